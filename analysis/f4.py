@@ -1,0 +1,394 @@
+"""Faugère's F4 over GF(p): select -> symbolic preprocessing -> reduce -> update.
+
+The driver :func:`groebner` keeps one :class:`RoundStats` per round and returns the reduced Gröbner
+basis. Pairs are selected by the normal strategy (all pairs of minimal lcm degree), pruned with the
+Gebauer-Möller criteria; the linear algebra is delegated to a backend of :mod:`analysis.linalg`.
+
+Reference: J.-C. Faugère, "A new efficient algorithm for computing Gröbner bases (F4)", JPAA 1999;
+R. Gebauer and H. M. Möller, "On an installation of Buchberger's algorithm", JSC 1988.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from operator import mul
+from typing import Sequence
+
+from .linalg import MatrixTooLarge, Row, get_backend
+from .ring import Poly, Ring
+
+
+@dataclass(frozen=True)
+class F4Options:
+    """Options of an F4 run.
+
+    backend: linear algebra backend ("numpy" fast, "python" reference).
+    max_matrix_cells: stop with :class:`MatrixTooLarge` when rows*cols of a matrix exceeds this.
+    verbose: print one line per round to stderr.
+    """
+
+    backend: str = "numpy"
+    max_matrix_cells: int = 400_000_000
+    verbose: bool = False
+
+
+@dataclass(frozen=True)
+class RoundStats:
+    """Statistics of one F4 round (msolve-style)."""
+
+    degree: int
+    pairs: int
+    rows: int
+    cols: int
+    density: float
+    new: int
+    zero_reductions: int
+    seconds: float
+
+
+@dataclass(frozen=True)
+class GroebnerResult:
+    """A reduced Gröbner basis with its per-round statistics."""
+
+    ring: Ring
+    basis: tuple[Poly, ...]
+    rounds: tuple[RoundStats, ...] = field(repr=False)
+    seconds: float = 0.0
+
+    @property
+    def leading_monomials(self) -> list[int]:
+        return [g.lm for g in self.basis]
+
+    @property
+    def is_unit(self) -> bool:
+        """Whether the ideal is the whole ring (inconsistent system)."""
+        return len(self.basis) == 1 and self.basis[0].is_constant()
+
+    @property
+    def max_matrix(self) -> tuple[int, int]:
+        return max(((r.rows, r.cols) for r in self.rounds), key=lambda rc: rc[0] * rc[1], default=(0, 0))
+
+
+class _Divisibility:
+    """Packed exponent vectors with guard bits: one integer operation per divisibility test."""
+
+    def __init__(self, ring: Ring):
+        self.ring = ring
+        self.bits = 16
+        self.guard = sum(1 << (self.bits * i + self.bits - 1) for i in range(ring.nvars))
+        self.cache: dict[int, int] = {}
+
+    def pack(self, key: int) -> int:
+        v = self.cache.get(key)
+        if v is None:
+            v = 0
+            for i, e in enumerate(self.ring.exps(key)):
+                if e >= 1 << (self.bits - 1):
+                    raise OverflowError("exponent too large for the divisibility packing")
+                v |= e << (self.bits * i)
+            self.cache[key] = v
+        return v
+
+    def divides(self, a: int, b: int) -> bool:
+        """a | b for packed exponents a, b."""
+        g = self.guard
+        return ((b | g) - a) & g == g
+
+
+class _State:
+    """The growing basis G and the pair set, with the Gebauer-Möller update."""
+
+    def __init__(self, ring: Ring):
+        self.ring = ring
+        self.div = _Divisibility(ring)
+        self.polys: list[Poly] = []
+        self.lms: list[int] = []
+        self.packed: list[int] = []
+        self.active: list[bool] = []
+        self.pairs: list[tuple[int, int, int, int]] = []  # (degree, lcm key, i, j)
+        self.reducer_cache: dict[int, tuple[int, int]] = {}  # monomial -> (index or -1, len(G) checked)
+
+    def lcm_key(self, a: int, b: int) -> int:
+        """lcm of two monomial keys, registering its exponent vector."""
+        ring = self.ring
+        e = tuple(map(max, ring.exps(a), ring.exps(b)))
+        k = sum(map(mul, e, ring._weights))
+        ring._exps.setdefault(k, e)
+        return k
+
+    def coprime(self, i: int, j: int) -> bool:
+        return not any(a and b for a, b in zip(self.ring.exps(self.lms[i]), self.ring.exps(self.lms[j])))
+
+    def add(self, h: Poly) -> None:
+        """Insert h (monic, lm not divisible by any lm of G) and update pairs (Gebauer-Möller)."""
+        ring, div = self.ring, self.div
+        k = len(self.polys)
+        self.polys.append(h)
+        self.lms.append(h.lm)
+        hp = div.pack(h.lm)
+        self.packed.append(hp)
+        self.active.append(True)
+        # new pairs (h, g)
+        cand = []
+        for i in range(k):
+            if self.active[i]:
+                l = self.lcm_key(self.lms[i], h.lm)
+                cand.append((i, l, div.pack(l), self.coprime(i, k)))
+        kept = []
+        for idx, (i, l, lp, cop) in enumerate(cand):
+            if cop:
+                kept.append((i, l, lp, cop))
+                continue
+            # criterion M: drop if another candidate's lcm properly divides this one's, or equal lcm kept already
+            dominated = False
+            for jdx, (j, l2, lp2, cop2) in enumerate(cand):
+                if jdx == idx:
+                    continue
+                if l2 == l:
+                    if jdx < idx and not cop2:
+                        dominated = True
+                        break
+                    if cop2:
+                        # equal lcm with a coprime pair: criterion F with Buchberger's first criterion
+                        dominated = True
+                        break
+                elif div.divides(lp2, lp):
+                    dominated = True
+                    break
+            if not dominated:
+                kept.append((i, l, lp, cop))
+        # criterion B on old pairs
+        new_pairs = []
+        for d, l, i, j in self.pairs:
+            lp = div.pack(l)
+            if div.divides(hp, lp) and self.lcm_key(self.lms[i], h.lm) != l and self.lcm_key(self.lms[j], h.lm) != l:
+                continue
+            new_pairs.append((d, l, i, j))
+        for i, l, lp, cop in kept:
+            if not cop:  # Buchberger's first criterion
+                new_pairs.append((ring.degree(l), l, i, k))
+        self.pairs = new_pairs
+        for i in range(k):
+            if self.active[i] and div.divides(hp, self.packed[i]):
+                self.active[i] = False
+
+    def find_reducer(self, m: int) -> int:
+        """Index of an active basis element whose lm divides m, or -1."""
+        cached = self.reducer_cache.get(m)
+        n = len(self.polys)
+        div = self.div
+        if cached is not None:
+            idx, checked = cached
+            if idx >= 0 and self.active[idx]:
+                return idx
+            start = checked if idx < 0 else 0
+        else:
+            start = 0
+        mp = div.pack(m)
+        guard = div.guard
+        mg = mp | guard
+        best = -1
+        packed, active, polys = self.packed, self.active, self.polys
+        for i in range(start, n):
+            if active[i] and (mg - packed[i]) & guard == guard:
+                if best < 0 or len(polys[i]) < len(polys[best]):
+                    best = i
+        if best < 0 and start > 0:
+            best = -1
+        self.reducer_cache[m] = (best, n)
+        return best
+
+
+def _symbolic_preprocessing(state: _State, rows: list[tuple[int, int]]) -> tuple[list[tuple[int, int]], list[int]]:
+    """Add reducer rows for every matrix monomial divisible by a leading monomial.
+
+    rows: list of (multiplier key, basis index). Returns all rows and the sorted column monomials.
+    """
+    polys = state.polys
+    seen: set[int] = set()
+    done: set[int] = set()
+    todo: list[int] = []
+    for t, i in rows:
+        g = polys[i]
+        done.add(t + g.lm)
+        for k in g.mons:
+            m = t + k
+            if m not in seen:
+                seen.add(m)
+                todo.append(m)
+    out_rows = list(rows)
+    ring = state.ring
+    while todo:
+        m = todo.pop()
+        if m in done:
+            continue
+        idx = state.find_reducer(m)
+        if idx < 0:
+            continue
+        g = polys[idx]
+        t = m - g.lm
+        if t not in ring._exps:
+            ring.exps(t)
+        done.add(m)
+        out_rows.append((t, idx))
+        for k in g.mons:
+            mm = t + k
+            if mm not in seen:
+                seen.add(mm)
+                todo.append(mm)
+    return out_rows, sorted(seen, reverse=True)
+
+
+def _build_matrix(state: _State, rows: list[tuple[int, int]], columns: list[int]):
+    col_of = {m: c for c, m in enumerate(columns)}
+    polys = state.polys
+    built: list[Row] = []
+    for t, i in rows:
+        g = polys[i]
+        built.append(([col_of[t + k] for k in g.mons], g.coeffs))
+    return built
+
+
+def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> GroebnerResult:
+    """Reduced Gröbner basis of the ideal generated by polys (all in one ring) by F4.
+
+    Zero polynomials are ignored; a nonzero constant gives the basis [1].
+    """
+    t_start = time.perf_counter()
+    if not polys:
+        raise ValueError("empty system: no polynomials given")
+    ring = polys[0].ring
+    for f in polys:
+        if f.ring != ring:
+            raise ValueError("all polynomials must belong to the same ring")
+    backend = get_backend(options.backend)
+    p = ring.prime
+    state = _State(ring)
+    rounds: list[RoundStats] = []
+
+    inputs = [f.monic() for f in polys if f]
+    if not inputs:  # only zero polynomials: the zero ideal
+        return GroebnerResult(ring, (), (), time.perf_counter() - t_start)
+    if any(f.is_constant() for f in inputs):
+        return GroebnerResult(ring, (ring.one(),), (), time.perf_counter() - t_start)
+    # initial inter-reduction of the input as one matrix: echelon form, then insert by increasing lm
+    if inputs:
+        # treat inputs as rows to reduce with no pivots: this removes duplicates and dependencies
+        cols = sorted({k for f in inputs for k in f.mons}, reverse=True)
+        col_of = {m: c for c, m in enumerate(cols)}
+        rows = [([col_of[k] for k in f.mons], f.coeffs) for f in inputs]
+        ech = backend.reduce({}, rows, len(cols), p)
+        for c, v in sorted(ech, key=lambda r: -r[0][0]):
+            h = Poly(ring, [cols[j] for j in c], list(v))
+            _insert(state, h)
+    while state.pairs:
+        t0 = time.perf_counter()
+        d = min(pr[0] for pr in state.pairs)
+        sel = [pr for pr in state.pairs if pr[0] == d]
+        state.pairs = [pr for pr in state.pairs if pr[0] != d]
+        row_set: set[tuple[int, int]] = set()
+        for _, l, i, j in sel:
+            for k in (i, j):
+                t = l - state.lms[k]
+                if t not in ring._exps:
+                    ring._exps[t] = tuple(x - y for x, y in zip(ring.exps(l), ring.exps(state.lms[k])))
+                row_set.add((t, k))
+        rows = sorted(row_set)
+        rows, columns = _symbolic_preprocessing(state, rows)
+        ncols = len(columns)
+        if len(rows) * ncols > options.max_matrix_cells:
+            raise MatrixTooLarge(
+                f"F4 matrix {len(rows)} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
+            )
+        matrix = _build_matrix(state, rows, columns)
+        pivots: dict[int, Row] = {}
+        to_reduce: list[Row] = []
+        # prefer the sparsest row for each leading column as pivot
+        for r in sorted(matrix, key=lambda r: len(r[0])):
+            if r[0][0] not in pivots:
+                pivots[r[0][0]] = r
+            else:
+                to_reduce.append(r)
+        nnz = sum(len(r[0]) for r in matrix)
+        new_rows = backend.reduce(pivots, to_reduce, ncols, p)
+        for c, v in sorted(new_rows, key=lambda r: -r[0][0]):
+            h = Poly(ring, [columns[j] for j in c], list(v))
+            if h.is_constant():
+                return GroebnerResult(ring, (ring.one(),), tuple(rounds), time.perf_counter() - t_start)
+            _insert(state, h)
+        stats = RoundStats(
+            degree=d,
+            pairs=len(sel),
+            rows=len(matrix),
+            cols=ncols,
+            density=nnz / max(1, len(matrix) * ncols),
+            new=len(new_rows),
+            zero_reductions=len(to_reduce) - len(new_rows),
+            seconds=time.perf_counter() - t0,
+        )
+        rounds.append(stats)
+        if options.verbose:
+            print(
+                f"[f4] deg {d:3d}  pairs {len(sel):5d}  matrix {len(matrix):6d} x {ncols:6d}  "
+                f"density {stats.density:6.2%}  new {stats.new:4d}  zero {stats.zero_reductions:5d}  "
+                f"{stats.seconds:7.3f}s",
+                file=sys.stderr,
+            )
+    basis = _reduce_basis(state, backend)
+    return GroebnerResult(ring, tuple(basis), tuple(rounds), time.perf_counter() - t_start)
+
+
+def _insert(state: _State, h: Poly) -> None:
+    for k in h.mons:
+        state.ring.exps(k)
+    state.add(h)
+
+
+def _reduce_basis(state: _State, backend) -> list[Poly]:
+    """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis."""
+    ring = state.ring
+    idx = [i for i, a in enumerate(state.active) if a]
+    # rows to reduce: the tails; pivots: reducers of tail monomials from symbolic preprocessing
+    lead_set = {state.lms[i] for i in idx}
+    seen: set[int] = set()
+    todo: list[int] = []
+    for i in idx:
+        for k in state.polys[i].mons[1:]:
+            if k not in seen:
+                seen.add(k)
+                todo.append(k)
+    red_rows: list[tuple[int, int]] = []
+    done: set[int] = set()
+    while todo:
+        m = todo.pop()
+        if m in done:
+            continue
+        j = state.find_reducer(m)
+        if j < 0:
+            continue
+        done.add(m)
+        g = state.polys[j]
+        t = m - g.lm
+        ring.exps(t)
+        red_rows.append((t, j))
+        for k in g.mons:
+            mm = t + k
+            if mm not in seen:
+                seen.add(mm)
+                todo.append(mm)
+    columns = sorted(seen | lead_set, reverse=True)
+    col_of = {m: c for c, m in enumerate(columns)}
+    pivots: dict[int, Row] = {}
+    for t, j in red_rows:
+        g = state.polys[j]
+        r = ([col_of[t + k] for k in g.mons], g.coeffs)
+        pivots[r[0][0]] = r
+    tails = [([col_of[k] for k in state.polys[i].mons[1:]], state.polys[i].coeffs[1:]) for i in idx]
+    reduced = backend.reduce_each(pivots, tails, len(columns), ring.prime)
+    basis = []
+    for i, (c, v) in zip(idx, reduced):
+        g = state.polys[i]
+        basis.append(Poly(ring, [g.lm] + [columns[j] for j in c], [1] + list(v)))
+    basis.sort(key=lambda g: g.lm)
+    return basis

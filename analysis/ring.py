@@ -1,0 +1,380 @@
+"""Polynomial rings over GF(p) and their sparse polynomials.
+
+A :class:`Ring` is frozen: variable names, the prime and the monomial order. Monomials are stored as
+order-preserving additive integer keys (see :mod:`analysis.orderings`), so a polynomial is two parallel
+lists, monomial keys in strictly decreasing order and coefficients in [1, p). The ring caches the
+exponent vector of every key it has seen.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
+
+from .orderings import FIELD_BITS, MonomialOrder
+
+MAX_PRIME = 2**31
+
+
+class BadPrime(ValueError):
+    """The characteristic is not a prime in the supported range 2 < p < 2**31."""
+
+
+def is_prime(n: int) -> bool:
+    """Deterministic Miller-Rabin for n < 3.3e24 (enough for every supported characteristic)."""
+    if n < 2:
+        return False
+    small = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41)
+    for q in small:
+        if n % q == 0:
+            return n == q
+    d, s = n - 1, 0
+    while d % 2 == 0:
+        d //= 2
+        s += 1
+    for a in small:
+        x = pow(a, d, n)
+        if x in (1, n - 1):
+            continue
+        for _ in range(s - 1):
+            x = x * x % n
+            if x == n - 1:
+                break
+        else:
+            return False
+    return True
+
+
+def check_prime(p: int) -> int:
+    """Return p if it is a supported characteristic, else raise :class:`BadPrime`."""
+    if not isinstance(p, int) or isinstance(p, bool):
+        raise BadPrime(f"characteristic must be an integer, got {p!r}")
+    if not 2 < p < MAX_PRIME:
+        raise BadPrime(f"characteristic {p} out of range: need a prime 2 < p < 2^31")
+    if not is_prime(p):
+        raise BadPrime(f"characteristic {p} is not prime")
+    return p
+
+
+@dataclass(frozen=True, eq=False)
+class Ring:
+    """GF(p)[variables] with a monomial order.
+
+    Parameters
+    ----------
+    variables: variable names (distinct identifiers).
+    prime: the characteristic, a prime 2 < p < 2**31.
+    order: "grevlex", "lex", "block:k1,k2,..." or a :class:`MonomialOrder`.
+    """
+
+    variables: tuple[str, ...]
+    prime: int
+    order: MonomialOrder
+    _weights: tuple[int, ...] = field(repr=False, default=())
+    _exps: dict = field(repr=False, default_factory=dict)
+
+    def __init__(self, variables: Sequence[str], prime: int, order: "str | MonomialOrder" = "grevlex"):
+        variables = tuple(str(v) for v in variables)
+        if not variables:
+            raise ValueError("a ring needs at least one variable")
+        if len(set(variables)) != len(variables):
+            raise ValueError(f"duplicate variable names in {variables}")
+        if isinstance(order, str):
+            order = MonomialOrder.parse(order, len(variables))
+        elif order.nvars != len(variables):
+            raise ValueError("order and ring have different numbers of variables")
+        object.__setattr__(self, "variables", variables)
+        object.__setattr__(self, "prime", check_prime(prime))
+        object.__setattr__(self, "order", order)
+        object.__setattr__(self, "_weights", order.variable_weights)
+        object.__setattr__(self, "_exps", {0: (0,) * len(variables)})
+
+    # -- identity ---------------------------------------------------------------------------
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, Ring)
+            and self.variables == other.variables
+            and self.prime == other.prime
+            and self.order == other.order
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.variables, self.prime, self.order))
+
+    def __repr__(self) -> str:
+        return f"Ring(GF({self.prime})[{', '.join(self.variables)}], {self.order})"
+
+    def with_prime(self, prime: int) -> "Ring":
+        return Ring(self.variables, prime, self.order)
+
+    def with_order(self, order: "str | MonomialOrder") -> "Ring":
+        return Ring(self.variables, self.prime, order)
+
+    @property
+    def nvars(self) -> int:
+        return len(self.variables)
+
+    # -- monomials --------------------------------------------------------------------------
+    def key(self, exps: Sequence[int]) -> int:
+        """Order key of the monomial with exponent vector exps."""
+        if len(exps) != self.nvars:
+            raise ValueError(f"exponent vector {tuple(exps)} has length {len(exps)}, ring has {self.nvars} variables")
+        k = 0
+        for e, w in zip(exps, self._weights):
+            if e:
+                if e < 0:
+                    raise ValueError(f"negative exponent in {tuple(exps)}")
+                k += e * w
+        if sum(exps) > self.order.max_row_value:
+            raise OverflowError(f"total degree {sum(exps)} exceeds the supported 2^{FIELD_BITS}-1")
+        ex = self._exps
+        if k not in ex:
+            ex[k] = tuple(int(e) for e in exps)
+        return k
+
+    def exps(self, key: int) -> tuple[int, ...]:
+        """Exponent vector of a monomial key (decoded once, then cached)."""
+        e = self._exps.get(key)
+        if e is None:
+            e = self._decode(key)
+            self._exps[key] = e
+        return e
+
+    def _decode(self, key: int) -> tuple[int, ...]:
+        rows = self.order.weight_rows
+        nrows = len(rows)
+        mask = (1 << FIELD_BITS) - 1
+        fields = [(key >> (FIELD_BITS * (nrows - 1 - r))) & mask for r in range(nrows)]
+        # every supported order is block grevlex: rows of a block are partial sums, longest first
+        out = [0] * self.nvars
+        r = 0
+        offset = 0
+        for size in self.order.blocks or ((self.nvars,) if self.order.name == "grevlex" else (1,) * self.nvars):
+            sums = fields[r : r + size]  # s_size, ..., s_1
+            for k in range(size):
+                hi = sums[k]
+                lo = sums[k + 1] if k + 1 < size else 0
+                out[offset + size - 1 - k] = hi - lo
+            r += size
+            offset += size
+        return tuple(out)
+
+    def degree(self, key: int) -> int:
+        return sum(self.exps(key))
+
+    def divides(self, a: int, b: int) -> bool:
+        """Whether monomial a divides monomial b."""
+        return all(x <= y for x, y in zip(self.exps(a), self.exps(b)))
+
+    def lcm(self, a: int, b: int) -> int:
+        return self.key(tuple(max(x, y) for x, y in zip(self.exps(a), self.exps(b))))
+
+    def variable_key(self, i: int) -> int:
+        return self._weights[i]
+
+    def monomial_str(self, key: int) -> str:
+        parts = []
+        for v, e in zip(self.variables, self.exps(key)):
+            if e == 1:
+                parts.append(v)
+            elif e > 1:
+                parts.append(f"{v}^{e}")
+        return "*".join(parts) if parts else "1"
+
+    # -- polynomials ------------------------------------------------------------------------
+    def zero(self) -> "Poly":
+        return Poly(self, [], [])
+
+    def one(self) -> "Poly":
+        return Poly(self, [0], [1])
+
+    def gen(self, i: "int | str") -> "Poly":
+        if isinstance(i, str):
+            try:
+                i = self.variables.index(i)
+            except ValueError:
+                raise ValueError(f"unknown variable {i!r}; ring variables: {', '.join(self.variables)}") from None
+        return Poly(self, [self._weights[i]], [1])
+
+    def gens(self) -> list["Poly"]:
+        return [self.gen(i) for i in range(self.nvars)]
+
+    def from_terms(self, terms: "Mapping[Sequence[int], int] | Iterable[tuple[Sequence[int], int]]") -> "Poly":
+        """Polynomial from {exponent vector: integer (or Fraction) coefficient}; reduced mod p."""
+        items = terms.items() if isinstance(terms, Mapping) else terms
+        acc: dict[int, int] = {}
+        p = self.prime
+        for exps, c in items:
+            c = _mod(c, p)
+            if c:
+                k = self.key(tuple(exps))
+                acc[k] = (acc.get(k, 0) + c) % p
+        return Poly.from_dict(self, acc)
+
+    def from_sympy(self, expr) -> "Poly":
+        """Polynomial from a sympy expression in (a subset of) the ring's variables."""
+        import sympy
+
+        syms = sympy.symbols(self.variables)
+        expr = sympy.sympify(expr)
+        unknown = sorted(str(s) for s in expr.free_symbols if str(s) not in self.variables)
+        if unknown:
+            raise ValueError(f"unknown variable(s) {', '.join(unknown)}; ring variables: {', '.join(self.variables)}")
+        poly = sympy.Poly(expr, *syms, domain="QQ")
+        return self.from_terms((m, sympy.Rational(c)) for m, c in poly.terms())
+
+    def to_sympy(self, f: "Poly"):
+        import sympy
+
+        syms = sympy.symbols(self.variables)
+        out = sympy.Integer(0)
+        for k, c in zip(f.mons, f.coeffs):
+            term = sympy.Integer(c)
+            for s, e in zip(syms, self.exps(k)):
+                if e:
+                    term *= s**e
+            out += term
+        return out
+
+
+def _mod(c, p: int) -> int:
+    """Reduce an integer or rational coefficient mod p (raises ZeroDivisionError if p | denominator)."""
+    if isinstance(c, int):
+        return c % p
+    num, den = int(c.numerator), int(c.denominator)
+    if den % p == 0:
+        raise ZeroDivisionError(f"denominator {den} is divisible by the characteristic {p}")
+    return num * pow(den, -1, p) % p
+
+
+class Poly:
+    """A sparse polynomial over GF(p): monomial keys strictly decreasing, coefficients in [1, p)."""
+
+    __slots__ = ("ring", "mons", "coeffs")
+
+    def __init__(self, ring: Ring, mons: list[int], coeffs: list[int]):
+        self.ring = ring
+        self.mons = mons
+        self.coeffs = coeffs
+
+    @staticmethod
+    def from_dict(ring: Ring, d: Mapping[int, int]) -> "Poly":
+        mons = sorted((k for k, c in d.items() if c), reverse=True)
+        return Poly(ring, mons, [d[k] for k in mons])
+
+    def to_dict(self) -> dict[int, int]:
+        return dict(zip(self.mons, self.coeffs))
+
+    # -- basic queries ----------------------------------------------------------------------
+    def __bool__(self) -> bool:
+        return bool(self.mons)
+
+    def __len__(self) -> int:
+        return len(self.mons)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Poly):
+            return NotImplemented
+        return self.ring == other.ring and self.mons == other.mons and self.coeffs == other.coeffs
+
+    def __hash__(self) -> int:
+        return hash((tuple(self.mons), tuple(self.coeffs)))
+
+    @property
+    def lm(self) -> int:
+        return self.mons[0]
+
+    @property
+    def lc(self) -> int:
+        return self.coeffs[0]
+
+    def total_degree(self) -> int:
+        return max((self.ring.degree(k) for k in self.mons), default=-1)
+
+    def is_constant(self) -> bool:
+        return len(self.mons) == 1 and self.mons[0] == 0
+
+    def terms(self) -> list[tuple[tuple[int, ...], int]]:
+        return [(self.ring.exps(k), c) for k, c in zip(self.mons, self.coeffs)]
+
+    def __repr__(self) -> str:
+        return str(self)
+
+    def __str__(self) -> str:
+        if not self.mons:
+            return "0"
+        parts = []
+        for k, c in zip(self.mons, self.coeffs):
+            m = self.ring.monomial_str(k)
+            parts.append(str(c) if m == "1" else (m if c == 1 else f"{c}*{m}"))
+        return " + ".join(parts)
+
+    # -- arithmetic -------------------------------------------------------------------------
+    def monic(self) -> "Poly":
+        if not self.mons or self.coeffs[0] == 1:
+            return self
+        p = self.ring.prime
+        inv = pow(self.coeffs[0], -1, p)
+        return Poly(self.ring, self.mons, [c * inv % p for c in self.coeffs])
+
+    def scale(self, c: int) -> "Poly":
+        p = self.ring.prime
+        c %= p
+        if not c:
+            return self.ring.zero()
+        return Poly(self.ring, self.mons, [x * c % p for x in self.coeffs])
+
+    def mul_term(self, key: int, c: int = 1) -> "Poly":
+        """Multiply by the term c * x^key."""
+        p = self.ring.prime
+        return Poly(self.ring, [k + key for k in self.mons], [x * c % p for x in self.coeffs] if c != 1 else self.coeffs)
+
+    def __add__(self, other: "Poly") -> "Poly":
+        p = self.ring.prime
+        d = self.to_dict()
+        for k, c in zip(other.mons, other.coeffs):
+            d[k] = (d.get(k, 0) + c) % p
+        return Poly.from_dict(self.ring, d)
+
+    def __neg__(self) -> "Poly":
+        p = self.ring.prime
+        return Poly(self.ring, self.mons, [p - c for c in self.coeffs])
+
+    def __sub__(self, other: "Poly") -> "Poly":
+        return self + (-other)
+
+    def __mul__(self, other: "Poly | int") -> "Poly":
+        if isinstance(other, int):
+            return self.scale(other)
+        p = self.ring.prime
+        d: dict[int, int] = {}
+        for k1, c1 in zip(self.mons, self.coeffs):
+            for k2, c2 in zip(other.mons, other.coeffs):
+                k = k1 + k2
+                d[k] = (d.get(k, 0) + c1 * c2) % p
+        for k in d:
+            self.ring.exps(k)
+        return Poly.from_dict(self.ring, d)
+
+    __rmul__ = __mul__
+
+    def __pow__(self, e: int) -> "Poly":
+        out = self.ring.one()
+        base = self
+        while e:
+            if e & 1:
+                out = out * base
+            base = base * base
+            e >>= 1
+        return out
+
+    def evaluate(self, point: Sequence[int]) -> int:
+        """Value mod p at a point of GF(p)^n."""
+        p = self.ring.prime
+        total = 0
+        for k, c in zip(self.mons, self.coeffs):
+            t = c
+            for x, e in zip(point, self.ring.exps(k)):
+                if e:
+                    t = t * pow(int(x), e, p) % p
+            total += t
+        return total % p

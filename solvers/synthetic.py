@@ -1,0 +1,187 @@
+"""Synthetic 2D TDOA networks and their known algebraic roots.
+
+This module owns the ground truth used by validation and tests: a `Network` (receivers,
+transmitters, transmitter clock offsets), the TDOA measurements it produces, the paper's random
+sampler and `true_root`, the point (H, b, o) of the algebraic formulation that the network
+corresponds to in the gauge r_1 = 0.
+
+Measurement model (paper Sec. 1, eq. (2)): f_ij = ||r_i - s_j|| + o_j, receivers synchronised,
+one unknown offset o_j per transmitter. Only numpy is used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "DegenerateNetworkError",
+    "Network",
+    "random_network",
+    "true_root",
+]
+
+
+class DegenerateNetworkError(ValueError):
+    """The network has no well-defined algebraic root (e.g. s_1, s_2, s_3 collinear)."""
+
+
+def _frozen_array(values: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
+    """Return a read-only float64 copy of `values`, checking its shape (None = any length)."""
+    array = np.array(values, dtype=float)
+    if array.ndim != len(shape) or any(
+        want is not None and got != want for got, want in zip(array.shape, shape)
+    ):
+        raise ValueError(f"{name} must have shape {shape} (None = any), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite")
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Network:
+    """A 2D TDOA sensor network: m synchronised receivers, n transmitters with clock offsets.
+
+    Parameters
+    ----------
+    receivers : (m, 2) array
+        Receiver positions r_i.
+    transmitters : (n, 2) array
+        Transmitter positions s_j.
+    offsets : (n,) array
+        Transmitter clock offsets o_j (in distance units).
+
+    Reference: paper Sec. 1, TDOA measurement equation (f_ij - o_j)^2 = ||r_i - s_j||^2.
+    """
+
+    receivers: np.ndarray
+    transmitters: np.ndarray
+    offsets: np.ndarray
+
+    def __post_init__(self) -> None:
+        receivers = _frozen_array(self.receivers, (None, 2), "receivers")
+        transmitters = _frozen_array(self.transmitters, (None, 2), "transmitters")
+        offsets = _frozen_array(self.offsets, (transmitters.shape[0],), "offsets")
+        object.__setattr__(self, "receivers", receivers)
+        object.__setattr__(self, "transmitters", transmitters)
+        object.__setattr__(self, "offsets", offsets)
+
+    @property
+    def m(self) -> int:
+        """Number of receivers."""
+        return self.receivers.shape[0]
+
+    @property
+    def n(self) -> int:
+        """Number of transmitters."""
+        return self.transmitters.shape[0]
+
+    def distances(self) -> np.ndarray:
+        """Return the (m, n) receiver-transmitter distances d_ij = ||r_i - s_j||."""
+        diff = self.receivers[:, None, :] - self.transmitters[None, :, :]
+        return np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+
+    def measurements(
+        self, noise_sigma: float = 0.0, rng: np.random.Generator | None = None
+    ) -> np.ndarray:
+        """Return the (m, n) TDOA measurements F[i, j] = ||r_i - s_j|| + o_j (+ noise).
+
+        Parameters
+        ----------
+        noise_sigma : float
+            Standard deviation of i.i.d. zero-mean Gaussian noise added to every f_ij.
+        rng : numpy.random.Generator, optional
+            Source of the noise; required when `noise_sigma > 0` (seeds stay explicit).
+
+        Returns
+        -------
+        (m, n) float array.
+
+        Reference: paper Sec. 1 eq. (2) and Sec. 4.2 (noisy data).
+        """
+        if noise_sigma < 0:
+            raise ValueError(f"noise_sigma must be >= 0, got {noise_sigma}")
+        F = self.distances() + self.offsets[None, :]
+        if noise_sigma > 0:
+            if rng is None:
+                raise ValueError("noise_sigma > 0 requires an explicit numpy Generator `rng`")
+            F = F + noise_sigma * rng.standard_normal(F.shape)
+        return F
+
+
+def random_network(
+    m: int,
+    n: int,
+    rng: np.random.Generator,
+    position_sigma: float = 10.0,
+    offset_sigma: float = 1.0,
+) -> Network:
+    """Sample a network as in the paper's experiments.
+
+    Parameters
+    ----------
+    m, n : int
+        Numbers of receivers and transmitters.
+    rng : numpy.random.Generator
+        Explicitly seeded generator; draws receivers, then transmitters, then offsets.
+    position_sigma : float
+        Standard deviation of the zero-mean normal node coordinates (paper: 10).
+    offset_sigma : float
+        Standard deviation of the zero-mean normal offsets (paper: 1).
+
+    Returns
+    -------
+    Network
+
+    Reference: paper Sec. 4 (synthetic data).
+    """
+    if m < 1 or n < 1:
+        raise ValueError(f"need m >= 1 and n >= 1, got m={m}, n={n}")
+    receivers = position_sigma * rng.standard_normal((m, 2))
+    transmitters = position_sigma * rng.standard_normal((n, 2))
+    offsets = offset_sigma * rng.standard_normal(n)
+    return Network(receivers, transmitters, offsets)
+
+
+def true_root(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the root (H, b, o) of the algebraic formulation that `network` corresponds to.
+
+    After translating so that r_1 = 0, the factorisation D~ = R~^T S~ with R~ = D~[:, :2]^T and
+    S~ = I (first two columns of the compaction matrix) is matched by L = -2 S, where
+    S = [s_2 - s_1, s_3 - s_1]. Hence H = (L^T L)^{-1} = (4 S^T S)^{-1} and
+    b = L^{-1} s_1 = -1/2 S^{-1} s_1. Any L' = Q L with Q orthogonal gives the same H; that is the
+    rotation/reflection gauge.
+
+    Parameters
+    ----------
+    network : Network
+        Needs n >= 3 with s_1, s_2, s_3 not collinear.
+
+    Returns
+    -------
+    H : (2, 2) symmetric positive-definite array
+    b : (2,) array
+    o : (n,) array, the offsets (a copy)
+
+    Raises
+    ------
+    DegenerateNetworkError
+        If n < 3 or s_1, s_2, s_3 are (numerically) collinear.
+
+    Reference: paper Sec. 2.1 eq. (4)-(5) and Sec. 3.1 eq. (6).
+    """
+    if network.n < 3:
+        raise DegenerateNetworkError(f"the parametrisation needs n >= 3 transmitters, got {network.n}")
+    r1 = network.receivers[0]
+    s1 = network.transmitters[0] - r1
+    S = (network.transmitters[1:3] - network.transmitters[0]).T  # columns s_2 - s_1, s_3 - s_1
+    singular_values = np.linalg.svd(S, compute_uv=False)
+    if not singular_values[1] > 1e-12 * singular_values[0]:
+        raise DegenerateNetworkError("transmitters s_1, s_2, s_3 are collinear or coincident")
+    S_inv = np.linalg.inv(S)
+    H = 0.25 * S_inv @ S_inv.T  # (4 S^T S)^{-1}
+    H = 0.5 * (H + H.T)
+    b = -0.5 * S_inv @ s1
+    return H, b, network.offsets.copy()
