@@ -12,8 +12,9 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass, field
-from operator import mul
 from typing import Sequence
+
+import numpy as np
 
 from .linalg import MatrixTooLarge, Row, get_backend
 from .ring import Poly, Ring
@@ -97,81 +98,93 @@ class _Divisibility:
 
 
 class _State:
-    """The growing basis G and the pair set, with the Gebauer-Möller update."""
+    """The growing basis G and the pair set, with a vectorised Gebauer-Möller update.
+
+    Exponent vectors of the leading monomials and of the pair lcms live in numpy arrays, so each
+    insertion costs a few array operations instead of Python loops over all pairs.
+    """
 
     def __init__(self, ring: Ring):
         self.ring = ring
         self.div = _Divisibility(ring)
+        n = ring.nvars
         self.polys: list[Poly] = []
         self.lms: list[int] = []
         self.packed: list[int] = []
-        self.active: list[bool] = []
-        self.pairs: list[tuple[int, int, int, int]] = []  # (degree, lcm key, i, j)
+        self.active_list: list[bool] = []
+        self.E = np.zeros((16, n), dtype=np.int32)
+        self.active = np.zeros(16, dtype=bool)
+        # pairs: parallel arrays (i, j, lcm exponents, lcm degree)
+        self.pi = np.zeros(0, dtype=np.int64)
+        self.pj = np.zeros(0, dtype=np.int64)
+        self.pL = np.zeros((0, n), dtype=np.int32)
+        self.pdeg = np.zeros(0, dtype=np.int64)
         self.reducer_cache: dict[int, tuple[int, int]] = {}  # monomial -> (index or -1, len(G) checked)
 
-    def lcm_key(self, a: int, b: int) -> int:
-        """lcm of two monomial keys, registering its exponent vector."""
-        ring = self.ring
-        e = tuple(map(max, ring.exps(a), ring.exps(b)))
-        k = sum(map(mul, e, ring._weights))
-        ring._exps.setdefault(k, e)
-        return k
+    @property
+    def npairs(self) -> int:
+        return len(self.pi)
 
-    def coprime(self, i: int, j: int) -> bool:
-        return not any(a and b for a, b in zip(self.ring.exps(self.lms[i]), self.ring.exps(self.lms[j])))
+    def pop_pairs(self) -> tuple[int, list[tuple[int, int, tuple[int, ...]]]]:
+        """Remove and return the pairs of minimal lcm degree (normal strategy): (degree, [(i, j, lcm)])."""
+        d = int(self.pdeg.min())
+        sel = self.pdeg == d
+        out = [(int(i), int(j), tuple(int(x) for x in L)) for i, j, L in zip(self.pi[sel], self.pj[sel], self.pL[sel])]
+        keep = ~sel
+        self.pi, self.pj, self.pL, self.pdeg = self.pi[keep], self.pj[keep], self.pL[keep], self.pdeg[keep]
+        return d, out
 
     def add(self, h: Poly) -> None:
-        """Insert h (monic, lm not divisible by any lm of G) and update pairs (Gebauer-Möller)."""
-        ring, div = self.ring, self.div
+        """Insert h (monic, lm not divisible by any lm of G) and update the pairs.
+
+        Gebauer-Möller as in Becker-Weispfenning's UPDATE: among the new pairs (g, h) drop those whose
+        lcm is a proper multiple of another new pair's lcm (criterion M), keep one per equal lcm unless
+        one of them is coprime (criterion F, then all go by Buchberger's first criterion); drop old pairs
+        whose lcm is divisible by lm(h) with both lcms against h different (criterion B).
+        """
+        ring = self.ring
         k = len(self.polys)
+        eh = np.array(ring.exps(h.lm), dtype=np.int32)
+        if k == len(self.E):
+            self.E = np.vstack([self.E, np.zeros_like(self.E)])
+            self.active = np.concatenate([self.active, np.zeros_like(self.active)])
         self.polys.append(h)
         self.lms.append(h.lm)
-        hp = div.pack(h.lm)
-        self.packed.append(hp)
-        self.active.append(True)
-        # new pairs (h, g)
-        cand = []
-        for i in range(k):
-            if self.active[i]:
-                l = self.lcm_key(self.lms[i], h.lm)
-                cand.append((i, l, div.pack(l), self.coprime(i, k)))
-        kept = []
-        for idx, (i, l, lp, cop) in enumerate(cand):
-            if cop:
-                kept.append((i, l, lp, cop))
-                continue
-            # criterion M: drop if another candidate's lcm properly divides this one's, or equal lcm kept already
-            dominated = False
-            for jdx, (j, l2, lp2, cop2) in enumerate(cand):
-                if jdx == idx:
-                    continue
-                if l2 == l:
-                    if jdx < idx and not cop2:
-                        dominated = True
-                        break
-                    if cop2:
-                        # equal lcm with a coprime pair: criterion F with Buchberger's first criterion
-                        dominated = True
-                        break
-                elif div.divides(lp2, lp):
-                    dominated = True
-                    break
-            if not dominated:
-                kept.append((i, l, lp, cop))
+        self.packed.append(self.div.pack(h.lm))
+        self.E[k] = eh
         # criterion B on old pairs
-        new_pairs = []
-        for d, l, i, j in self.pairs:
-            lp = div.pack(l)
-            if div.divides(hp, lp) and self.lcm_key(self.lms[i], h.lm) != l and self.lcm_key(self.lms[j], h.lm) != l:
-                continue
-            new_pairs.append((d, l, i, j))
-        for i, l, lp, cop in kept:
-            if not cop:  # Buchberger's first criterion
-                new_pairs.append((ring.degree(l), l, i, k))
-        self.pairs = new_pairs
-        for i in range(k):
-            if self.active[i] and div.divides(hp, self.packed[i]):
-                self.active[i] = False
+        if len(self.pi):
+            divisible = np.all(self.pL >= eh, axis=1)
+            if divisible.any():
+                eq_i = np.all(np.maximum(self.E[self.pi], eh) == self.pL, axis=1)
+                eq_j = np.all(np.maximum(self.E[self.pj], eh) == self.pL, axis=1)
+                keep = ~divisible | eq_i | eq_j
+                self.pi, self.pj, self.pL, self.pdeg = self.pi[keep], self.pj[keep], self.pL[keep], self.pdeg[keep]
+        act = np.flatnonzero(self.active[:k])
+        if len(act):
+            Ea = self.E[act]
+            L = np.maximum(Ea, eh)
+            coprime = ~np.any((Ea > 0) & (eh > 0), axis=1)
+            keep_new = np.zeros(len(act), dtype=bool)
+            # criteria M and F, in chunks to bound the a x a x n comparison
+            le = np.empty((len(act), len(act)), dtype=bool)
+            chunk = max(1, 4_000_000 // max(1, len(act) * L.shape[1]))
+            for s in range(0, len(act), chunk):
+                le[s : s + chunk] = np.all(L[None, :, :] <= L[s : s + chunk, None, :], axis=2)  # le[i, j]: L_j | L_i
+            eq = le & le.T
+            dominated = np.any(le & ~eq, axis=1)
+            has_coprime = np.any(eq & coprime[None, :], axis=1)
+            first = ~np.any(np.tril(eq, -1), axis=1)
+            keep_new = ~dominated & ~has_coprime & first
+            if keep_new.any():
+                Lk = L[keep_new]
+                self.pi = np.concatenate([self.pi, act[keep_new]])
+                self.pj = np.concatenate([self.pj, np.full(int(keep_new.sum()), k, dtype=np.int64)])
+                self.pL = np.vstack([self.pL, Lk])
+                self.pdeg = np.concatenate([self.pdeg, Lk.sum(axis=1, dtype=np.int64)])
+            redundant = np.all(Ea >= eh, axis=1)
+            self.active[act[redundant]] = False
+        self.active[k] = True
 
     def find_reducer(self, m: int) -> int:
         """Index of an active basis element whose lm divides m, or -1."""
@@ -279,21 +292,17 @@ def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> Groebne
         col_of = {m: c for c, m in enumerate(cols)}
         rows = [([col_of[k] for k in f.mons], f.coeffs) for f in inputs]
         ech = backend.reduce({}, rows, len(cols), p)
-        for c, v in sorted(ech, key=lambda r: -r[0][0]):
+        for c, v in sorted(ech, key=lambda r: r[0][0]):  # decreasing lm: no new lm divides an earlier one
             h = Poly(ring, [cols[j] for j in c], list(v))
             _insert(state, h)
-    while state.pairs:
+    while state.npairs:
         t0 = time.perf_counter()
-        d = min(pr[0] for pr in state.pairs)
-        sel = [pr for pr in state.pairs if pr[0] == d]
-        state.pairs = [pr for pr in state.pairs if pr[0] != d]
+        d, sel = state.pop_pairs()
         row_set: set[tuple[int, int]] = set()
-        for _, l, i, j in sel:
+        for i, j, le in sel:
             for k in (i, j):
-                t = l - state.lms[k]
-                if t not in ring._exps:
-                    ring._exps[t] = tuple(x - y for x, y in zip(ring.exps(l), ring.exps(state.lms[k])))
-                row_set.add((t, k))
+                t_exps = tuple(a - b for a, b in zip(le, ring.exps(state.lms[k])))
+                row_set.add((ring.key(t_exps), k))
         rows = sorted(row_set)
         rows, columns = _symbolic_preprocessing(state, rows)
         ncols = len(columns)
@@ -312,7 +321,7 @@ def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> Groebne
                 to_reduce.append(r)
         nnz = sum(len(r[0]) for r in matrix)
         new_rows = backend.reduce(pivots, to_reduce, ncols, p)
-        for c, v in sorted(new_rows, key=lambda r: -r[0][0]):
+        for c, v in sorted(new_rows, key=lambda r: r[0][0]):  # decreasing lm: no new lm divides an earlier one
             h = Poly(ring, [columns[j] for j in c], list(v))
             if h.is_constant():
                 return GroebnerResult(ring, (ring.one(),), tuple(rounds), time.perf_counter() - t_start)

