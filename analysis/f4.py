@@ -216,12 +216,16 @@ class _State:
 def _symbolic_preprocessing(state: _State, rows: list[tuple[int, int]]) -> tuple[list[tuple[int, int]], list[int]]:
     """Add reducer rows for every matrix monomial divisible by a leading monomial.
 
-    rows: list of (multiplier key, basis index). Returns all rows and the sorted column monomials.
+    Works in waves: the monomials first seen in one wave are decoded in bulk and tested for divisibility
+    against all active leading monomials with one array comparison; the reducer of a monomial is the
+    sparsest basis element whose leading monomial divides it. rows: list of (multiplier key, basis index).
+    Returns all rows and the column monomials in decreasing order.
     """
     polys = state.polys
+    ring = state.ring
     seen: set[int] = set()
     done: set[int] = set()
-    todo: list[int] = []
+    frontier: list[int] = []
     for t, i in rows:
         g = polys[i]
         done.add(t + g.lm)
@@ -229,27 +233,36 @@ def _symbolic_preprocessing(state: _State, rows: list[tuple[int, int]]) -> tuple
             m = t + k
             if m not in seen:
                 seen.add(m)
-                todo.append(m)
+                frontier.append(m)
     out_rows = list(rows)
-    ring = state.ring
-    while todo:
-        m = todo.pop()
-        if m in done:
-            continue
-        idx = state.find_reducer(m)
-        if idx < 0:
-            continue
-        g = polys[idx]
-        t = m - g.lm
-        if t not in ring._exps:
-            ring.exps(t)
-        done.add(m)
-        out_rows.append((t, idx))
-        for k in g.mons:
-            mm = t + k
-            if mm not in seen:
-                seen.add(mm)
-                todo.append(mm)
+    act = np.flatnonzero(state.active[: len(polys)])
+    e_act = state.E[act]
+    lengths = np.array([len(polys[i]) for i in act], dtype=np.int64)
+    big = np.iinfo(np.int64).max
+    while frontier:
+        cand = [m for m in frontier if m not in done]
+        frontier = []
+        if not cand or not len(act):
+            break
+        X = ring.decode_many(cand)
+        chunk = max(1, 2_000_000 // max(1, e_act.size))
+        for s in range(0, len(cand), chunk):
+            divides = np.all(e_act[None, :, :] <= X[s : s + chunk, None, :], axis=2)
+            cost = np.where(divides, lengths[None, :], big)
+            best = cost.argmin(axis=1)
+            has = cost[np.arange(len(best)), best] != big
+            for r in np.flatnonzero(has):
+                m = cand[s + r]
+                idx = int(act[best[r]])
+                g = polys[idx]
+                t = m - g.lm
+                done.add(m)
+                out_rows.append((t, idx))
+                for k in g.mons:
+                    mm = t + k
+                    if mm not in seen:
+                        seen.add(mm)
+                        frontier.append(mm)
     return out_rows, sorted(seen, reverse=True)
 
 

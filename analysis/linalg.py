@@ -165,10 +165,10 @@ def _eliminate_dense(m: np.ndarray, pivots: dict[int, Row], p: int, block: int =
                 x[:, j] = (x[:, j] - (x[:, nzj] @ col[nzj]) % p) % p if len(nzj) * (p - 1) ** 2 < 2**62 else (
                     x[:, j] - matmul_mod(x[:, nzj], col[nzj, None], p)[:, 0]
                 ) % p
-        upd = matmul_mod(x, a, p)
-        rows = m[live]
-        rows = (rows - upd) % p
-        m[live] = rows
+        support = np.flatnonzero(a.any(axis=0))  # F4 matrices are sparse: touch only the block's columns
+        upd = matmul_mod(x, a[:, support], p)
+        idx = np.ix_(live, support)
+        m[idx] = (m[idx] - upd) % p
     return m
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Sequence
 
+import numpy as np
+
 from .orderings import FIELD_BITS, MonomialOrder
 
 MAX_PRIME = 2**31
@@ -71,6 +73,8 @@ class Ring:
     order: MonomialOrder
     _weights: tuple[int, ...] = field(repr=False, default=())
     _exps: dict = field(repr=False, default_factory=dict)
+    _nrows: int = field(repr=False, default=0)
+    _winv_t: object = field(repr=False, default=None)
 
     def __init__(self, variables: Sequence[str], prime: int, order: "str | MonomialOrder" = "grevlex"):
         variables = tuple(str(v) for v in variables)
@@ -87,6 +91,12 @@ class Ring:
         object.__setattr__(self, "order", order)
         object.__setattr__(self, "_weights", order.variable_weights)
         object.__setattr__(self, "_exps", {0: (0,) * len(variables)})
+        object.__setattr__(self, "_nrows", len(order.weight_rows))
+        W = np.array(order.weight_rows, dtype=np.int64)
+        winv = np.rint(np.linalg.inv(W.astype(float))).astype(np.int64)
+        if not np.array_equal(W @ winv, np.eye(len(variables), dtype=np.int64)):
+            raise ValueError(f"order {order} has no integer inverse weight matrix")
+        object.__setattr__(self, "_winv_t", np.ascontiguousarray(winv.T[::-1]))
 
     # -- identity ---------------------------------------------------------------------------
     def __eq__(self, other: object) -> bool:
@@ -140,8 +150,7 @@ class Ring:
         return e
 
     def _decode(self, key: int) -> tuple[int, ...]:
-        rows = self.order.weight_rows
-        nrows = len(rows)
+        nrows = self._nrows
         mask = (1 << FIELD_BITS) - 1
         fields = [(key >> (FIELD_BITS * (nrows - 1 - r))) & mask for r in range(nrows)]
         # every supported order is block grevlex: rows of a block are partial sums, longest first
@@ -157,6 +166,16 @@ class Ring:
             r += size
             offset += size
         return tuple(out)
+
+    def decode_many(self, keys: Sequence[int]) -> np.ndarray:
+        """Exponent vectors (len(keys) x nvars, int64) of many keys at once, through their bytes."""
+        nb = FIELD_BITS // 8 * self._nrows
+        if not keys:
+            return np.zeros((0, self.nvars), dtype=np.int64)
+        raw = b"".join(k.to_bytes(nb, "little") for k in keys)
+        fields = np.frombuffer(raw, dtype=f"<u{FIELD_BITS // 8}").reshape(len(keys), self._nrows)
+        # little-endian fields are the weight rows, last row first: the reversed inverse undoes both
+        return fields.astype(np.int64) @ self._winv_t
 
     def degree(self, key: int) -> int:
         return sum(self.exps(key))

@@ -35,6 +35,18 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("file", nargs="?", help="system in msolve format ('-' for stdin)")
+    p.add_argument("--tdoa", metavar="CONFIG", help="a TDOA configuration instead of FILE, e.g. 6r4s or 9r/3s")
+    p.add_argument(
+        "--equations",
+        metavar="SPEC",
+        help="with --tdoa: equations, e.g. 'B2,C2-C6,minors', 'C*', 'A,B2,B3,C2-C6', 'M123_123,...', 'all'",
+    )
+    p.add_argument("--seed", type=int, default=0, help="with --tdoa: seed of the consistent random instance")
+    p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H = h11*h22 - h12^2")
+    p.add_argument(
+        "--export", nargs=2, metavar=("FORMAT", "PATH"),
+        help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
+    )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
@@ -53,8 +65,14 @@ def cmd_degree(args: argparse.Namespace) -> int:
     from analysis.io import InputError, System, parse_msolve, parse_polynomial
     from analysis.ring import check_prime, BadPrime
 
+    if args.tdoa:
+        if args.file:
+            raise UserError("give either FILE or --tdoa, not both")
+        return _degree_tdoa(args)
+    if args.equations or args.saturate_det_h:
+        raise UserError("--equations and --saturate-det-h need --tdoa CONFIG")
     if args.file is None:
-        raise UserError("degree: give a FILE in msolve format")
+        raise UserError("give a FILE in msolve format, or --tdoa CONFIG --equations SPEC")
     try:
         text = sys.stdin.read() if args.file == "-" else open(args.file, encoding="utf-8").read()
     except OSError as e:
@@ -96,12 +114,61 @@ def cmd_degree(args: argparse.Namespace) -> int:
         def sat(p: int):
             return sat_system.to_ring(p, args.order)[1][0]
 
+    if args.export:
+        from analysis.io import write_system
+
+        write_system(system, args.export[1], args.export[0])
     report = analyse(polys, primes, options, saturate_by=sat)
     out = report.as_dict()
     if args.basis:
         out["standard_basis"] = report.standard_basis()
     if args.gb:
         out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
+    _print_report(out, args.json)
+    return 0
+
+
+def _degree_tdoa(args: argparse.Namespace) -> int:
+    """Degree of one TDOA formulation on consistent random instances (known root checked per prime)."""
+    from analysis import formulations as tf
+    from analysis.degree import DEFAULT_PRIMES, analyse
+    from analysis.f4 import F4Options
+    from analysis.ring import BadPrime, Ring, check_prime
+
+    try:
+        config = tf.TDOAConfig.parse(args.tdoa)
+        formulation = tf.Formulation(config, tf.parse_equations(config, args.equations or "all"))
+        primes = tuple(check_prime(p) for p in args.prime) if args.prime else DEFAULT_PRIMES
+    except (ValueError, BadPrime) as e:
+        raise UserError(str(e)) from None
+    options = F4Options(backend=args.backend, max_matrix_cells=args.max_cells, verbose=args.verbose)
+    rings: dict[int, Ring] = {}
+
+    def polys(p: int):
+        instance = tf.sample_gf_instance(config, p, args.seed)
+        tf.check_root(formulation, instance)
+        ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
+        return [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
+
+    def det_h(p: int):
+        ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
+        return ring.gen("h11") * ring.gen("h22") - ring.gen("h12") ** 2
+
+    if args.export:
+        from analysis.io import System, write_system
+
+        ring = Ring(config.unknowns, primes[0], args.order)
+        write_system(System.from_polys(ring, polys(primes[0])), args.export[1], args.export[0])
+    report = analyse(polys, primes, options, saturate_by=det_h if args.saturate_det_h else None)
+    out = {"formulation": formulation.label, "seed": args.seed, **report.as_dict()}
+    if args.saturate_det_h:
+        out["saturated_by"] = "det H"
+    if args.basis:
+        out["standard_basis"] = report.standard_basis()
+    if args.gb:
+        out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
+    if not args.json:
+        print(f"formulation {formulation.label} (seed {args.seed})")
     _print_report(out, args.json)
     return 0
 
