@@ -114,26 +114,27 @@ def _dense(rows: Sequence[Row], ncols: int) -> np.ndarray:
 
 
 def matmul_mod(x: np.ndarray, y: np.ndarray, p: int) -> np.ndarray:
-    """x @ y mod p for int64 matrices with entries in [0, p), exactly.
+    """x @ y mod p for int64 matrices with entries in [0, p), exactly, through float64 BLAS.
 
-    Uses float64 BLAS when every dot product stays below 2**53, else splits x into 16-bit limbs and
-    uses int64 products (exact while k * 2**16 * p < 2**63).
+    When every dot product stays below 2**53 one product suffices. Otherwise both factors are split into
+    16-bit limbs (p < 2**31 so limbs are < 2**16 and limb dot products stay exact for k < 2**21), and
+    the four limb products are recombined mod p in int64.
     """
     k = x.shape[1]
     if k == 0:
         return np.zeros((x.shape[0], y.shape[1]), dtype=np.int64)
     if k * (p - 1) ** 2 < 2**53:
         return (x.astype(np.float64) @ y.astype(np.float64)).astype(np.int64) % p
-    if k * (p - 1) * (1 << 16) < 2**53:
-        lo = (x & 0xFFFF).astype(np.float64)
-        hi = (x >> 16).astype(np.float64)
-        yf = y.astype(np.float64)
-        r_lo = (lo @ yf).astype(np.int64) % p
-        r_hi = (hi @ yf).astype(np.int64) % p
-        return (r_lo + ((r_hi << 16) % p)) % p
-    lo = x & 0xFFFF
-    hi = x >> 16
-    return ((lo @ y) % p + (((hi @ y) % p) << 16) % p) % p
+    if k >= 2**21:
+        raise ValueError("inner dimension too large for exact limb products")
+    x0, x1 = (x & 0xFFFF).astype(np.float64), (x >> 16).astype(np.float64)
+    y0, y1 = (y & 0xFFFF).astype(np.float64), (y >> 16).astype(np.float64)
+    r00 = (x0 @ y0).astype(np.int64) % p
+    r01 = ((x0 @ y1).astype(np.int64) + (x1 @ y0).astype(np.int64)) % p
+    r11 = (x1 @ y1).astype(np.int64) % p
+    s16 = (1 << 16) % p
+    s32 = (1 << 32) % p
+    return (r00 + r01 * s16 % p + r11 * s32 % p) % p
 
 
 def _eliminate_dense(m: np.ndarray, pivots: dict[int, Row], p: int, block: int = 256) -> np.ndarray:

@@ -169,7 +169,7 @@ def action_matrix(gb: GroebnerResult, f: "Poly | int | str", basis: Sequence[int
 
 
 def saturate(polys: Sequence[Poly], f: Poly, options: F4Options = F4Options()) -> GroebnerResult:
-    """Gröbner basis (grevlex) of the saturation I : f^infinity, by the Rabinowitsch trick.
+    """Gröbner basis of the saturation I : f^infinity (in the ring's own order), by the Rabinowitsch trick.
 
     Adds a variable t, computes a Gröbner basis of I + (1 - t f) in an order eliminating t, and keeps the
     elements free of t (Cox-Little-O'Shea, ch. 4 sec. 4).

@@ -347,7 +347,19 @@ class Poly:
         p = self.ring.prime
         return Poly(self.ring, [k + key for k in self.mons], [x * c % p for x in self.coeffs] if c != 1 else self.coeffs)
 
-    def __add__(self, other: "Poly") -> "Poly":
+    def _coerce(self, other: "Poly | int") -> "Poly":
+        if isinstance(other, Poly):
+            if other.ring != self.ring:
+                raise ValueError("polynomials from different rings")
+            return other
+        if isinstance(other, int):
+            return self.ring.one().scale(other)
+        return NotImplemented
+
+    def __add__(self, other: "Poly | int") -> "Poly":
+        other = self._coerce(other)
+        if other is NotImplemented:
+            return NotImplemented
         p = self.ring.prime
         d = self.to_dict()
         for k, c in zip(other.mons, other.coeffs):
@@ -358,8 +370,16 @@ class Poly:
         p = self.ring.prime
         return Poly(self.ring, self.mons, [p - c for c in self.coeffs])
 
-    def __sub__(self, other: "Poly") -> "Poly":
+    __radd__ = __add__
+
+    def __sub__(self, other: "Poly | int") -> "Poly":
+        other = self._coerce(other)
+        if other is NotImplemented:
+            return NotImplemented
         return self + (-other)
+
+    def __rsub__(self, other: int) -> "Poly":
+        return (-self) + other
 
     def __mul__(self, other: "Poly | int") -> "Poly":
         if isinstance(other, int):

