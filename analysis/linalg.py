@@ -137,39 +137,52 @@ def matmul_mod(x: np.ndarray, y: np.ndarray, p: int) -> np.ndarray:
     return (r00 + r01 * s16 % p + r11 * s32 % p) % p
 
 
-def _eliminate_dense(m: np.ndarray, pivots: dict[int, Row], p: int, block: int = 256) -> np.ndarray:
-    """Zero every pivot column of the dense block m, pivot columns left to right.
+def _pivot_layers(pivots: dict[int, Row], ncols: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted pivot columns and their layer: the longest chain of pivot rows leading to each pivot.
 
-    Blocked (Faugère-Lachartre style): for a block J of consecutive pivots, the multipliers X solve
-    X A_JJ = M[:, J] with A_JJ unit upper triangular (solved column by column), then the whole block is
-    applied at once with one modular matrix product M -= X A_J.
+    Pivot row i has entries only at columns >= its own; if it has an entry in pivot column j, pivot j
+    must be applied after pivot i. Pivots of one layer are independent, so a whole layer is applied at
+    once: one matrix product per layer instead of a triangular solve per pivot.
     """
+    pcols = np.array(sorted(pivots), dtype=np.int64)
+    where = np.full(ncols, -1, dtype=np.int64)
+    where[pcols] = np.arange(len(pcols))
+    rows = [pivots[int(c)] for c in pcols]
+    lengths = np.fromiter((len(r[0]) for r in rows), dtype=np.int64, count=len(rows))
+    cols = np.fromiter(chain.from_iterable(r[0] for r in rows), dtype=np.int64, count=int(lengths.sum()))
+    src = np.repeat(np.arange(len(rows)), lengths)
+    dst = where[cols]
+    edge = (dst >= 0) & (dst != src)
+    src, dst = src[edge], dst[edge]
+    layer = np.zeros(len(pcols), dtype=np.int64)
+    while len(src):
+        new = layer.copy()
+        np.maximum.at(new, dst, layer[src] + 1)
+        if np.array_equal(new, layer):
+            break
+        layer = new
+    return pcols, layer
+
+
+def _eliminate_dense(m: np.ndarray, pivots: dict[int, Row], p: int, block: int = 512) -> np.ndarray:
+    """Zero every pivot column of the dense block m by the pivot rows, layer by layer (in place)."""
     if not len(m) or not pivots:
         return m
-    pcols = np.array(sorted(pivots), dtype=np.int64)
-    # skip leading pivot columns that no row touches
-    for start in range(0, len(pcols), block):
-        cols = pcols[start : start + block]
-        sub = m[:, cols]
-        live = np.flatnonzero(np.any(sub != 0, axis=1))
-        if not len(live):
-            continue
-        a = _dense([pivots[int(c)] for c in cols], m.shape[1])
-        a_jj = a[:, cols]
-        x = sub[live].copy()
-        b = len(cols)
-        # forward substitution: x[:, j] -= x[:, :j] @ a_jj[:j, j]; a_jj has unit diagonal
-        for j in range(1, b):
-            col = a_jj[:j, j]
-            nzj = np.flatnonzero(col)
-            if len(nzj):
-                x[:, j] = (x[:, j] - (x[:, nzj] @ col[nzj]) % p) % p if len(nzj) * (p - 1) ** 2 < 2**62 else (
-                    x[:, j] - matmul_mod(x[:, nzj], col[nzj, None], p)[:, 0]
-                ) % p
-        support = np.flatnonzero(a.any(axis=0))  # F4 matrices are sparse: touch only the block's columns
-        upd = matmul_mod(x, a[:, support], p)
-        idx = np.ix_(live, support)
-        m[idx] = (m[idx] - upd) % p
+    pcols, layer = _pivot_layers(pivots, m.shape[1])
+    order = np.argsort(layer, kind="stable")
+    bounds = np.flatnonzero(np.diff(layer[order])) + 1
+    for group in np.split(order, bounds):
+        for start in range(0, len(group), block):
+            cols = pcols[group[start : start + block]]
+            sub = m[:, cols]
+            live = np.flatnonzero(np.any(sub != 0, axis=1))
+            if not len(live):
+                continue
+            a = _dense([pivots[int(c)] for c in cols], m.shape[1])
+            support = np.flatnonzero(a.any(axis=0))  # F4 matrices are sparse: touch only these columns
+            upd = matmul_mod(sub[live], a[:, support], p)
+            idx = np.ix_(live, support)
+            m[idx] = (m[idx] - upd) % p
     return m
 
 

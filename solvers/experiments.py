@@ -186,6 +186,8 @@ TABLE4_COLUMNS: tuple[str, ...] = (
     "median_lm_iterations",
     "median_log10_residual",
     "median_real_candidates",
+    "median_log10_initial_position_error",
+    "median_log10_initial_offset_error",
     "status",
 )
 
@@ -770,8 +772,9 @@ def summarise(frame: pd.DataFrame) -> pd.DataFrame:
 
     Columns: trials, median/q25/q75 log10 position and offset errors (no estimate = +inf),
     failure_rate, median_log10_residual, median_real_candidates, median_lm_iterations,
-    median_solver_ms, median_lm_ms, median_runtime_ms (solver + LM), and the oracle's median
-    log10 errors (LM from the ground truth).
+    median_solver_ms, median_lm_ms, median_runtime_ms (solver + LM), the median log10 errors of
+    the starting point (solver accuracy before LM) and of the oracle (LM from the ground truth),
+    and the first failed seeds.
     """
     rows = []
     for (config, init, sigma), group in frame.groupby(["config", "init", "sigma"], sort=False):
@@ -794,6 +797,8 @@ def summarise(frame: pd.DataFrame) -> pd.DataFrame:
             "median_solver_ms": 1e3 * float(group["solver_s"].median()),
             "median_lm_ms": 1e3 * float(group["lm_s"].median()),
             "median_runtime_ms": 1e3 * float(group["total_s"].median()),
+            "median_log10_initial_position_error": _median_log10(group["initial_position_error"]),
+            "median_log10_initial_offset_error": _median_log10(group["initial_offset_error"]),
             "median_log10_oracle_position_error": _median_log10(group["oracle_position_error"]),
             "median_log10_oracle_offset_error": _median_log10(group["oracle_offset_error"]),
             "failed_seeds": " ".join(str(s) for s in group.loc[group["failed"], "seed"].head(10)),
@@ -1033,7 +1038,8 @@ def plot_histograms(
             ax.set_ylabel("trials per bin (width 0.25)")
             ax.set_xlabel(f"log10 relative {what} error (dimensionless)")
             ax.grid(alpha=0.3)
-            ax.legend(loc="upper center", fontsize=8)
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(loc="upper center", fontsize=8)
             ax.set_xlim(edges[0], edges[-1])
             ax.tick_params(labelbottom=True)
     trials = "/".join(str(t) for t in sorted(trials_seen)) or "0"
@@ -1093,7 +1099,8 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
         ax.set_title(f"{what.capitalize()} error vs noise")
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.1)
-        ax.legend(fontsize=8, loc="upper left")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8, loc="upper left")
     trials = "/".join(str(int(t)) for t in sorted(set(data["trials"]))) if not data.empty else "0"
     fig.suptitle(f"Median relative error after Levenberg-Marquardt vs measurement noise "
                  f"({trials} trials per point; shaded: interquartile range)")
