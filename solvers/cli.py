@@ -4,6 +4,9 @@ Subcommands
 -----------
 degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
            or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``)
+tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
+generate   regenerate a numeric solver (elimination template -> solvers/generated/) and print its statistics
+reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
 
 Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
 stderr with exit status 2; a disagreement between primes exits with status 3.
@@ -192,6 +195,74 @@ def _print_report(out: dict, as_json: bool) -> None:
                 print(f"  {s}")
 
 
+def _add_tables(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("tables", help="reproduce Tables 2 and 3 (complexity sweep, cached and parallel)",
+                       description="Run the complexity sweep over TDOA formulations and write tables/table2.*, "
+                       "tables/table3.* and tables/formulations.csv. Results are cached under .cache/complexity, "
+                       "so a rerun is instant and an interrupted sweep resumes.")
+    p.add_argument("--quick", action="store_true", help="only the cells and formulations the paper reports")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.set_defaults(func=cmd_tables)
+
+
+def cmd_tables(args: argparse.Namespace) -> int:
+    from analysis.tables import make_tables
+
+    summary = make_tables(quick=args.quick, jobs=args.jobs)
+    if summary is not None:
+        print(summary)
+    return 0
+
+
+def _add_generate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("generate", help="regenerate a numeric solver from its formulation",
+                       description="Build the elimination template over GF(p) for a solver configuration "
+                       "(9r3s or 6r4s), emit solvers/generated/tdoa_<config>_t<rows>x<cols>.{py,json} and print "
+                       "the template statistics.")
+    p.add_argument("config", help="solver configuration: 9r3s or 6r4s")
+    p.set_defaults(func=cmd_generate)
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    from solvers.codegen import SOLVERS, generate
+
+    label = args.config.replace("/", "")
+    if label not in SOLVERS:
+        raise UserError(f"unknown solver configuration {args.config!r}; valid: {', '.join(SOLVERS)}")
+    stats = generate(label)
+    print(stats)
+    return 0
+
+
+def _add_reproduce(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("reproduce", help="the main job: reproduce Tables 2, 3, 4 and Figures 1, 2",
+                       description="Regenerate the paper's Tables 2 and 3 (complexity sweep), Table 4 and "
+                       "Figures 1 and 2 (synthetic experiments) under tables/, with progress output and a final "
+                       "comparison with the paper. Cached: a rerun resumes where the last one stopped.")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--quick", action="store_true", help="fewer trials (100 per Table 4 row; default)")
+    mode.add_argument("--full", action="store_true", help="the paper's 1000 trials per row")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.set_defaults(func=cmd_reproduce)
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    import time
+
+    from analysis.tables import make_tables
+    from solvers.experiments import reproduce
+
+    t0 = time.perf_counter()
+    print("== Tables 2 and 3: complexity sweep ==", flush=True)
+    summary = make_tables(quick=not args.full, jobs=args.jobs)
+    if summary is not None:
+        print(summary)
+    print("== Table 4 and Figures 1, 2: synthetic experiments ==", flush=True)
+    reproduce(quick=not args.full, jobs=args.jobs)
+    print(f"reproduce: done in {time.perf_counter() - t0:.0f} s; outputs under tables/")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tdoa-workbench",
@@ -199,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_degree(sub)
+    _add_tables(sub)
+    _add_generate(sub)
+    _add_reproduce(sub)
     return parser
 
 

@@ -112,7 +112,7 @@ FIGURES_DIR = TABLES_DIR / "figures"
 PROVENANCE_PATH = TABLES_DIR / "experiments_provenance.json"
 
 #: Bump when the meaning of a cached trial changes (columns, seeding, failure rule).
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 #: The paper's two solvers, in Table 4 order: configuration key -> (m receivers, n transmitters).
 CONFIGS: dict[str, tuple[int, int]] = {"9r3s": (9, 3), "6r4s": (6, 4)}
@@ -158,10 +158,14 @@ TRIAL_COLUMNS: tuple[str, ...] = (
     "solver_s",
     "lm_s",
     "total_s",
+    "n_roots",
+    "n_real_roots",
     "n_real_candidates",
     "n_refined",
     "initial_position_error",
     "initial_offset_error",
+    "best_candidate_position_error",
+    "best_candidate_offset_error",
     "oracle_position_error",
     "oracle_offset_error",
     "oracle_residual",
@@ -185,6 +189,8 @@ TABLE4_COLUMNS: tuple[str, ...] = (
     "median_lm_ms",
     "median_lm_iterations",
     "median_log10_residual",
+    "median_real_roots",
+    "median_roots",
     "median_real_candidates",
     "median_log10_initial_position_error",
     "median_log10_initial_offset_error",
@@ -210,6 +216,9 @@ class TrialOptions:
         Solver initialisation: number of best-residual candidates refined by LM.
     max_iter : int
         LM budget of residual evaluations (`solvers.refine.refine` ``max_iter``).
+    count_roots : bool
+        Solver initialisation: also call ``solvers.api.solve_roots`` (outside the timed part) to
+        count all finite and all real roots of the polynomial system.
     failure_threshold : float
         Relative error above which a noiseless trial has failed (see module docstring).
     oracle_factor : float
@@ -220,6 +229,7 @@ class TrialOptions:
 
     refine_candidates: int = 3
     max_iter: int = 200
+    count_roots: bool = True
     failure_threshold: float = 1e-6
     oracle_factor: float = 10.0
     position_sigma: float = 10.0
@@ -262,6 +272,26 @@ def _check_init(init: str) -> str:
     if init not in INITS:
         raise ValueError(f"unknown initialisation {init!r}; valid: {', '.join(INITS)}")
     return init
+
+
+def _load_solve_roots() -> Callable[..., np.ndarray] | None:
+    """Return ``solvers.api.solve_roots`` if it exists (after `_load_calibrate` succeeded)."""
+    solve_roots = getattr(importlib.import_module("solvers.api"), "solve_roots", None)
+    return solve_roots if callable(solve_roots) else None
+
+
+#: A root counts as real when max |Im x| <= REAL_TOL * max |x| (as `solvers.recovery.recover`).
+REAL_TOL = 1e-6
+
+
+def _count_roots(roots: np.ndarray) -> tuple[int, int]:
+    """Return (number of roots, number of real roots) of a (k, N) array of candidate roots."""
+    roots = np.asarray(roots)
+    if roots.ndim != 2 or roots.shape[0] == 0:
+        return 0, 0
+    scale = np.max(np.abs(roots), axis=1)
+    imag = np.max(np.abs(np.imag(roots)), axis=1)
+    return int(roots.shape[0]), int(np.sum(imag <= REAL_TOL * scale))
 
 
 def _load_calibrate() -> Callable[..., list]:
@@ -343,9 +373,16 @@ def run_trial(
       failed, outcome                see `OUTCOMES` and the module docstring
       solver_s, lm_s, total_s        seconds in the algebraic solver (NaN for "random"), in LM (all
                                      refined candidates), and their sum
-      n_real_candidates              valid real solutions returned by the solver (NaN for "random")
+      n_roots, n_real_roots          finite / real roots of the polynomial system (solve_roots;
+                                     NaN for "random" or when not counted)
+      n_real_candidates              calibrations from calibrate(F, refine=False): real roots
+                                     with positive-definite H and a valid geometry, deduplicated
+                                     (NaN for "random")
       n_refined                      starting points refined by LM
-      initial_*_error                errors of the kept starting point (solver accuracy before LM)
+      initial_*_error                errors of the solver's best-residual candidate before LM (the
+                                     solver alone), or of the random start
+      best_candidate_*_error         smallest errors over all candidates before LM (is the true
+                                     root among them?; NaN for "random")
       oracle_*                       LM started at the ground truth on the same F
 
     Raises
@@ -391,7 +428,8 @@ def _run_trial(
     F = network.measurements(sigma, rng)
 
     nan = float("nan")
-    solver_s, n_real, outcome = nan, nan, "ok"
+    solver_s, n_real, n_roots, n_real_roots, outcome = nan, nan, nan, nan, "ok"
+    best_candidate_pe, best_candidate_oe = nan, nan
     starts: list[object] = []
     if init == "random":
         starts = [random_initial(m, n, rng, options.position_sigma, options.offset_sigma)]
@@ -407,6 +445,15 @@ def _run_trial(
         starts = candidates[: options.refine_candidates]
         if not starts and outcome == "ok":
             outcome = "no_candidate"
+        if candidates:
+            errors = np.array([_errors(c, network) for c in candidates])
+            best_candidate_pe, best_candidate_oe = (float(v) for v in np.min(errors, axis=0))
+        solve_roots = _load_solve_roots() if options.count_roots else None
+        if solve_roots is not None:
+            try:
+                n_roots, n_real_roots = (float(k) for k in _count_roots(solve_roots(F)))
+            except (np.linalg.LinAlgError, FloatingPointError, ZeroDivisionError):
+                pass
 
     results = []
     t0 = time.perf_counter()
@@ -423,8 +470,9 @@ def _run_trial(
         residual=nan, lm_iterations=nan, lm_success=False, failed=True, outcome=outcome,
         solver_s=solver_s, lm_s=lm_s if results else 0.0,
         total_s=(0.0 if math.isnan(solver_s) else solver_s) + lm_s,
-        n_real_candidates=n_real, n_refined=len(results),
+        n_roots=n_roots, n_real_roots=n_real_roots, n_real_candidates=n_real, n_refined=len(results),
         initial_position_error=nan, initial_offset_error=nan,
+        best_candidate_position_error=best_candidate_pe, best_candidate_offset_error=best_candidate_oe,
         oracle_position_error=oracle_pe, oracle_offset_error=oracle_oe,
         oracle_residual=oracle.calibration.residual,
     )
@@ -435,10 +483,10 @@ def _run_trial(
         residual = item[0].calibration.residual  # type: ignore[attr-defined]
         return residual if math.isfinite(residual) else math.inf
 
-    best, start = min(results, key=score)
+    best, _ = min(results, key=score)
     calibration = best.calibration
     pe, oe = _errors(calibration, network)
-    start_pe, start_oe = _errors(_as_calibration_like(start), network)
+    start_pe, start_oe = _errors(_as_calibration_like(starts[0]), network)
     position_limit = max(options.failure_threshold, options.oracle_factor * oracle_pe)
     offset_limit = max(options.failure_threshold, options.oracle_factor * oracle_oe)
     ok = _finite(pe, oe) and pe <= position_limit and oe <= offset_limit
@@ -793,6 +841,8 @@ def summarise(frame: pd.DataFrame) -> pd.DataFrame:
             "failure_rate": float(group["failed"].mean()),
             "median_log10_residual": _median_log10(group["residual"]),
             "median_real_candidates": float(group["n_real_candidates"].median()),
+            "median_real_roots": float(group["n_real_roots"].median()),
+            "median_roots": float(group["n_roots"].median()),
             "median_lm_iterations": float(group["lm_iterations"].median()),
             "median_solver_ms": 1e3 * float(group["solver_s"].median()),
             "median_lm_ms": 1e3 * float(group["lm_s"].median()),
@@ -871,9 +921,15 @@ _DISPLAY = (
     ("median_lm_ms", "LM (ms)", 1),
     ("median_lm_iterations", "LM iterations", 0),
     ("median_log10_residual", "Residual log10", 1),
-    ("median_real_candidates", "Real roots", 0),
+    ("median_real_roots", "Real roots", 0),
+    ("median_real_candidates", "Valid candidates", 0),
     ("trials", "Trials", 0),
 )
+
+
+def _num(value: object) -> str:
+    """Counts and medians of counts: 3, 3.5, or n/a."""
+    return f"{value:g}" if isinstance(value, (int, float)) and not math.isnan(value) else "n/a"
 
 
 def _display_rows(table: pd.DataFrame) -> list[list[str]]:
@@ -882,7 +938,7 @@ def _display_rows(table: pd.DataFrame) -> list[list[str]]:
         cells = []
         for column, _, digits in _DISPLAY:
             value = row[column]
-            if column in ("median_lm_iterations", "median_real_candidates") and isinstance(value, float) and not math.isnan(value):
+            if column in ("median_lm_iterations", "median_real_roots", "median_real_candidates") and isinstance(value, float) and not math.isnan(value):
                 cells.append(f"{value:g}")
             else:
                 cells.append(_fmt(value, digits))
@@ -1024,7 +1080,8 @@ def plot_histograms(
                 logs = np.clip(log10_error(errors[~np.isnan(errors)]), edges[0], edges[-1])
                 counts, _ = np.histogram(logs, bins=edges)
                 median = _median_log10(frame[column])
-                label = f"{_INIT_LABEL[init]} ({'LM from solver' if init == 'solver' else 'LM from random start'}), median {median:.2f}"
+                label = (f"{_INIT_LABEL[init]} ({'LM from solver' if init == 'solver' else 'LM from random start'})\n"
+                         f"median {median:.2f}, {int(frame['failed'].sum())}/{len(frame)} failed")
                 if missing:
                     label += f", {missing} without estimate"
                 ax.hist(edges[:-1], bins=edges, weights=counts, histtype="stepfilled", alpha=0.45,
@@ -1039,12 +1096,14 @@ def plot_histograms(
             ax.set_xlabel(f"log10 relative {what} error (dimensionless)")
             ax.grid(alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
-                ax.legend(loc="upper center", fontsize=8)
+                # centred on log10 error -6, in the gap between converged (~-15) and failed (>= -2) runs
+                x_gap = (-6.0 - edges[0]) / (edges[-1] - edges[0])
+                ax.legend(loc="upper center", bbox_to_anchor=(x_gap, 1.0), fontsize=8, framealpha=0.9)
             ax.set_xlim(edges[0], edges[-1])
             ax.tick_params(labelbottom=True)
     trials = "/".join(str(t) for t in sorted(trials_seen)) or "0"
-    fig.suptitle(f"Relative error after Levenberg-Marquardt, noiseless data, {trials} trials per "
-                 f"histogram (errors outside 1e{edges[0]:.0f}..1e{edges[-1]:.0f} drawn in the end bins)")
+    fig.suptitle(f"Relative error after Levenberg-Marquardt, noiseless data, {trials} trials per histogram\n"
+                 f"(dashed: medians; errors outside 1e{edges[0]:.0f}..1e{edges[-1]:.0f} are drawn in the end bins)")
     title = "Fig. 1: log10 relative error histograms, ours vs random initialisation"
     paths = _save(fig, Path(stem), title, "Paper Sec. 4.1 Fig. 1 reproduction", meta)
     plt.close(fig)
@@ -1056,7 +1115,7 @@ def plot_histograms(
 def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", meta: dict | None = None) -> list[Path]:
     """Fig. 2: median relative error against the noise level sigma, positions and offsets.
 
-    One line per (solver, initialisation) with the interquartile range shaded, plus the oracle
+    One line per (solver, initialisation), the interquartile range of "ours" shaded, plus the oracle
     (LM started at the ground truth) as a dotted grey reference. Both axes logarithmic. Writes
     ``<stem>.png``, ``<stem>.pdf`` and the plotted summary ``<stem>.csv``.
 
@@ -1073,7 +1132,7 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
 
     meta = meta or {}
     data = summary[summary["sigma"] > 0].sort_values(["config", "init", "sigma"])
-    fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5.6), constrained_layout=True)
     for ax, what in zip(axes, ("position", "offset")):
         for config in CONFIGS:
             for init in INITS:
@@ -1086,7 +1145,8 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
                 q75 = 10.0 ** part[f"q75_log10_{what}_error"].to_numpy()
                 ax.plot(sig, med, color=_COLORS[init], linestyle=_LINESTYLES[config], marker=_MARKERS[config],
                         label=f"{config_label(config)} {_INIT_LABEL[init]}")
-                ax.fill_between(sig, q25, np.minimum(q75, 1e6), color=_COLORS[init], alpha=0.08)
+                if init == "solver":  # the random baseline's spread covers decades: not drawn
+                    ax.fill_between(sig, q25, q75, color=_COLORS[init], alpha=0.10, linewidth=0)
             part = data[(data["config"] == config) & (data["init"] == INITS[0])]
             if not part.empty:
                 ax.plot(part["sigma"], 10.0 ** part[f"median_log10_oracle_{what}_error"], color="0.45",
@@ -1099,11 +1159,12 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
         ax.set_title(f"{what.capitalize()} error vs noise")
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.1)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="upper left")
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
     trials = "/".join(str(int(t)) for t in sorted(set(data["trials"]))) if not data.empty else "0"
-    fig.suptitle(f"Median relative error after Levenberg-Marquardt vs measurement noise "
-                 f"({trials} trials per point; shaded: interquartile range)")
+    fig.suptitle(f"Median relative error after Levenberg-Marquardt vs measurement noise\n"
+                 f"({trials} trials per point; shaded: interquartile range of 'ours')")
     title = "Fig. 2: median relative error vs noise sigma"
     paths = _save(fig, Path(stem), title, "Paper Sec. 4.2 Fig. 2 reproduction", meta)
     plt.close(fig)
@@ -1350,7 +1411,7 @@ def comparison_report(table: pd.DataFrame, noise: pd.DataFrame | None = None, tr
     lines = [f"Table 4 reproduction ({trials_text}) vs paper, median log10 relative error:"]
     lines.append(
         f"  {'row':<12} {'position ours':>13} {'paper':>6} {'diff':>6}   {'offset ours':>11} {'paper':>6} "
-        f"{'diff':>6}   {'failures':>8} {'runtime ms':>10} {'real roots':>10}"
+        f"{'diff':>6}   {'failures':>8} {'runtime ms':>10} {'real roots':>10} {'valid cands':>11}"
     )
     for _, r in table.iterrows():
         name = f"{r['solver']} {r['init']}"
@@ -1363,7 +1424,7 @@ def comparison_report(table: pd.DataFrame, noise: pd.DataFrame | None = None, tr
             f"  {name:<12} {r['median_log10_position_error']:>13.2f} {r['paper_median_log10_position_error']:>6.2f} "
             f"{dp:>+6.2f}   {r['median_log10_offset_error']:>11.2f} {r['paper_median_log10_offset_error']:>6.2f} "
             f"{do:>+6.2f}   {100 * r['failure_rate']:>7.1f}% {r['median_runtime_ms']:>10.1f} "
-            f"{_fmt(r['median_real_candidates'], 0):>10}"
+            f"{_num(r['median_real_roots']):>10} {_num(r['median_real_candidates']):>11}"
         )
     if noise is not None and not noise.empty:
         lines.append(summarise_noise_text(noise))

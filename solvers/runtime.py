@@ -61,7 +61,6 @@ class StagedSolver:
         self.scale_powers = None if scale_powers is None else np.asarray(scale_powers, dtype=float)
         mons = [tuple(m) for m in spec["monomials"]]
         self._mons = mons
-        key = {m: i for i, m in enumerate(mons)}
         polys = spec["polys"]
         lengths = np.array([len(s) for s in polys], dtype=np.int64)
         self._offsets = np.concatenate([[0], np.cumsum(lengths)])
@@ -182,7 +181,12 @@ class StagedSolver:
     def roots(self, coeffs: np.ndarray) -> np.ndarray:
         """Candidate roots (batch, |B|, nvars), complex, in the scaled frame of the coefficients."""
         with np.errstate(all="ignore"):
-            M = self.action_matrices(coeffs)
+            try:
+                M = self.action_matrices(coeffs)
+            except np.linalg.LinAlgError:  # a singular step in the batch: solve one by one
+                if coeffs.shape[0] > 1:
+                    return np.concatenate([self.roots(coeffs[i : i + 1]) for i in range(coeffs.shape[0])])
+                return np.full((1, self.basis_size, self.nvars), np.nan + 0j)
             bad = ~np.all(np.isfinite(M), axis=(1, 2))
             M[bad] = 0.0
             _, vecs = np.linalg.eig(M)
@@ -204,14 +208,20 @@ class StagedSolver:
         return polish(coeffs, self._term_exps, self._term_eq, self.n_inputs, roots, iterations)
 
 
-def _monomials(x: np.ndarray, exps: np.ndarray) -> np.ndarray:
-    """x (..., n) complex, exps (T, n) -> (..., T) values of the monomials."""
-    out = np.ones(x.shape[:-1] + (len(exps),), dtype=x.dtype)
-    for j in range(exps.shape[1]):
-        e = exps[:, j]
-        if e.any():
-            out = out * x[..., j : j + 1] ** e
+def _power_table(x: np.ndarray, max_exp: np.ndarray) -> list[np.ndarray]:
+    """Per variable j, the powers x_j^0..x_j^max_exp[j] stacked on a last axis."""
+    out = []
+    for j, d in enumerate(max_exp):
+        p = np.ones(x.shape[:-1] + (int(d) + 1,), dtype=x.dtype)
+        for k in range(1, int(d) + 1):
+            p[..., k] = p[..., k - 1] * x[..., j]
+        out.append(p)
     return out
+
+
+def _cmatmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Complex (batch, r, T) times real (batch, T, q), as two real batched products."""
+    return (a.real @ b) + 1j * (a.imag @ b)
 
 
 def polish(coeffs: np.ndarray, exps: np.ndarray, term_eq: np.ndarray, n_eq: int, roots: np.ndarray,
@@ -220,29 +230,38 @@ def polish(coeffs: np.ndarray, exps: np.ndarray, term_eq: np.ndarray, n_eq: int,
 
     coeffs (batch, T) coefficients of the T terms with exponents exps (T, n), term_eq (T,) the equation
     of each term; roots (batch, k, n). Each equation is scaled by the norm of its coefficients; the step
-    is the least-squares solution through the pseudo-inverse. Non-finite candidates are left alone.
+    is the least-squares solution through the pseudo-inverse. Candidates whose Jacobian or residual is
+    not finite are left alone. Derivatives use prefix/suffix products (no division by x_j).
     """
     x = roots.astype(complex)
+    n = exps.shape[1]
     S = np.zeros((n_eq, len(exps)))
     S[term_eq, np.arange(len(exps))] = 1.0
     weight = 1.0 / np.sqrt(np.maximum((coeffs**2) @ S.T, 1e-300))  # (batch, n_eq)
-    c = coeffs[:, None, :]
-    n = exps.shape[1]
+    C = (coeffs[:, None, :] * S[None]) * weight[:, :, None]  # (batch, n_eq, T)
+    Ct = np.ascontiguousarray(np.swapaxes(C, 1, 2))  # (batch, T, n_eq)
+    max_exp = exps.max(axis=0)
+    dexp = np.maximum(exps - 1, 0)
     with np.errstate(all="ignore"):
         for _ in range(iterations):
-            mon = _monomials(x, exps)  # (b, k, T)
-            f = (c * mon) @ S.T * weight[:, None, :]  # (b, k, n_eq)
-            J = np.empty(x.shape[:2] + (n_eq, n), dtype=complex)
-            for j in range(n):
-                e = exps[:, j]
-                d = exps.copy()
-                d[:, j] = np.maximum(e - 1, 0)
-                dm = _monomials(x, d) * e
-                J[..., j] = (c * dm) @ S.T * weight[:, None, :]
+            pw = _power_table(x, max_exp)
+            factors = [pw[j][..., exps[:, j]] for j in range(n)]  # each (b, k, T)
+            prefix = [np.ones_like(factors[0])]
+            for j in range(n - 1):
+                prefix.append(prefix[-1] * factors[j])
+            suffix = [np.ones_like(factors[0])]
+            for j in range(n - 1, 0, -1):
+                suffix.append(suffix[-1] * factors[j])
+            suffix = suffix[::-1]
+            mon = prefix[-1] * factors[-1]
+            f = _cmatmul(mon, Ct)  # (b, k, n_eq)
+            D = np.stack([prefix[j] * suffix[j] * (pw[j][..., dexp[:, j]] * exps[:, j]) for j in range(n)], axis=2)
+            b_, k_ = x.shape[:2]
+            J = np.swapaxes(_cmatmul(D.reshape(b_, k_ * n, -1), Ct).reshape(b_, k_, n, n_eq), 2, 3)
             ok = np.all(np.isfinite(J), axis=(2, 3)) & np.all(np.isfinite(f), axis=2)
             Jc = np.where(ok[..., None, None], J, 0.0)
             fc = np.where(ok[..., None], f, 0.0)
-            step = np.einsum("bkij,bkj->bki", np.linalg.pinv(Jc), fc)
+            step = (np.linalg.pinv(Jc) @ fc[..., None])[..., 0]
             x = np.where(ok[..., None], x - step, x)
     return x
 
@@ -262,3 +281,53 @@ def data_scale(F: np.ndarray) -> np.ndarray:
 
 def spec_path(module_file: str, name: str) -> str:
     return os.path.join(os.path.dirname(os.path.abspath(module_file)), name)
+
+
+#: Instances per chunk in batched solves (bounds the memory of the step matrices).
+CHUNK = 64
+
+
+def _check_data(F: np.ndarray, config: tuple[int, int]) -> np.ndarray:
+    F = np.asarray(F, dtype=float)
+    if F.shape[-2:] != tuple(config):
+        raise ValueError(f"data must have shape (..., {config[0]}, {config[1]}), got {F.shape}")
+    return F
+
+
+def _finish(solver: StagedSolver, coeffs: np.ndarray, scale: np.ndarray, polish_iterations: int) -> np.ndarray:
+    roots = solver.roots(coeffs)
+    if polish_iterations:
+        roots = solver.polish(coeffs, roots, polish_iterations)
+    if solver.scale_powers is not None:
+        roots = roots * (scale[:, None, None] ** solver.scale_powers[None, None, :])
+    return roots
+
+
+def solve_one(solver: StagedSolver, coefficients, F: np.ndarray, config: tuple[int, int],
+              polish_iterations: int) -> np.ndarray:
+    """Candidate roots (k, nvars) for one data matrix; coefficients run on Python floats."""
+    F = _check_data(F, config)
+    if F.ndim != 2:
+        raise ValueError(f"solve takes one ({config[0]}, {config[1]}) matrix; use solve_batch for {F.shape}")
+    s = data_scale(F[None])
+    coeffs = np.array(coefficients(tuple((F / s[0]).ravel().tolist())), dtype=float)[None]
+    return _finish(solver, coeffs, s, polish_iterations)[0]
+
+
+def solve_batch(solver: StagedSolver, coefficients, F: np.ndarray, config: tuple[int, int],
+                polish_iterations: int) -> np.ndarray:
+    """Candidate roots (..., k, nvars) for data (..., m, n); coefficients run on numpy arrays."""
+    F = _check_data(F, config)
+    lead = F.shape[:-2]
+    flat = F.reshape((-1,) + tuple(config))
+    out = np.empty((len(flat), solver.basis_size, solver.nvars), dtype=complex)
+    for start in range(0, len(flat), CHUNK):
+        block = flat[start : start + CHUNK]
+        s = data_scale(block)
+        cols = (block / s[:, None, None]).reshape(len(block), -1).T
+        values = coefficients(tuple(cols))
+        coeffs = np.empty((len(block), len(values)))
+        for j, v in enumerate(values):
+            coeffs[:, j] = v
+        out[start : start + CHUNK] = _finish(solver, coeffs, s, polish_iterations)
+    return out.reshape(lead + out.shape[1:])

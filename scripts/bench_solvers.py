@@ -1,0 +1,160 @@
+"""Benchmark the generated solvers; writes tables/solvers.csv and tables/solvers.meta.json.
+
+Per solver: final template rows x cols, elimination steps and their total rows, |B|, action variable,
+template generation time (a fresh search, not timed in tests), median runtime of one solve and batched
+throughput, and, on N seeded noiseless networks (positions N(0, 10^2), offsets N(0, 1), via
+solvers.synthetic.random_network): median / 90th percentile of the log10 relative error of the best
+candidate against the true root (H, b, o), the failure fraction (no candidate within 1e-6), the mean
+number of real candidates; both for the raw eigen-solution (no polishing) and for the solver output
+(Gauss-Newton polished on the polynomial system; no LM, no recovery).
+
+Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers.py [--trials 1000] [--seed 0] [--no-generate]
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import datetime  # noqa: E402
+import importlib  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import numpy as np  # noqa: E402
+
+from solvers.codegen import SOLVERS, generated_specs  # noqa: E402
+from solvers.synthetic import random_network, true_root  # noqa: E402
+from solvers.template import build_template  # noqa: E402
+
+FAIL_TOL = 1e-6
+REAL_TOL = 1e-6
+
+
+def _module(label: str):
+    stem = next(os.path.basename(p)[:-5] for p in generated_specs() if os.path.basename(p).startswith(f"tdoa_{label}_t"))
+    return importlib.import_module(f"solvers.generated.{stem}")
+
+
+def _accuracy(roots: np.ndarray, truths: np.ndarray) -> dict:
+    """Best-candidate log10 relative errors, failures and real-candidate counts for a batch."""
+    err = np.nanmin(np.linalg.norm(roots - truths[:, None, :], axis=2), axis=1) / np.linalg.norm(truths, axis=1)
+    err = np.where(np.isfinite(err), err, np.inf)
+    log = np.log10(np.maximum(err, 1e-17))
+    finite = np.all(np.isfinite(roots), axis=2)
+    scale = np.max(np.abs(np.where(finite[..., None], roots, 0)), axis=2)
+    real = finite & (np.max(np.abs(roots.imag), axis=2) <= REAL_TOL * np.maximum(scale, 1e-300))
+    return {
+        "median_log10_err": float(np.median(log)),
+        "p90_log10_err": float(np.percentile(log, 90)),
+        "failure_fraction": float(np.mean(err > FAIL_TOL)),
+        "mean_real": float(np.mean(real.sum(axis=1))),
+    }
+
+
+def bench(label: str, trials: int, seed: int, generate: bool) -> dict:
+    module = _module(label)
+    m, n = module.CONFIG
+    with open(os.path.join(os.path.dirname(module.__file__), module.SPEC_FILE), encoding="utf-8") as fh:
+        spec = json.load(fh)
+    gen_s = float("nan")
+    if generate:
+        t0 = time.perf_counter()
+        build_template(SOLVERS[label])
+        gen_s = time.perf_counter() - t0
+    rng = np.random.default_rng(seed)
+    nets = [random_network(m, n, rng) for _ in range(trials)]
+    F = np.stack([net.measurements() for net in nets])
+    truths = []
+    for net in nets:
+        H, b, o = true_root(net)
+        truths.append(np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o]))
+    truths = np.array(truths)
+    module.solve(F[0])  # warm-up: builds the index arrays
+    single = []
+    for k in range(min(trials, 200)):
+        t0 = time.perf_counter()
+        module.solve(F[k])
+        single.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    polished = module.solve_batch(F)
+    batch_s = (time.perf_counter() - t0) / trials
+    raw = module.solve_batch(F, polish=0)
+    row = {
+        "solver": label,
+        "formulation": module.FORMULATION,
+        "basis_size": module.BASIS_SIZE,
+        "action": module.ACTION,
+        "template": f"{module.TEMPLATE_SHAPE[0]}x{module.TEMPLATE_SHAPE[1]}",
+        "steps": module.STEPS,
+        "step_rows_total": sum(len(s["rows"]) for s in spec["steps"]) + module.TEMPLATE_SHAPE[0],
+        "generation_s": round(gen_s, 2),
+        "single_ms": round(1e3 * float(np.median(single)), 3),
+        "batch_ms_per_instance": round(1e3 * batch_s, 3),
+        "polish_iterations": module.POLISH_ITERATIONS,
+        "trials": trials,
+    }
+    for prefix, roots in (("raw", raw), ("solver", polished)):
+        for key, value in _accuracy(roots, truths).items():
+            row[f"{prefix}_{key}"] = round(value, 4)
+    return row
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=1000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-generate", action="store_true", help="skip timing a fresh template search")
+    parser.add_argument("--solvers", nargs="*", default=list(SOLVERS))
+    parser.add_argument("--out", default=os.path.join(ROOT, "tables", "solvers.csv"))
+    args = parser.parse_args(argv)
+    rows = []
+    for label in args.solvers:
+        row = bench(label, args.trials, args.seed, not args.no_generate)
+        rows.append(row)
+        print(", ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    meta = {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "commit": _git("rev-parse", "HEAD"),
+        "worktree_dirty": bool(_git("status", "--porcelain")),
+        "trials": args.trials,
+        "seed": args.seed,
+        "networks": "solvers.synthetic.random_network: positions N(0, 10^2), offsets N(0, 1), noiseless",
+        "error": "log10 of min over candidates ||x - x_true|| / ||x_true||, x = (h11, h12, h22, b1, b2, o)",
+        "failure": f"no candidate within {FAIL_TOL} relative error",
+        "real": f"finite candidates with max |imag| <= {REAL_TOL} max |x|",
+        "timing": "single: median of up to 200 solve() calls; batch: solve_batch on all trials / trials",
+        "versions": {"python": platform.python_version(), "numpy": np.__version__},
+        "threads": {k: os.environ.get(k, "") for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+    }
+    with open(os.path.splitext(args.out)[0] + ".meta.json", "w", encoding="utf-8") as fh:
+        json.dump(meta, fh, indent=2)
+        fh.write("\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,164 @@
+"""Public entry points: from TDOA measurements to calibrations (paper Section 3 pipeline).
+
+``calibrate(F)`` validates the data, runs a generated minimal solver on a subset (6r4s when n >= 4 and
+m >= 6, else 9r3s; the first receivers and transmitters), recovers positions and offsets from every
+real candidate with all receivers (:mod:`solvers.recovery`), places the transmitters the solver did
+not use by linear TDOA multilateration, refines with Levenberg-Marquardt on all m*n measurements
+(:mod:`solvers.refine`) and returns the calibrations best first. ``solve_roots(F)`` is the lower-level
+entry: the raw candidate roots (H, b, o) of the dispatched solver.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .recovery import Calibration, recover, rms_residual
+from .refine import refine as _refine
+
+__all__ = ["SolverChoice", "calibrate", "select_solver", "solve_roots"]
+
+_GENERATED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
+
+
+@dataclass(frozen=True)
+class SolverChoice:
+    """Which generated solver handles a network, and on which subset of nodes."""
+
+    label: str
+    m: int
+    n: int
+    module: str
+
+
+def _module_for(label: str):
+    names = sorted(f[:-3] for f in os.listdir(_GENERATED) if f.startswith(f"tdoa_{label}_t") and f.endswith(".py"))
+    if not names:
+        raise RuntimeError(f"no generated solver for {label} in {_GENERATED}; run scripts/generate_solvers.py")
+    return importlib.import_module(f"solvers.generated.{names[-1]}")
+
+
+def _validate(F) -> np.ndarray:
+    try:
+        arr = np.asarray(F, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"F must be a 2-D array of real numbers: {exc}") from None
+    if arr.ndim != 2:
+        raise ValueError(f"F must be a 2-D (receivers x transmitters) array, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("F contains NaN or infinite values")
+    m, n = arr.shape
+    if not ((m >= 9 and n >= 3) or (m >= 6 and n >= 4)):
+        raise ValueError(f"too few nodes: {m} receivers x {n} transmitters; the solvers need at least "
+                         "9 receivers and 3 transmitters (9r3s) or 6 receivers and 4 transmitters (6r4s)")
+    return arr
+
+
+def select_solver(m: int, n: int) -> SolverChoice:
+    """6r4s when n >= 4 and m >= 6, else 9r3s (needs m >= 9, n >= 3)."""
+    if n >= 4 and m >= 6:
+        return SolverChoice("6r4s", 6, 4, _module_for("6r4s").__name__)
+    if m >= 9 and n >= 3:
+        return SolverChoice("9r3s", 9, 3, _module_for("9r3s").__name__)
+    raise ValueError(f"no solver for {m} receivers x {n} transmitters (need 9r3s or 6r4s)")
+
+
+def solve_roots(F) -> np.ndarray:
+    """Raw candidate roots (k, 5 + n_s) of the dispatched solver, unknowns h11, h12, h22, b1, b2, o1..o_ns.
+
+    Uses the first m_s receivers and n_s transmitters of F (see :func:`select_solver`); complex and
+    spurious candidates included, non-finite ones removed.
+    """
+    F = _validate(F)
+    choice = select_solver(*F.shape)
+    module = importlib.import_module(choice.module)
+    with np.errstate(all="ignore"):
+        roots = module.solve(F[: choice.m, : choice.n])
+    return roots[np.all(np.isfinite(roots), axis=1)]
+
+
+def _multilaterate(receivers: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Position and offset of one transmitter from its column of measurements (receivers in gauge).
+
+    (f_i - o)^2 = |r_i - s|^2 minus the same for receiver 1 (r_1 = 0) is linear in (s, o):
+    2 r_i.s - 2 (f_i - f_1) o = |r_i|^2 - f_i^2 + f_1^2, i = 2..m; solved by least squares.
+    """
+    A = np.column_stack([2.0 * receivers[1:], -2.0 * (f[1:] - f[0])])
+    rhs = np.einsum("ij,ij->i", receivers[1:], receivers[1:]) - f[1:] ** 2 + f[0] ** 2
+    sol, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=1e-12)
+    if rank < 3 or not np.all(np.isfinite(sol)):
+        return None
+    return sol[:2], float(sol[2])
+
+
+def _extend(F: np.ndarray, cal: Calibration, n_used: int) -> Calibration | None:
+    """Add the transmitters n_used..n-1 to a calibration recovered from the first n_used."""
+    m, n = F.shape
+    if n == n_used:
+        return cal
+    tra = np.empty((n, 2))
+    off = np.empty(n)
+    tra[:n_used], off[:n_used] = cal.transmitters, cal.offsets
+    for j in range(n_used, n):
+        got = _multilaterate(cal.receivers, F[:, j])
+        if got is None:
+            return None
+        tra[j], off[j] = got
+    res = rms_residual(F, cal.receivers, tra, off)
+    return Calibration(cal.receivers, tra, off, res) if np.isfinite(res) else None
+
+
+def calibrate(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]:
+    """Calibrate a network from TDOA measurements F[i, j] = |r_i - s_j| + o_j.
+
+    Parameters
+    ----------
+    F: (m, n) finite array, m >= 9 and n >= 3, or m >= 6 and n >= 4.
+    refine: run Levenberg-Marquardt on all m*n measurements from each recovered candidate.
+    max_refined: refine only this many candidates (the smallest residuals after recovery).
+
+    Returns the calibrations (gauge r_1 = 0, r_2 = (r_2x, 0)) sorted by RMS residual, best first;
+    an empty list when no candidate is real and geometrically valid (e.g. collinear receivers).
+    Raises ValueError for malformed input (wrong shape, NaN/inf, too few nodes).
+    Paper Section 3.1 (steps 1-4) and 3.2 (trilateration of the remaining transmitters).
+    """
+    F = _validate(F)
+    choice = select_solver(*F.shape)
+    roots = solve_roots(F)
+    cands: list[Calibration] = []
+    ns = choice.n
+    with np.errstate(all="ignore"):
+        for x in roots:
+            cal = recover(F[:, :ns], x[:3], x[3:5], x[5 : 5 + ns])
+            if cal is None:
+                continue
+            cal = _extend(F, cal, ns)
+            if cal is not None:
+                cands.append(cal)
+    cands.sort(key=lambda c: c.residual)
+    if refine:
+        refined = []
+        for cal in cands[:max_refined]:
+            try:
+                out = _refine(cal, F).calibration
+            except ValueError:
+                continue
+            if np.isfinite(out.residual) and np.all(np.isfinite(out.receivers)) and np.all(np.isfinite(out.transmitters)):
+                refined.append(out)
+        cands = refined
+        cands.sort(key=lambda c: c.residual)
+    return _dedupe(cands)
+
+
+def _dedupe(cands: list[Calibration], tol: float = 1e-8) -> list[Calibration]:
+    """Drop calibrations that repeat an earlier one (same offsets and receiver layout)."""
+    out: list[Calibration] = []
+    for c in cands:
+        key = np.concatenate([c.offsets, np.abs(c.receivers).ravel()])
+        if any(np.allclose(key, np.concatenate([d.offsets, np.abs(d.receivers).ravel()]), rtol=tol, atol=tol * (1 + np.abs(key).max()))
+               for d in out):
+            continue
+        out.append(c)
+    return out
