@@ -188,7 +188,34 @@ BENCHMARK_SYSTEMS: dict[str, SystemBuilder] = {
     "dense-3x(2,3,3)": lambda p: dense_random_system(3, (2, 3, 3), p, seed=0),
     "dense-4x(2,2,3,3)": lambda p: dense_random_system(4, (2, 2, 3, 3), p, seed=0),
 }
-"""Name -> builder(prime). Extend with :func:`register_system` (e.g. Table 2 TDOA systems)."""
+"""Name -> builder(prime). Extend with :func:`register_system`."""
+
+
+def tdoa_system(label: str, prime: int = 65521, seed: int = 0) -> list[Poly]:
+    """A TDOA formulation ("9r3s:C2-C9") on a consistent random instance (known root checked)."""
+    from . import formulations as tf
+    from .ring import Ring
+
+    formulation = tf.Formulation.parse(label)
+    instance = tf.sample_gf_instance(formulation.config, prime, seed)
+    tf.check_root(formulation, instance)
+    ring = Ring(formulation.config.unknowns, prime)
+    return [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, prime)]
+
+
+TDOA_TABLE_SYSTEMS = {
+    "tdoa-9r3s-C8": "9r3s:C2-C9",
+    "tdoa-8r3s-B1C7": "8r3s:B2,C2-C8",
+    "tdoa-8r3s-A1C7": "8r3s:A,C2-C8",
+    "tdoa-7r3s-A1B1C6": "7r3s:A,B2,C2-C7",
+    "tdoa-7r3s-B2C6": "7r3s:B2,B3,C2-C7",
+    "tdoa-6r3s-A1B2C5": "6r3s:A,B2,B3,C2-C6",
+    "tdoa-6r4s-B1C5M10": "6r4s:B2,C2-C6,minors",
+}
+"""The systems of the paper's Table 2 and the 6r/4s cell of Table 3 (seed-0 instances)."""
+
+for _name, _label in TDOA_TABLE_SYSTEMS.items():
+    BENCHMARK_SYSTEMS[_name] = (lambda label: lambda p: tdoa_system(label, p))(_label)
 
 
 def register_system(name: str, builder: SystemBuilder, replace: bool = False) -> None:

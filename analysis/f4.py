@@ -97,6 +97,46 @@ class _Divisibility:
         return ((b | g) - a) & g == g
 
 
+def _pack_words(E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pack exponent rows into uint64 words with guard bits: (words, guard mask per word).
+
+    8-bit fields (exponents < 128) when possible, else 16-bit fields; a | b for packed rows is then
+    ((b | guard) - a) & guard == guard in every word, with no borrow between fields.
+    """
+    top = int(E.max(initial=0))
+    bits = 8 if top < 128 else 16 if top < 32768 else 0
+    if not bits:
+        raise OverflowError("exponent too large for packed divisibility tests")
+    per_word = 64 // bits
+    n = E.shape[1]
+    nwords = -(-n // per_word)
+    words = np.zeros((len(E), nwords), dtype=np.uint64)
+    guard = np.zeros(nwords, dtype=np.uint64)
+    for v in range(n):
+        w, f = divmod(v, per_word)
+        words[:, w] |= E[:, v].astype(np.uint64) << np.uint64(bits * f)
+        guard[w] |= np.uint64(1 << (bits * f + bits - 1))
+    return words, guard
+
+
+def _divides(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Row-wise (broadcast) test that exponent rows A divide exponent rows B."""
+    A, B = np.broadcast_arrays(A, B)
+    words, guard = _pack_words(np.concatenate([A, B]))
+    a, b = words[: len(A)], words[len(A) :]
+    return np.all(((b | guard) - a) & guard == guard, axis=1)
+
+
+def _divides_matrix(L: np.ndarray) -> np.ndarray:
+    """le[i, j] = (row j of L divides row i of L), by packed words with guard bits."""
+    words, guard = _pack_words(L)
+    le = np.ones((len(L), len(L)), dtype=bool)
+    for w in range(words.shape[1]):
+        col = words[:, w]
+        le &= (((col | guard[w])[:, None] - col[None, :]) & guard[w]) == guard[w]
+    return le
+
+
 class _State:
     """The growing basis G and the pair set, with a vectorised Gebauer-Möller update.
 
@@ -154,23 +194,23 @@ class _State:
         self.E[k] = eh
         # criterion B on old pairs
         if len(self.pi):
-            divisible = np.all(self.pL >= eh, axis=1)
-            if divisible.any():
-                eq_i = np.all(np.maximum(self.E[self.pi], eh) == self.pL, axis=1)
-                eq_j = np.all(np.maximum(self.E[self.pj], eh) == self.pL, axis=1)
-                keep = ~divisible | eq_i | eq_j
-                self.pi, self.pj, self.pL, self.pdeg = self.pi[keep], self.pj[keep], self.pL[keep], self.pdeg[keep]
+            divisible = np.flatnonzero(_divides(eh[None, :], self.pL))
+            if len(divisible):
+                sub = self.pL[divisible]
+                eq_i = np.all(np.maximum(self.E[self.pi[divisible]], eh) == sub, axis=1)
+                eq_j = np.all(np.maximum(self.E[self.pj[divisible]], eh) == sub, axis=1)
+                drop = divisible[~(eq_i | eq_j)]
+                if len(drop):
+                    keep = np.ones(len(self.pi), dtype=bool)
+                    keep[drop] = False
+                    self.pi, self.pj, self.pL, self.pdeg = self.pi[keep], self.pj[keep], self.pL[keep], self.pdeg[keep]
         act = np.flatnonzero(self.active[:k])
         if len(act):
             Ea = self.E[act]
             L = np.maximum(Ea, eh)
             coprime = ~np.any((Ea > 0) & (eh > 0), axis=1)
-            keep_new = np.zeros(len(act), dtype=bool)
-            # criteria M and F, in chunks to bound the a x a x n comparison
-            le = np.empty((len(act), len(act)), dtype=bool)
-            chunk = max(1, 4_000_000 // max(1, len(act) * L.shape[1]))
-            for s in range(0, len(act), chunk):
-                le[s : s + chunk] = np.all(L[None, :, :] <= L[s : s + chunk, None, :], axis=2)  # le[i, j]: L_j | L_i
+            # criteria M and F: le[i, j] says lcm_j divides lcm_i
+            le = _divides_matrix(L)
             eq = le & le.T
             dominated = np.any(le & ~eq, axis=1)
             has_coprime = np.any(eq & coprime[None, :], axis=1)

@@ -216,11 +216,13 @@ def _rref_numpy(m: np.ndarray, p: int) -> np.ndarray:
         piv = row + int(nz[0])
         if piv != row:
             m[[row, piv]] = m[[piv, row]]
-        m[row, col:] = m[row, col:] * pow(int(m[row, col]), -1, p) % p
+        support = col + np.flatnonzero(m[row, col:])
+        m[row, support] = m[row, support] * pow(int(m[row, col]), -1, p) % p
         others = np.flatnonzero(m[:, col])
         others = others[others != row]
         if len(others):
-            m[others, col:] = (m[others, col:] - np.outer(m[others, col], m[row, col:]) % p) % p
+            idx = np.ix_(others, support)
+            m[idx] = (m[idx] - np.outer(m[others, col], m[row, support]) % p) % p
         row += 1
     return m[:row]
 

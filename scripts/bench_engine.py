@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402  (after the thread settings)
 
 from analysis.benchmarks import (  # noqa: E402
     BENCHMARK_SYSTEMS,
+    TDOA_TABLE_SYSTEMS,
     benchmark_system,
     find_msolve,
     parse_msolve_basis,
@@ -54,7 +55,7 @@ from analysis.f4 import F4Options, GroebnerResult, groebner  # noqa: E402
 from analysis.quotient import NotZeroDimensional, degree, dimension  # noqa: E402
 
 PRIME = 65521
-DEFAULT_SYSTEMS = ("katsura-6", "katsura-7", "cyclic-6")
+DEFAULT_SYSTEMS = ("katsura-6", "katsura-7", "cyclic-6", *TDOA_TABLE_SYSTEMS)
 CSV_PATH = ROOT / "tables" / "bench_engine.csv"
 META_PATH = ROOT / "tables" / "bench_engine.meta.json"
 COLUMNS = (
