@@ -71,32 +71,6 @@ class GroebnerResult:
         return max(((r.rows, r.cols) for r in self.rounds), key=lambda rc: rc[0] * rc[1], default=(0, 0))
 
 
-class _Divisibility:
-    """Packed exponent vectors with guard bits: one integer operation per divisibility test."""
-
-    def __init__(self, ring: Ring):
-        self.ring = ring
-        self.bits = 16
-        self.guard = sum(1 << (self.bits * i + self.bits - 1) for i in range(ring.nvars))
-        self.cache: dict[int, int] = {}
-
-    def pack(self, key: int) -> int:
-        v = self.cache.get(key)
-        if v is None:
-            v = 0
-            for i, e in enumerate(self.ring.exps(key)):
-                if e >= 1 << (self.bits - 1):
-                    raise OverflowError("exponent too large for the divisibility packing")
-                v |= e << (self.bits * i)
-            self.cache[key] = v
-        return v
-
-    def divides(self, a: int, b: int) -> bool:
-        """a | b for packed exponents a, b."""
-        g = self.guard
-        return ((b | g) - a) & g == g
-
-
 def _pack_words(E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pack exponent rows into uint64 words with guard bits: (words, guard mask per word).
 
@@ -146,11 +120,9 @@ class _State:
 
     def __init__(self, ring: Ring):
         self.ring = ring
-        self.div = _Divisibility(ring)
         n = ring.nvars
         self.polys: list[Poly] = []
         self.lms: list[int] = []
-        self.packed: list[int] = []
         self.active_list: list[bool] = []
         self.E = np.zeros((16, n), dtype=np.int32)
         self.active = np.zeros(16, dtype=bool)
@@ -159,7 +131,6 @@ class _State:
         self.pj = np.zeros(0, dtype=np.int64)
         self.pL = np.zeros((0, n), dtype=np.int32)
         self.pdeg = np.zeros(0, dtype=np.int64)
-        self.reducer_cache: dict[int, tuple[int, int]] = {}  # monomial -> (index or -1, len(G) checked)
 
     @property
     def npairs(self) -> int:
@@ -190,7 +161,6 @@ class _State:
             self.active = np.concatenate([self.active, np.zeros_like(self.active)])
         self.polys.append(h)
         self.lms.append(h.lm)
-        self.packed.append(self.div.pack(h.lm))
         self.E[k] = eh
         # criterion B on old pairs
         if len(self.pi):
@@ -227,38 +197,25 @@ class _State:
         self.active[k] = True
 
     def find_reducer(self, m: int) -> int:
-        """Index of an active basis element whose lm divides m, or -1."""
-        cached = self.reducer_cache.get(m)
-        n = len(self.polys)
-        div = self.div
-        if cached is not None:
-            idx, checked = cached
-            if idx >= 0 and self.active[idx]:
-                return idx
-            start = checked if idx < 0 else 0
-        else:
-            start = 0
-        mp = div.pack(m)
-        guard = div.guard
-        mg = mp | guard
-        best = -1
-        packed, active, polys = self.packed, self.active, self.polys
-        for i in range(start, n):
-            if active[i] and (mg - packed[i]) & guard == guard:
-                if best < 0 or len(polys[i]) < len(polys[best]):
-                    best = i
-        if best < 0 and start > 0:
-            best = -1
-        self.reducer_cache[m] = (best, n)
-        return best
+        """Index of the sparsest active basis element whose leading monomial divides m, or -1."""
+        act = np.flatnonzero(self.active[: len(self.polys)])
+        if not len(act):
+            return -1
+        hits = act[np.all(self.E[act] <= np.array(self.ring.exps(m)), axis=1)]
+        if not len(hits):
+            return -1
+        return int(min(hits, key=lambda i: len(self.polys[i])))
 
 
-def _symbolic_preprocessing(state: _State, rows: list[tuple[int, int]]) -> tuple[list[tuple[int, int]], list[int]]:
+def _symbolic_preprocessing(
+    state: _State, rows: list[tuple[int, int]], leads_done: bool = True
+) -> tuple[list[tuple[int, int]], list[int]]:
     """Add reducer rows for every matrix monomial divisible by a leading monomial.
 
     Works in waves: the monomials first seen in one wave are decoded in bulk and tested for divisibility
     against all active leading monomials with one array comparison; the reducer of a monomial is the
     sparsest basis element whose leading monomial divides it. rows: list of (multiplier key, basis index).
+    With leads_done=False the leading monomials of the given rows get reducers too (tail reduction).
     Returns all rows and the column monomials in decreasing order.
     """
     polys = state.polys
@@ -268,7 +225,8 @@ def _symbolic_preprocessing(state: _State, rows: list[tuple[int, int]]) -> tuple
     frontier: list[int] = []
     for t, i in rows:
         g = polys[i]
-        done.add(t + g.lm)
+        if leads_done:
+            done.add(t + g.lm)
         for k in g.mons:
             m = t + k
             if m not in seen:
@@ -408,41 +366,17 @@ def _insert(state: _State, h: Poly) -> None:
 
 
 def _reduce_basis(state: _State, backend) -> list[Poly]:
-    """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis."""
+    """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis.
+
+    Symbolic preprocessing of the active elements supplies a reducer for every tail monomial that is
+    divisible by a leading monomial; the tails are then reduced by these pivot rows, each on its own.
+    """
     ring = state.ring
-    idx = [i for i, a in enumerate(state.active) if a]
-    # rows to reduce: the tails; pivots: reducers of tail monomials from symbolic preprocessing
-    lead_set = {state.lms[i] for i in idx}
-    seen: set[int] = set()
-    todo: list[int] = []
-    for i in idx:
-        for k in state.polys[i].mons[1:]:
-            if k not in seen:
-                seen.add(k)
-                todo.append(k)
-    red_rows: list[tuple[int, int]] = []
-    done: set[int] = set()
-    while todo:
-        m = todo.pop()
-        if m in done:
-            continue
-        j = state.find_reducer(m)
-        if j < 0:
-            continue
-        done.add(m)
-        g = state.polys[j]
-        t = m - g.lm
-        ring.exps(t)
-        red_rows.append((t, j))
-        for k in g.mons:
-            mm = t + k
-            if mm not in seen:
-                seen.add(mm)
-                todo.append(mm)
-    columns = sorted(seen | lead_set, reverse=True)
+    idx = [int(i) for i in np.flatnonzero(state.active[: len(state.polys)])]
+    rows, columns = _symbolic_preprocessing(state, [(0, i) for i in idx], leads_done=False)
     col_of = {m: c for c, m in enumerate(columns)}
     pivots: dict[int, Row] = {}
-    for t, j in red_rows:
+    for t, j in rows[len(idx) :]:
         g = state.polys[j]
         r = ([col_of[t + k] for k in g.mons], g.coeffs)
         pivots[r[0][0]] = r
