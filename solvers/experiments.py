@@ -455,10 +455,8 @@ def _run_trial(
             except (np.linalg.LinAlgError, FloatingPointError, ZeroDivisionError):
                 pass
 
-    results = []
     t0 = time.perf_counter()
-    for start in starts:
-        results.append((refine(start, F, max_iter=options.max_iter), start))
+    results = [refine(start, F, max_iter=options.max_iter) for start in starts]
     lm_s = time.perf_counter() - t0
 
     oracle = refine((network.receivers, network.transmitters, network.offsets), F, max_iter=options.max_iter)
@@ -479,11 +477,11 @@ def _run_trial(
     if not results:
         return record
 
-    def score(item: tuple[object, object]) -> float:
-        residual = item[0].calibration.residual  # type: ignore[attr-defined]
+    def score(result: object) -> float:
+        residual = result.calibration.residual  # type: ignore[attr-defined]
         return residual if math.isfinite(residual) else math.inf
 
-    best, _ = min(results, key=score)
+    best = min(results, key=score)
     calibration = best.calibration
     pe, oe = _errors(calibration, network)
     start_pe, start_oe = _errors(_as_calibration_like(starts[0]), network)
@@ -742,8 +740,11 @@ def run_trials(
         key = _cache_key(key_config, init, trials, sigma, seed, options)
         path = _cache_path(key)
         if path.exists():
-            return _read_cache(path)
+            frame = _read_cache(path)
+            frame.attrs["batch"] = _batch_info(path, "cache hit")
+            return frame
 
+    started = time.perf_counter()
     pairs = [(t, seed + t) for t in range(trials)]
     tasks = [
         (key_config, init, pairs[i : i + chunk_size], float(sigma), options)
@@ -766,10 +767,38 @@ def run_trials(
         bar.close()
 
     frame = _frame(records)
+    seconds = round(time.perf_counter() - started, 3)
     if path is not None:
         _write_atomic(path, frame.to_csv(index=False, float_format="%.17g"))
-        _write_atomic(path.with_suffix(".json"), json.dumps(key, indent=2, sort_keys=True) + "\n")
+        sidecar = dict(key, compute_seconds=seconds, jobs=jobs if pool is None else pool.jobs,
+                       computed=_dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat())
+        _write_atomic(path.with_suffix(".json"), json.dumps(sidecar, indent=2, sort_keys=True) + "\n")
+        frame.attrs["batch"] = _batch_info(path, "computed")
+    else:
+        frame.attrs["batch"] = {"file": None, "status": "not cached", "compute_seconds": seconds}
     return frame
+
+
+def _batch_info(path: Path, status: str) -> dict:
+    """Cache file, whether it was computed now, and the wall time it took when it was computed."""
+    try:
+        sidecar = json.loads(path.with_suffix(".json").read_text())
+    except (OSError, json.JSONDecodeError):
+        sidecar = {}
+    return {"file": path.name, "status": status, "compute_seconds": sidecar.get("compute_seconds"),
+            "computed": sidecar.get("computed")}
+
+
+def _batches(frames: Iterable[pd.DataFrame | str]) -> dict:
+    """Summarise the `batch` attributes of run_trials frames for the provenance record."""
+    infos = [f.attrs["batch"] for f in frames if not isinstance(f, str) and "batch" in f.attrs]
+    return {
+        "batches": len(infos),
+        "computed_now": sum(i["status"] != "cache hit" for i in infos),
+        "cache_hits": sum(i["status"] == "cache hit" for i in infos),
+        "compute_seconds_when_computed": round(sum(i["compute_seconds"] or 0.0 for i in infos), 1),
+        "files": [i["file"] for i in infos],
+    }
 
 
 def noise_sweep(
@@ -793,7 +822,10 @@ def noise_sweep(
         for init in inits
         for sigma in sigmas
     ]
-    return pd.concat(frames, ignore_index=True)
+    batches = _batches(frames)
+    sweep = pd.concat(frames, ignore_index=True)
+    sweep.attrs = {"batches": batches}
+    return sweep
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1081,9 +1113,9 @@ def plot_histograms(
                 counts, _ = np.histogram(logs, bins=edges)
                 median = _median_log10(frame[column])
                 label = (f"{_INIT_LABEL[init]} ({'LM from solver' if init == 'solver' else 'LM from random start'})\n"
-                         f"median {median:.2f}, {int(frame['failed'].sum())}/{len(frame)} failed")
+                         f"median {median:.2f}\n{int(frame['failed'].sum())}/{len(frame)} failed")
                 if missing:
-                    label += f", {missing} without estimate"
+                    label += f" ({missing} no estimate)"
                 ax.hist(edges[:-1], bins=edges, weights=counts, histtype="stepfilled", alpha=0.45,
                         color=_COLORS[init], edgecolor=_COLORS[init], linewidth=1.2, label=label)
                 if math.isfinite(median):
@@ -1323,6 +1355,7 @@ def build_table4(
     meta["wall_seconds"] = round(time.perf_counter() - t0, 3)
     meta["outputs"] = _relative(paths.values())
     meta["rows"] = json.loads(table.to_json(orient="records"))
+    meta["trial_batches"] = _batches(frames.values())
     meta["failed_seeds"] = {
         f"{config}/{init}": " ".join(str(s) for s in frame.loc[frame["failed"], "seed"].head(20))
         for (config, init), frame in frames.items() if not isinstance(frame, str)
@@ -1377,6 +1410,7 @@ def build_figures(
         fig1 = plot_histograms(hist_frames, figures_dir / "fig1_histograms", meta1)
         meta1["wall_seconds"] = round(time.perf_counter() - t0, 3)
         meta1["outputs"] = _relative(fig1)
+        meta1["trial_batches"] = _batches(frames.values())
 
         t0 = time.perf_counter()
         sweep = noise_sweep(tuple(CONFIGS), inits, tuple(sigmas), sweep_trials, seed, **kwargs)
@@ -1387,6 +1421,7 @@ def build_figures(
     fig2 = plot_noise(noise, figures_dir / "fig2_noise", meta2)
     meta2["wall_seconds"] = round(time.perf_counter() - t0, 3)
     meta2["outputs"] = _relative(fig2)
+    meta2["trial_batches"] = sweep.attrs.get("batches")
     _update_provenance({"fig1": meta1, "fig2": meta2}, Path(tables_dir) / PROVENANCE_PATH.name)
     return noise, {"fig1": [str(p) for p in fig1], "fig2": [str(p) for p in fig2]}
 

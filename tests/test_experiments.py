@@ -174,6 +174,8 @@ def test_cache_hit_on_rerun(monkeypatch, tmp_path):
     monkeypatch.setattr(ex, "_run_chunk", no_work)
     second = ex.run_trials("6r4s", "random", 3, sigma=1e-3, seed=11, jobs=1, progress=False)
     pd.testing.assert_frame_equal(first, second)
+    assert first.attrs["batch"]["status"] == "computed" and second.attrs["batch"]["status"] == "cache hit"
+    assert second.attrs["batch"]["compute_seconds"] > 0
     # any parameter change is a different key
     with pytest.raises(AssertionError, match="cache miss"):
         ex.run_trials("6r4s", "random", 3, sigma=1e-3, seed=12, jobs=1, progress=False)
