@@ -34,7 +34,7 @@ class SolverChoice:
 
 
 def _module_for(label: str):
-    names = sorted(f[:-3] for f in os.listdir(_GENERATED) if f.startswith(f"tdoa_{label}_t") and f.endswith(".py"))
+    names = sorted(f[:-3] for f in os.listdir(_GENERATED) if f.startswith(f"tdoa_{label}_") and f.endswith(".py"))
     if not names:
         raise RuntimeError(f"no generated solver for {label} in {_GENERATED}; run scripts/generate_solvers.py")
     return importlib.import_module(f"solvers.generated.{names[-1]}")

@@ -215,9 +215,9 @@ def cmd_tables(args: argparse.Namespace) -> int:
 
 
 def _add_generate(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("generate", help="regenerate a numeric solver from its formulation",
-                       description="Build the elimination template over GF(p) for a solver configuration "
-                       "(9r3s or 6r4s), emit solvers/generated/tdoa_<config>_t<rows>x<cols>.{py,json} and print "
+    p = sub.add_parser("generate", help="regenerate a numeric solver from its formulation (spec + module)",
+                       description="Build the solver spec over GF(p) (root count, structure) for a configuration "
+                       "(9r3s or 6r4s), emit solvers/generated/tdoa_<config>_<method><size>.{py,json} and print "
                        "the template statistics.")
     p.add_argument("config", help="solver configuration: 9r3s or 6r4s")
     p.set_defaults(func=cmd_generate)

@@ -1,20 +1,21 @@
-"""Shared numeric kernels of the generated solvers: replay a staged elimination template, build the
-action matrix, solve the eigenproblem, read off the roots and polish them by Gauss-Newton.
+"""Shared numeric kernels of the generated solvers.
 
-A generated module (solvers/generated/*.py) computes the equation coefficients from the data and
-hands them, with its spec (solvers/generated/*.json, built by :mod:`solvers.template`), to
-:class:`StagedSolver`. All kernels are vectorised over a leading batch axis; index arrays are
-precomputed once per spec, so a solve is a fixed sequence of numpy calls:
+A generated module (solvers/generated/*.py) holds the solver's constants and the coefficient function
+of its equations; the numerics live here, vectorised over a leading batch axis:
 
-1. fill each step's template from the polynomial table V (one fancy-indexed assignment);
-2. reduce the non-pivot rows by the pivot rows (unit triangular block: ``numpy.linalg.solve``);
-3. keep the rows with new leading monomials, normalised by a least-squares (QR) solve, into V;
-4. final step: [T | C_B] with T unit upper triangular; NF(r) = -(T^-1 C_B)[r] for r in R;
-5. action matrix on B, ``numpy.linalg.eig``, eigenvectors normalised by the entry of monomial 1;
-6. optional Gauss-Newton polishing of every candidate on all input equations.
+* data normalisation (divide by the RMS measurement) and the map of roots back to the data scale;
+* evaluation of a polynomial system from its coefficient vector, Gauss-Newton polishing;
+* :class:`CurvePencilSolver` (6r4s): the rank-2 condition on the compaction matrix makes the offsets a
+  rational curve with an explicit linear parametrisation; on it, C2..C6 are linear in (H, b) and B2
+  is quadratic, so the roots are the eigenvalues of an 11 x 11 quartic matrix polynomial (bordered
+  matrix), solved by the QZ algorithm on its companion pencil;
+* :class:`CSystemHomotopy` (9r3s): parameter homotopy from a stored generic complex instance whose 75
+  roots were found by monodromy, tracked by a batched RK4 predictor / Newton corrector;
+* :class:`StagedSolver`: the legacy replay of a staged F4-trace template (kept as the fallback path).
 
-Only numpy is used. Reference: Kukelova et al. (ECCV 2008) for the action-matrix template;
-Faugère (JPAA 1999) for the F4 steps whose trace the template replays.
+Why not a single elimination template: see :mod:`solvers.template` (degree falls make the single
+Macaulay template exceed thousands of rows; the staged replay amplifies rounding without bound).
+Only numpy and scipy are used.
 """
 from __future__ import annotations
 
@@ -23,8 +24,554 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack
 
-__all__ = ["StagedSolver", "load_solver", "polish"]
+__all__ = [
+    "CSystemHomotopy",
+    "CurvePencilSolver",
+    "PolySystem",
+    "StagedSolver",
+    "TrackerOptions",
+    "c_pieces",
+    "c_residual_jacobian",
+    "data_scale",
+    "load_solver",
+    "polish",
+    "solve_batch",
+    "solve_one",
+    "track",
+]
+
+
+# --------------------------------------------------------------------------------------------------
+# normalisation
+# --------------------------------------------------------------------------------------------------
+
+
+def data_scale(F: np.ndarray) -> np.ndarray:
+    """Per-instance scale s = RMS of the measurements (batch,); data are divided by s before solving.
+
+    A root of F / s maps back to F by h -> h / s^2, b -> b, o -> o * s (see solvers.codegen).
+    """
+    s = np.sqrt(np.mean(F * F, axis=(-2, -1)))
+    return np.where(s > 0, s, 1.0)
+
+
+def spec_path(module_file: str, name: str) -> str:
+    return os.path.join(os.path.dirname(os.path.abspath(module_file)), name)
+
+
+# --------------------------------------------------------------------------------------------------
+# polynomial systems from coefficient vectors; Gauss-Newton polishing
+# --------------------------------------------------------------------------------------------------
+
+
+class PolySystem:
+    """A polynomial system given by its term structure; values come from a coefficient vector.
+
+    exps (T, n): exponents of the T terms; term_eq (T,): the equation of each term. Terms are grouped
+    by distinct monomial so that residuals and Jacobians of k candidates of one instance are two small
+    matrix products with the instance's (monomials x equations) coefficient matrix.
+    """
+
+    def __init__(self, exps: np.ndarray, term_eq: np.ndarray, n_eq: int):
+        exps = np.asarray(exps, dtype=np.int64)
+        self.n_eq, self.nvars = int(n_eq), exps.shape[1]
+        mons, self.term_mon = np.unique(exps, axis=0, return_inverse=True)
+        self.term_mon = self.term_mon.ravel()
+        self.term_eq = np.asarray(term_eq, dtype=np.intp)
+        # derivative d mon_m / d x_v = e_mv * x^(e_m - u_v): index into an extended monomial table
+        lowered = [tuple(m - np.eye(self.nvars, dtype=np.int64)[v]) for m in mons for v in range(self.nvars)]
+        table = {tuple(m): i for i, m in enumerate(mons)}
+        for m in lowered:
+            if min(m) >= 0 and m not in table:
+                table[m] = len(table)
+        ext = np.zeros((len(table), self.nvars), dtype=np.int64)
+        for m, i in table.items():
+            ext[i] = m
+        self.ext = ext
+        self.n_mon = len(mons)
+        self.dfactor = np.array([[m[v] for v in range(self.nvars)] for m in mons], dtype=float)  # (M, n)
+        self.didx = np.array([[table[tuple(m - np.eye(self.nvars, dtype=np.int64)[v])] if m[v] else 0
+                               for v in range(self.nvars)] for m in mons], dtype=np.intp)
+        self.max_exp = ext.max(axis=0)
+
+    def coefficient_matrix(self, coeffs: np.ndarray) -> np.ndarray:
+        """(batch, M, n_eq) coefficient matrices from coefficient vectors (batch, T), rows scaled to unit norm."""
+        C = np.zeros((coeffs.shape[0], self.n_mon, self.n_eq), dtype=coeffs.dtype)
+        np.add.at(C, (slice(None), self.term_mon, self.term_eq), coeffs)
+        norm = np.sqrt(np.sum(np.abs(C) ** 2, axis=1, keepdims=True))
+        return C / np.where(norm > 0, norm, 1.0)
+
+    def _ext_monomials(self, x: np.ndarray) -> np.ndarray:
+        """x (..., n) -> values of the extended monomial table (..., E)."""
+        out = np.ones(x.shape[:-1] + (len(self.ext),), dtype=x.dtype)
+        for v in range(self.nvars):
+            pw = np.ones(x.shape[:-1] + (int(self.max_exp[v]) + 1,), dtype=x.dtype)
+            for k in range(1, int(self.max_exp[v]) + 1):
+                pw[..., k] = pw[..., k - 1] * x[..., v]
+            out = out * pw[..., self.ext[:, v]]
+        return out
+
+    def residual_jacobian(self, x: np.ndarray, C: np.ndarray, jacobian: bool = True):
+        """Residuals (B, k, n_eq) and Jacobians (B, k, n_eq, n) at x (B, k, n) with matrices C (B, M, n_eq)."""
+        em = self._ext_monomials(x)
+        f = em[..., : self.n_mon] @ C
+        if not jacobian:
+            return f, None
+        dm = em[..., self.didx] * self.dfactor  # (B, k, M, n)
+        B, k = x.shape[:2]
+        J = np.swapaxes(dm.reshape(B, k, self.n_mon, self.nvars), 2, 3).reshape(B, k * self.nvars, self.n_mon) @ C
+        return f, np.swapaxes(J.reshape(B, k, self.nvars, self.n_eq), 2, 3)
+
+
+def polish(system: PolySystem, coeffs: np.ndarray, roots: np.ndarray, iterations: int = 1) -> np.ndarray:
+    """Gauss-Newton steps on the (possibly overdetermined) input system for every candidate.
+
+    coeffs (batch, T) from the generated coefficient function, roots (batch, k, n). Equations are
+    scaled to unit coefficient norm; the step is the least-squares solution by QR. A candidate keeps
+    its old value when it is not finite or when the step does not decrease its residual, so polishing
+    never spoils an accurate root.
+    """
+    C = system.coefficient_matrix(coeffs).astype(complex)
+    x = roots.astype(complex)
+    with np.errstate(all="ignore"):
+        finite = np.all(np.isfinite(x), axis=-1)
+        x = np.where(finite[..., None], x, 0.0)
+        f, J = system.residual_jacobian(x, C)
+        for it in range(iterations):
+            ok = finite & np.all(np.isfinite(J), axis=(2, 3)) & np.all(np.isfinite(f), axis=2)
+            Jc = np.where(ok[..., None, None], J, np.eye(J.shape[2], J.shape[3]))
+            q, r = np.linalg.qr(Jc)
+            rhs = (np.conj(np.swapaxes(q, 2, 3)) @ np.where(ok[..., None], f, 0.0)[..., None])
+            try:
+                step = np.linalg.solve(r, rhs)[..., 0]
+            except np.linalg.LinAlgError:
+                step = (np.linalg.pinv(r) @ rhs)[..., 0]
+            xn = x - np.where(ok[..., None], step, 0.0)
+            last = it == iterations - 1
+            fn, Jn = system.residual_jacobian(xn, C, jacobian=not last)
+            better = ok & np.all(np.isfinite(xn), axis=-1) & (np.linalg.norm(fn, axis=2) < np.linalg.norm(f, axis=2))
+            x = np.where(better[..., None], xn, x)
+            if not last:
+                f = np.where(better[..., None], fn, f)
+                J = np.where(better[..., None, None], Jn, J)
+    return np.where(finite[..., None], x, roots)
+
+
+# --------------------------------------------------------------------------------------------------
+# 6r4s: rank-2 curve and bordered quartic pencil
+# --------------------------------------------------------------------------------------------------
+
+
+def _pmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Product of polynomials stored along the last axis (ascending powers), batch axes broadcast."""
+    da, db = a.shape[-1], b.shape[-1]
+    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1]) + (da + db - 1,)
+    out = np.zeros(shape, dtype=np.result_type(a, b))
+    for i in range(da):
+        out[..., i:i + db] += a[..., i:i + 1] * b
+    return out
+
+
+def _pad(p: np.ndarray, size: int) -> np.ndarray:
+    out = np.zeros(p.shape[:-1] + (size,), dtype=p.dtype)
+    out[..., : p.shape[-1]] = p
+    return out
+
+
+def compaction_pieces(F: np.ndarray):
+    """The compaction matrix D~ = c + alpha o_1 + beta o_{j+1} of data F (..., m, n) and g_i = f_i1^2 - f_11^2.
+
+    Returns c (..., m-1, n-1), alpha (..., m-1), beta (..., m-1, n-1), g (..., m-1); the differences
+    of squares are formed as products (a - b)(a + b) to avoid cancellation.
+    """
+    d0 = F[..., 1:, :] - F[..., :1, :]
+    s0 = F[..., 1:, :] + F[..., :1, :]
+    sq = d0 * s0  # f_ij^2 - f_1j^2
+    c = sq[..., 1:] - sq[..., :1]
+    alpha = 2.0 * d0[..., 0]
+    beta = -2.0 * d0[..., 1:]
+    return c, alpha, beta, sq[..., 0]
+
+
+class CurvePencilSolver:
+    """6r4s solver (formulation B2, C2-C6 and the ten 3 x 3 minors): rank-2 curve + bordered pencil.
+
+    Offsets: rank D~ = 2 iff D~ w = 0 for some w, i.e. sum_j w_j c_j + alpha (o_1 sum w) +
+    sum_j beta_j (o_{j+1} w_j) = 0: the vector (w, s = o_1 sum w, u_j = o_{j+1} w_j) lies in the 2-dim
+    kernel of G = [c | alpha | beta] (5 x 7), so every o_j is a Moebius function of one projective
+    parameter (lambda, mu) (the offsets lie on a rational curve), with o_1 = s/sigma (sigma = sum w),
+    o_{j+1} = u_j/w_j. On the curve, with the scaled unknowns h11 = sigma w1^2 h^11,
+    h12 = sigma w1 w2 h^12, h22 = sigma w2^2 h^22, b1 = w1 b^1, b2 = w2 b^2, the equations C2..C6
+    become C(nu) v = 0 (5 x 6, v = (1, h^, b^)) and B2 becomes v^T Q(nu) v = 0, both polynomial
+    (degree <= 4) in the chart parameter nu. With C of full row rank, v^T Q v = 0 on ker C iff the
+    bordered matrix K(nu) = [[Q, C^T], [C, 0]] (11 x 11) is singular, so the roots are the
+    eigenvalues of a quartic matrix polynomial, and its eigenvectors carry v. The companion pencil
+    (44 x 44) is solved by LAPACK dggev (QZ: no inversion of an ill-conditioned coefficient).
+    det K has degree 30 = 22 roots + sigma^8 (o_1 = infinity); the other 14 eigenvalues are infinite.
+    Both kinds of spurious eigenvalues are dropped by count (spec: ``drop_infinite``, ``drop_sigma``).
+
+    Eigenvalue sensitivity does not depend on the separation between eigenvalues, which is why this
+    is robust where the scalar eliminant (the same 22 roots as a univariate polynomial) is not: roots
+    whose o_1 nearly coincide are separated by (H, b).
+    """
+
+    def __init__(self, spec: dict):
+        self.spec = spec
+        p = spec["pencil"]
+        self.phi = float(p["chart_angle"])
+        self.drop_infinite = int(p["drop_infinite"])
+        self.drop_sigma = int(p["drop_sigma"])
+        self.basis_size = int(spec["degree"])
+        self.nvars = len(spec["unknowns"])
+
+    # polynomial matrix ---------------------------------------------------------------------------
+    def matrix_polynomial(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """K (batch, 5, 11, 11) (coefficients of nu^0..nu^4) and the linear forms (batch, 7, 2)."""
+        B = F.shape[0]
+        c, alpha, beta, g = compaction_pieces(F)
+        G = np.concatenate([c, alpha[..., None], beta], axis=-1)  # (B, 5, 7)
+        N = np.linalg.svd(G)[2][:, -2:, :].transpose(0, 2, 1)  # (B, 7, 2)
+        cs, sn = np.cos(self.phi), np.sin(self.phi)
+        # (lambda, mu) = nu (cos, sin) + (-sin, cos): each form is const + slope * nu
+        forms = np.stack([-N[..., 0] * sn + N[..., 1] * cs, N[..., 0] * cs + N[..., 1] * sn], axis=-1)
+        w1, w2, w3, s, u1, u2, u3 = (forms[:, k] for k in range(7))
+        sig = w1 + w2 + w3
+        col = lambda v: v[:, :, None]  # noqa: E731  (B, 5) -> (B, 5, 1)
+        sw1, sw2 = _pmul(sig, w1), _pmul(sig, w2)
+        X = (_pmul(sw1[:, None], col(c[:, :, 0])) + _pmul(_pmul(s, w1)[:, None], col(alpha))
+             + _pmul(_pmul(u1, sig)[:, None], col(beta[:, :, 0])))
+        Y = (_pmul(sw2[:, None], col(c[:, :, 1])) + _pmul(_pmul(s, w2)[:, None], col(alpha))
+             + _pmul(_pmul(u2, sig)[:, None], col(beta[:, :, 1])))
+        L = _pmul(sig[:, None], col(g)) - _pmul(s[:, None], col(alpha))
+        a = F[:, 0, 1][:, None] * w1 - u1
+        b = F[:, 0, 0][:, None] * sig - s
+        E = _pmul(_pmul(a, a), _pmul(sig, sig)) - _pmul(_pmul(b, b), _pmul(w1, w1))
+        D = 5
+        Cm = np.stack([_pad(L, D), -_pmul(X, X), -2.0 * _pmul(X, Y), -_pmul(Y, Y), _pad(2.0 * X, D), _pad(2.0 * Y, D)],
+                      axis=2)  # (B, 5, 6, D)
+        K = np.zeros((B, 11, 11, D))
+        K[:, 1, 3] = K[:, 3, 1] = 0.5 * E
+        K[:, 2, 2] = -E
+        K[:, 0, 3] = K[:, 3, 0] = -_pad(sig, D) / 8.0
+        K[:, 4, 3] = K[:, 3, 4] = 0.5 * _pad(sw1, D)
+        K[:, 5, 2] = K[:, 2, 5] = -0.5 * _pad(sw1, D)
+        K[:, :6, 6:] = Cm.transpose(0, 2, 1, 3)
+        K[:, 6:, :6] = Cm
+        return np.moveaxis(K, -1, 1), forms
+
+    def roots(self, F: np.ndarray) -> np.ndarray:
+        """Candidate roots (batch, 22, 9), complex, of the normalised data F (batch, 6, 4)."""
+        K, forms = self.matrix_polynomial(F)
+        B, d1 = K.shape[:2]
+        d, n = d1 - 1, K.shape[2]
+        size = n * d
+        A0 = np.zeros((size, size))
+        A0[: n * (d - 1), n:] = np.eye(n * (d - 1))
+        B0 = np.eye(size)
+        keep_n = size - self.drop_infinite
+        out = np.full((B, self.basis_size, self.nvars), np.nan + 0j)
+        for i in range(B):
+            A, Bm = A0.copy(), B0.copy()
+            for j in range(d):
+                A[n * (d - 1):, n * j:n * (j + 1)] = -K[i, j]
+            Bm[n * (d - 1):, n * (d - 1):] = K[i, d]
+            if not (np.all(np.isfinite(A)) and np.all(np.isfinite(Bm))):
+                continue
+            ar, ai, be, _, vr, _, info = lapack.dggev(A, Bm, compute_vl=0, compute_vr=1)
+            if info != 0:
+                continue
+            al = ar + 1j * ai
+            V = _complex_eigenvectors(vr, ai)
+            # infinite eigenvalues: smallest |beta| / |alpha|
+            order = np.argsort(-np.abs(be) / np.maximum(np.abs(al), 1e-300), kind="stable")[:keep_n]
+            al, be, V = al[order], be[order], V[:, order]
+            with np.errstate(all="ignore"):
+                nu = al / be
+                f = forms[i]
+                fv = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]  # forms at (nu, 1): (7, k)
+                sig = fv[0] + fv[1] + fv[2]
+                # o_1 = infinity: sigma = 0 (relative to |(nu, 1)|)
+                keep = np.argsort(-np.abs(sig) / np.sqrt(1.0 + np.abs(nu) ** 2), kind="stable")
+                keep = keep[: min(self.basis_size, len(keep) - self.drop_sigma)]
+                fv, sig, V = fv[:, keep], sig[keep], V[:, keep]
+                # v up to scale from the block of the eigenvector [x, nu x, nu^2 x, nu^3 x] with largest norm
+                blocks = V.reshape(d, n, -1)
+                best = np.argmax(np.linalg.norm(blocks, axis=1), axis=0)
+                x = blocks[best, :, np.arange(blocks.shape[2])].T  # (n, k)
+                v = x[:6] / x[:1]
+                w1, w2, w3, s, u1, u2, u3 = fv
+                h = np.stack([sig * w1**2 * v[1], sig * w1 * w2 * v[2], sig * w2**2 * v[3], w1 * v[4], w2 * v[5],
+                              s / sig, u1 / w1, u2 / w2, u3 / w3], axis=-1)
+            out[i, : len(keep)] = h
+        return out
+
+
+def _complex_eigenvectors(vr: np.ndarray, ai: np.ndarray) -> np.ndarray:
+    """LAPACK real storage of eigenvectors (conjugate pairs as re, im columns) -> complex columns."""
+    V = vr.astype(complex)
+    j = 0
+    while j < len(ai):
+        if ai[j] != 0.0 and j + 1 < len(ai):
+            V[:, j] = vr[:, j] + 1j * vr[:, j + 1]
+            V[:, j + 1] = vr[:, j] - 1j * vr[:, j + 1]
+            j += 2
+        else:
+            j += 1
+    return V
+
+
+# --------------------------------------------------------------------------------------------------
+# 9r3s: parameter homotopy on the C equations
+# --------------------------------------------------------------------------------------------------
+
+
+def c_pieces(F: np.ndarray, rows: np.ndarray):
+    """Data of the equations C_i (i = rows + 2) of an m x 3 configuration: c (.., k, 2), alpha, beta, g.
+
+    C_i = l - h11 x^2 - 2 h12 x y - h22 y^2 + 2 b1 x + 2 b2 y with x = c_1 + alpha o1 + beta_1 o2,
+    y = c_2 + alpha o1 + beta_2 o3, l = g - alpha o1 (D~ rows i - 1, first two columns).
+    """
+    c, alpha, beta, g = compaction_pieces(F)
+    return c[..., rows, :2], alpha[..., rows], beta[..., rows, :2], g[..., rows]
+
+
+def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True):
+    """Residuals (P, k) and Jacobian (P, k, 8) of the C equations at x (P, 8) = (h11, h12, h22, b1, b2, o1, o2, o3)."""
+    h11, h12, h22, b1, b2, o1, o2, o3 = (x[:, j : j + 1] for j in range(8))
+    X = c[..., 0] + alpha * o1 + beta[..., 0] * o2
+    Y = c[..., 1] + alpha * o1 + beta[..., 1] * o3
+    G = g - alpha * o1 - (h11 * X * X + 2.0 * h12 * X * Y + h22 * Y * Y) + 2.0 * (b1 * X + b2 * Y)
+    if not jacobian:
+        return G, None
+    gx = 2.0 * (b1 - h11 * X - h12 * Y)
+    gy = 2.0 * (b2 - h12 * X - h22 * Y)
+    J = np.stack([-X * X, -2.0 * X * Y, -Y * Y, 2.0 * X, 2.0 * Y, alpha * (gx + gy - 1.0), beta[..., 0] * gx,
+                  beta[..., 1] * gy], axis=-1)
+    return G, J
+
+
+@dataclass(frozen=True)
+class TrackerOptions:
+    """Step control of the path tracker (relative Newton corrections e0 (first), e (last)).
+
+    A step is accepted when e0 < accept and the corrector contracts (e < 0.05 e0 or e < tol); the step
+    doubles when e0 < grow and halves on rejection. ``newton``: corrector iterations per step;
+    ``final_newton``: iterations at s = 1 on the exact target data.
+    """
+
+    h0: float = 0.1
+    hmax: float = 0.5
+    hmin: float = 1e-10
+    accept: float = 0.1
+    grow: float = 1e-3
+    tol: float = 1e-7
+    newton: int = 2
+    final_newton: int = 3
+    max_iterations: int = 3000
+
+
+class _CPath:
+    """Data pieces along the straight segment F(s) = F0 + s (F1 - F0), quadratic in s, per path."""
+
+    def __init__(self, F0: np.ndarray, F1: np.ndarray, rows: np.ndarray):
+        D = F1 - F0
+        p0, pd, p1 = c_pieces(F0, rows), c_pieces(D, rows), c_pieces(F0 + D, rows)
+        # quadratic pieces (c, g): q(F0 + sD) = q(F0) + s (q(F0 + D) - q(F0) - q(D)) + s^2 q(D);
+        # linear pieces (alpha, beta): l(F0) + s l(D)
+        self.k0 = p0
+        self.k1 = tuple((b - a - dd) if quad else dd for a, dd, b, quad in zip(p0, pd, p1, (True, False, False, True)))
+        self.k2 = tuple(dd if quad else np.zeros_like(dd) for dd, quad in zip(pd, (True, False, False, True)))
+        self.target = c_pieces(F1, rows)
+
+    def take(self, idx: np.ndarray) -> "_CPath":
+        out = _CPath.__new__(_CPath)
+        out.k0 = tuple(a[idx] for a in self.k0)
+        out.k1 = tuple(a[idx] for a in self.k1)
+        out.k2 = tuple(a[idx] for a in self.k2)
+        out.target = tuple(a[idx] for a in self.target)
+        return out
+
+    def at(self, s: np.ndarray):
+        out, dout = [], []
+        for a, b, c in zip(self.k0, self.k1, self.k2):
+            sh = s.reshape((-1,) + (1,) * (a.ndim - 1))
+            out.append(a + sh * (b + sh * c))
+            dout.append(b + 2.0 * sh * c)
+        return out, dout
+
+
+def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Batched J^-1 r for (P, n, n), (P, n); NaN for non-finite or singular systems (never raises)."""
+    bad = ~(np.all(np.isfinite(J), axis=(1, 2)) & np.all(np.isfinite(r), axis=1))
+    if bad.any():
+        J = np.where(bad[:, None, None], np.eye(J.shape[1]), J)
+        r = np.where(bad[:, None], 0.0, r)
+    try:
+        out = np.linalg.solve(J, r[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        out = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(J, r)])
+    out[bad] = np.nan
+    return out
+
+
+def _ds(x: np.ndarray, pieces, dpieces) -> np.ndarray:
+    """d/ds of the C residuals at fixed x (chain rule through the data pieces)."""
+    c, alpha, beta, g = pieces
+    dc, dalpha, dbeta, dg = dpieces
+    h11, h12, h22, b1, b2, o1, o2, o3 = (x[:, j : j + 1] for j in range(8))
+    X = c[..., 0] + alpha * o1 + beta[..., 0] * o2
+    Y = c[..., 1] + alpha * o1 + beta[..., 1] * o3
+    dX = dc[..., 0] + dalpha * o1 + dbeta[..., 0] * o2
+    dY = dc[..., 1] + dalpha * o1 + dbeta[..., 1] * o3
+    gx = 2.0 * (b1 - h11 * X - h12 * Y)
+    gy = 2.0 * (b2 - h12 * X - h22 * Y)
+    return dg - dalpha * o1 + gx * dX + gy * dY
+
+
+def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
+    """Track the roots x0 (P, 8) of F0 along the segment to F1 (one path per row; ``path`` holds P rows).
+
+    Returns the endpoints (P, 8) after ``final_newton`` Newton steps on the target data, NaN where a
+    path did not reach s = 1, and the number of accepted steps per path (-1 for a lost path whose last
+    point had norm above :data:`DIVERGED`).
+    """
+    P = x0.shape[0]
+    x = x0.astype(complex).copy()
+    s = np.zeros(P)
+    h = np.full(P, options.h0)
+    steps = np.zeros(P, dtype=np.int64)
+    active = np.arange(P)
+    sub = path
+    it = 0
+    with np.errstate(all="ignore"):
+        while len(active) and it < options.max_iterations:
+            it += 1
+            xa, sa = x[active], s[active]
+            ha = np.minimum(h[active], 1.0 - sa)
+
+            def field(xx, ss):
+                pc, dp = sub.at(ss)
+                _, J = c_residual_jacobian(xx, *pc)
+                return -_solve(J, _ds(xx, pc, dp))
+
+            k1 = field(xa, sa)
+            k2 = field(xa + 0.5 * ha[:, None] * k1, sa + 0.5 * ha)
+            k3 = field(xa + 0.5 * ha[:, None] * k2, sa + 0.5 * ha)
+            k4 = field(xa + ha[:, None] * k3, sa + ha)
+            xp = xa + (ha / 6.0)[:, None] * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            sn = np.where(ha >= 1.0 - sa, 1.0, sa + ha)
+            pc, _ = sub.at(sn)
+            scale = np.linalg.norm(xp, axis=1) + 1.0
+            e0 = e = np.full(len(active), np.inf)
+            for k in range(options.newton):
+                G, J = c_residual_jacobian(xp, *pc)
+                dx = _solve(J, G)
+                xp = xp - dx
+                e = np.linalg.norm(dx, axis=1) / scale
+                if k == 0:
+                    e0 = e
+            ok = np.isfinite(e) & (e0 < options.accept) & ((e < options.tol) | (e < 0.05 * e0))
+            acc = active[ok]
+            x[acc] = xp[ok]
+            s[acc] = sn[ok]
+            steps[acc] += 1
+            h[acc] = np.minimum(np.where(e0[ok] < options.grow, 2.0, 1.0) * h[acc], options.hmax)
+            h[active[~ok]] *= 0.5
+            live = (s[active] < 1.0) & (h[active] > options.hmin)
+            if not live.all():
+                keep = np.flatnonzero(live)
+                active = active[keep]
+                sub = sub.take(keep)
+        lost = s < 1.0
+        diverged = lost & ~(np.linalg.norm(x, axis=1) < DIVERGED)
+        x[lost] = np.nan
+        tgt = path.target
+        for _ in range(options.final_newton):
+            G, J = c_residual_jacobian(x, *tgt)
+            x = x - _solve(J, G)
+    steps[diverged] = -1
+    return x, steps
+
+
+#: A lost path whose last point has norm above this (normalised units) is taken to diverge (a root
+#: near infinity, physically meaningless) and is not retracked.
+DIVERGED = 1e4
+
+
+class CSystemHomotopy:
+    """Parameter homotopy for a square system of C equations (m receivers, 3 transmitters).
+
+    The spec stores a generic complex data matrix F0 and all roots of its system (found by monodromy,
+    :func:`solvers.template.build_homotopy_spec`). For data F1 every root of F0 is tracked along the
+    complex segment F0 -> F1 (a real segment of the complex parameter space, which misses the
+    discriminant hypersurface with probability one; Sommese and Wampler 2005, ch. 7), the system being
+    evaluated in factored form from the compaction data (exact structure at every point of the path).
+    Endpoints get Newton steps on the target data. A path that stalls (step below ``hmin``) without
+    diverging is retracked with smaller minimum steps, and so is every path of an instance in which
+    two paths ended at the same root (path jumping). Paths to roots near infinity are left as NaN.
+    """
+
+    def __init__(self, spec: dict, options: TrackerOptions | None = None):
+        self.spec = spec
+        h = spec["homotopy"]
+        self.rows = np.array(h["rows"], dtype=np.intp)
+        self.F0 = np.array([[complex(re, im) for re, im in row] for row in spec["start_data"]])
+        self.x0 = np.array([[complex(re, im) for re, im in r] for r in spec["start_roots"]])
+        self.basis_size = len(self.x0)
+        self.nvars = self.x0.shape[1]
+        self.options = options or TrackerOptions(**h.get("tracker", {}))
+        self._refine_start()
+
+    def _refine_start(self) -> None:
+        pieces = c_pieces(self.F0, self.rows)
+        x = self.x0
+        with np.errstate(all="ignore"):
+            for _ in range(2):
+                P = len(x)
+                G, J = c_residual_jacobian(x, *(np.broadcast_to(p, (P,) + p.shape) for p in pieces))
+                x = x - _solve(J, G)
+        self.x0 = x
+
+    def roots(self, F: np.ndarray, options: TrackerOptions | None = None) -> np.ndarray:
+        """Candidate roots (batch, K, 8) of the normalised data F (batch, m, 3); NaN rows for lost paths."""
+        options = options or self.options
+        B, K = F.shape[0], self.basis_size
+        F1 = np.repeat(F.astype(complex), K, axis=0)
+        F0 = np.broadcast_to(self.F0, F1.shape)
+        x, steps = track(_CPath(F0, F1, self.rows), np.tile(self.x0, (B, 1)), options)
+        x = x.reshape(B, K, -1)
+        # paths that failed without diverging, and whole instances where two paths met (path
+        # jumping): retrack with tight step control
+        lost = ~np.all(np.isfinite(x), axis=2) & (steps.reshape(B, K) >= 0)
+        for i in range(B):
+            if _has_duplicates(x[i]):
+                lost[i] = True
+        bi, ki = np.nonzero(lost)
+        if len(bi):
+            xr, _ = track(_CPath(np.broadcast_to(self.F0, (len(bi),) + self.F0.shape), F[bi].astype(complex), self.rows),
+                          self.x0[ki], _TIGHT)
+            x[bi, ki] = xr
+        return x
+
+
+#: Step control for retracking lost or jumped paths.
+_TIGHT = TrackerOptions(h0=0.02, hmin=1e-14, accept=0.05, newton=3, max_iterations=3000)
+
+
+def _has_duplicates(x: np.ndarray, tol: float = 1e-6) -> bool:
+    """Whether two finite rows of x (K, n) coincide (relative tolerance)."""
+    finite = x[np.all(np.isfinite(x), axis=1)]
+    d = np.linalg.norm(finite[:, None, :] - finite[None, :, :], axis=2)
+    scale = 1.0 + np.linalg.norm(finite, axis=1)
+    d[np.arange(len(d)), np.arange(len(d))] = np.inf
+    return bool(np.any(d < tol * scale[:, None]))
+
+
+# --------------------------------------------------------------------------------------------------
+# legacy: replay of a staged F4-trace template (fallback path, not used by the generated solvers)
+# --------------------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -39,26 +586,22 @@ class _Step:
     pivot_cols: np.ndarray
     free_cols: np.ndarray
     lead_in_free: np.ndarray
-    new_row: np.ndarray  # for every stored coefficient: row of H
-    new_col: np.ndarray  # ... and its column (position among free columns)
-    new_dst: np.ndarray  # ... and its slot in V
+    new_row: np.ndarray
+    new_col: np.ndarray
+    new_dst: np.ndarray
 
 
 class StagedSolver:
-    """Numeric replay of a staged elimination template spec (see :mod:`solvers.template`).
+    """Numeric replay of a staged elimination template spec (see :func:`solvers.template.build_template`).
 
-    Parameters
-    ----------
-    spec: the parsed JSON spec.
-    scale_powers: per unknown, the power w of the data scale s such that a root of the data F / s
-        maps back by x = x_s * s**w (None: no data normalisation).
+    Kept as the fallback: in floating point the ~10 chained eliminations with pivots fixed by the
+    GF(p) trace amplify the rounding of the coefficients without bound (tables/solvers.csv history).
     """
 
-    def __init__(self, spec: dict, scale_powers: tuple[float, ...] | None = None):
+    def __init__(self, spec: dict):
         self.spec = spec
         self.unknowns = tuple(spec["unknowns"])
         self.nvars = len(self.unknowns)
-        self.scale_powers = None if scale_powers is None else np.asarray(scale_powers, dtype=float)
         mons = [tuple(m) for m in spec["monomials"]]
         self._mons = mons
         polys = spec["polys"]
@@ -87,16 +630,16 @@ class StagedSolver:
             fr, fc, fs = fill(st["rows"], st["columns"])
             ncols = len(st["columns"])
             pivots = np.array(st["pivots"], dtype=np.intp)
-            # a pivot row's lead column: the position of its largest monomial
-            pcols = np.array([fc[np.flatnonzero(fr == r)].min() for r in pivots], dtype=np.intp) if len(pivots) else np.zeros(0, np.intp)
+            pcols = (np.array([fc[np.flatnonzero(fr == r)].min() for r in pivots], dtype=np.intp)
+                     if len(pivots) else np.zeros(0, np.intp))
             free = np.setdiff1d(np.arange(ncols), pcols)
             free_pos = {int(c): i for i, c in enumerate(free)}
             leads = [free_pos[nw[1]] for nw in st["new"]]
             nr, nc, nd = [], [], []
-            for h, (pid, _, support) in enumerate(st["new"]):
+            for hh, (pid, _, support) in enumerate(st["new"]):
                 off = int(self._offsets[pid])
                 for k, c in enumerate(support):
-                    nr.append(h)
+                    nr.append(hh)
                     nc.append(free_pos[c])
                     nd.append(off + k)
             self.steps.append(_Step(len(st["rows"]), ncols, fr, fc, fs, pivots,
@@ -110,8 +653,7 @@ class StagedSolver:
         basis = spec["basis"]
         self.basis_size = len(basis)
         bpos = {mons[b]: j for j, b in enumerate(basis)}
-        std_cols = [bpos[mons[c]] for c in final["columns"][self._n_lead:]]
-        self._std_cols = np.array(std_cols, dtype=np.intp)
+        self._std_cols = np.array([bpos[mons[c]] for c in final["columns"][self._n_lead:]], dtype=np.intp)
         target_row = {mons[m]: t for m, t in zip(final["target_monomials"], final["targets"])}
         a = self.unknowns.index(spec["action"])
         unit = tuple(int(i == a) for i in range(self.nvars))
@@ -130,23 +672,15 @@ class StagedSolver:
         if zero not in bpos:
             raise ValueError("the standard monomial basis must contain 1")
         self._one = bpos[zero]
-        read_basis, read_target = [], []
+        self._read_basis, self._read_target = [], []
         for i in range(self.nvars):
             m = tuple(int(k == i) for k in range(self.nvars))
             if m in bpos:
-                read_basis.append((i, bpos[m]))
+                self._read_basis.append((i, bpos[m]))
             else:
-                read_target.append((i, target_row[m]))
-        self._read_basis = read_basis
-        self._read_target = read_target
-        # input equations as (term exponents, equation of each term) for polishing
-        exps = [mons[m] for eq in spec["inputs"] for m in eq]
-        self._term_exps = np.array(exps, dtype=np.int64)
-        self._term_eq = np.concatenate([np.full(len(eq), i) for i, eq in enumerate(spec["inputs"])])
+                self._read_target.append((i, target_row[m]))
 
-    # ------------------------------------------------------------------------------------------
-    def action_matrices(self, coeffs: np.ndarray) -> np.ndarray:
-        """Action matrices (batch, |B|, |B|) from input coefficients (batch, n_input_coeffs)."""
+    def _action_matrices(self, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         batch = coeffs.shape[0]
         V = np.zeros((batch, self.table_size))
         V[:, : self.n_input_coeffs] = coeffs
@@ -169,23 +703,23 @@ class StagedSolver:
         A[:, fr, fc] = V[:, fs]
         n = self._n_lead
         Y = np.linalg.solve(A[:, :, :n], A[:, :, n:])
-        self._last_Y = Y
         M = np.zeros((batch, self.basis_size, self.basis_size))
         M[:, self._unit[0], self._unit[1]] = 1.0
         rr, rt = self._red
         block = np.zeros((batch, len(rr), self.basis_size))
         block[:, :, self._std_cols] = -Y[:, rt]
         M[:, rr] = block
-        return M
+        return M, Y
 
-    def roots(self, coeffs: np.ndarray) -> np.ndarray:
-        """Candidate roots (batch, |B|, nvars), complex, in the scaled frame of the coefficients."""
+    def roots_from_coefficients(self, coeffs: np.ndarray) -> np.ndarray:
+        """Candidate roots (batch, |B|, nvars) from input coefficients (batch, n_input_coeffs)."""
         with np.errstate(all="ignore"):
             try:
-                M = self.action_matrices(coeffs)
-            except np.linalg.LinAlgError:  # a singular step in the batch: solve one by one
+                M, Y = self._action_matrices(coeffs)
+            except np.linalg.LinAlgError:
                 if coeffs.shape[0] > 1:
-                    return np.concatenate([self.roots(coeffs[i : i + 1]) for i in range(coeffs.shape[0])])
+                    return np.concatenate([self.roots_from_coefficients(coeffs[i : i + 1])
+                                           for i in range(coeffs.shape[0])])
                 return np.full((1, self.basis_size, self.nvars), np.nan + 0j)
             bad = ~np.all(np.isfinite(M), axis=(1, 2))
             M[bad] = 0.0
@@ -194,96 +728,56 @@ class StagedSolver:
             out = np.empty((coeffs.shape[0], self.basis_size, self.nvars), dtype=complex)
             for i, j in self._read_basis:
                 out[:, :, i] = vecs[:, j, :] / one
-            if self._read_target:
-                Y = self._last_Y
-                for i, t in self._read_target:
-                    nf = np.zeros((coeffs.shape[0], self.basis_size))
-                    nf[:, self._std_cols] = -Y[:, t]
-                    out[:, :, i] = np.einsum("bk,bks->bs", nf, vecs) / one
+            for i, t in self._read_target:
+                nf = np.zeros((coeffs.shape[0], self.basis_size))
+                nf[:, self._std_cols] = -Y[:, t]
+                out[:, :, i] = np.einsum("bk,bks->bs", nf, vecs) / one
             out[bad] = np.nan
         return out
 
-    def polish(self, coeffs: np.ndarray, roots: np.ndarray, iterations: int = 2) -> np.ndarray:
-        """Gauss-Newton steps on all input equations, for every candidate (see :func:`polish`)."""
-        return polish(coeffs, self._term_exps, self._term_eq, self.n_inputs, roots, iterations)
+
+# --------------------------------------------------------------------------------------------------
+# module glue
+# --------------------------------------------------------------------------------------------------
 
 
-def _power_table(x: np.ndarray, max_exp: np.ndarray) -> list[np.ndarray]:
-    """Per variable j, the powers x_j^0..x_j^max_exp[j] stacked on a last axis."""
-    out = []
-    for j, d in enumerate(max_exp):
-        p = np.ones(x.shape[:-1] + (int(d) + 1,), dtype=x.dtype)
-        for k in range(1, int(d) + 1):
-            p[..., k] = p[..., k - 1] * x[..., j]
-        out.append(p)
-    return out
+class _Solver:
+    """A solver kernel with the term structure of its input equations (for polishing)."""
+
+    def __init__(self, spec: dict, scale_powers: tuple[float, ...]):
+        self.spec = spec
+        kind = spec.get("kind", "staged")
+        if kind == "curve-pencil":
+            self.kernel = CurvePencilSolver(spec)
+        elif kind == "homotopy":
+            self.kernel = CSystemHomotopy(spec)
+        elif kind == "staged":
+            self.kernel = StagedSolver(spec)
+        else:
+            raise ValueError(f"unknown solver kind {kind!r}; valid: curve-pencil, homotopy, staged")
+        self.kind = kind
+        self.basis_size = self.kernel.basis_size
+        self.nvars = len(spec["unknowns"])
+        self.scale_powers = np.asarray(scale_powers, dtype=float)
+        mons = [tuple(m) for m in spec["monomials"]]
+        term_exps = np.array([mons[m] for eq in spec["inputs"] for m in eq], dtype=np.int64)
+        term_eq = np.concatenate([np.full(len(eq), i) for i, eq in enumerate(spec["inputs"])])
+        self.system = PolySystem(term_exps, term_eq, len(spec["inputs"]))
+
+    def roots(self, Fn: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+        if self.kind == "staged":
+            return self.kernel.roots_from_coefficients(coeffs)
+        return self.kernel.roots(Fn)
 
 
-def _cmatmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Complex (batch, r, T) times real (batch, T, q), as two real batched products."""
-    return (a.real @ b) + 1j * (a.imag @ b)
-
-
-def polish(coeffs: np.ndarray, exps: np.ndarray, term_eq: np.ndarray, n_eq: int, roots: np.ndarray,
-           iterations: int = 2) -> np.ndarray:
-    """Gauss-Newton polishing of candidate roots on the (possibly overdetermined) input system.
-
-    coeffs (batch, T) coefficients of the T terms with exponents exps (T, n), term_eq (T,) the equation
-    of each term; roots (batch, k, n). Each equation is scaled by the norm of its coefficients; the step
-    is the least-squares solution through the pseudo-inverse. Candidates whose Jacobian or residual is
-    not finite are left alone. Derivatives use prefix/suffix products (no division by x_j).
-    """
-    x = roots.astype(complex)
-    n = exps.shape[1]
-    S = np.zeros((n_eq, len(exps)))
-    S[term_eq, np.arange(len(exps))] = 1.0
-    weight = 1.0 / np.sqrt(np.maximum((coeffs**2) @ S.T, 1e-300))  # (batch, n_eq)
-    C = (coeffs[:, None, :] * S[None]) * weight[:, :, None]  # (batch, n_eq, T)
-    Ct = np.ascontiguousarray(np.swapaxes(C, 1, 2))  # (batch, T, n_eq)
-    max_exp = exps.max(axis=0)
-    dexp = np.maximum(exps - 1, 0)
-    with np.errstate(all="ignore"):
-        for _ in range(iterations):
-            pw = _power_table(x, max_exp)
-            factors = [pw[j][..., exps[:, j]] for j in range(n)]  # each (b, k, T)
-            prefix = [np.ones_like(factors[0])]
-            for j in range(n - 1):
-                prefix.append(prefix[-1] * factors[j])
-            suffix = [np.ones_like(factors[0])]
-            for j in range(n - 1, 0, -1):
-                suffix.append(suffix[-1] * factors[j])
-            suffix = suffix[::-1]
-            mon = prefix[-1] * factors[-1]
-            f = _cmatmul(mon, Ct)  # (b, k, n_eq)
-            D = np.stack([prefix[j] * suffix[j] * (pw[j][..., dexp[:, j]] * exps[:, j]) for j in range(n)], axis=2)
-            b_, k_ = x.shape[:2]
-            J = np.swapaxes(_cmatmul(D.reshape(b_, k_ * n, -1), Ct).reshape(b_, k_, n, n_eq), 2, 3)
-            ok = np.all(np.isfinite(J), axis=(2, 3)) & np.all(np.isfinite(f), axis=2)
-            Jc = np.where(ok[..., None, None], J, 0.0)
-            fc = np.where(ok[..., None], f, 0.0)
-            step = (np.linalg.pinv(Jc) @ fc[..., None])[..., 0]
-            x = np.where(ok[..., None], x - step, x)
-    return x
-
-
-def load_solver(json_path: str, scale_powers: tuple[float, ...] | None = None) -> StagedSolver:
-    """Read a spec next to a generated module and build its solver (index arrays precomputed)."""
+def load_solver(json_path: str, scale_powers: tuple[float, ...]) -> _Solver:
+    """Read a spec next to a generated module and build its solver (precomputed once per process)."""
     with open(json_path, encoding="utf-8") as fh:
         spec = json.load(fh)
-    return StagedSolver(spec, scale_powers)
+    return _Solver(spec, scale_powers)
 
 
-def data_scale(F: np.ndarray) -> np.ndarray:
-    """Per-instance scale s = RMS of the measurements (batch,); data are divided by s before solving."""
-    s = np.sqrt(np.mean(F * F, axis=(-2, -1)))
-    return np.where(s > 0, s, 1.0)
-
-
-def spec_path(module_file: str, name: str) -> str:
-    return os.path.join(os.path.dirname(os.path.abspath(module_file)), name)
-
-
-#: Instances per chunk in batched solves (bounds the memory of the step matrices).
+#: Instances per chunk in batched solves (bounds the memory of the per-instance matrices).
 CHUNK = 64
 
 
@@ -294,40 +788,46 @@ def _check_data(F: np.ndarray, config: tuple[int, int]) -> np.ndarray:
     return F
 
 
-def _finish(solver: StagedSolver, coeffs: np.ndarray, scale: np.ndarray, polish_iterations: int) -> np.ndarray:
-    roots = solver.roots(coeffs)
-    if polish_iterations:
-        roots = solver.polish(coeffs, roots, polish_iterations)
-    if solver.scale_powers is not None:
-        roots = roots * (scale[:, None, None] ** solver.scale_powers[None, None, :])
-    return roots
+def _coefficients(coefficients, Fn: np.ndarray) -> np.ndarray:
+    """Coefficient vectors (batch, T); one instance runs on Python floats (much faster than 1-arrays)."""
+    if len(Fn) == 1:
+        return np.array(coefficients(tuple(Fn[0].ravel().tolist())), dtype=float)[None]
+    cols = Fn.reshape(len(Fn), -1).T
+    values = coefficients(tuple(cols))
+    out = np.empty((len(Fn), len(values)))
+    for j, v in enumerate(values):
+        out[:, j] = v
+    return out
 
 
-def solve_one(solver: StagedSolver, coefficients, F: np.ndarray, config: tuple[int, int],
+def _solve_chunk(solver: _Solver, coefficients, block: np.ndarray, polish_iterations: int) -> np.ndarray:
+    s = data_scale(block)
+    Fn = block / s[:, None, None]
+    coeffs = _coefficients(coefficients, Fn)
+    with np.errstate(all="ignore"):
+        roots = solver.roots(Fn, coeffs)
+        if polish_iterations:
+            roots = polish(solver.system, coeffs, roots, polish_iterations)
+        return roots * (s[:, None, None] ** solver.scale_powers[None, None, :])
+
+
+def solve_one(solver: _Solver, coefficients, F: np.ndarray, config: tuple[int, int],
               polish_iterations: int) -> np.ndarray:
-    """Candidate roots (k, nvars) for one data matrix; coefficients run on Python floats."""
+    """Candidate roots (k, nvars) for one data matrix."""
     F = _check_data(F, config)
     if F.ndim != 2:
         raise ValueError(f"solve takes one ({config[0]}, {config[1]}) matrix; use solve_batch for {F.shape}")
-    s = data_scale(F[None])
-    coeffs = np.array(coefficients(tuple((F / s[0]).ravel().tolist())), dtype=float)[None]
-    return _finish(solver, coeffs, s, polish_iterations)[0]
+    return _solve_chunk(solver, coefficients, F[None], polish_iterations)[0]
 
 
-def solve_batch(solver: StagedSolver, coefficients, F: np.ndarray, config: tuple[int, int],
+def solve_batch(solver: _Solver, coefficients, F: np.ndarray, config: tuple[int, int],
                 polish_iterations: int) -> np.ndarray:
-    """Candidate roots (..., k, nvars) for data (..., m, n); coefficients run on numpy arrays."""
+    """Candidate roots (..., k, nvars) for data (..., m, n)."""
     F = _check_data(F, config)
     lead = F.shape[:-2]
     flat = F.reshape((-1,) + tuple(config))
     out = np.empty((len(flat), solver.basis_size, solver.nvars), dtype=complex)
     for start in range(0, len(flat), CHUNK):
-        block = flat[start : start + CHUNK]
-        s = data_scale(block)
-        cols = (block / s[:, None, None]).reshape(len(block), -1).T
-        values = coefficients(tuple(cols))
-        coeffs = np.empty((len(block), len(values)))
-        for j, v in enumerate(values):
-            coeffs[:, j] = v
-        out[start : start + CHUNK] = _finish(solver, coeffs, s, polish_iterations)
+        out[start : start + CHUNK] = _solve_chunk(solver, coefficients, flat[start : start + CHUNK], polish_iterations)
     return out.reshape(lead + out.shape[1:])
+

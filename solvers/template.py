@@ -1,31 +1,41 @@
-"""Elimination templates over GF(p): the plain-text spec from which a numeric solver is generated.
+"""Solver construction over GF(p): the plain-text specs from which numeric solvers are generated.
 
-This module owns step 1 of solver generation (Kukelova et al. 2008; Larsson et al. 2017): on one
-consistent random instance over GF(p) it computes the Gröbner basis (grevlex, unknowns h11, h12, h22,
-b1, b2, o1..on), the standard monomial basis B, and a recipe that, replayed in floating point on real
-data, yields the normal forms of the reducible monomials R = x_a * B minus B for an action variable x_a.
+This module owns step 1 of solver generation: on consistent random instances over GF(p) it fixes the
+number of roots of a formulation (the size of the standard monomial basis of its grevlex Gröbner basis,
+:func:`gf_degree`) and builds a JSON spec that :mod:`solvers.codegen` turns into a module and
+:mod:`solvers.runtime` executes. Three kinds of spec:
 
-Why staged templates. A single Macaulay template (all multiples t * f_i up to degree D, columns
-[excessive | reducible | basis]) needs a very large D here: for 9r3s (C2-C9, |B| = 75) the degree-8
-Macaulay matrix (10296 rows) still reduces only 28 of the 35 reducible monomials, and for 6r4s
-(B2, C2-C6, 10 minors, |B| = 22) the degree-7 one (10945 rows) only 13 of 15 (see
-:func:`macaulay_reducible_rank`). The C equations are linear in (H, b) with offset-dependent
-coefficients, so their syzygies only appear at high degree. F4 instead reaches the basis through
-polynomials of degree <= 5 with small matrices. The template is therefore a sequence of *steps*, each an
-elimination template whose rows are monomial multiples of the polynomials produced by earlier steps
-(the trace of F4 with the normal selection strategy, Faugère 1999; Traverso's Gröbner trace idea):
+* ``curve-pencil`` (6r4s: B2, C2-C6, the ten 3 x 3 minors): the minors make the offsets a rational
+  curve, parametrised linearly by the kernel of [c | alpha | beta]; on it the roots are the eigenvalues
+  of an 11 x 11 quartic matrix polynomial (:class:`solvers.runtime.CurvePencilSolver`). The spec holds
+  the chart and the number of spurious eigenvalues to drop, both checked here on seeded real data.
+* ``homotopy`` (9r3s: C2-C9, or any square set of C equations with three transmitters): a generic
+  complex instance and all its roots, found by monodromy from one known root (loops in the parameter
+  space until the GF(p) degree is reached); :class:`solvers.runtime.CSystemHomotopy` tracks them to
+  the data.
+* ``staged`` (fallback, :func:`build_template`): the trace of F4 over GF(p) replayed in floating point.
 
-* step 0 inter-reduces the input equations;
-* each F4 round builds rows t * g (pair halves and symbolic-preprocessing reducers), reduces the
-  non-pivot rows by the pivot rows (a unit triangular solve) and keeps the rows with new leading
-  monomials, normalised to leading coefficient 1 (a least-squares solve in floating point);
-* the final step is a classic action-matrix template: rows t * g for one reducer of every non-standard
-  monomial reachable from R, columns [non-standard | B]; its unit upper triangular block gives
-  NF(r) for every r in R (and for unknowns not in B, needed to read off the root).
+Why not one elimination template (Kukelova et al. 2008; Larsson et al. 2017). The C equations are
+linear in (H, b) with offset-dependent coefficients, so their top-degree forms vanish on the whole
+section H = b = 0 at infinity, and the affine ideal is reached only through long chains of degree
+falls. Measured over GF(65521) when this design was chosen:
 
-Rounds whose output no later step uses are dropped. The spec is plain JSON (monomials as exponent
-lists in a table, rows as [polynomial id, multiplier id]) and is checked on the GF(p) instance: the
-final step's normal forms must equal :func:`analysis.quotient.normal_form`.
+* uniform Macaulay templates: at degree 6 (3355 rows) the 6r4s matrix contains 154 of the 198
+  independent relations of degree <= 3 that the action matrix needs; for 9r3s, with offset
+  multipliers up to degree 8 (1320 rows) and the extended basis P = {o-degree <= 3, (H, b)-degree
+  <= 1}, R = o3 P, one relation of the 105 needed is still missing (and P spans only 70 of the 75
+  dimensions of the quotient, so higher degrees would be needed anyway);
+* expanding the F4 trace into multiples of the input equations (needed(g) = union of t' needed(g'))
+  gives 777760 rows for 6r4s; tracking exact cofactors instead still gives 176222 rows, of degree up
+  to 11;
+* the staged replay (:func:`build_template`) is exact over GF(p), but in floating point its ~10
+  chained eliminations, with pivots fixed by the trace, multiply the coefficients' rounding errors by
+  more than 1e10; even replayed in 3000-bit arithmetic on exact rational coefficients, the grevlex
+  action matrix of 6r4s has eigenvector condition numbers up to 5e10, and on a 9r3s instance the
+  replay meets a zero pivot that the GF(p) trace did not have.
+
+The staged template (``macaulay_reducible_rank`` included) is kept for these diagnostics and as a
+fallback; the generated solvers use the other two kinds.
 """
 from __future__ import annotations
 
@@ -46,17 +56,32 @@ from analysis.ring import Poly, Ring
 
 __all__ = [
     "SPEC_FORMAT",
+    "STAGED_FORMAT",
+    "METHODS",
     "TemplateError",
     "TemplateOptions",
     "TemplateResult",
+    "build_homotopy_spec",
+    "build_pencil_spec",
+    "build_spec",
     "build_template",
-    "load_spec",
+    "complex_instance",
     "dump_spec",
-    "spec_sha256",
+    "gf_degree",
+    "load_spec",
     "macaulay_reducible_rank",
+    "monodromy",
+    "solver_method",
+    "spec_sha256",
+    "term_structure",
 ]
 
-SPEC_FORMAT = "tdoa-staged-template/1"
+#: Format of the curve-pencil and homotopy specs.
+SPEC_FORMAT = "tdoa-solver/2"
+#: Format of the staged F4-trace templates (fallback).
+STAGED_FORMAT = "tdoa-staged-template/1"
+#: Solver construction methods.
+METHODS = ("curve-pencil", "homotopy", "staged")
 
 
 class TemplateError(RuntimeError):
@@ -65,16 +90,24 @@ class TemplateError(RuntimeError):
 
 @dataclass(frozen=True)
 class TemplateOptions:
-    """Options of template construction.
+    """Options of solver construction.
 
-    prime: characteristic of the instance (< 2^16 so that every product is exact in float64).
-    seed: seed of the GF(p) instance (printed in errors).
-    actions: candidate action variables (None: every unknown); the smallest template wins.
+    prime: characteristic of the GF(p) instances (< 2^16 so that every product is exact in float64).
+    seed: seed of the GF(p) instance (printed in errors); the degree is confirmed on seed + 1.
+    actions: staged templates only: candidate action variables (None: every unknown).
+    chart_angle: curve-pencil only: the chart nu -> (lambda, mu) = nu (cos a, sin a) + (-sin a, cos a).
+    monodromy_seed: homotopy only: seed of the complex start instance and of the monodromy loops.
+    max_loops: homotopy only: monodromy loops before giving up.
+    verify_trials: seeded real networks on which a built solver must find the known root.
     """
 
     prime: int = 65521
     seed: int = 1
     actions: tuple[str, ...] | None = None
+    chart_angle: float = 0.3
+    monodromy_seed: int = 2
+    max_loops: int = 60
+    verify_trials: int = 20
 
 
 @dataclass(frozen=True)
@@ -87,7 +120,10 @@ class TemplateResult:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return tuple(self.spec["final"]["shape"])
+        """Size of the numeric core: final template (staged), companion pencil, or (paths, unknowns)."""
+        if self.spec.get("kind", "staged") == "staged":
+            return tuple(self.spec["final"]["shape"])
+        return tuple(self.spec["size"])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -366,13 +402,15 @@ def _to_spec(formulation: Formulation, ring: Ring, options: TemplateOptions, bas
 
     final = cand["final"]
     spec = {
-        "format": SPEC_FORMAT,
+        "format": STAGED_FORMAT,
+        "kind": "staged",
         "formulation": formulation.label,
         "equations": list(formulation.equations),
         "unknowns": list(formulation.unknowns),
         "order": "grevlex",
         "prime": options.prime,
         "seed": options.seed,
+        "degree": len(basis),
         "action": cand["action"],
         "monomials": [list(ring.exps(k)) for k in table],
         "basis": [idx[k] for k in basis],
@@ -390,6 +428,276 @@ def _to_spec(formulation: Formulation, ring: Ring, options: TemplateOptions, bas
         },
     }
     return spec
+
+
+# --------------------------------------------------------------------------------------------------
+# shared pieces of the curve-pencil and homotopy specs
+# --------------------------------------------------------------------------------------------------
+
+
+def gf_degree(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> int:
+    """Number of roots (with multiplicity) over GF(p): |standard monomial basis| of the grevlex basis.
+
+    Computed on the instances with seeds ``options.seed`` and ``options.seed + 1``; raises
+    :class:`TemplateError` if they disagree or if the known root of an instance is not a root.
+    """
+    if isinstance(formulation, str):
+        formulation = Formulation.parse(formulation)
+    p = options.prime
+    ring = Ring(formulation.unknowns, p, "grevlex")
+    degrees = []
+    for seed in (options.seed, options.seed + 1):
+        instance = sample_gf_instance(formulation.config, p, seed)
+        polys = [ring.from_terms(e) for e in gf_equations(formulation, instance)]
+        if any(f.evaluate(instance.root) for f in polys):
+            raise TemplateError(f"the known root of the GF({p}) instance (seed {seed}) is not a root")
+        degrees.append(len(standard_monomials(groebner(polys, F4Options()))))
+    if degrees[0] != degrees[1]:
+        raise TemplateError(f"GF({p}) instances with seeds {options.seed}, {options.seed + 1} give "
+                            f"different degrees {degrees}")
+    return degrees[0]
+
+
+def term_structure(formulation: Formulation | str) -> tuple[list[list[int]], list[list[int]]]:
+    """(monomial table, per equation the indices of its terms) of a formulation's symbolic equations.
+
+    Terms are the exponents with a nonzero coefficient polynomial in the data, in decreasing grevlex
+    order; the table lists the monomials by (degree, grevlex). This is the layout of the coefficient
+    vector emitted by :mod:`solvers.codegen` (used for polishing and residuals).
+    """
+    if isinstance(formulation, str):
+        formulation = Formulation.parse(formulation)
+    ring = Ring(formulation.unknowns, 65521, "grevlex")
+    symbolic = coefficient_expressions(formulation, "ring")
+    per_eq = [sorted((e for e, c in eq.items() if c), key=ring.key, reverse=True) for eq in symbolic]
+    table = sorted({e for eq in per_eq for e in eq}, key=lambda e: (sum(e), ring.key(e)))
+    idx = {e: i for i, e in enumerate(table)}
+    return [list(e) for e in table], [[idx[e] for e in eq] for eq in per_eq]
+
+
+def solver_method(formulation: Formulation | str) -> str:
+    """The construction used for a formulation: ``curve-pencil``, ``homotopy`` or ``staged``."""
+    if isinstance(formulation, str):
+        formulation = Formulation.parse(formulation)
+    config, eqs = formulation.config, tuple(formulation.equations)
+    c_eqs = tuple(f"C{i}" for i in range(2, config.m + 1))
+    minors = tuple(e for e in eqs if e.startswith("M"))
+    if (config.m == 6 and config.n == 4 and set(eqs) == {"B2", *c_eqs, *minors} and len(minors) == 10):
+        return "curve-pencil"
+    if config.n == 3 and all(e.startswith("C") for e in eqs) and len(eqs) == len(formulation.unknowns):
+        return "homotopy"
+    return "staged"
+
+
+def build_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions(),
+               method: str | None = None) -> TemplateResult:
+    """Build the spec of a formulation's solver by ``method`` (default :func:`solver_method`)."""
+    if isinstance(formulation, str):
+        formulation = Formulation.parse(formulation)
+    method = method or solver_method(formulation)
+    if method == "curve-pencil":
+        return build_pencil_spec(formulation, options)
+    if method == "homotopy":
+        return build_homotopy_spec(formulation, options)
+    if method == "staged":
+        return build_template(formulation, options)
+    raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
+
+
+def _common_spec(formulation: Formulation, options: TemplateOptions, kind: str, degree: int) -> dict:
+    monomials, inputs = term_structure(formulation)
+    return {
+        "format": SPEC_FORMAT,
+        "kind": kind,
+        "formulation": formulation.label,
+        "equations": list(formulation.equations),
+        "unknowns": list(formulation.unknowns),
+        "order": "grevlex",
+        "prime": options.prime,
+        "seed": options.seed,
+        "degree": degree,
+        "monomials": monomials,
+        "inputs": inputs,
+    }
+
+
+def _real_trials(formulation: Formulation, trials: int) -> tuple[np.ndarray, np.ndarray]:
+    """Seeded noiseless networks (seeds 0..trials-1): normalised data and the root in that frame."""
+    from .runtime import data_scale
+    from .synthetic import random_network, true_root
+
+    m, n = formulation.config.m, formulation.config.n
+    F, X = [], []
+    for seed in range(trials):
+        net = random_network(m, n, np.random.default_rng(seed))
+        H, b, o = true_root(net)
+        F.append(net.measurements())
+        X.append(np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o]))
+    F, X = np.array(F), np.array(X)
+    s = data_scale(F)
+    powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
+    return F / s[:, None, None], X / s[:, None] ** powers
+
+
+def _found(roots: np.ndarray, truth: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    err = np.nanmin(np.linalg.norm(roots - truth[:, None, :], axis=2), axis=1) / np.linalg.norm(truth, axis=1)
+    return err < tol
+
+
+# --------------------------------------------------------------------------------------------------
+# curve-pencil (6r4s)
+# --------------------------------------------------------------------------------------------------
+
+
+def build_pencil_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
+    """Spec of the rank-2-curve pencil solver (:class:`solvers.runtime.CurvePencilSolver`).
+
+    Checks: the GF(p) degree is 22; on ``options.verify_trials`` seeded real networks the companion
+    pencil (44 x 44) has exactly 14 eigenvalues with beta ~ 0 (a gap of five orders of magnitude to the
+    next) and eight with sigma ~ 0 (o_1 = infinity), and the remaining 22 contain the known root.
+    """
+    t0 = time.perf_counter()
+    if isinstance(formulation, str):
+        formulation = Formulation.parse(formulation)
+    if solver_method(formulation) != "curve-pencil":
+        raise TemplateError(f"{formulation.label}: the curve pencil needs 6r4s with B2, C2-C6 and the 10 minors")
+    from .runtime import CurvePencilSolver
+
+    degree = gf_degree(formulation, options)
+    size, n_eig = 11 * 4, 11 * 4
+    det_degree = degree + 8  # sigma^8: the C rows degenerate where o_1 = infinity
+    spec = _common_spec(formulation, options, "curve-pencil", degree)
+    spec["size"] = [size, size]
+    spec["pencil"] = {"chart_angle": options.chart_angle, "matrix": [11, 11], "polynomial_degree": 4,
+                      "drop_infinite": n_eig - det_degree, "drop_sigma": det_degree - degree}
+    solver = CurvePencilSolver(spec)
+    F, X = _real_trials(formulation, options.verify_trials)
+    K, _ = solver.matrix_polynomial(F)
+    from scipy.linalg import eigvals
+
+    for i in range(len(F)):
+        d, n = 4, 11
+        A = np.zeros((n * d, n * d))
+        A[: n * (d - 1), n:] = np.eye(n * (d - 1))
+        B = np.eye(n * d)
+        for j in range(d):
+            A[n * (d - 1):, n * j:n * (j + 1)] = -K[i, j]
+        B[n * (d - 1):, n * (d - 1):] = K[i, d]
+        al, be = eigvals(A, B, homogeneous_eigvals=True)
+        ratio = np.sort(np.abs(be) / np.maximum(np.abs(al), 1e-300))
+        k = spec["pencil"]["drop_infinite"]
+        if not (ratio[k - 1] < 1e-5 * ratio[k]):
+            raise TemplateError(f"trial {i}: expected {k} infinite eigenvalues, beta/alpha ratios {ratio[:k + 2]}")
+    found = _found(solver.roots(F), X)
+    if found.mean() < 0.9:
+        raise TemplateError(f"the pencil finds the known root in only {found.sum()}/{len(found)} seeded networks")
+    return TemplateResult(spec, time.perf_counter() - t0, ({"method": "curve-pencil", "degree": degree,
+                                                            "verified": int(found.sum()), "trials": len(found)},))
+
+
+# --------------------------------------------------------------------------------------------------
+# homotopy (9r3s): complex start instance and monodromy
+# --------------------------------------------------------------------------------------------------
+
+
+def complex_instance(m: int, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A complex network's data F (m, n), normalised by its RMS modulus, and its root in that frame.
+
+    Receivers, transmitters and offsets are complex normal; d_ij is a square root of the (complex)
+    squared distance (the equations use only d_ij^2). The root is (H, b, o) with H = (4 S^T S)^-1,
+    b = -1/2 S^-1 s_1 (r_1 translated to 0; transposes, not conjugates), as in solvers.synthetic.
+    """
+    r = rng.normal(size=(m, 2)) + 1j * rng.normal(size=(m, 2))
+    t = rng.normal(size=(n, 2)) + 1j * rng.normal(size=(n, 2))
+    o = rng.normal(size=n) + 1j * rng.normal(size=n)
+    F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + o[None, :]
+    s1 = t[0] - r[0]
+    S = np.column_stack([t[1] - t[0], t[2] - t[0]])
+    H = np.linalg.inv(4.0 * S.T @ S)
+    b = -0.5 * np.linalg.solve(S, s1)
+    x = np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
+    scale = np.sqrt(np.mean(np.abs(F) ** 2))
+    powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
+    return F / scale, x / scale**powers
+
+
+def monodromy(F0: np.ndarray, x0: np.ndarray, rows: np.ndarray, degree: int, rng: np.random.Generator,
+              max_loops: int = 60, radius: float = 0.5) -> tuple[np.ndarray, int]:
+    """All roots of the C system of F0 from one root x0, by monodromy (triangle loops F0 -> Fa -> Fb -> F0).
+
+    Each loop tracks every known root around a random triangle in the complex parameter space; the
+    endpoints that are new roots are added. Stops when ``degree`` roots are known. Returns (roots,
+    loops used). Reference: Duff, Hill, Jensen, Lee, Leykin, Sommese, "Solving polynomial systems via
+    homotopy continuation and monodromy", IMA J. Numer. Anal. 2019.
+    """
+    from .runtime import _CPath, track
+
+    roots = x0[None].astype(complex)
+    for loop in range(1, max_loops + 1):
+        Fa = F0 + radius * (rng.normal(size=F0.shape) + 1j * rng.normal(size=F0.shape))
+        Fb = F0 + radius * (rng.normal(size=F0.shape) + 1j * rng.normal(size=F0.shape))
+        xs = roots
+        for start, end in ((F0, Fa), (Fa, Fb), (Fb, F0)):
+            P = len(xs)
+            xs, _ = track(_CPath(np.broadcast_to(start, (P,) + F0.shape), np.broadcast_to(end, (P,) + F0.shape), rows), xs)
+            xs = xs[np.all(np.isfinite(xs), axis=1)]
+        for x in xs:
+            scale = 1.0 + np.linalg.norm(x)
+            if np.min(np.linalg.norm(roots - x, axis=1)) > 1e-6 * scale:
+                roots = np.vstack([roots, x])
+        if len(roots) >= degree:
+            return roots, loop
+    return roots, max_loops
+
+
+def build_homotopy_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
+    """Spec of the parameter-homotopy solver for a square set of C equations (three transmitters).
+
+    The start instance is :func:`complex_instance` with seed ``options.monodromy_seed``; its roots come
+    from :func:`monodromy` and must number the GF(p) degree, be pairwise distinct and have residuals
+    below 1e-10 (after two Newton steps); the solver must then find the known root of seeded real
+    networks. Roots get three Newton steps on F0 and are stored as [re, im] pairs rounded to 14
+    significant digits (the runtime refines them again when it loads the spec).
+    """
+    t0 = time.perf_counter()
+    if isinstance(formulation, str):
+        formulation = Formulation.parse(formulation)
+    if solver_method(formulation) != "homotopy":
+        raise TemplateError(f"{formulation.label}: the homotopy needs a square system of C equations with n = 3")
+    from .runtime import CSystemHomotopy, _has_duplicates, c_pieces, c_residual_jacobian
+
+    degree = gf_degree(formulation, options)
+    m, n = formulation.config.m, formulation.config.n
+    rows = np.array([int(e[1:]) - 2 for e in formulation.equations], dtype=np.intp)
+    rng = np.random.default_rng(options.monodromy_seed)
+    F0, x0 = complex_instance(m, n, rng)
+    roots, loops = monodromy(F0, x0, rows, degree, rng, options.max_loops)
+    if len(roots) != degree:
+        raise TemplateError(f"monodromy found {len(roots)} of {degree} roots in {loops} loops "
+                            f"(seed {options.monodromy_seed})")
+    pieces = [np.broadcast_to(q, (len(roots),) + q.shape) for q in c_pieces(F0, rows)]
+    for _ in range(3):  # Newton on F0: the stored digits do not depend on the monodromy paths
+        G, J = c_residual_jacobian(roots, *pieces)
+        roots = roots - np.linalg.solve(J, G[..., None])[..., 0]
+    roots = np.vectorize(lambda v: complex(float(f"{v.real:.14g}"), float(f"{v.imag:.14g}")))(roots)
+    G, _ = c_residual_jacobian(roots, *pieces, jacobian=False)
+    if np.max(np.abs(G)) > 1e-10 or _has_duplicates(roots):
+        raise TemplateError(f"start roots: max residual {np.max(np.abs(G)):.1e}, duplicates {_has_duplicates(roots)}")
+    order = np.lexsort((roots.imag[:, 0], roots.real[:, 0]))
+    roots = roots[order]
+    spec = _common_spec(formulation, options, "homotopy", degree)
+    spec["size"] = [degree, len(formulation.unknowns)]
+    spec["homotopy"] = {"rows": [int(r) for r in rows], "monodromy_seed": options.monodromy_seed,
+                        "monodromy_loops": loops}
+    # one line per data row and per root in the JSON text (see dump_spec)
+    spec["start_data"] = [[[float(z.real), float(z.imag)] for z in row] for row in F0]
+    spec["start_roots"] = [[[float(z.real), float(z.imag)] for z in x] for x in roots]
+    F, X = _real_trials(formulation, options.verify_trials)
+    found = _found(CSystemHomotopy(spec).roots(F), X)
+    if found.mean() < 0.9:
+        raise TemplateError(f"the homotopy finds the known root in only {found.sum()}/{len(found)} seeded networks")
+    return TemplateResult(spec, time.perf_counter() - t0, ({"method": "homotopy", "degree": degree, "loops": loops,
+                                                            "verified": int(found.sum()), "trials": len(found)},))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -417,9 +725,11 @@ def dump_spec(spec: dict) -> str:
 
 
 def load_spec(text: str) -> dict:
+    """Parse a spec; raises :class:`TemplateError` for an unknown format."""
     spec = json.loads(text)
-    if spec.get("format") != SPEC_FORMAT:
-        raise TemplateError(f"unknown template spec format {spec.get('format')!r}; expected {SPEC_FORMAT}")
+    if spec.get("format") not in (SPEC_FORMAT, STAGED_FORMAT):
+        raise TemplateError(f"unknown template spec format {spec.get('format')!r}; "
+                            f"expected {SPEC_FORMAT} or {STAGED_FORMAT}")
     return spec
 
 

@@ -1,45 +1,85 @@
-"""Tests for solvers.template: the staged elimination template over GF(p) and its plain-text spec."""
+"""Tests for solvers.template: root counts over GF(p), the solver specs and their plain-text form."""
 from __future__ import annotations
 
+import json
 import os
 
+import numpy as np
 import pytest
 
-from solvers.codegen import GENERATED_DIR, SOLVERS, module_name
+from analysis.formulations import Formulation, gf_equations, sample_gf_instance
+from solvers.codegen import GENERATED_DIR, SOLVERS, generated_specs, module_name
+from solvers.runtime import _has_duplicates, c_pieces, c_residual_jacobian
 from solvers.template import (
     SPEC_FORMAT,
     TemplateError,
     TemplateOptions,
+    build_pencil_spec,
     build_template,
     dump_spec,
+    gf_degree,
     load_spec,
     macaulay_reducible_rank,
+    solver_method,
+    term_structure,
 )
+
+
+def _committed(label: str) -> dict:
+    path = next(p for p in generated_specs() if os.path.basename(p).startswith(f"tdoa_{label}_"))
+    with open(path, encoding="utf-8") as fh:
+        return load_spec(fh.read())
 
 
 @pytest.fixture(scope="module")
 def built_6r4s():
-    # the committed spec was selected among all unknowns; o4 wins, so building only o4 reproduces it
-    return build_template(SOLVERS["6r4s"], TemplateOptions(actions=("o4",)))
+    return build_pencil_spec(SOLVERS["6r4s"])
 
 
-def test_6r4s_template_shape_and_basis(built_6r4s):
+def test_methods_of_the_paper_solvers():
+    assert solver_method(SOLVERS["6r4s"]) == "curve-pencil"
+    assert solver_method(SOLVERS["9r3s"]) == "homotopy"
+    assert solver_method("6r4s:B2,C2-C6,M123_123,M124_123,M125_123") == "staged"
+
+
+def test_gf_degree_of_6r4s_is_22():
+    assert gf_degree(SOLVERS["6r4s"]) == 22  # paper Section 3.2
+
+
+def test_pencil_spec_is_stable_and_matches_committed(built_6r4s):
     spec = built_6r4s.spec
-    assert spec["format"] == SPEC_FORMAT
-    assert len(spec["basis"]) == 22  # paper Section 3.2
-    assert spec["action"] == "o4"
-    rows, cols = spec["final"]["shape"]
-    assert cols == rows + len(spec["final"]["columns"]) - spec["final"]["n_lead"]
-    # every reducible monomial x_a * b (b in B, not in B) is a target of the final template
-    assert set(spec["reducible"]) <= set(spec["final"]["target_monomials"])
-
-
-def test_spec_text_is_stable_and_matches_committed(built_6r4s):
-    text = dump_spec(built_6r4s.spec)
+    assert spec["format"] == SPEC_FORMAT and spec["kind"] == "curve-pencil"
+    assert spec["degree"] == 22
+    # det K has degree 22 + 8 (sigma^8); the companion pencil has 11 * 4 = 44 eigenvalues
+    assert spec["pencil"]["drop_infinite"] == 44 - 30 and spec["pencil"]["drop_sigma"] == 8
+    assert built_6r4s.candidates[0]["verified"] == built_6r4s.candidates[0]["trials"]
+    text = dump_spec(spec)
     assert dump_spec(load_spec(text)) == text
-    path = os.path.join(GENERATED_DIR, module_name(built_6r4s.spec) + ".json")
+    path = os.path.join(GENERATED_DIR, module_name(spec) + ".json")
     with open(path, encoding="utf-8") as fh:
         assert fh.read() == text, "committed 6r4s spec differs from a fresh build (seed 1, p = 65521)"
+
+
+def test_homotopy_start_system_is_complete():
+    # the committed start instance: as many distinct roots as the GF(p) degree, all with tiny residuals
+    spec = _committed("9r3s")
+    assert spec["kind"] == "homotopy" and spec["degree"] == 75  # paper Section 3.1
+    h = spec["homotopy"]
+    F0 = np.array([[complex(a, b) for a, b in row] for row in spec["start_data"]])
+    x = np.array([[complex(a, b) for a, b in r] for r in spec["start_roots"]])
+    assert x.shape == (75, 8)
+    pieces = c_pieces(F0, np.array(h["rows"]))
+    G, _ = c_residual_jacobian(x, *(np.broadcast_to(q, (len(x),) + q.shape) for q in pieces), jacobian=False)
+    assert np.max(np.abs(G)) < 1e-10
+    assert not _has_duplicates(x)
+
+
+def test_term_structure_matches_gf_supports():
+    form = Formulation.parse(SOLVERS["6r4s"])
+    monomials, inputs = term_structure(form)
+    instance = sample_gf_instance(form.config, 65521, 3)
+    for eq, terms in zip(gf_equations(form, instance), inputs):
+        assert set(eq) == {tuple(monomials[t]) for t in terms}
 
 
 def test_load_spec_rejects_other_formats():
@@ -47,7 +87,19 @@ def test_load_spec_rejects_other_formats():
         load_spec('{"format": "something-else"}')
 
 
+def test_pencil_rejects_other_formulations():
+    with pytest.raises(TemplateError, match="curve pencil"):
+        build_pencil_spec("6r4s:B2,C2-C6,M123_123,M124_123,M125_123")
+
+
+def test_staged_fallback_still_builds_an_exact_template():
+    # the fallback path: its final step is checked against GF(p) normal forms inside build_template
+    result = build_template(SOLVERS["6r4s"], TemplateOptions(actions=("o4",)))
+    assert result.spec["kind"] == "staged" and len(result.spec["basis"]) == 22
+    assert json.loads(dump_spec(result.spec)) == result.spec
+
+
 def test_single_macaulay_template_is_not_enough_at_low_degree():
-    # why the template is staged: at degree 5 the Macaulay matrix reduces only part of R
+    # one of the reasons for the pencil / homotopy: at degree 5 the Macaulay matrix reduces only part of R
     rows, rank, need = macaulay_reducible_rank(SOLVERS["6r4s"], 5, "o4")
     assert rows == 835 and need == 15 and rank < need
