@@ -5,7 +5,7 @@ Subcommands
 degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
            or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``)
 tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
-generate   regenerate a numeric solver (elimination template -> solvers/generated/) and print its statistics
+generate   regenerate a numeric solver (spec over GF(p) -> solvers/generated/) and print its statistics
 reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
 
 Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
