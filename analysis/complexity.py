@@ -45,7 +45,6 @@ import collections
 import dataclasses
 import hashlib
 import json
-import math
 import os
 import sys
 import time
@@ -499,7 +498,8 @@ def combine(formulation: Formulation, outcomes: Sequence[InstanceOutcome], prime
             degree, dim = top, 0
         if status != "disagree":
             chosen = next(o for o, c in zip(outcomes, category) if c == top)
-            sats = [o.saturated_degree for o, c in zip(outcomes, category) if c == top and o.saturated_degree is not None]
+            sats = [o.saturated_degree for o, c in zip(outcomes, category)
+                    if c == top and o.saturated_degree is not None]
             if sats:
                 value, sat_unique = _majority(sats)
                 sat = value if sat_unique else None

@@ -19,7 +19,8 @@ Which formulations (paper Sections 3.1-3.2, Tables 2-3):
   on a positive-dimensional component). Candidates are (i) A/B/C subsets plus k minors with
   a + b + c + k = 5 + n (k-subsets of the minors enumerated up to symmetry while C(#minors, k) <=
   ``Budget.subset_limit``) and (ii) A/B/C subsets plus all minors (the paper's 6r/4s solver). They are
-  ordered by the heuristic "fewer A and B, more C, then more minors" and cut at the cell's budget.
+  ordered by the heuristic "fewer A and B, more C, then more minors" and cut at the cell's budget
+  (at most ``Budget.per_base`` per A/B/C subset).
   A cell's value is the smallest degree |B| (as generated) over its own candidates and those of the
   cells m'/n with m' < m (a configuration can ignore receivers). Over-determined formulations (more
   independent equations than unknowns) are not candidates: on exact data they usually keep only the
@@ -35,14 +36,12 @@ import csv
 import dataclasses
 import datetime as _dt
 import io
-import itertools
 import json
 import math
 import os
 import platform
 import re
 import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,7 +61,7 @@ from .complexity import (
     sweep,
 )
 from .f4 import F4Options
-from .formulations import Formulation, TDOAConfig, canonical_form, enumerate_formulations, equation_names
+from .formulations import Formulation, TDOAConfig, canonical_form, enumerate_formulations
 
 __all__ = [
     "Budget",
@@ -120,17 +119,22 @@ class Budget:
     """How many formulations to compute per Table 3 cell.
 
     focus: cells with a paper number or '-' (9/3, 8/3, 7/3, 6/3, 6/4, 5/4, 5/5, 4/5, 4/6).
-    other: cells marked X or * (0 skips them). subset_limit: enumerate k-subsets of the minors only
-    while C(#minors, k) <= subset_limit. section32: compute the Section 3.2 searches.
+    other: cells marked X or * (0 skips them). per_base: at most this many candidates share one A/B/C
+    subset (so that the budget covers many A/B/C choices rather than many minor subsets of one).
+    subset_limit: enumerate k-subsets of the minors only while C(#minors, k) <= subset_limit.
+    section32: compute the Section 3.2 searches. other_timeout: wall-clock limit (seconds) per
+    formulation of the X/* cells (they are swept after everything else, with this shorter limit).
     """
 
     focus: int
     other: int
+    per_base: int = 4
     subset_limit: int = 3000
     section32: bool = True
+    other_timeout: float = 90.0
 
 
-FULL = Budget(focus=60, other=12)
+FULL = Budget(focus=40, other=6)
 QUICK = Budget(focus=2, other=0, subset_limit=0, section32=False)
 
 
@@ -278,10 +282,17 @@ def plan_cell(m: int, n: int, budget: Budget) -> CellPlan:
         if r.config == config:
             native[r.label] = r
     square = sorted(_square_filter(native.values(), unknowns), key=_heuristic_key)
+    chosen: list[Formulation] = []
+    per_base: dict[tuple[str, ...], int] = {}
+    for f in square:
+        base = tuple(x for x in f.equations if not x.startswith("M"))
+        if len(chosen) < limit and per_base.get(base, 0) < budget.per_base:
+            chosen.append(f)
+            per_base[base] = per_base.get(base, 0) + 1
     fallback = None
     if max_independent < unknowns:
         fallback = Formulation.from_spec(config, "all").label
-    return CellPlan(m, n, tuple(f.label for f in square[:limit]), len(native), len(square), fallback,
+    return CellPlan(m, n, tuple(f.label for f in chosen), len(native), len(square), fallback,
                     max_independent, limit, tuple(skipped))
 
 
@@ -296,8 +307,9 @@ def table2_formulations() -> list[Formulation]:
 
 
 def section32_formulations() -> dict[str, list[str]]:
-    """The Section 3.2 searches: paper number -> labels (only formulations with a full-rank Jacobian
-    at the known root, i.e. whose true root is isolated)."""
+    """The Section 3.2 searches: paper number -> labels. B2 + C2-C6 + every 3-subset of the minors of
+    6r/4s, and otherwise only formulations with a full-rank Jacobian at the known root (whose true root
+    is isolated)."""
     c64, c54, c55 = TDOAConfig(6, 4), TDOAConfig(5, 4), TDOAConfig(5, 5)
     six = [f for k in range(1, c64.n_minors + 1)
            for f in enumerate_formulations(c64, nA=0, nB=1, nC=5, minor_sets=k)]
@@ -307,7 +319,10 @@ def section32_formulations() -> dict[str, list[str]]:
     def isolated(fs: list[Formulation]) -> list[str]:
         return [f.label for f in fs if root_ranks(f)[0] == f.config.n_unknowns]
 
-    return {"22/66": isolated(six), "154": isolated(five_four), "64": isolated(five_five)}
+    # the paper's "only 3 minors": every 3-subset, even those whose true root is not isolated
+    three = [f.label for f in six if f.counts.minors == 3]
+    return {"22/66": three + [x for x in isolated(six) if x not in three], "154": isolated(five_four),
+            "64": isolated(five_five)}
 
 
 @dataclass(frozen=True)
@@ -319,18 +334,23 @@ class TablePlan:
     section32: Mapping[str, tuple[str, ...]]
     budget: Budget
 
-    def labels(self) -> list[str]:
-        """All formulations, deduplicated: Table 2, then focus cells, Section 3.2, other cells."""
-        order = list(self.table2)
-        focus = [c for c in self.cells if c.focus]
-        other = [c for c in self.cells if not c.focus]
-        for cell in focus:
-            order += list(cell.candidates) + ([cell.fallback] if cell.fallback else [])
+    def labels(self, part: str = "all") -> list[str]:
+        """Formulations, deduplicated, in sweep order: Table 2, focus cells, Section 3.2 (part
+        "primary"), then the X/* cells (part "secondary", minus those already in the primary part)."""
+        primary = list(self.table2)
+        for cell in self.cells:
+            if cell.focus:
+                primary += list(cell.candidates) + ([cell.fallback] if cell.fallback else [])
         for labels in self.section32.values():
-            order += list(labels)
-        for cell in other:
-            order += list(cell.candidates) + ([cell.fallback] if cell.fallback else [])
-        return list(dict.fromkeys(order))
+            primary += list(labels)
+        primary = list(dict.fromkeys(primary))
+        seen = set(primary)
+        secondary = []
+        for cell in self.cells:
+            if not cell.focus:
+                secondary += [x for x in cell.candidates + ((cell.fallback,) if cell.fallback else ()) if x not in seen]
+        secondary = list(dict.fromkeys(secondary))
+        return {"primary": primary, "secondary": secondary, "all": primary + secondary}[part]
 
     def memberships(self) -> dict[str, list[str]]:
         """label -> where it is used: "T2", "T3:6/4", "S3.2:66"."""
@@ -409,7 +429,7 @@ def build_table2(results: Mapping[str, FormulationResult], ref: pd.DataFrame | N
                  and r.n_equations == 8]
         r = min(match, key=lambda x: x.m) if match else None
         rows.append({
-            "A": a, "B": b, "C": c, "config": f"{c + 1 if c + 1 >= 6 else 6}r/3s" if r is None else f"{r.m}r/{r.n}s",
+            "A": a, "B": b, "C": c, "config": f"{r.m}r/{r.n}s" if r else None,
             "paper": value, "ours": r.degree if r else None,
             "match": None if r is None or r.degree is None else ("yes" if r.degree == value else "no"),
             "ours_saturated": r.saturated_degree if r else None,
@@ -464,16 +484,24 @@ def build_table3(plan: TablePlan, results: Mapping[str, FormulationResult],
             match = "yes" if status == "underdetermined" else "n/a"
         else:
             match = "n/a"
-        comment = ""
+        notes = []
         if status == "underdetermined":
-            fb = ""
+            notes.append(f"at most {cell.max_independent} independent equations for {unknowns} unknowns in this "
+                         "formulation family")
             if fallback is not None:
-                dim = fallback.dimension if fallback.dimension is not None else f"<= {fallback.tangent_dim} (tangent)"
-                fb = f"; all {fallback.n_equations} equations: {fallback.status}, dimension {dim}"
-            comment = (f"at most {cell.max_independent} independent equations for {unknowns} unknowns"
-                       f" in this formulation{fb}")
-        elif best is not None and best.m < cell.m:
-            comment = f"best uses {best.m} receivers"
+                if fallback.dimension is not None:
+                    notes.append(f"all {fallback.n_equations} equations: dimension {fallback.dimension}")
+                else:
+                    notes.append(f"all {fallback.n_equations} equations: tangent space of dimension "
+                                 f"{fallback.tangent_dim} at the known root; {fallback.message}")
+        if best is not None and best.m < cell.m:
+            notes.append(f"best uses {best.m} receivers")
+        if best is not None and best.n >= 4 and best.n_minors == TDOAConfig(best.m, best.n).n_minors:
+            expected = (best.m - 3) * (best.n - 3)
+            if expected >= best.n:
+                notes.append(f"the rank constraints alone fix the offsets ((m-3)(n-3) = {expected} for {best.n} "
+                             f"offsets, rank {best.minor_rank} at the root), then C is linear in (H, b)")
+        comment = "; ".join(notes)
         rows.append({
             "m": cell.m, "n": cell.n, "paper": paper_entry, "paper_table1": PAPER_TABLE1[key], "ours": ours,
             "match": match, "ours_saturated": best.saturated_degree if best else None,
@@ -489,20 +517,31 @@ def build_table3(plan: TablePlan, results: Mapping[str, FormulationResult],
     return pd.DataFrame(rows, dtype=object)
 
 
+SECTION32_TARGETS: dict[str, tuple[str, tuple[int, ...]]] = {
+    "22/66": ("6r4s", (22, 66)), "154": ("5r4s", (154,)), "64": ("5r5s", (64,)),
+}
+"""Section 3.2 / Table 3 numbers whose equation subsets the paper does not (fully) state: search key ->
+(configuration, numbers)."""
+
+
 def build_section32(plan: TablePlan, results: Mapping[str, FormulationResult]) -> pd.DataFrame:
-    """Every Section 3.2 formulation with its degrees (the paper's 22, 66, 154, 64 are searched here)."""
+    """The Section 3.2 searches: every searched formulation, plus every other computed formulation of
+    the same configuration whose degree (as generated or saturated) is one of the paper's numbers."""
     rows = []
     for key, labels in plan.section32.items():
-        targets = [int(x) for x in key.split("/")]
-        for label in labels:
+        config, targets = SECTION32_TARGETS[key]
+        hits = [r.label for r in sorted(results.values(), key=lambda r: r.label)
+                if r.config == config and ({r.degree, r.saturated_degree} & set(targets))]
+        for label in dict.fromkeys(list(labels) + hits):
             r = results.get(label)
             if r is None:
                 continue
             hit = [t for t in targets if t in (r.degree, r.saturated_degree)]
-            rows.append({"search": key, "formulation": label, "independent_equations": r.independent_equations,
+            rows.append({"search": key, "formulation": label, "searched": label in labels,
+                         "independent_equations": r.independent_equations, "n_minors": r.n_minors,
                          "status": r.status, "degree": r.degree, "saturated_degree": r.saturated_degree,
-                         "dimension": r.dimension, "instance_degrees": r.instance_degrees,
-                         "paper_hit": " ".join(map(str, hit))})
+                         "dimension": r.dimension, "tangent_dim": r.tangent_dim,
+                         "instance_degrees": r.instance_degrees, "paper_hit": " ".join(map(str, hit))})
     return pd.DataFrame(rows, dtype=object)
 
 
@@ -530,7 +569,8 @@ def _md_table(df: pd.DataFrame) -> str:
 
 def _tex_escape(text: str) -> str:
     return (text.replace("\\", r"\textbackslash{}").replace("_", r"\_").replace("%", r"\%")
-            .replace("&", r"\&").replace("#", r"\#").replace("*", r"$\ast$").replace("<=", r"$\le$"))
+            .replace("&", r"\&").replace("#", r"\#").replace("*", r"$\ast$").replace("<=", r"$\le$")
+            .replace("|B|", r"$|\mathcal{B}|$"))
 
 
 def _tex_table(df: pd.DataFrame, caption: str, label: str) -> str:
@@ -550,27 +590,28 @@ def _grid(table3: pd.DataFrame, tex: bool) -> str:
     cols = sorted({n for _, n in cells})
     rows = sorted({m for m, _ in cells})
 
-    def text(m: int, n: int) -> str:
+    def text(m: int, n: int) -> tuple[str, str]:
         r = cells.get((m, n))
         if r is None:
-            return ""
+            return "", ""
         if r.ours not in (None, ""):
             ours = str(r.ours)
         else:
             ours = {"underdetermined": "u", "not computed": "."}.get(r.status, "?")
-        mark = {"yes": " ✓", "no": " ✗"}.get(r.match, "") if not tex else {"yes": r" \checkmark", "no": r" $\times$"}.get(r.match, "")
-        return f"{ours} ({r.paper}){mark}"
+        marks = {"yes": r" \checkmark", "no": r" $\times$"} if tex else {"yes": " ✓", "no": " ✗"}
+        return f"{ours} ({r.paper})", marks.get(r.match, "")
 
     if tex:
         lines = [r"\begin{tabular}{c|" + "c" * len(cols) + "}", r"\hline\hline",
                  "$m/n$ & " + " & ".join(map(str, cols)) + r" \\\hline"]
         for m in rows:
-            lines.append(f"{m} & " + " & ".join(_tex_escape(text(m, n)).replace(r"$\ast$", "*") for n in cols) + r" \\")
+            lines.append(f"{m} & " + " & ".join(_tex_escape(text(m, n)[0]).replace(r"$\ast$", "*") + text(m, n)[1]
+                                                for n in cols) + r" \\")
         lines.append(r"\end{tabular}")
         return "\n".join(lines) + "\n"
     lines = ["| m/n | " + " | ".join(map(str, cols)) + " |", "|---|" + "---|" * len(cols)]
     for m in rows:
-        lines.append(f"| {m} | " + " | ".join(text(m, n) for n in cols) + " |")
+        lines.append(f"| {m} | " + " | ".join("".join(text(m, n)) for n in cols) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -609,6 +650,23 @@ def _provenance(primes, seeds, options: F4Options, timeout, budget: Budget, mode
         "timings": {"wall_seconds": round(seconds, 1), "formulations_computed": computed,
                     "formulations_from_cache": cached},
     }
+
+
+def _last_uncached_run(previous: Path, provenance: dict, cached: int) -> dict | None:
+    """Timings of the last run that computed everything, carried over from the previous provenance.json
+    while the engine version and mode are unchanged (a cached rerun otherwise hides the real cost)."""
+    if cached == 0:
+        return {"date": provenance["date"], "commit": provenance["commit"],
+                "wall_seconds": provenance["timings"]["wall_seconds"],
+                "worker_seconds": provenance["sweep_seconds_sum"],
+                "formulations": provenance["timings"]["formulations_computed"], "jobs": provenance["jobs"]}
+    try:
+        old = json.loads(previous.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if old.get("engine_version") != provenance["engine_version"] or old.get("mode") != provenance["mode"]:
+        return None
+    return old.get("last_uncached_run")
 
 
 def write_outputs(out_dir: Path, table2: pd.DataFrame, table3: pd.DataFrame, section32: pd.DataFrame,
@@ -678,6 +736,9 @@ class TablesSummary:
     mode: str
     statuses: dict = field(default_factory=dict)
 
+    def __str__(self) -> str:
+        return self.report()
+
     def report(self) -> str:
         """Plain-text comparison with the paper."""
         out = [f"Table 2 ({self.mode} run)"]
@@ -733,13 +794,15 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
         out_dir = repo_root() / ".cache" / "tables-partial" if partial else TABLES_DIR
     out_dir = Path(out_dir)
     plan = plan_tables(budget, cell_list)
-    labels = plan.labels()
     options = F4Options(max_matrix_cells=max_matrix_cells)
     from_cache: set[str] = set()
-    results_list = sweep(labels, primes=primes, seeds=seeds, options=options, jobs=jobs, cache_dir=cache_dir,
-                         use_cache=use_cache, progress=progress, timeout=timeout,
-                         on_result=lambda r, cached: from_cache.add(r.label) if cached else None)
-    results = {r.label: r for r in results_list}
+    results: dict[str, FormulationResult] = {}
+    other_timeout = budget.other_timeout if timeout is None else min(timeout, budget.other_timeout)
+    for part, limit in (("primary", timeout), ("secondary", other_timeout)):
+        for r in sweep(plan.labels(part), primes=primes, seeds=seeds, options=options, jobs=jobs,
+                       cache_dir=cache_dir, use_cache=use_cache, progress=progress, timeout=limit,
+                       on_result=lambda r, cached: from_cache.add(r.label) if cached else None):
+            results[r.label] = r
     ref = paper_reference()
     table2 = build_table2({k: results[k] for k in plan.table2}, ref)
     table3 = build_table3(plan, results, ref)
@@ -753,7 +816,10 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     statuses: dict[str, int] = {}
     for r in results.values():
         statuses[r.status] = statuses.get(r.status, 0) + 1
-    provenance = _provenance(primes, seeds, options, timeout, budget, mode, seconds, len(results) - cached, cached, jobs)
+    provenance = _provenance(primes, seeds, options, timeout, budget, mode, seconds, len(results) - cached, cached,
+                             jobs)
+    provenance["timeout_seconds_x_star_cells"] = other_timeout
+    provenance["last_uncached_run"] = _last_uncached_run(out_dir / "provenance.json", provenance, cached)
     provenance["table3_cells"] = [f"{m}/{n}" for m, n in cell_list]
     provenance["sweep_seconds_sum"] = round(sum(r.seconds for r in results.values()), 1)
     paths = write_outputs(out_dir, table2, table3, section32, formulations, provenance)

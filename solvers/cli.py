@@ -195,22 +195,35 @@ def _print_report(out: dict, as_json: bool) -> None:
                 print(f"  {s}")
 
 
+QUICK_DIR = "tables/quick"
+"""Where quick runs write, so that they never overwrite the full reproduction under tables/."""
+
+
 def _add_tables(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tables", help="reproduce Tables 2 and 3 (complexity sweep, cached and parallel)",
                        description="Run the complexity sweep over TDOA formulations and write tables/table2.*, "
-                       "tables/table3.* and tables/formulations.csv. Results are cached under .cache/complexity, "
-                       "so a rerun is instant and an interrupted sweep resumes.")
-    p.add_argument("--quick", action="store_true", help="only the cells and formulations the paper reports")
+                       "tables/table3.*, tables/section32.csv and tables/formulations.csv (--quick: a small budget, "
+                       f"written to {QUICK_DIR}/). Results are cached under .cache/complexity, so a rerun is instant "
+                       "and an interrupted sweep resumes.")
+    p.add_argument("--quick", action="store_true", help=f"Table 2 and two formulations per cell, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--no-cache", action="store_true", help="recompute instead of reading .cache/complexity")
     p.set_defaults(func=cmd_tables)
 
 
-def cmd_tables(args: argparse.Namespace) -> int:
+def _run_tables(quick: bool, jobs: int, use_cache: bool = True) -> None:
+    from analysis.complexity import repo_root
     from analysis.tables import make_tables
 
-    summary = make_tables(quick=args.quick, jobs=args.jobs)
-    if summary is not None:
-        print(summary)
+    out_dir = repo_root() / QUICK_DIR if quick else None
+    summary = make_tables(quick=quick, jobs=jobs, use_cache=use_cache, out_dir=out_dir)
+    print(summary.report())
+
+
+def cmd_tables(args: argparse.Namespace) -> int:
+    if args.jobs < 1:
+        raise UserError("--jobs must be at least 1")
+    _run_tables(args.quick, args.jobs, use_cache=not args.no_cache)
     return 0
 
 
@@ -237,11 +250,10 @@ def cmd_generate(args: argparse.Namespace) -> int:
 def _add_reproduce(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="the main job: reproduce Tables 2, 3, 4 and Figures 1, 2",
                        description="Regenerate the paper's Tables 2 and 3 (complexity sweep), Table 4 and "
-                       "Figures 1 and 2 (synthetic experiments) under tables/, with progress output and a final "
-                       "comparison with the paper. Cached: a rerun resumes where the last one stopped.")
-    mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--quick", action="store_true", help="fewer trials (100 per Table 4 row; default)")
-    mode.add_argument("--full", action="store_true", help="the paper's 1000 trials per row")
+                       "Figures 1 and 2 (synthetic experiments, 1000 trials per row as in the paper) under tables/, "
+                       "with progress output and a final comparison with the paper. Cached: a rerun resumes where "
+                       f"the last one stopped. --quick: small sweep budget and 100 trials, written to {QUICK_DIR}/.")
+    p.add_argument("--quick", action="store_true", help=f"a few minutes: fewer formulations and trials, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.set_defaults(func=cmd_reproduce)
 
@@ -249,17 +261,18 @@ def _add_reproduce(sub: argparse._SubParsersAction) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    from analysis.tables import make_tables
+    from analysis.complexity import repo_root
     from solvers.experiments import reproduce
 
+    if args.jobs < 1:
+        raise UserError("--jobs must be at least 1")
     t0 = time.perf_counter()
     print("== Tables 2 and 3: complexity sweep ==", flush=True)
-    summary = make_tables(quick=not args.full, jobs=args.jobs)
-    if summary is not None:
-        print(summary)
+    _run_tables(args.quick, args.jobs)
     print("== Table 4 and Figures 1, 2: synthetic experiments ==", flush=True)
-    reproduce(quick=not args.full, jobs=args.jobs)
-    print(f"reproduce: done in {time.perf_counter() - t0:.0f} s; outputs under tables/")
+    out = repo_root() / (QUICK_DIR if args.quick else "tables")
+    reproduce(quick=args.quick, jobs=args.jobs, tables_dir=out)
+    print(f"reproduce: done in {time.perf_counter() - t0:.0f} s; outputs under {out}")
     return 0
 
 

@@ -262,7 +262,7 @@ def test_committed_formulations_csv_is_not_stale():
 
 @pytest.mark.slow
 def test_table2_in_full():
-    """All six rows of Table 2 on 2 primes x 2 seeds (about 2 minutes)."""
+    """All six rows of Table 2 on 2 primes x 2 seeds (about 25 s on an idle machine, 4 instances each)."""
     paper = _paper_table2(paper_reference())
     for f in table2_formulations():
         r = compute_formulation(f, seeds=SEEDS)
