@@ -42,6 +42,7 @@ Statuses (``FormulationResult.status``):
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -51,7 +52,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Literal, Mapping, Sequence
+from typing import Callable, Iterable, Iterator, Literal, Mapping, Sequence
 
 import flint
 import numpy as np
@@ -620,7 +621,23 @@ def _store(cache_dir: Path, result: FormulationResult) -> None:
 # Sweep: worker processes with a wall-clock limit
 # --------------------------------------------------------------------------------------------------
 
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_THREAD_VARS = THREAD_VARIABLES
+
+
+@contextlib.contextmanager
+def single_threaded_blas_env() -> Iterator[None]:
+    """Set one BLAS thread in the environment, for spawned workers that read it before importing numpy."""
+    saved = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    os.environ.update({name: "1" for name in THREAD_VARIABLES})
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
@@ -765,18 +782,9 @@ def _run_pool(todo: list[str], primes, seeds, options: F4Options, saturate: bool
 
     def start() -> _Slot:
         parent, child = ctx.Pipe()
-        saved = {name: os.environ.get(name) for name in _THREAD_VARS}
-        for name in _THREAD_VARS:  # inherited by the child before it imports numpy
-            os.environ[name] = "1"
-        try:
+        with single_threaded_blas_env():  # inherited by the child before it imports numpy
             proc = ctx.Process(target=_worker_main, args=(child,), daemon=True)
             proc.start()
-        finally:
-            for name, value in saved.items():
-                if value is None:
-                    os.environ.pop(name, None)
-                else:
-                    os.environ[name] = value
         child.close()
         return _Slot(proc, parent)
 

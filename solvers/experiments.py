@@ -45,7 +45,6 @@ import dataclasses
 import datetime as _dt
 import hashlib
 import importlib
-import io
 import json
 import math
 import os
@@ -62,6 +61,7 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
+from analysis.complexity import THREAD_VARIABLES, single_threaded_blas_env
 from solvers.metrics import log10_error, offset_error, position_error
 from solvers.refine import random_initial, refine
 from solvers.synthetic import random_network
@@ -589,22 +589,8 @@ def _frame(records: list[dict]) -> pd.DataFrame:
     return frame.astype({k: v for k, v in _DTYPES.items() if k in frame})
 
 
-_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-@contextlib.contextmanager
-def _single_threaded_blas_env() -> Iterator[None]:
-    """Spawned workers read these before importing numpy (one BLAS thread per worker)."""
-    saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
-    os.environ.update({name: "1" for name in _THREAD_VARIABLES})
-    try:
-        yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
+_THREAD_VARIABLES = THREAD_VARIABLES
+_single_threaded_blas_env = single_threaded_blas_env
 
 
 def _run_chunk(task: tuple[str, str, list[tuple[int, int]], float, TrialOptions]) -> list[dict]:
