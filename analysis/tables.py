@@ -819,9 +819,9 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     provenance = _provenance(primes, seeds, options, timeout, budget, mode, seconds, len(results) - cached, cached,
                              jobs)
     provenance["timeout_seconds_x_star_cells"] = other_timeout
-    provenance["last_uncached_run"] = _last_uncached_run(out_dir / "provenance.json", provenance, cached)
     provenance["table3_cells"] = [f"{m}/{n}" for m, n in cell_list]
     provenance["sweep_seconds_sum"] = round(sum(r.seconds for r in results.values()), 1)
+    provenance["last_uncached_run"] = _last_uncached_run(out_dir / "provenance.json", provenance, cached)
     paths = write_outputs(out_dir, table2, table3, section32, formulations, provenance)
     return TablesSummary(table2, table3, section32, formulations, paths, seconds, len(results) - cached, cached,
                          mode, statuses)

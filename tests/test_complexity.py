@@ -269,3 +269,15 @@ def test_table2_in_full():
         c = f.counts
         assert r.status == "ok" and r.instances_agree
         assert r.degree == paper[(c.A, c.B, c.C)], f.label
+
+
+def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path):
+    """A first run (nothing cached) must write the tables and provenance (regression: KeyError)."""
+    from analysis.tables import QUICK, make_tables
+
+    summary = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
+                          cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
+    assert summary.computed > 0
+    provenance = json.loads((tmp_path / "out" / "provenance.json").read_text())
+    assert provenance["last_uncached_run"]["formulations"] == summary.computed
+    assert (tmp_path / "out" / "table3.csv").exists()
