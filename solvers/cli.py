@@ -114,8 +114,10 @@ def cmd_degree(args: argparse.Namespace) -> int:
             raise UserError(f"--saturate: {e}") from None
         sat_system = System(system.variables, system.characteristic, (sat_terms,), (0,))
 
-        def sat(p: int):
+        def saturating_poly(p: int):
             return sat_system.to_ring(p, args.order)[1][0]
+
+        sat = saturating_poly
 
     if args.export:
         from analysis.io import write_system

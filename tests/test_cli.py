@@ -1,0 +1,93 @@
+"""The tdoa-workbench command line: results, JSON shape and one-line errors with exit codes."""
+import json
+from pathlib import Path
+
+import pytest
+
+from solvers.cli import main
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "katsura4.ms"
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def write(tmp_path, text):
+    path = tmp_path / "system.ms"
+    path.write_text(text)
+    return str(path)
+
+
+def test_degree_json_of_katsura4(capsys):
+    code, out, _ = run(capsys, "degree", str(EXAMPLE), "--json")
+    report = json.loads(out)
+    assert code == 0
+    assert report["degree"] == 16 and report["dimension"] == 0 and report["zero_dimensional"]
+    assert report["primes"] == [65521, 32749] and report["gb_size"] > 0 and report["seconds"] >= 0
+
+
+def test_standard_basis_is_printed(capsys, tmp_path):
+    code, out, _ = run(capsys, "degree", write(tmp_path, "x,y\n0\nx^2-1,y^2-x\n"), "--json", "--basis")
+    assert code == 0 and sorted(json.loads(out)["standard_basis"]) == sorted(["1", "y", "x", "x*y"])
+
+
+def test_positive_dimensional_and_inconsistent(capsys, tmp_path):
+    _, out, _ = run(capsys, "degree", write(tmp_path, "x,y,z\n0\nx*y-z\n"), "--json")
+    report = json.loads(out)
+    assert report["degree"] is None and report["dimension"] == 2 and not report["zero_dimensional"]
+    _, out, _ = run(capsys, "degree", write(tmp_path, "x,y\n7\nx*y+1,x*y+2\n"), "--json")
+    report = json.loads(out)
+    assert report["degree"] == 0 and report["dimension"] == -1 and report["primes"] == [7]
+
+
+def test_zero_polynomials_leave_the_ideal_unchanged(capsys, tmp_path):
+    _, out, _ = run(capsys, "degree", write(tmp_path, "x,y\n0\nx^2-1,0,x-x,y^3-2\n"), "--json")
+    assert json.loads(out)["degree"] == 6
+
+
+def test_saturation_removes_a_planted_point(capsys, tmp_path):
+    path = write(tmp_path, "x,y\n0\nx*(x-1),x*(y-2),y*(y-2)\n")  # points (0,0) and (1,2), plus (0,2)
+    _, out, _ = run(capsys, "degree", path, "--json")
+    assert json.loads(out)["degree"] == 3
+    _, out, _ = run(capsys, "degree", path, "--json", "--saturate", "x")
+    assert json.loads(out)["degree"] == 1
+
+
+@pytest.mark.parametrize(
+    "text, args, fragment",
+    [
+        ("x,y\n0\nx+q\n", (), "unknown variable 'q'"),
+        ("x,y\n8\nx+y\n", (), "not prime"),
+        ("x,y\n0\n", (), "empty"),
+        ("x,y\n0\nx+*y\n", (), "line 3"),
+        ("x,y\n7\nx+y\n", ("--prime", "11"), "conflicts"),
+        ("x,y\n0\nx+y\n", ("--prime", "9"), "not prime"),
+        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-cells", "1"), "exceeds the cap"),
+    ],
+)
+def test_bad_input_is_one_line_with_status_2(capsys, tmp_path, text, args, fragment):
+    code, out, err = run(capsys, "degree", write(tmp_path, text), *args)
+    assert code == 2 and out == ""
+    assert fragment in err and len(err.strip().splitlines()) == 1
+
+
+def test_missing_file_is_reported(capsys, tmp_path):
+    code, _, err = run(capsys, "degree", str(tmp_path / "nope.ms"))
+    assert code == 2 and "cannot read" in err
+
+
+def test_tdoa_formulation_6r4s_has_degree_22(capsys):
+    code, out, _ = run(capsys, "degree", "--tdoa", "6r4s", "--equations", "B2,C2-C6,minors", "--json")
+    report = json.loads(out)
+    assert code == 0 and report["degree"] == 22 and report["formulation"] == "6r4s:B2,C2-C6,minors(10)"
+
+
+def test_tdoa_export_and_unknown_equation(capsys, tmp_path):
+    target = tmp_path / "x.m2"
+    code, _, _ = run(capsys, "degree", "--tdoa", "6r4s", "--equations", "B2,C2-C6,minors", "--export", "m2", str(target))
+    assert code == 0 and "ideal(" in target.read_text()
+    code, _, err = run(capsys, "degree", "--tdoa", "6r4s", "--equations", "B2,Q7")
+    assert code == 2 and "unknown equation 'Q7'" in err
