@@ -264,6 +264,31 @@ def _symbolic_preprocessing(
     return out_rows, sorted(seen, reverse=True)
 
 
+def select_pairs(state: _State) -> tuple[int, list, list[tuple[int, int]]]:
+    """Pop the pairs of minimal lcm degree; return (degree, pairs, sorted rows (multiplier key, index))."""
+    ring = state.ring
+    d, sel = state.pop_pairs()
+    row_set: set[tuple[int, int]] = set()
+    for i, j, le in sel:
+        for k in (i, j):
+            t_exps = tuple(a - b for a, b in zip(le, ring.exps(state.lms[k])))
+            row_set.add((ring.key(t_exps), k))
+    return d, sel, sorted(row_set)
+
+
+def split_pivots(matrix: Sequence[Row]) -> tuple[dict[int, int], list[int]]:
+    """One pivot row per leading column (the sparsest), the others to reduce: (column -> row, rows)."""
+    pivots: dict[int, int] = {}
+    to_reduce: list[int] = []
+    for r in sorted(range(len(matrix)), key=lambda r: len(matrix[r][0])):
+        lead = matrix[r][0][0]
+        if lead not in pivots:
+            pivots[lead] = r
+        else:
+            to_reduce.append(r)
+    return pivots, to_reduce
+
+
 def _build_matrix(state: _State, rows: list[tuple[int, int]], columns: list[int]):
     col_of = {m: c for c, m in enumerate(columns)}
     polys = state.polys
@@ -308,13 +333,7 @@ def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> Groebne
             _insert(state, h)
     while state.npairs:
         t0 = time.perf_counter()
-        d, sel = state.pop_pairs()
-        row_set: set[tuple[int, int]] = set()
-        for i, j, le in sel:
-            for k in (i, j):
-                t_exps = tuple(a - b for a, b in zip(le, ring.exps(state.lms[k])))
-                row_set.add((ring.key(t_exps), k))
-        rows = sorted(row_set)
+        d, sel, rows = select_pairs(state)
         rows, columns = _symbolic_preprocessing(state, rows)
         ncols = len(columns)
         if len(rows) * ncols > options.max_matrix_cells:
@@ -322,14 +341,9 @@ def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> Groebne
                 f"F4 matrix {len(rows)} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
             )
         matrix = _build_matrix(state, rows, columns)
-        pivots: dict[int, Row] = {}
-        to_reduce: list[Row] = []
-        # prefer the sparsest row for each leading column as pivot
-        for r in sorted(matrix, key=lambda r: len(r[0])):
-            if r[0][0] not in pivots:
-                pivots[r[0][0]] = r
-            else:
-                to_reduce.append(r)
+        pivot_index, reduce_index = split_pivots(matrix)
+        pivots = {c: matrix[r] for c, r in pivot_index.items()}
+        to_reduce = [matrix[r] for r in reduce_index]
         nnz = sum(len(r[0]) for r in matrix)
         new_rows = backend.reduce(pivots, to_reduce, ncols, p)
         for c, v in sorted(new_rows, key=lambda r: r[0][0]):  # decreasing lm: no new lm divides an earlier one

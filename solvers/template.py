@@ -48,7 +48,15 @@ from typing import Sequence
 
 import numpy as np
 
-from analysis.f4 import F4Options, _State, _build_matrix, _symbolic_preprocessing, groebner
+from analysis.f4 import (
+    F4Options,
+    _State,
+    _build_matrix,
+    _symbolic_preprocessing,
+    groebner,
+    select_pairs,
+    split_pivots,
+)
 from analysis.formulations import Formulation, coefficient_expressions, gf_equations, sample_gf_instance
 from analysis.linalg import get_backend
 from analysis.quotient import normal_form, standard_monomials
@@ -175,23 +183,10 @@ def _trace_groebner(ring: Ring, inputs: list[Poly], input_supports: list[list[in
         "columns": cols, "pivots": [], "reduce": list(range(len(inputs))), "new": new,
     })
     while state.npairs:
-        d, sel = state.pop_pairs()
-        row_set: set[tuple[int, int]] = set()
-        for i, j, le in sel:
-            for k in (i, j):
-                t_exps = tuple(a - b for a, b in zip(le, ring.exps(state.lms[k])))
-                row_set.add((ring.key(t_exps), k))
-        rows_tk, columns = _symbolic_preprocessing(state, sorted(row_set))
+        d, sel, rows_tk = select_pairs(state)
+        rows_tk, columns = _symbolic_preprocessing(state, rows_tk)
         matrix = _build_matrix(state, rows_tk, columns)
-        order = sorted(range(len(matrix)), key=lambda r: len(matrix[r][0]))
-        pivots: dict[int, int] = {}
-        to_reduce: list[int] = []
-        for r in order:
-            lead = matrix[r][0][0]
-            if lead not in pivots:
-                pivots[lead] = r
-            else:
-                to_reduce.append(r)
+        pivots, to_reduce = split_pivots(matrix)
         new_rows = backend.reduce({c: matrix[r] for c, r in pivots.items()}, [matrix[r] for r in to_reduce],
                                   len(columns), p)
         new = []
