@@ -41,7 +41,7 @@ POLISH_ITERATIONS = {"curve-pencil": 1, "homotopy": 0, "staged": 8}
 _DESCRIPTIONS = {
     "curve-pencil": (
         "rank-2 curve of the offsets (kernel of [c | alpha | beta]) and the bordered\n"
-        "{rows} x {rows} quartic matrix polynomial of C2-C6 and B2 on it; companion pencil {size0} x {size1} (QZ).\n"
+        "{rows} x {rows} quartic matrix polynomial of C2-C6 and B2 on it; column-degree pencil {size0} x {size1} (QZ).\n"
         "{degree} roots (GF(p) degree); the pencil's other eigenvalues (infinite, o_1 = infinity) are dropped."),
     "homotopy": (
         "parameter homotopy from a generic complex instance whose {degree} roots were\n"
@@ -105,7 +105,7 @@ _KIND_TAGS = {"curve-pencil": "pencil", "homotopy": "homotopy", "staged": "t"}
 
 
 def module_name(spec: dict) -> str:
-    """File stem with configuration, method and size, e.g. ``tdoa_6r4s_pencil44``, ``tdoa_9r3s_homotopy75``."""
+    """File stem with configuration, method and size, e.g. ``tdoa_6r4s_pencil37``, ``tdoa_9r3s_homotopy75``."""
     label = spec["formulation"].split(":")[0]
     kind = spec.get("kind", "staged")
     if kind == "staged":

@@ -95,6 +95,7 @@ class PolySystem:
         self.didx = np.array([[table[tuple(m - np.eye(self.nvars, dtype=np.int64)[v])] if m[v] else 0
                                for v in range(self.nvars)] for m in mons], dtype=np.intp)
         self.max_exp = ext.max(axis=0)
+        self._variables = np.arange(self.nvars)[None, :]
 
     def coefficient_matrix(self, coeffs: np.ndarray) -> np.ndarray:
         """(batch, M, n_eq) coefficient matrices from coefficient vectors (batch, T), rows scaled to unit norm."""
@@ -105,13 +106,10 @@ class PolySystem:
 
     def _ext_monomials(self, x: np.ndarray) -> np.ndarray:
         """x (..., n) -> values of the extended monomial table (..., E)."""
-        out = np.ones(x.shape[:-1] + (len(self.ext),), dtype=x.dtype)
-        for v in range(self.nvars):
-            pw = np.ones(x.shape[:-1] + (int(self.max_exp[v]) + 1,), dtype=x.dtype)
-            for k in range(1, int(self.max_exp[v]) + 1):
-                pw[..., k] = pw[..., k - 1] * x[..., v]
-            out = out * pw[..., self.ext[:, v]]
-        return out
+        top = int(self.max_exp.max())
+        pw = np.concatenate([np.ones(x.shape + (1,), dtype=x.dtype), np.repeat(x[..., None], top, axis=-1)], axis=-1)
+        pw = np.cumprod(pw, axis=-1)  # (..., n, top + 1): x_v^0 .. x_v^top
+        return np.prod(pw[..., self._variables, self.ext], axis=-1)
 
     def residual_jacobian(self, x: np.ndarray, C: np.ndarray, jacobian: bool = True):
         """Residuals (B, k, n_eq) and Jacobians (B, k, n_eq, n) at x (B, k, n) with matrices C (B, M, n_eq)."""
@@ -125,25 +123,39 @@ class PolySystem:
         return f, np.swapaxes(J.reshape(B, k, self.nvars, self.n_eq), 2, 3)
 
 
-def polish(system: PolySystem, coeffs: np.ndarray, roots: np.ndarray, iterations: int = 1) -> np.ndarray:
-    """Gauss-Newton steps on the (possibly overdetermined) input system for every candidate.
+#: Candidates whose imaginary parts are below this (relative to their largest entry) are polished, as
+#: real points; the others are not physical calibrations and are returned as computed.
+POLISH_REAL_TOL = 1e-4
 
-    coeffs (batch, T) from the generated coefficient function, roots (batch, k, n). Equations are
-    scaled to unit coefficient norm; the step is the least-squares solution by QR. A candidate keeps
+
+def polish(system: PolySystem, coeffs: np.ndarray, roots: np.ndarray, iterations: int = 1,
+           real_tol: float = POLISH_REAL_TOL) -> np.ndarray:
+    """Gauss-Newton steps on the (possibly overdetermined) input system for every near-real candidate.
+
+    coeffs (batch, T) from the generated coefficient function, roots (batch, k, n). A candidate with
+    max |Im x| <= real_tol * max |x| is replaced by its real part and polished in real arithmetic (the
+    candidates of the whole batch in one stack); complex candidates are returned unchanged. Equations
+    are scaled to unit coefficient norm; the step is the least-squares solution by QR. A candidate keeps
     its old value when it is not finite or when the step does not decrease its residual, so polishing
     never spoils an accurate root.
     """
-    C = system.coefficient_matrix(coeffs).astype(complex)
-    x = roots.astype(complex)
+    roots = np.asarray(roots)
     with np.errstate(all="ignore"):
-        finite = np.all(np.isfinite(x), axis=-1)
-        x = np.where(finite[..., None], x, 0.0)
+        finite = np.all(np.isfinite(roots), axis=-1)
+        scale = np.max(np.abs(np.where(finite[..., None], roots, 0.0)), axis=-1)
+        near_real = finite & (np.max(np.abs(roots.imag), axis=-1) <= real_tol * scale)
+    bi, ki = np.nonzero(near_real)
+    if not len(bi):
+        return roots
+    C = system.coefficient_matrix(coeffs.real if np.iscomplexobj(coeffs) else coeffs)[bi]  # (P, M, n_eq)
+    x = roots[bi, ki].real[:, None, :]  # (P, 1, n): one candidate per stack entry
+    with np.errstate(all="ignore"):
         f, J = system.residual_jacobian(x, C)
         for it in range(iterations):
-            ok = finite & np.all(np.isfinite(J), axis=(2, 3)) & np.all(np.isfinite(f), axis=2)
+            ok = np.all(np.isfinite(J), axis=(2, 3)) & np.all(np.isfinite(f), axis=2)
             Jc = np.where(ok[..., None, None], J, np.eye(J.shape[2], J.shape[3]))
             q, r = np.linalg.qr(Jc)
-            rhs = (np.conj(np.swapaxes(q, 2, 3)) @ np.where(ok[..., None], f, 0.0)[..., None])
+            rhs = np.swapaxes(q, 2, 3) @ np.where(ok[..., None], f, 0.0)[..., None]
             try:
                 step = np.linalg.solve(r, rhs)[..., 0]
             except np.linalg.LinAlgError:
@@ -156,28 +168,14 @@ def polish(system: PolySystem, coeffs: np.ndarray, roots: np.ndarray, iterations
             if not last:
                 f = np.where(better[..., None], fn, f)
                 J = np.where(better[..., None, None], Jn, J)
-    return np.where(finite[..., None], x, roots)
+    out = roots.astype(complex)
+    out[bi, ki] = x[:, 0]
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
 # 6r4s: rank-2 curve and bordered quartic pencil
 # --------------------------------------------------------------------------------------------------
-
-
-def _pmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Product of polynomials stored along the last axis (ascending powers), batch axes broadcast."""
-    da, db = a.shape[-1], b.shape[-1]
-    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1]) + (da + db - 1,)
-    out = np.zeros(shape, dtype=np.result_type(a, b))
-    for i in range(da):
-        out[..., i:i + db] += a[..., i:i + 1] * b
-    return out
-
-
-def _pad(p: np.ndarray, size: int) -> np.ndarray:
-    out = np.zeros(p.shape[:-1] + (size,), dtype=p.dtype)
-    out[..., : p.shape[-1]] = p
-    return out
 
 
 def compaction_pieces(F: np.ndarray):
@@ -195,6 +193,62 @@ def compaction_pieces(F: np.ndarray):
     return c, alpha, beta, sq[..., 0]
 
 
+#: Degree in nu of each column of the bordered matrix K (rows and columns: v = (1, h^, b^), then the
+#: five multipliers of C2..C6): L and sigma are linear, X and Y quadratic, so the column of 1 has
+#: degree 1, those of h^ degree 4 (X^2, XY, Y^2; E), those of b^ degree 2 (2X, 2Y; sigma w1) and the
+#: multiplier columns (rows of C) degree 4. K is symmetric, so entry (a, b) has degree <= min(d_a, d_b).
+PENCIL_COLUMN_DEGREES = (1, 4, 4, 4, 2, 2, 4, 4, 4, 4, 4)
+#: Sample points of nu at which K is evaluated; its coefficients are their inverse DFT (unitary, so
+#: no error amplification, unlike a real Vandermonde interpolation).
+_NU_POINTS = np.exp(-2j * np.pi * np.arange(5) / 5)
+
+
+class _ColumnDegreePencil:
+    """Index arrays of the column-degree linearisation of an n x n matrix polynomial K(nu).
+
+    States z_(j, k) = nu^k x_j for k < d_j (column degrees d_j): size N = sum d_j (37 for the 6r4s
+    matrix, against 44 for the block companion form, which pads every column to degree 4 and adds 7
+    more infinite eigenvalues). Rows: nu z_(j, k) = z_(j, k+1) for k < d_j - 1, then the n rows of
+    sum_(j, k < d_j) K_k[:, j] z_(j, k) + nu sum_j K_(d_j)[:, j] z_(j, d_j - 1) = 0, i.e. A z = nu B z.
+    The pencil has N - deg det K infinite eigenvalues.
+    """
+
+    def __init__(self, degrees: tuple[int, ...]):
+        self.degrees = np.asarray(degrees, dtype=np.intp)
+        n = len(degrees)
+        states = [(j, k) for j in range(n) for k in range(degrees[j])]
+        index = {s: i for i, s in enumerate(states)}
+        self.size = len(states)
+        self.n_shift = self.size - n
+        self.A0 = np.zeros((self.size, self.size))
+        self.B0 = np.zeros((self.size, self.size))
+        row = 0
+        for j in range(n):
+            for k in range(degrees[j] - 1):
+                self.A0[row, index[(j, k + 1)]] = 1.0
+                self.B0[row, index[(j, k)]] = 1.0
+                row += 1
+        self.k_of_state = np.array([k for _, k in states], dtype=np.intp)
+        self.j_of_state = np.array([j for j, _ in states], dtype=np.intp)
+        self.first = np.array([index[(j, 0)] for j in range(n)], dtype=np.intp)
+        self.top = np.array([index[(j, degrees[j] - 1)] for j in range(n)], dtype=np.intp)
+        self.columns = np.arange(n)
+        self.mask = (np.arange(int(max(degrees)) + 1)[:, None, None]
+                     <= np.minimum(self.degrees[:, None], self.degrees[None, :])[None])
+
+    def pencil(self, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(A, B) for the coefficients K (degree + 1, n, n) of one instance."""
+        A, B = self.A0.copy(), self.B0.copy()
+        A[self.n_shift:] = -K[self.k_of_state, :, self.j_of_state].T
+        B[self.n_shift:, self.top] = K[self.degrees, :, self.columns].T
+        return A, B
+
+    def eigenvector_heads(self, V: np.ndarray, nu: np.ndarray) -> np.ndarray:
+        """x (n, k) from pencil eigenvectors V (N, k): z_(j,0), or z_(j, d_j-1) / nu^(d_j-1) when |nu| > 1."""
+        top = V[self.top] / nu[None] ** (self.degrees[:, None] - 1)
+        return np.where(np.abs(nu)[None] > 1.0, top, V[self.first])
+
+
 class CurvePencilSolver:
     """6r4s solver (formulation B2, C2-C6 and the ten 3 x 3 minors): rank-2 curve + bordered pencil.
 
@@ -207,10 +261,16 @@ class CurvePencilSolver:
     become C(nu) v = 0 (5 x 6, v = (1, h^, b^)) and B2 becomes v^T Q(nu) v = 0, both polynomial
     (degree <= 4) in the chart parameter nu. With C of full row rank, v^T Q v = 0 on ker C iff the
     bordered matrix K(nu) = [[Q, C^T], [C, 0]] (11 x 11) is singular, so the roots are the
-    eigenvalues of a quartic matrix polynomial, and its eigenvectors carry v. The companion pencil
-    (44 x 44) is solved by LAPACK dggev (QZ: no inversion of an ill-conditioned coefficient).
-    det K has degree 30 = 22 roots + sigma^8 (o_1 = infinity); the other 14 eigenvalues are infinite.
-    Both kinds of spurious eigenvalues are dropped by count (spec: ``drop_infinite``, ``drop_sigma``).
+    eigenvalues of a quartic matrix polynomial, and its eigenvectors carry v.
+
+    Numerics: K is evaluated at five points on the unit circle and its coefficients recovered by an
+    inverse DFT; the column-degree linearisation (:class:`_ColumnDegreePencil`, 37 x 37; spec
+    ``linearisation``) is solved by LAPACK dggev (QZ: no inversion of an ill-conditioned
+    coefficient). det K has degree 30 = 22 roots + sigma^8 (o_1 = infinity); the other 7 eigenvalues
+    are infinite. Both kinds of spurious eigenvalues are dropped by count (spec: ``drop_infinite``,
+    ``drop_sigma``). Each kept eigenvalue gets one Newton step on the symmetric eigen-equation,
+    nu <- nu - x^T K(nu) x / x^T K'(nu) x (K symmetric: x is also the left eigenvector), which brings
+    the offsets back to the accuracy of the 44 x 44 block companion form.
 
     Eigenvalue sensitivity does not depend on the separation between eigenvalues, which is why this
     is robust where the scalar eliminant (the same 22 roots as a univariate polynomial) is not: roots
@@ -225,6 +285,7 @@ class CurvePencilSolver:
         self.drop_sigma = int(p["drop_sigma"])
         self.basis_size = int(spec["degree"])
         self.nvars = len(spec["unknowns"])
+        self.linearisation = _ColumnDegreePencil(tuple(p["column_degrees"]))
 
     # polynomial matrix ---------------------------------------------------------------------------
     def matrix_polynomial(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -236,90 +297,84 @@ class CurvePencilSolver:
         cs, sn = np.cos(self.phi), np.sin(self.phi)
         # (lambda, mu) = nu (cos, sin) + (-sin, cos): each form is const + slope * nu
         forms = np.stack([-N[..., 0] * sn + N[..., 1] * cs, N[..., 0] * cs + N[..., 1] * sn], axis=-1)
-        w1, w2, w3, s, u1, u2, u3 = (forms[:, k] for k in range(7))
+        fv = forms[..., :1] + forms[..., 1:] * _NU_POINTS  # (B, 7, 5): the forms at the sample points
+        w1, w2, w3, s, u1, u2, u3 = (fv[:, k] for k in range(7))
         sig = w1 + w2 + w3
-        col = lambda v: v[:, :, None]  # noqa: E731  (B, 5) -> (B, 5, 1)
-        sw1, sw2 = _pmul(sig, w1), _pmul(sig, w2)
-        X = (_pmul(sw1[:, None], col(c[:, :, 0])) + _pmul(_pmul(s, w1)[:, None], col(alpha))
-             + _pmul(_pmul(u1, sig)[:, None], col(beta[:, :, 0])))
-        Y = (_pmul(sw2[:, None], col(c[:, :, 1])) + _pmul(_pmul(s, w2)[:, None], col(alpha))
-             + _pmul(_pmul(u2, sig)[:, None], col(beta[:, :, 1])))
-        L = _pmul(sig[:, None], col(g)) - _pmul(s[:, None], col(alpha))
+        sw1, sw2 = sig * w1, sig * w2
+        row = lambda v: v[:, None, :]  # noqa: E731  (B, 5 points) -> (B, 1, 5)
+        X = row(sw1) * c[:, :, 0, None] + row(s * w1) * alpha[..., None] + row(u1 * sig) * beta[:, :, 0, None]
+        Y = row(sw2) * c[:, :, 1, None] + row(s * w2) * alpha[..., None] + row(u2 * sig) * beta[:, :, 1, None]
+        L = row(sig) * g[..., None] - row(s) * alpha[..., None]
         a = F[:, 0, 1][:, None] * w1 - u1
         b = F[:, 0, 0][:, None] * sig - s
-        E = _pmul(_pmul(a, a), _pmul(sig, sig)) - _pmul(_pmul(b, b), _pmul(w1, w1))
-        D = 5
-        Cm = np.stack([_pad(L, D), -_pmul(X, X), -2.0 * _pmul(X, Y), -_pmul(Y, Y), _pad(2.0 * X, D), _pad(2.0 * Y, D)],
-                      axis=2)  # (B, 5, 6, D)
-        K = np.zeros((B, 11, 11, D))
-        K[:, 1, 3] = K[:, 3, 1] = 0.5 * E
-        K[:, 2, 2] = -E
-        K[:, 0, 3] = K[:, 3, 0] = -_pad(sig, D) / 8.0
-        K[:, 4, 3] = K[:, 3, 4] = 0.5 * _pad(sw1, D)
-        K[:, 5, 2] = K[:, 2, 5] = -0.5 * _pad(sw1, D)
-        K[:, :6, 6:] = Cm.transpose(0, 2, 1, 3)
-        K[:, 6:, :6] = Cm
-        return np.moveaxis(K, -1, 1), forms
+        E = (a * a) * (sig * sig) - (b * b) * (w1 * w1)
+        Cm = np.moveaxis(np.stack([L, -X * X, -2.0 * X * Y, -Y * Y, 2.0 * X, 2.0 * Y], axis=2), -1, 1)  # (B, 5, 5, 6)
+        K = np.zeros((B, 5, 11, 11), dtype=complex)
+        K[:, :, 1, 3] = K[:, :, 3, 1] = 0.5 * E
+        K[:, :, 2, 2] = -E
+        K[:, :, 0, 3] = K[:, :, 3, 0] = -sig / 8.0
+        K[:, :, 4, 3] = K[:, :, 3, 4] = 0.5 * sw1
+        K[:, :, 5, 2] = K[:, :, 2, 5] = -0.5 * sw1
+        K[:, :, :6, 6:] = np.swapaxes(Cm, 2, 3)
+        K[:, :, 6:, :6] = Cm
+        return np.fft.ifft(K, axis=1).real * self.linearisation.mask, forms
 
     def roots(self, F: np.ndarray) -> np.ndarray:
         """Candidate roots (batch, 22, 9), complex, of the normalised data F (batch, 6, 4)."""
         K, forms = self.matrix_polynomial(F)
-        B, d1 = K.shape[:2]
-        d, n = d1 - 1, K.shape[2]
-        size = n * d
-        A0 = np.zeros((size, size))
-        A0[: n * (d - 1), n:] = np.eye(n * (d - 1))
-        B0 = np.eye(size)
-        keep_n = size - self.drop_infinite
+        lin = self.linearisation
+        B = K.shape[0]
+        powers = np.arange(K.shape[1])
+        keep_n = lin.size - self.drop_infinite
         out = np.full((B, self.basis_size, self.nvars), np.nan + 0j)
         for i in range(B):
-            A, Bm = A0.copy(), B0.copy()
-            for j in range(d):
-                A[n * (d - 1):, n * j:n * (j + 1)] = -K[i, j]
-            Bm[n * (d - 1):, n * (d - 1):] = K[i, d]
+            A, Bm = lin.pencil(K[i])
             if not (np.all(np.isfinite(A)) and np.all(np.isfinite(Bm))):
                 continue
             ar, ai, be, _, vr, _, info = lapack.dggev(A, Bm, compute_vl=0, compute_vr=1)
             if info != 0:
                 continue
             al = ar + 1j * ai
-            V = _complex_eigenvectors(vr, ai)
             # infinite eigenvalues: smallest |beta| / |alpha|
             order = np.argsort(-np.abs(be) / np.maximum(np.abs(al), 1e-300), kind="stable")[:keep_n]
-            al, be, V = al[order], be[order], V[:, order]
             with np.errstate(all="ignore"):
-                nu = al / be
+                nu = al[order] / be[order]
                 f = forms[i]
                 fv = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]  # forms at (nu, 1): (7, k)
                 sig = fv[0] + fv[1] + fv[2]
                 # o_1 = infinity: sigma = 0 (relative to |(nu, 1)|)
                 keep = np.argsort(-np.abs(sig) / np.sqrt(1.0 + np.abs(nu) ** 2), kind="stable")
-                keep = keep[: min(self.basis_size, len(keep) - self.drop_sigma)]
-                fv, sig, V = fv[:, keep], sig[keep], V[:, keep]
-                # v up to scale from the block of the eigenvector [x, nu x, nu^2 x, nu^3 x] with largest norm
-                blocks = V.reshape(d, n, -1)
-                best = np.argmax(np.linalg.norm(blocks, axis=1), axis=0)
-                x = blocks[best, :, np.arange(blocks.shape[2])].T  # (n, k)
+                keep = order[keep[: min(self.basis_size, len(keep) - self.drop_sigma)]]
+                nu = al[keep] / be[keep]
+                x = lin.eigenvector_heads(_complex_eigenvectors(vr, ai, keep), nu)  # (11, k)
+                # H, b from the eigenvector, with the scalings at the eigenvalue it belongs to
+                fv = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]
+                w1, w2, sig = fv[0], fv[1], fv[0] + fv[1] + fv[2]
                 v = x[:6] / x[:1]
-                w1, w2, w3, s, u1, u2, u3 = fv
+                # one Newton step on x^T K(nu) x = 0 for the offsets
+                q = np.einsum("akc,ac->kc", (K[i] @ x).transpose(1, 0, 2), x)  # x^T K_k x: (5, k)
+                value = np.sum(q * nu[None] ** powers[:, None], axis=0)
+                slope = np.sum(q[1:] * powers[1:, None] * nu[None] ** (powers[1:, None] - 1), axis=0)
+                nu = nu - value / slope
+                fn = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]
                 h = np.stack([sig * w1**2 * v[1], sig * w1 * w2 * v[2], sig * w2**2 * v[3], w1 * v[4], w2 * v[5],
-                              s / sig, u1 / w1, u2 / w2, u3 / w3], axis=-1)
+                              fn[3] / (fn[0] + fn[1] + fn[2]), fn[4] / fn[0], fn[5] / fn[1], fn[6] / fn[2]], axis=-1)
             out[i, : len(keep)] = h
         return out
 
 
-def _complex_eigenvectors(vr: np.ndarray, ai: np.ndarray) -> np.ndarray:
-    """LAPACK real storage of eigenvectors (conjugate pairs as re, im columns) -> complex columns."""
-    V = vr.astype(complex)
-    j = 0
-    while j < len(ai):
-        if ai[j] != 0.0 and j + 1 < len(ai):
-            V[:, j] = vr[:, j] + 1j * vr[:, j + 1]
-            V[:, j + 1] = vr[:, j] - 1j * vr[:, j + 1]
-            j += 2
-        else:
-            j += 1
-    return V
+def _complex_eigenvectors(vr: np.ndarray, ai: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
+    """LAPACK real storage of eigenvectors (conjugate pairs as re, im columns) -> complex columns.
+
+    LAPACK stores a pair at consecutive columns j, j+1 with the positive imaginary part first:
+    v_j = vr_j + i vr_(j+1), v_(j+1) = vr_j - i vr_(j+1). ``columns`` selects the eigenvectors wanted.
+    """
+    cols = np.arange(len(ai)) if columns is None else np.asarray(columns)
+    a = ai[cols]
+    first, second = a > 0, a < 0
+    re = vr[:, np.where(second, cols - 1, cols)]
+    im = vr[:, np.where(first, np.minimum(cols + 1, len(ai) - 1), cols)]
+    return re + 1j * np.where(first, 1.0, np.where(second, -1.0, 0.0)) * im
 
 
 # --------------------------------------------------------------------------------------------------

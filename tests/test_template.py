@@ -50,8 +50,9 @@ def test_pencil_spec_is_stable_and_matches_committed(built_6r4s):
     spec = built_6r4s.spec
     assert spec["format"] == SPEC_FORMAT and spec["kind"] == "curve-pencil"
     assert spec["degree"] == 22
-    # det K has degree 22 + 8 (sigma^8); the companion pencil has 11 * 4 = 44 eigenvalues
-    assert spec["pencil"]["drop_infinite"] == 44 - 30 and spec["pencil"]["drop_sigma"] == 8
+    # det K has degree 22 + 8 (sigma^8); the column-degree pencil has 1 + 3*4 + 2*2 + 5*4 = 37 eigenvalues
+    assert spec["size"] == [37, 37]
+    assert spec["pencil"]["drop_infinite"] == 37 - 30 and spec["pencil"]["drop_sigma"] == 8
     assert built_6r4s.candidates[0]["verified"] == built_6r4s.candidates[0]["trials"]
     text = dump_spec(spec)
     assert dump_spec(load_spec(text)) == text
