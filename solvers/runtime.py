@@ -400,11 +400,24 @@ def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True)
     G = g - alpha * o1 - (h11 * X * X + 2.0 * h12 * X * Y + h22 * Y * Y) + 2.0 * (b1 * X + b2 * Y)
     if not jacobian:
         return G, None
+    return G, _c_jacobian(x, X, Y, alpha, beta)[0]
+
+
+def _c_jacobian(x: np.ndarray, X, Y, alpha, beta):
+    """Jacobian (P, k, 8) of the C equations from their X, Y (P, k); also the gradients gx, gy in (X, Y)."""
+    h11, h12, h22, b1, b2 = (x[:, j : j + 1] for j in range(5))
     gx = 2.0 * (b1 - h11 * X - h12 * Y)
     gy = 2.0 * (b2 - h12 * X - h22 * Y)
-    J = np.stack([-X * X, -2.0 * X * Y, -Y * Y, 2.0 * X, 2.0 * Y, alpha * (gx + gy - 1.0), beta[..., 0] * gx,
-                  beta[..., 1] * gy], axis=-1)
-    return G, J
+    J = np.empty(X.shape + (8,), dtype=np.result_type(X, x))
+    J[..., 0] = -X * X
+    J[..., 1] = -2.0 * X * Y
+    J[..., 2] = -Y * Y
+    J[..., 3] = 2.0 * X
+    J[..., 4] = 2.0 * Y
+    J[..., 5] = alpha * (gx + gy - 1.0)
+    J[..., 6] = beta[..., 0] * gx
+    J[..., 7] = beta[..., 1] * gy
+    return J, gx, gy
 
 
 @dataclass(frozen=True)
@@ -459,7 +472,7 @@ class _CPath:
 
 def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Batched J^-1 r for (P, n, n), (P, n); NaN for non-finite or singular systems (never raises)."""
-    bad = ~(np.all(np.isfinite(J), axis=(1, 2)) & np.all(np.isfinite(r), axis=1))
+    bad = ~np.isfinite(J.sum(axis=(1, 2)) + r.sum(axis=1))  # one pass: NaN/inf anywhere poisons the sum
     if bad.any():
         J = np.where(bad[:, None, None], np.eye(J.shape[1]), J)
         r = np.where(bad[:, None], 0.0, r)
@@ -471,18 +484,17 @@ def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     return out
 
 
-def _ds(x: np.ndarray, pieces, dpieces) -> np.ndarray:
-    """d/ds of the C residuals at fixed x (chain rule through the data pieces)."""
+def _field(x: np.ndarray, pieces, dpieces) -> np.ndarray:
+    """Jacobian (P, k, 8) in x and derivative (P, k) in s of the C residuals (chain rule through the data pieces)."""
     c, alpha, beta, g = pieces
     dc, dalpha, dbeta, dg = dpieces
-    h11, h12, h22, b1, b2, o1, o2, o3 = (x[:, j : j + 1] for j in range(8))
+    o1, o2, o3 = x[:, 5:6], x[:, 6:7], x[:, 7:8]
     X = c[..., 0] + alpha * o1 + beta[..., 0] * o2
     Y = c[..., 1] + alpha * o1 + beta[..., 1] * o3
+    J, gx, gy = _c_jacobian(x, X, Y, alpha, beta)
     dX = dc[..., 0] + dalpha * o1 + dbeta[..., 0] * o2
     dY = dc[..., 1] + dalpha * o1 + dbeta[..., 1] * o3
-    gx = 2.0 * (b1 - h11 * X - h12 * Y)
-    gy = 2.0 * (b2 - h12 * X - h22 * Y)
-    return dg - dalpha * o1 + gx * dX + gy * dY
+    return J, dg - dalpha * o1 + gx * dX + gy * dY
 
 
 def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
@@ -507,9 +519,7 @@ def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions
             ha = np.minimum(h[active], 1.0 - sa)
 
             def field(xx, ss):
-                pc, dp = sub.at(ss)
-                _, J = c_residual_jacobian(xx, *pc)
-                return -_solve(J, _ds(xx, pc, dp))
+                return -_solve(*_field(xx, *sub.at(ss)))
 
             k1 = field(xa, sa)
             k2 = field(xa + 0.5 * ha[:, None] * k1, sa + 0.5 * ha)
