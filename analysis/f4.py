@@ -4,6 +4,12 @@ The driver :func:`groebner` keeps one :class:`RoundStats` per round and returns 
 basis. Pairs are selected by the normal strategy (all pairs of minimal lcm degree), pruned with the
 Gebauer-Möller criteria; the linear algebra is delegated to a backend of :mod:`analysis.linalg`.
 
+Every step works on arrays: the basis elements live in a term pool of packed monomial codes
+(:class:`analysis.ring.MonomialCodes`), so symbolic preprocessing, matrix assembly and the pair update
+are numpy operations over all rows, monomials and pairs of a round at once. :func:`select_pairs`,
+:func:`_symbolic_preprocessing`, :func:`split_pivots` and :func:`_build_matrix` give the same steps on
+Python rows and keys, for callers that record an F4 run step by step (``solvers.template``).
+
 Reference: J.-C. Faugère, "A new efficient algorithm for computing Gröbner bases (F4)", JPAA 1999;
 R. Gebauer and H. M. Möller, "On an installation of Buchberger's algorithm", JSC 1988.
 """
@@ -16,8 +22,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .linalg import MatrixTooLarge, Row, get_backend
-from .ring import Poly, Ring
+from .linalg import Backend, MatrixTooLarge, Row, SparseRows, get_backend
+from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
 @dataclass(frozen=True)
@@ -71,238 +77,403 @@ class GroebnerResult:
         return max(((r.rows, r.cols) for r in self.rounds), key=lambda rc: rc[0] * rc[1], default=(0, 0))
 
 
-def _pack_words(E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pack exponent rows into uint64 words with guard bits: (words, guard mask per word).
-
-    8-bit fields (exponents < 128) when possible, else 16-bit fields; a | b for packed rows is then
-    ((b | guard) - a) & guard == guard in every word, with no borrow between fields.
-    """
-    top = int(E.max(initial=0))
-    bits = 8 if top < 128 else 16 if top < 32768 else 0
-    if not bits:
-        raise OverflowError("exponent too large for packed divisibility tests")
-    per_word = 64 // bits
-    n = E.shape[1]
-    nwords = -(-n // per_word)
-    words = np.zeros((len(E), nwords), dtype=np.uint64)
-    guard = np.zeros(nwords, dtype=np.uint64)
-    for v in range(n):
-        w, f = divmod(v, per_word)
-        words[:, w] |= E[:, v].astype(np.uint64) << np.uint64(bits * f)
-        guard[w] |= np.uint64(1 << (bits * f + bits - 1))
-    return words, guard
+def _exponent_field(top: int) -> np.dtype:
+    """The narrowest unsigned field (uint8 or uint16) holding exponents up to top with its top bit free."""
+    if top < 128:
+        return np.dtype(np.uint8)
+    if top < 32768:
+        return np.dtype(np.uint16)
+    raise OverflowError("exponent too large for packed divisibility tests")
 
 
-def _divides(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Row-wise (broadcast) test that exponent rows A divide exponent rows B."""
-    A, B = np.broadcast_arrays(A, B)
-    words, guard = _pack_words(np.concatenate([A, B]))
-    a, b = words[: len(A)], words[len(A) :]
-    return np.all(((b | guard) - a) & guard == guard, axis=1)
+def _pack(E: np.ndarray, field: np.dtype) -> np.ndarray:
+    """Exponent rows as rows of fields, zero padded to whole 64-bit words: ``.view(np.uint64)`` of the
+    result gives the packed words of :func:`_divides_words`."""
+    per_word = 8 // field.itemsize
+    out = np.zeros((len(E), -(-E.shape[1] // per_word) * per_word), dtype=field)
+    out[:, : E.shape[1]] = E
+    return out
 
 
-def _divides_matrix(L: np.ndarray) -> np.ndarray:
-    """le[i, j] = (row j of L divides row i of L), by packed words with guard bits."""
-    words, guard = _pack_words(L)
-    le = np.ones((len(L), len(L)), dtype=bool)
-    for w in range(words.shape[1]):
-        col = words[:, w]
-        le &= (((col | guard[w])[:, None] - col[None, :]) & guard[w]) == guard[w]
-    return le
+def _guard(field: np.dtype, nwords: int) -> np.ndarray:
+    """The top bit of every field of a packed word."""
+    return np.full(nwords, 0x8080808080808080 if field.itemsize == 1 else 0x8000800080008000, dtype=np.uint64)
+
+
+def _divides_words(a: np.ndarray, b: np.ndarray, guard: np.ndarray) -> np.ndarray:
+    """out[i, j] = (packed row a[j] divides packed row b[i]): ((b | guard) - a) & guard == guard in every
+    word, as the guard bits stop borrows between fields."""
+    out = ((b[:, None, 0] | guard[0]) - a[None, :, 0]) & guard[0] == guard[0]
+    for w in range(1, a.shape[1]):
+        out &= ((b[:, None, w] | guard[w]) - a[None, :, w]) & guard[w] == guard[w]
+    return out
+
+
+class _Elements:
+    """The basis elements as polynomials, each built from the term pool of its state when first needed
+    (F4 itself works on the pool; only callers that look at elements pay for the polynomials)."""
+
+    def __init__(self, state: "_State"):
+        self._state = state
+        self._polys: list[Poly | None] = []
+
+    def __len__(self) -> int:
+        return len(self._polys)
+
+    def __getitem__(self, k: int) -> Poly:
+        poly = self._polys[k]
+        if poly is None:
+            state = self._state
+            terms = slice(state.starts[k], state.starts[k] + state.lengths[k])
+            poly = Poly(state.ring, state.codes.to_keys(state.pool_codes[terms]), state.pool_coeffs[terms].tolist())
+            self._polys[k] = poly
+        return poly
+
+    def extend(self, polys: Sequence[Poly | None]) -> None:
+        self._polys.extend(polys)
 
 
 class _State:
     """The growing basis G and the pair set, with a vectorised Gebauer-Möller update.
 
-    Exponent vectors of the leading monomials and of the pair lcms live in numpy arrays, so each
-    insertion costs a few array operations instead of Python loops over all pairs.
+    Exponent vectors of the leading monomials and of the pair lcms live in numpy arrays of narrow
+    fields that view as packed 64-bit words (see :func:`_divides_words`), so that inserting the new
+    elements of a round costs a few array operations instead of Python loops over all pairs. The terms
+    of every element are kept as monomial codes (see :class:`analysis.ring.MonomialCodes`) and
+    coefficients in one concatenated term pool, so that the rows of an F4 matrix are gathered with
+    array operations; ``polys`` gives the elements as polynomials.
     """
 
-    def __init__(self, ring: Ring):
+    def __init__(self, ring: Ring, codes: MonomialCodes | None = None):
         self.ring = ring
-        n = ring.nvars
-        self.polys: list[Poly] = []
-        self.lms: list[int] = []
-        self.active_list: list[bool] = []
-        self.E = np.zeros((16, n), dtype=np.int32)
+        self.codes = codes or MonomialCodes(ring)
+        self.polys = _Elements(self)
+        self.field = _exponent_field(0)
+        # per element: packed exponents and degree of the leading monomial, its code, whether it is
+        # active, its terms pool[starts : starts + lengths] and their top degree
+        self.E = _pack(np.zeros((16, ring.nvars), dtype=np.int64), self.field)
+        self.lm_degrees = np.zeros(16, dtype=np.int64)
+        self.lm_codes = np.zeros(16, dtype=self.codes.dtype)
         self.active = np.zeros(16, dtype=bool)
-        # pairs: parallel arrays (i, j, lcm exponents, lcm degree)
-        self.pi = np.zeros(0, dtype=np.int64)
-        self.pj = np.zeros(0, dtype=np.int64)
-        self.pL = np.zeros((0, n), dtype=np.int32)
-        self.pdeg = np.zeros(0, dtype=np.int64)
+        self.starts = np.zeros(16, dtype=np.int64)
+        self.lengths = np.zeros(16, dtype=np.int64)
+        self.max_degrees = np.zeros(16, dtype=np.int64)
+        self.pool_codes = np.zeros(1024, dtype=self.codes.dtype)
+        self.pool_coeffs = np.zeros(1024, dtype=np.int64)
+        self.pool_size = 0
+        # pairs: rows (i, j, lcm degree) and the packed lcm exponents
+        self.pairs = np.zeros((0, 3), dtype=np.int64)
+        self.pL = self.E[:0]
 
     @property
     def npairs(self) -> int:
-        return len(self.pi)
+        return len(self.pairs)
 
-    def pop_pairs(self) -> tuple[int, list[tuple[int, int, tuple[int, ...]]]]:
-        """Remove and return the pairs of minimal lcm degree (normal strategy): (degree, [(i, j, lcm)])."""
-        d = int(self.pdeg.min())
-        sel = self.pdeg == d
-        out = [(int(i), int(j), tuple(int(x) for x in L)) for i, j, L in zip(self.pi[sel], self.pj[sel], self.pL[sel])]
-        keep = ~sel
-        self.pi, self.pj, self.pL, self.pdeg = self.pi[keep], self.pj[keep], self.pL[keep], self.pdeg[keep]
-        return d, out
+    def lead_exponents(self, index: np.ndarray) -> np.ndarray:
+        """Exponent vectors (int64) of the leading monomials of the elements at index."""
+        return self.E[index, : self.ring.nvars].astype(np.int64)
+
+    def pop_pairs(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+        """Remove and return the pairs of minimal lcm degree (normal strategy): (degree, i, j, lcm exponents)."""
+        d = int(self.pairs[:, 2].min())
+        sel = self.pairs[:, 2] == d
+        chosen = self.pairs[sel]
+        out = (d, chosen[:, 0], chosen[:, 1], self.pL[sel, : self.ring.nvars].astype(np.int64))
+        self.pairs, self.pL = self.pairs[~sel], self.pL[~sel]
+        return out
 
     def add(self, h: Poly) -> None:
-        """Insert h (monic, lm not divisible by any lm of G) and update the pairs.
+        """Insert h (monic, lm not divisible by any lm of G) and update the pairs (see :meth:`insert`)."""
+        codes = self.codes.from_keys(h.mons)
+        self.insert(codes, np.array(h.coeffs, dtype=np.int64), np.array([0, len(codes)]), [h])
 
-        Gebauer-Möller as in Becker-Weispfenning's UPDATE: among the new pairs (g, h) drop those whose
-        lcm is a proper multiple of another new pair's lcm (criterion M), keep one per equal lcm unless
-        one of them is coprime (criterion F, then all go by Buchberger's first criterion); drop old pairs
-        whose lcm is divisible by lm(h) with both lcms against h different (criterion B).
-        """
-        ring = self.ring
-        k = len(self.polys)
-        eh = np.array(ring.exps(h.lm), dtype=np.int32)
-        if k == len(self.E):
+    def _store(self, codes: np.ndarray, coeffs: np.ndarray, indptr: np.ndarray, leads: np.ndarray) -> None:
+        """Append new elements (terms codes/coeffs[indptr[i] : indptr[i + 1]], leading exponents) to the
+        per-element arrays and the term pool."""
+        k, m = len(self.polys), len(indptr) - 1
+        field = _exponent_field(int(leads.max(initial=0)))
+        if field.itemsize > self.field.itemsize:
+            n = self.ring.nvars
+            self.field = field
+            self.E, self.pL = _pack(self.E[:, :n], field), _pack(self.pL[:, :n], field)
+        while k + m > len(self.starts):
             self.E = np.vstack([self.E, np.zeros_like(self.E)])
-            self.active = np.concatenate([self.active, np.zeros_like(self.active)])
-        self.polys.append(h)
-        self.lms.append(h.lm)
-        self.E[k] = eh
-        # criterion B on old pairs
-        if len(self.pi):
-            divisible = np.flatnonzero(_divides(eh[None, :], self.pL))
-            if len(divisible):
-                sub = self.pL[divisible]
-                eq_i = np.all(np.maximum(self.E[self.pi[divisible]], eh) == sub, axis=1)
-                eq_j = np.all(np.maximum(self.E[self.pj[divisible]], eh) == sub, axis=1)
-                drop = divisible[~(eq_i | eq_j)]
-                if len(drop):
-                    keep = np.ones(len(self.pi), dtype=bool)
-                    keep[drop] = False
-                    self.pi, self.pj, self.pL, self.pdeg = self.pi[keep], self.pj[keep], self.pL[keep], self.pdeg[keep]
-        act = np.flatnonzero(self.active[:k])
-        if len(act):
-            Ea = self.E[act]
-            L = np.maximum(Ea, eh)
-            coprime = ~np.any((Ea > 0) & (eh > 0), axis=1)
-            # criteria M and F: le[i, j] says lcm_j divides lcm_i
-            le = _divides_matrix(L)
-            eq = le & le.T
-            dominated = np.any(le & ~eq, axis=1)
-            has_coprime = np.any(eq & coprime[None, :], axis=1)
-            first = ~np.any(np.tril(eq, -1), axis=1)
-            keep_new = ~dominated & ~has_coprime & first
-            if keep_new.any():
-                Lk = L[keep_new]
-                self.pi = np.concatenate([self.pi, act[keep_new]])
-                self.pj = np.concatenate([self.pj, np.full(int(keep_new.sum()), k, dtype=np.int64)])
-                self.pL = np.vstack([self.pL, Lk])
-                self.pdeg = np.concatenate([self.pdeg, Lk.sum(axis=1, dtype=np.int64)])
-            redundant = np.all(Ea >= eh, axis=1)
-            self.active[act[redundant]] = False
-        self.active[k] = True
+            self.lm_degrees, self.lm_codes, self.active, self.starts, self.lengths, self.max_degrees = (
+                np.concatenate([a, np.zeros_like(a)])
+                for a in (self.lm_degrees, self.lm_codes, self.active, self.starts, self.lengths, self.max_degrees)
+            )
+        end = self.pool_size + len(codes)
+        if end > len(self.pool_codes):
+            grow = max(end, 2 * len(self.pool_codes)) - len(self.pool_codes)
+            self.pool_codes = np.concatenate([self.pool_codes, np.zeros(grow, dtype=self.pool_codes.dtype)])
+            self.pool_coeffs = np.concatenate([self.pool_coeffs, np.zeros(grow, dtype=np.int64)])
+        self.pool_codes[self.pool_size : end] = codes
+        self.pool_coeffs[self.pool_size : end] = coeffs
+        degrees = self.codes.degrees(codes)
+        new = slice(k, k + m)
+        self.E[new, : leads.shape[1]] = leads
+        self.lm_degrees[new] = leads.sum(axis=1)
+        self.lm_codes[new] = codes[indptr[:-1]]
+        self.starts[new] = self.pool_size + indptr[:-1]
+        self.lengths[new] = np.diff(indptr)
+        self.max_degrees[new] = np.maximum.reduceat(degrees, indptr[:-1])
+        self.pool_size = end
+
+    def insert(self, codes: np.ndarray, coeffs: np.ndarray, indptr: np.ndarray, polys: Sequence[Poly | None]) -> None:
+        """Insert new monic elements h_0, ..., h_{m-1} (terms codes/coeffs[indptr[t] : indptr[t + 1]],
+        leading monomials decreasing, none divisible by the lm of an active element) one after the other,
+        updating the pairs; polys[t] is h_t or None (built from the pool when asked for).
+
+        Gebauer-Möller as in Becker-Weispfenning's UPDATE, for each h_t in turn: among the new pairs
+        (g, h_t) drop those whose lcm is a proper multiple of another new pair's lcm (criterion M), keep
+        one per equal lcm unless one of them is coprime (criterion F, then all go by Buchberger's first
+        criterion); drop existing pairs whose lcm is divisible by lm(h_t) with both lcms against h_t
+        different (criterion B); h_t makes the active elements whose lm it divides inactive.
+
+        All m insertions are done at once with the same outcome: an element is a partner of h_t when it
+        is active at time t (inserted before t, made inactive at t or later), so the new pairs of all t
+        follow from these activity spans, and criterion B drops a pair as soon as any later h_t
+        qualifies. Degrees decide the equalities: for monomials a | c and b | c, lcm(a, b) = c iff their
+        degrees agree.
+        """
+        m = len(polys)
+        k = len(self.polys)
+        leads = self.codes.decode(codes[indptr[:-1]])
+        self._store(codes, coeffs, indptr, leads)
+        self.polys.extend(polys)
+        # activity spans of the partners: born (inserted) before t, made inactive by the first later h_u
+        # whose lm divides theirs (a new lm cannot divide an earlier, larger one)
+        partners = np.concatenate([np.flatnonzero(self.active[:k]), np.arange(k, k + m)])
+        born = np.concatenate([np.full(len(partners) - m, -1), np.arange(m)])
+        words = self.E.view(np.uint64)
+        guard = _guard(self.field, words.shape[1])
+        new_words = words[k : k + m]
+        covered = _divides_words(new_words, words[partners], guard) & (np.arange(m)[None, :] > born[:, None])
+        dies = np.where(covered.any(axis=1), covered.argmax(axis=1), m)
+        # new pairs (g, h_t), a few t at a time: span[t, c] says partner c is active at time t
+        new_pairs, new_lcms, new_born = [], [], []
+        step = max(1, (1 << 18) // len(partners) ** 2)
+        for t0 in range(0, m, step):
+            t = np.arange(t0, min(t0 + step, m))
+            span = (born[None, :] < t[:, None]) & (dies[None, :] >= t[:, None])
+            live = np.flatnonzero(span.any(axis=0))
+            if not len(live):
+                continue
+            span, cand = span[:, live], partners[live]
+            L = np.maximum(self.E[cand][None, :, :], self.E[k + t][:, None, :])
+            degrees = L.sum(axis=2, dtype=np.int64)
+            coprime = degrees == self.lm_degrees[cand][None, :] + self.lm_degrees[k + t][:, None]
+            # divides[t, c, c'] = lm(c') | lcm(c, h_t), i.e. lcm(c', h_t) | lcm(c, h_t), for partners c';
+            # then the two lcms are equal iff their degrees are
+            L_words = L.view(np.uint64)
+            divides = _divides_words(words[cand], L_words.reshape(-1, L_words.shape[2]), guard)
+            divides = divides.reshape(len(t), len(cand), len(cand)) & span[:, None, :]
+            same = degrees[:, :, None] == degrees[:, None, :]
+            equal = divides & same
+            dominated = (divides > same).any(axis=2)
+            has_coprime = (equal & coprime[:, None, :]).any(axis=2)
+            first = equal.argmax(axis=2) == np.arange(len(cand))  # no earlier partner with this lcm
+            tt, cc = np.nonzero(span & first & ~dominated & ~has_coprime)
+            new_pairs.append(np.column_stack([cand[cc], k + t[tt], degrees[tt, cc]]))
+            new_lcms.append(L[tt, cc])
+            new_born.append(t[tt])
+        # criterion B over the existing and the new pairs, by every h_u inserted after the pair
+        pairs = np.vstack([self.pairs, *new_pairs])
+        lcms = np.vstack([self.pL, *new_lcms])
+        pair_born = np.concatenate([np.full(len(self.pairs), -1), *new_born])
+        hit = _divides_words(new_words, lcms.view(np.uint64), guard) & (np.arange(m)[None, :] > pair_born[:, None])
+        pp, uu = np.nonzero(hit)
+        if len(pp):
+            lead_u = self.E[k + uu]
+            same_i = np.maximum(self.E[pairs[pp, 0]], lead_u).sum(axis=1, dtype=np.int64) == pairs[pp, 2]
+            same_j = np.maximum(self.E[pairs[pp, 1]], lead_u).sum(axis=1, dtype=np.int64) == pairs[pp, 2]
+            keep = np.ones(len(pairs), dtype=bool)
+            keep[pp[~(same_i | same_j)]] = False
+            pairs, lcms = pairs[keep], lcms[keep]
+        self.pairs, self.pL = pairs, lcms
+        self.active[partners] = dies == m
 
     def find_reducer(self, m: int) -> int:
         """Index of the sparsest active basis element whose leading monomial divides m, or -1."""
         act = np.flatnonzero(self.active[: len(self.polys)])
-        if not len(act):
-            return -1
-        hits = act[np.all(self.E[act] <= np.array(self.ring.exps(m)), axis=1)]
+        hits = act[np.all(self.lead_exponents(act) <= np.array(self.ring.exps(m)), axis=1)]
         if not len(hits):
             return -1
-        return int(min(hits, key=lambda i: len(self.polys[i])))
+        return int(hits[np.argmin(self.lengths[hits])])
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """Rows mult[r] * g[index[r]] of an F4 matrix and their terms: monomial codes, positions in the term
+    pool and row lengths."""
+
+    mult: np.ndarray
+    index: np.ndarray
+    terms: np.ndarray
+    positions: np.ndarray
+    lengths: np.ndarray
+
+    @staticmethod
+    def of(state: "_State", mult: np.ndarray, index: np.ndarray) -> "_Rows":
+        """The rows mult[r] * g[index[r]]; raises :class:`CodeOverflow` when a product could exceed the
+        degrees the codes can hold."""
+        codes = state.codes
+        if len(index) and not codes.wide:
+            top = int((codes.degrees(mult) + state.max_degrees[index]).max())
+            if top > codes.max_degree:
+                raise CodeOverflow(f"degree {top} exceeds the narrow monomial codes")
+        lengths = state.lengths[index]
+        ends = np.cumsum(lengths)
+        total = int(ends[-1]) if len(ends) else 0
+        positions = np.repeat(state.starts[index] - (ends - lengths), lengths) + np.arange(total)
+        return _Rows(mult, index, state.pool_codes[positions] + np.repeat(mult, lengths), positions, lengths)
+
+    @staticmethod
+    def concat(parts: Sequence["_Rows"]) -> "_Rows":
+        fields = ("mult", "index", "terms", "positions", "lengths")
+        return _Rows(*(np.concatenate([getattr(rows, f) for rows in parts]) for f in fields))
+
+
+def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each monomial code, the sparsest active element whose leading monomial divides it (the first
+    such in index order on ties): (mask of monomials that have one, their reducers)."""
+    X = state.codes.decode(monomials)
+    field = _exponent_field(int(X.max(initial=0)))
+    if field.itemsize < state.field.itemsize:
+        field = state.field
+    leads = state.E[act] if field == state.field else _pack(state.lead_exponents(act), field)
+    lead_words, mono_words = leads.view(np.uint64), _pack(X, field).view(np.uint64)
+    guard = _guard(field, lead_words.shape[1])
+    lengths = state.lengths[act]
+    big = np.iinfo(np.int64).max
+    best = np.zeros(len(monomials), dtype=np.int64)
+    has = np.zeros(len(monomials), dtype=bool)
+    chunk = max(1, 1_000_000 // len(act))
+    for s in range(0, len(monomials), chunk):
+        divides = _divides_words(lead_words, mono_words[s : s + chunk], guard)
+        cost = np.where(divides, lengths[None, :], big)
+        best[s : s + chunk] = cost.argmin(axis=1)
+        has[s : s + chunk] = divides.any(axis=1)
+    return has, act[best[has]]
+
+
+def _first_seen(terms: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The distinct terms that are not in known (sorted), in order of first occurrence."""
+    if len(known):
+        at = np.minimum(np.searchsorted(known, terms), len(known) - 1)
+        terms = terms[known[at] != terms]
+    distinct, first = np.unique(terms, return_index=True)
+    return distinct[np.argsort(first)]
+
+
+def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_Rows, np.ndarray]:
+    """Symbolic preprocessing on arrays: add a reducer row for every matrix monomial divisible by a lead.
+
+    Works in waves: the monomials first seen in one wave (in order of first occurrence) are tested for
+    divisibility against all active leading monomials at once; the reducer of a monomial is the
+    sparsest basis element whose leading monomial divides it. With leads_done=False the leading
+    monomials of the given rows get reducers too (tail reduction). Returns all rows, the given ones first
+    and then the reducers in the order found, and the column codes ascending.
+    """
+    done = np.unique(state.lm_codes[rows.index] + rows.mult) if leads_done else rows.terms[:0]
+    frontier = _first_seen(rows.terms, done)
+    seen = np.union1d(frontier, done)
+    parts = [rows]
+    act = np.flatnonzero(state.active[: len(state.polys)])
+    while len(frontier) and len(act):
+        has, red_index = _reducers(state, act, frontier)
+        if not len(red_index):
+            break
+        parts.append(_Rows.of(state, frontier[has] - state.lm_codes[red_index], red_index))
+        frontier = _first_seen(parts[-1].terms, seen)
+        seen = np.concatenate([seen, np.sort(frontier)])
+        seen.sort(kind="stable")  # two sorted runs: a merge
+    return _Rows.concat(parts), seen
+
+
+def _assemble(state: _State, rows: _Rows, columns: np.ndarray) -> SparseRows:
+    """The rows as sparse rows over the column codes (ascending; column 0 is the largest monomial)."""
+    indptr = np.zeros(len(rows.index) + 1, dtype=np.int64)
+    np.cumsum(rows.lengths, out=indptr[1:])
+    cols = len(columns) - 1 - np.searchsorted(columns, rows.terms)
+    return SparseRows(indptr, cols.astype(np.int64), state.pool_coeffs[rows.positions])
+
+
+def _split_pivots(leads: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One pivot row per leading column (the sparsest, the first on ties), the others to reduce:
+    (pivot rows, rows to reduce), each in order of increasing length."""
+    order = np.argsort(lengths, kind="stable")
+    _, first = np.unique(leads[order], return_index=True)
+    is_pivot = np.zeros(len(order), dtype=bool)
+    is_pivot[first] = True
+    return order[is_pivot], order[~is_pivot]
+
+
+def _pair_rows(
+    state: _State, d: int, pi: np.ndarray, pj: np.ndarray, lcms: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows lcm/lm(g) * g of both sides of the pairs (i, j) of lcm degree d, without repeats, sorted
+    by (multiplier, index): (multiplier codes, element indices)."""
+    codes = state.codes
+    if d > codes.max_degree:
+        raise CodeOverflow(f"degree {d} exceeds the narrow monomial codes")
+    index = np.concatenate([pi, pj])
+    mult = codes.encode(np.vstack([lcms, lcms]) - state.lead_exponents(index))
+    by_index = np.argsort(index, kind="stable")
+    order = by_index[np.argsort(mult[by_index], kind="stable")]
+    mult, index = mult[order], index[order]
+    fresh = np.ones(len(index), dtype=bool)
+    fresh[1:] = (mult[1:] != mult[:-1]) | (index[1:] != index[:-1])
+    return mult[fresh], index[fresh]
+
+
+# ----------------------------------------------------------------------------------------------
+# the F4 steps on Python rows, for callers that record them (solvers.template)
+# ----------------------------------------------------------------------------------------------
+def select_pairs(state: _State) -> tuple[int, list, list[tuple[int, int]]]:
+    """Pop the pairs of minimal lcm degree; return (degree, pairs, sorted rows (multiplier key, index))."""
+    d, pi, pj, lcms = state.pop_pairs()
+    mult, index = _pair_rows(state, d, pi, pj, lcms)
+    pairs = [(i, j, tuple(lcm)) for i, j, lcm in zip(pi.tolist(), pj.tolist(), lcms.tolist())]
+    return d, pairs, list(zip(state.codes.to_keys(mult), index.tolist()))
 
 
 def _symbolic_preprocessing(
     state: _State, rows: list[tuple[int, int]], leads_done: bool = True
 ) -> tuple[list[tuple[int, int]], list[int]]:
-    """Add reducer rows for every matrix monomial divisible by a leading monomial.
-
-    Works in waves: the monomials first seen in one wave are decoded in bulk and tested for divisibility
-    against all active leading monomials with one array comparison; the reducer of a monomial is the
-    sparsest basis element whose leading monomial divides it. rows: list of (multiplier key, basis index).
-    With leads_done=False the leading monomials of the given rows get reducers too (tail reduction).
-    Returns all rows and the column monomials in decreasing order.
-    """
-    polys = state.polys
-    ring = state.ring
-    seen: set[int] = set()
-    done: set[int] = set()
-    frontier: list[int] = []
-    for t, i in rows:
-        g = polys[i]
-        if leads_done:
-            done.add(t + g.lm)
-        for k in g.mons:
-            m = t + k
-            if m not in seen:
-                seen.add(m)
-                frontier.append(m)
-    out_rows = list(rows)
-    act = np.flatnonzero(state.active[: len(polys)])
-    e_act = state.E[act]
-    lengths = np.array([len(polys[i]) for i in act], dtype=np.int64)
-    big = np.iinfo(np.int64).max
-    while frontier:
-        cand = [m for m in frontier if m not in done]
-        frontier = []
-        if not cand or not len(act):
-            break
-        X = ring.decode_many(cand)
-        chunk = max(1, 2_000_000 // max(1, e_act.size))
-        for s in range(0, len(cand), chunk):
-            divides = np.all(e_act[None, :, :] <= X[s : s + chunk, None, :], axis=2)
-            cost = np.where(divides, lengths[None, :], big)
-            best = cost.argmin(axis=1)
-            has = cost[np.arange(len(best)), best] != big
-            for r in np.flatnonzero(has):
-                m = cand[s + r]
-                idx = int(act[best[r]])
-                g = polys[idx]
-                t = m - g.lm
-                done.add(m)
-                out_rows.append((t, idx))
-                for k in g.mons:
-                    mm = t + k
-                    if mm not in seen:
-                        seen.add(mm)
-                        frontier.append(mm)
-    return out_rows, sorted(seen, reverse=True)
-
-
-def select_pairs(state: _State) -> tuple[int, list, list[tuple[int, int]]]:
-    """Pop the pairs of minimal lcm degree; return (degree, pairs, sorted rows (multiplier key, index))."""
-    ring = state.ring
-    d, sel = state.pop_pairs()
-    row_set: set[tuple[int, int]] = set()
-    for i, j, le in sel:
-        for k in (i, j):
-            t_exps = tuple(a - b for a, b in zip(le, ring.exps(state.lms[k])))
-            row_set.add((ring.key(t_exps), k))
-    return d, sel, sorted(row_set)
+    """:func:`_preprocess` on rows given as (multiplier key, basis index): returns all rows and the
+    column monomials in decreasing order, as keys."""
+    codes = state.codes
+    mult = codes.from_keys([t for t, _ in rows])
+    index = np.array([i for _, i in rows], dtype=np.int64)
+    rows, columns = _preprocess(state, _Rows.of(state, mult, index), leads_done)
+    return list(zip(codes.to_keys(rows.mult), rows.index.tolist())), codes.to_keys(columns[::-1])
 
 
 def split_pivots(matrix: Sequence[Row]) -> tuple[dict[int, int], list[int]]:
     """One pivot row per leading column (the sparsest), the others to reduce: (column -> row, rows)."""
-    pivots: dict[int, int] = {}
-    to_reduce: list[int] = []
-    for r in sorted(range(len(matrix)), key=lambda r: len(matrix[r][0])):
-        lead = matrix[r][0][0]
-        if lead not in pivots:
-            pivots[lead] = r
-        else:
-            to_reduce.append(r)
-    return pivots, to_reduce
+    leads = np.array([r[0][0] for r in matrix], dtype=np.int64)
+    lengths = np.array([len(r[0]) for r in matrix], dtype=np.int64)
+    pivot_rows, reduce_rows = _split_pivots(leads, lengths)
+    return {int(leads[r]): int(r) for r in pivot_rows}, reduce_rows.tolist()
 
 
-def _build_matrix(state: _State, rows: list[tuple[int, int]], columns: list[int]):
-    col_of = {m: c for c, m in enumerate(columns)}
-    polys = state.polys
-    built: list[Row] = []
-    for t, i in rows:
-        g = polys[i]
-        built.append(([col_of[t + k] for k in g.mons], g.coeffs))
-    return built
+def _build_matrix(state: _State, rows: list[tuple[int, int]], columns: list[int]) -> list[Row]:
+    """The rows (multiplier key, basis index) over the columns (keys, decreasing) as (cols, vals) lists."""
+    codes = state.codes
+    mult = codes.from_keys([t for t, _ in rows])
+    index = np.array([i for _, i in rows], dtype=np.int64)
+    return _assemble(state, _Rows.of(state, mult, index), codes.from_keys(columns)[::-1]).to_rows()
 
 
+# ----------------------------------------------------------------------------------------------
+# the driver
+# ----------------------------------------------------------------------------------------------
 def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> GroebnerResult:
     """Reduced Gröbner basis of the ideal generated by polys (all in one ring) by F4.
 
-    Zero polynomials are ignored; a nonzero constant gives the basis [1].
+    Zero polynomials are ignored; a nonzero constant gives the basis [1]. The run uses narrow 64-bit
+    monomial codes and is repeated with wide ones if a degree outgrows them.
     """
     t_start = time.perf_counter()
     if not polys:
@@ -312,93 +483,106 @@ def groebner(polys: Sequence[Poly], options: F4Options = F4Options()) -> Groebne
         if f.ring != ring:
             raise ValueError("all polynomials must belong to the same ring")
     backend = get_backend(options.backend)
+    try:
+        basis, rounds = _f4(ring, polys, backend, options, MonomialCodes(ring))
+    except CodeOverflow as overflow:
+        if options.verbose:
+            print(f"[f4] {overflow}: restarting with wide codes", file=sys.stderr)
+        basis, rounds = _f4(ring, polys, backend, options, MonomialCodes(ring, wide=True))
+    return GroebnerResult(ring, basis, rounds, time.perf_counter() - t_start)
+
+
+def _f4(
+    ring: Ring, polys: Sequence[Poly], backend: Backend, options: F4Options, codes: MonomialCodes
+) -> tuple[tuple[Poly, ...], tuple[RoundStats, ...]]:
+    """The F4 loop of :func:`groebner`: (reduced basis, round statistics)."""
     p = ring.prime
-    state = _State(ring)
+    state = _State(ring, codes)
     rounds: list[RoundStats] = []
 
     inputs = [f.monic() for f in polys if f]
     if not inputs:  # only zero polynomials: the zero ideal
-        return GroebnerResult(ring, (), (), time.perf_counter() - t_start)
+        return (), ()
     if any(f.is_constant() for f in inputs):
-        return GroebnerResult(ring, (ring.one(),), (), time.perf_counter() - t_start)
-    # initial inter-reduction of the input as one matrix: echelon form, then insert by increasing lm
-    if inputs:
-        # treat inputs as rows to reduce with no pivots: this removes duplicates and dependencies
-        cols = sorted({k for f in inputs for k in f.mons}, reverse=True)
-        col_of = {m: c for c, m in enumerate(cols)}
-        rows = [([col_of[k] for k in f.mons], f.coeffs) for f in inputs]
-        ech = backend.reduce({}, rows, len(cols), p)
-        for c, v in sorted(ech, key=lambda r: r[0][0]):  # decreasing lm: no new lm divides an earlier one
-            h = Poly(ring, [cols[j] for j in c], list(v))
-            _insert(state, h)
+        return (ring.one(),), ()
+    # initial inter-reduction of the input as one matrix: rows to reduce with no pivots remove
+    # duplicates and dependencies; then insert by decreasing lm
+    cols = sorted({k for f in inputs for k in f.mons}, reverse=True)
+    col_of = {m: c for c, m in enumerate(cols)}
+    rows = SparseRows.from_rows([([col_of[k] for k in f.mons], f.coeffs) for f in inputs])
+    if _insert_rows(state, backend.reduce_sparse(rows.take([]), rows, len(cols), p), codes.from_keys(cols)):
+        return (ring.one(),), ()
     while state.npairs:
         t0 = time.perf_counter()
-        d, sel, rows = select_pairs(state)
-        rows, columns = _symbolic_preprocessing(state, rows)
-        ncols = len(columns)
-        if len(rows) * ncols > options.max_matrix_cells:
+        d, pi, pj, lcms = state.pop_pairs()
+        npairs = len(pi)
+        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms)))
+        nrows, ncols = len(rows.index), len(columns)
+        if nrows * ncols > options.max_matrix_cells:
             raise MatrixTooLarge(
-                f"F4 matrix {len(rows)} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
+                f"F4 matrix {nrows} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
             )
-        matrix = _build_matrix(state, rows, columns)
-        pivot_index, reduce_index = split_pivots(matrix)
-        pivots = {c: matrix[r] for c, r in pivot_index.items()}
-        to_reduce = [matrix[r] for r in reduce_index]
-        nnz = sum(len(r[0]) for r in matrix)
-        new_rows = backend.reduce(pivots, to_reduce, ncols, p)
-        for c, v in sorted(new_rows, key=lambda r: r[0][0]):  # decreasing lm: no new lm divides an earlier one
-            h = Poly(ring, [columns[j] for j in c], list(v))
-            if h.is_constant():
-                return GroebnerResult(ring, (ring.one(),), tuple(rounds), time.perf_counter() - t_start)
-            _insert(state, h)
+        matrix = _assemble(state, rows, columns)
+        pivot_rows, reduce_rows = _split_pivots(matrix.leads, matrix.lengths)
+        new_rows = backend.reduce_sparse(matrix.take(pivot_rows), matrix.take(reduce_rows), ncols, p)
+        if _insert_rows(state, new_rows, columns[::-1]):
+            return (ring.one(),), tuple(rounds)
         stats = RoundStats(
             degree=d,
-            pairs=len(sel),
-            rows=len(matrix),
+            pairs=npairs,
+            rows=nrows,
             cols=ncols,
-            density=nnz / max(1, len(matrix) * ncols),
+            density=len(matrix.cols) / max(1, nrows * ncols),
             new=len(new_rows),
-            zero_reductions=len(to_reduce) - len(new_rows),
+            zero_reductions=len(reduce_rows) - len(new_rows),
             seconds=time.perf_counter() - t0,
         )
         rounds.append(stats)
         if options.verbose:
             print(
-                f"[f4] deg {d:3d}  pairs {len(sel):5d}  matrix {len(matrix):6d} x {ncols:6d}  "
+                f"[f4] deg {d:3d}  pairs {npairs:5d}  matrix {nrows:6d} x {ncols:6d}  "
                 f"density {stats.density:6.2%}  new {stats.new:4d}  zero {stats.zero_reductions:5d}  "
                 f"{stats.seconds:7.3f}s",
                 file=sys.stderr,
             )
-    basis = _reduce_basis(state, backend)
-    return GroebnerResult(ring, tuple(basis), tuple(rounds), time.perf_counter() - t_start)
+    return tuple(_reduce_basis(state, backend)), tuple(rounds)
 
 
-def _insert(state: _State, h: Poly) -> None:
-    for k in h.mons:
-        state.ring.exps(k)
-    state.add(h)
+def _insert_rows(state: _State, rows: SparseRows, columns: np.ndarray) -> bool:
+    """Insert the rows of a reduced row echelon form (over columns: codes, decreasing) into the basis;
+    True when one of them is a nonzero constant (the unit ideal)."""
+    terms = columns[rows.cols]
+    if not len(rows):
+        return False
+    if (terms[rows.indptr[:-1]] == 0).any():
+        return True
+    # increasing leading column is decreasing lm: no new lm divides an earlier one
+    state.insert(terms, rows.vals, rows.indptr, [None] * len(rows))
+    return False
 
 
-def _reduce_basis(state: _State, backend) -> list[Poly]:
+def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis.
 
     Symbolic preprocessing of the active elements supplies a reducer for every tail monomial that is
     divisible by a leading monomial; the tails are then reduced by these pivot rows, each on its own.
     """
     ring = state.ring
-    idx = [int(i) for i in np.flatnonzero(state.active[: len(state.polys)])]
-    rows, columns = _symbolic_preprocessing(state, [(0, i) for i in idx], leads_done=False)
-    col_of = {m: c for c, m in enumerate(columns)}
-    pivots: dict[int, Row] = {}
-    for t, j in rows[len(idx) :]:
-        g = state.polys[j]
-        r = ([col_of[t + k] for k in g.mons], g.coeffs)
-        pivots[r[0][0]] = r
-    tails = [([col_of[k] for k in state.polys[i].mons[1:]], state.polys[i].coeffs[1:]) for i in idx]
-    reduced = backend.reduce_each(pivots, tails, len(columns), ring.prime)
+    idx = np.flatnonzero(state.active[: len(state.polys)])
+    elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx)
+    rows, columns = _preprocess(state, elements, leads_done=False)
+    matrix = _assemble(state, rows, columns)
+    pivots = matrix.take(np.arange(len(idx), len(rows.index)))
+    heads = matrix.take(np.arange(len(idx)))
+    tail = np.ones(len(heads.cols), dtype=bool)
+    tail[heads.indptr[:-1]] = False
+    tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])
+    reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime)
+    keys = state.codes.to_keys(columns[::-1][reduced.cols])
+    vals = reduced.vals.tolist()
+    bounds = reduced.indptr.tolist()
     basis = []
-    for i, (c, v) in zip(idx, reduced):
-        g = state.polys[i]
-        basis.append(Poly(ring, [g.lm] + [columns[j] for j in c], [1] + list(v)))
+    for lm, a, b in zip(state.codes.to_keys(state.lm_codes[idx]), bounds, bounds[1:]):
+        basis.append(Poly(ring, [lm] + keys[a:b], [1] + vals[a:b]))
     basis.sort(key=lambda g: g.lm)
     return basis

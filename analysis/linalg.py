@@ -2,19 +2,21 @@
 
 An F4 matrix is given as *pivot rows* (one per pivot column, leading coefficient 1; these are the
 reducers found by symbolic preprocessing) and *rows to reduce*. A row is a pair of lists
-``(cols, vals)``, columns strictly increasing (column 0 is the largest monomial), values in [1, p).
-Every backend implements two operations:
+``(cols, vals)``, columns strictly increasing (column 0 is the largest monomial), values in [1, p);
+a block of rows is also held in compressed form as :class:`SparseRows`. Every backend implements two
+operations, each on row lists (pivots as a dict leading column -> row) and on :class:`SparseRows`
+(pivot rows in any order):
 
-``reduce(pivots, rows, ncols, p)``
+``reduce(pivots, rows, ncols, p)`` / ``reduce_sparse``
     reduce each row fully by the pivot rows (afterwards no row has an entry in a pivot column), then
     bring the results to reduced row echelon form and return its nonzero rows (monic, sorted by leading
     column). This is one F4 reduction step: the returned rows are the new basis elements.
-``reduce_each(pivots, rows, ncols, p)``
+``reduce_each(pivots, rows, ncols, p)`` / ``reduce_each_sparse``
     reduce each row fully by the pivot rows, without combining rows (used for tail reduction).
 
 Backends: ``"python"`` is the slow, obviously correct reference used in tests; ``"numpy"`` does the
-elimination with vectorised dense int64 arithmetic and FLINT's ``nmod_mat.rref`` for the echelon form.
-Both must return identical rows.
+elimination with dense float64 BLAS products (a blocked triangular solve against the pivot rows) and
+the echelon form with a blocked row-by-row elimination. Both must return identical rows.
 """
 from __future__ import annotations
 
@@ -31,6 +33,69 @@ BACKENDS = ("python", "numpy")
 
 class MatrixTooLarge(RuntimeError):
     """An F4 matrix exceeded the configured size cap."""
+
+
+@dataclass(frozen=True)
+class SparseRows:
+    """Sparse rows in compressed form: row i has columns ``cols[indptr[i]:indptr[i + 1]]`` (strictly
+    increasing) with values ``vals[indptr[i]:indptr[i + 1]]`` in [1, p). All arrays are int64."""
+
+    indptr: np.ndarray
+    cols: np.ndarray
+    vals: np.ndarray
+
+    @staticmethod
+    def from_rows(rows: Sequence[Row]) -> "SparseRows":
+        lengths = np.fromiter((len(c) for c, _ in rows), dtype=np.int64, count=len(rows))
+        indptr = np.zeros(len(rows) + 1, dtype=np.int64)
+        np.cumsum(lengths, out=indptr[1:])
+        total = int(indptr[-1])
+        cols = np.fromiter(chain.from_iterable(c for c, _ in rows), dtype=np.int64, count=total)
+        vals = np.fromiter(chain.from_iterable(v for _, v in rows), dtype=np.int64, count=total)
+        return SparseRows(indptr, cols, vals)
+
+    @staticmethod
+    def from_dense(m: np.ndarray, columns: np.ndarray | None = None) -> "SparseRows":
+        """The nonzero entries of a dense matrix, row by row; columns relabels the matrix columns."""
+        r, c = np.nonzero(m)
+        indptr = np.zeros(len(m) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(r, minlength=len(m)), out=indptr[1:])
+        return SparseRows(indptr, (c if columns is None else columns[c]).astype(np.int64), m[r, c].astype(np.int64))
+
+    def __len__(self) -> int:
+        return len(self.indptr) - 1
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.diff(self.indptr)
+
+    @property
+    def leads(self) -> np.ndarray:
+        """Leading column of every row (rows must be nonzero)."""
+        return self.cols[self.indptr[:-1]]
+
+    def take(self, index: np.ndarray) -> "SparseRows":
+        """The rows at the given positions, in that order."""
+        index = np.asarray(index, dtype=np.int64)
+        lengths = self.lengths[index]
+        indptr = np.zeros(len(index) + 1, dtype=np.int64)
+        np.cumsum(lengths, out=indptr[1:])
+        gather = np.repeat(self.indptr[index] - indptr[:-1], lengths) + np.arange(int(indptr[-1]))
+        return SparseRows(indptr, self.cols[gather], self.vals[gather])
+
+    def to_rows(self) -> list[Row]:
+        bounds = self.indptr.tolist()
+        cols, vals = self.cols.tolist(), self.vals.tolist()
+        return [(cols[a:b], vals[a:b]) for a, b in zip(bounds, bounds[1:])]
+
+    def to_dense(self, ncols: int, dtype=np.int64) -> np.ndarray:
+        m = np.zeros((len(self), ncols), dtype=dtype)
+        m[np.repeat(np.arange(len(self)), self.lengths), self.cols] = self.vals
+        return m
+
+
+def _pivot_rows(pivots: dict[int, Row]) -> SparseRows:
+    return SparseRows.from_rows([pivots[c] for c in sorted(pivots)])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -97,22 +162,21 @@ def python_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, 
     return [_to_row(_reduce_dict(dict(zip(c, v)), pivots, p)) for c, v in rows]
 
 
-# ----------------------------------------------------------------------------------------------
-# numpy + flint backend
-# ----------------------------------------------------------------------------------------------
-def _dense(rows: Sequence[Row], ncols: int) -> np.ndarray:
-    """Scatter sparse rows into a dense int64 matrix with one vectorised assignment."""
-    m = np.zeros((len(rows), ncols), dtype=np.int64)
-    if not rows:
-        return m
-    lengths = np.fromiter((len(c) for c, _ in rows), dtype=np.int64, count=len(rows))
-    total = int(lengths.sum())
-    cols = np.fromiter(chain.from_iterable(c for c, _ in rows), dtype=np.int64, count=total)
-    vals = np.fromiter(chain.from_iterable(v for _, v in rows), dtype=np.int64, count=total)
-    m[np.repeat(np.arange(len(rows)), lengths), cols] = vals
-    return m
+def _pivot_dict(pivots: SparseRows) -> dict[int, Row]:
+    return {r[0][0]: r for r in pivots.to_rows()}
 
 
+def python_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+    return SparseRows.from_rows(python_reduce(_pivot_dict(pivots), rows.to_rows(), ncols, p))
+
+
+def python_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+    return SparseRows.from_rows(python_reduce_each(_pivot_dict(pivots), rows.to_rows(), ncols, p))
+
+
+# ----------------------------------------------------------------------------------------------
+# numpy backend
+# ----------------------------------------------------------------------------------------------
 def matmul_mod(x: np.ndarray, y: np.ndarray, p: int) -> np.ndarray:
     """x @ y mod p for int64 matrices with entries in [0, p), exactly, through float64 BLAS.
 
@@ -137,129 +201,155 @@ def matmul_mod(x: np.ndarray, y: np.ndarray, p: int) -> np.ndarray:
     return (r00 + r01 * s16 % p + r11 * s32 % p) % p
 
 
-def _pivot_layers(pivots: dict[int, Row], ncols: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted pivot columns and their layer: the longest chain of pivot rows leading to each pivot.
+def _solve_unit_upper(x: np.ndarray, t: np.ndarray, p: int) -> np.ndarray:
+    """y with y @ t = x mod p, for t unit upper triangular (k x k) and x (r x k), entries in [0, p).
 
-    Pivot row i has entries only at columns >= its own; if it has an entry in pivot column j, pivot j
-    must be applied after pivot i. Pivots of one layer are independent, so a whole layer is applied at
-    once: one matrix product per layer instead of a triangular solve per pivot.
+    Forward substitution by layers: a column's layer is the longest chain of nonzero entries of t above
+    the diagonal leading to it, so the columns of one layer are final together and are eliminated from
+    all later columns with one product.
     """
-    pcols = np.array(sorted(pivots), dtype=np.int64)
-    where = np.full(ncols, -1, dtype=np.int64)
-    where[pcols] = np.arange(len(pcols))
-    rows = [pivots[int(c)] for c in pcols]
-    lengths = np.fromiter((len(r[0]) for r in rows), dtype=np.int64, count=len(rows))
-    cols = np.fromiter(chain.from_iterable(r[0] for r in rows), dtype=np.int64, count=int(lengths.sum()))
-    src = np.repeat(np.arange(len(rows)), lengths)
-    dst = where[cols]
-    edge = (dst >= 0) & (dst != src)
-    src, dst = src[edge], dst[edge]
-    layer = np.zeros(len(pcols), dtype=np.int64)
-    while len(src):
-        new = layer.copy()
-        np.maximum.at(new, dst, layer[src] + 1)
-        if np.array_equal(new, layer):
-            break
-        layer = new
-    return pcols, layer
-
-
-def _eliminate_dense(m: np.ndarray, pivots: dict[int, Row], p: int, block: int = 512) -> np.ndarray:
-    """Zero every pivot column of the dense block m by the pivot rows, layer by layer (in place)."""
-    if not len(m) or not pivots:
-        return m
-    pcols, layer = _pivot_layers(pivots, m.shape[1])
+    dep = np.triu(t, 1)
+    # longest chains by one pass over the entries in column order (t is a small, sparse block; a
+    # vectorised fixpoint would need one pass per layer)
+    dst, src = np.nonzero(dep.T)
+    longest = [0] * len(t)
+    for j, i in zip(dst.tolist(), src.tolist()):
+        if longest[i] >= longest[j]:
+            longest[j] = longest[i] + 1
+    layer = np.array(longest, dtype=np.int64)
+    top = int(layer.max(initial=0))
+    if top == 0:
+        return x
     order = np.argsort(layer, kind="stable")
-    bounds = np.flatnonzero(np.diff(layer[order])) + 1
-    for group in np.split(order, bounds):
-        for start in range(0, len(group), block):
-            cols = pcols[group[start : start + block]]
-            sub = m[:, cols]
-            live = np.flatnonzero(np.any(sub != 0, axis=1))
-            if not len(live):
-                continue
-            a = _dense([pivots[int(c)] for c in cols], m.shape[1])
-            support = np.flatnonzero(a.any(axis=0))  # F4 matrices are sparse: touch only these columns
-            upd = matmul_mod(sub[live], a[:, support], p)
-            idx = np.ix_(live, support)
-            m[idx] = (m[idx] - upd) % p
-    return m
-
-
-def _rref_flint(m: np.ndarray, p: int) -> np.ndarray:
-    """Reduced row echelon form of a dense int64 matrix via FLINT; returns only the nonzero rows."""
-    import flint
-
-    r, c = m.shape
-    if r == 0 or c == 0:
-        return np.zeros((0, c), dtype=np.int64)
-    mat = flint.nmod_mat(r, c, m.ravel().tolist(), p)
-    red, rank = mat.rref()
-    if rank == 0:
-        return np.zeros((0, c), dtype=np.int64)
-    # read back only the rank nonzero rows, through int conversion of the nmod entries
-    vals = [int(x) for x in red.entries()[: rank * c]]
-    return np.array(vals, dtype=np.int64).reshape(rank, c)
-
-
-def _rref_numpy(m: np.ndarray, p: int) -> np.ndarray:
-    """Reduced row echelon form of a small dense int64 matrix (nonzero rows only)."""
-    m = m.copy()
-    r, c = m.shape
-    row = 0
-    for col in range(c):
-        if row == r:
-            break
-        nz = np.flatnonzero(m[row:, col])
-        if not len(nz):
-            continue
-        piv = row + int(nz[0])
-        if piv != row:
-            m[[row, piv]] = m[[piv, row]]
-        support = col + np.flatnonzero(m[row, col:])
-        m[row, support] = m[row, support] * pow(int(m[row, col]), -1, p) % p
-        others = np.flatnonzero(m[:, col])
-        others = others[others != row]
-        if len(others):
-            idx = np.ix_(others, support)
-            m[idx] = (m[idx] - np.outer(m[others, col], m[row, support]) % p) % p
-        row += 1
-    return m[:row]
-
-
-def _rref(m: np.ndarray, p: int) -> np.ndarray:
-    """Reduced row echelon form (nonzero rows): numpy's row loop for small blocks, FLINT otherwise.
-
-    The crossover was measured on this project's F4 blocks: FLINT's rref is fast but converting to and
-    from nmod_mat costs about 1 microsecond per entry.
-    """
-    if m.shape[0] <= 40 or m.shape[0] * m.shape[1] <= 25_000:
-        return _rref_numpy(m, p)
-    return _rref_flint(m, p)
-
-
-def numpy_reduce(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p: int) -> list[Row]:
-    if not rows:
-        return []
-    m = _eliminate_dense(_dense(rows, ncols), pivots, p)
-    keep = np.ones(ncols, dtype=bool)
-    keep[list(pivots)] = False
-    free = np.flatnonzero(keep)
-    sub = m[:, free]
-    sub = sub[np.any(sub != 0, axis=1)]
-    red = _rref(sub, p)
-    out = []
-    for row in red:
-        nz = np.flatnonzero(row)
-        out.append((free[nz].tolist(), row[nz].tolist()))
+    bounds = np.searchsorted(layer[order], np.arange(1, top + 1)).tolist()
+    dep = dep[np.ix_(order, order)]
+    out = np.empty_like(x)
+    if len(t) * (p - 1) ** 2 + p < 2**53:
+        # a column accumulates one product per predecessor: exact in float64, reduced once when final
+        y = x[:, order].astype(np.float64)
+        dep = dep.astype(np.float64)
+        for start, stop in zip([0] + bounds, bounds):
+            y[:, start:stop] %= p
+            y[:, stop:] -= y[:, start:stop] @ dep[start:stop, stop:]
+        y[:, bounds[-1] :] %= p
+        out[:, order] = y.astype(np.int64)
+        return out
+    y = x[:, order]
+    for start, stop in zip([0] + bounds, bounds):
+        y[:, stop:] = (y[:, stop:] - matmul_mod(y[:, start:stop], dep[start:stop, stop:], p)) % p
+    out[:, order] = y
     return out
 
 
+def _eliminate(rows: SparseRows, ncols: int, pivots: SparseRows, p: int, block: int = 64) -> np.ndarray:
+    """The rows as a dense int64 matrix mod p, every pivot column zeroed by the pivot rows (sorted by
+    leading column).
+
+    A blocked triangular solve: for each block of consecutive pivots, the multipliers of the rows come
+    from a small unit triangular solve on the block's columns, then one product subtracts the block's
+    pivot rows (dense from their first column on) from all rows.
+
+    With p small enough that the sum of all products stays below 2**53, the matrix is kept in float64
+    and reduced mod p only on the few columns a block reads; otherwise every product is reduced mod p
+    in int64 and the (then bounded) differences accumulate in int64.
+    """
+    npiv = len(pivots)
+    in_float = npiv * (p - 1) ** 2 + p < 2**53
+    dtype = np.float64 if in_float else np.int64
+    work = rows.to_dense(ncols, dtype)
+    if not len(work) or not npiv:
+        return work.astype(np.int64)
+    pcols, lengths = pivots.leads, pivots.lengths
+    for start in range(0, npiv, block):
+        stop = min(start + block, npiv)
+        cols = pcols[start:stop]
+        x = work[:, cols].astype(np.int64) % p
+        live = np.flatnonzero(x.any(axis=1))
+        if not len(live):
+            continue
+        first = int(cols[0])
+        a, b = pivots.indptr[start], pivots.indptr[stop]
+        dense = np.zeros((stop - start, ncols - first), dtype=dtype)
+        dense[np.repeat(np.arange(stop - start), lengths[start:stop]), pivots.cols[a:b] - first] = pivots.vals[a:b]
+        y = _solve_unit_upper(x[live], dense[:, cols - first].astype(np.int64), p)
+        update = y.astype(np.float64) @ dense if in_float else matmul_mod(y, dense, p)
+        if len(live) == len(work):
+            work[:, first:] -= update
+        else:
+            work[live, first:] -= update
+    out = work.astype(np.int64) if in_float else work
+    out %= p
+    return out
+
+
+def _rref_chunk(m: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reduced row echelon form of a few rows: (nonzero rows, their pivot columns), row by row.
+
+    Each row, reduced by the pivots before it, is zero or gives a new pivot at its leading column,
+    which is then cleared from all other rows (Gauss-Jordan).
+    """
+    m = m.copy()
+    pivcols = []
+    for row in range(len(m)):
+        nonzero = np.flatnonzero(m[row])
+        if not len(nonzero):
+            continue
+        col = int(nonzero[0])
+        lead = m[row] * pow(int(m[row, col]), -1, p) % p
+        factors = m[:, col].copy()
+        factors[row] = 0
+        m -= np.outer(factors, lead)
+        m %= p
+        m[row] = lead
+        pivcols.append(col)
+    return m[m.any(axis=1)], np.array(pivcols, dtype=np.int64)
+
+
+def _rref(m: np.ndarray, p: int, chunk: int = 16) -> np.ndarray:
+    """Reduced row echelon form of a dense int64 matrix (nonzero rows only), chunk by chunk of rows.
+
+    The echelon rows found so far are kept fully reduced; each new chunk is reduced by them with one
+    product, brought to echelon form on its own, and then used to clear its pivot columns from the
+    earlier echelon rows with one more product. F4 matrices have many zero reductions, which then cost
+    one product each.
+    """
+    echelon = np.zeros((0, m.shape[1]), dtype=np.int64)
+    pivcols = np.zeros(0, dtype=np.int64)
+    for start in range(0, len(m), chunk):
+        rows = m[start : start + chunk]
+        if len(pivcols):
+            rows = (rows - matmul_mod(rows[:, pivcols], echelon, p)) % p
+        rows = rows[rows.any(axis=1)]
+        if not len(rows):
+            continue
+        new, new_cols = _rref_chunk(rows, p)
+        if len(pivcols):
+            echelon = (echelon - matmul_mod(echelon[:, new_cols], new, p)) % p
+        echelon = np.vstack([echelon, new])
+        pivcols = np.concatenate([pivcols, new_cols])
+    return echelon[np.argsort(pivcols)]
+
+
+def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+    pivots = pivots.take(np.argsort(pivots.leads))
+    keep = np.ones(ncols, dtype=bool)
+    keep[pivots.leads] = False
+    free = np.flatnonzero(keep)
+    sub = _eliminate(rows, ncols, pivots, p)[:, free]
+    return SparseRows.from_dense(_rref(sub[sub.any(axis=1)], p), free)
+
+
+def numpy_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+    pivots = pivots.take(np.argsort(pivots.leads))
+    return SparseRows.from_dense(_eliminate(rows, ncols, pivots, p))
+
+
+def numpy_reduce(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p: int) -> list[Row]:
+    return numpy_reduce_sparse(_pivot_rows(pivots), SparseRows.from_rows(rows), ncols, p).to_rows()
+
+
 def numpy_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p: int) -> list[Row]:
-    if not rows:
-        return []
-    m = _eliminate_dense(_dense(rows, ncols), pivots, p)
-    return [(np.flatnonzero(r).tolist(), r[np.flatnonzero(r)].tolist()) for r in m]
+    return numpy_reduce_each_sparse(_pivot_rows(pivots), SparseRows.from_rows(rows), ncols, p).to_rows()
 
 
 @dataclass(frozen=True)
@@ -267,11 +357,13 @@ class Backend:
     name: str
     reduce: Callable[[dict[int, Row], Sequence[Row], int, int], list[Row]]
     reduce_each: Callable[[dict[int, Row], Sequence[Row], int, int], list[Row]]
+    reduce_sparse: Callable[[SparseRows, SparseRows, int, int], SparseRows]
+    reduce_each_sparse: Callable[[SparseRows, SparseRows, int, int], SparseRows]
 
 
 _BACKENDS = {
-    "python": Backend("python", python_reduce, python_reduce_each),
-    "numpy": Backend("numpy", numpy_reduce, numpy_reduce_each),
+    "python": Backend("python", python_reduce, python_reduce_each, python_reduce_sparse, python_reduce_each_sparse),
+    "numpy": Backend("numpy", numpy_reduce, numpy_reduce_each, numpy_reduce_sparse, numpy_reduce_each_sparse),
 }
 
 

@@ -255,6 +255,86 @@ class Ring:
         return out
 
 
+class CodeOverflow(OverflowError):
+    """A monomial's total degree exceeds what the narrow codes of :class:`MonomialCodes` can hold."""
+
+
+class MonomialCodes:
+    """Monomials of a ring as numpy integer *codes*, for array-at-a-time work (F4's symbolic
+    preprocessing and matrix construction).
+
+    A code packs the weight-row values of a monomial into fields of ``bits`` bits, most significant row
+    first: the layout of the ring's keys (see :mod:`analysis.orderings`) with narrower fields. Codes are
+    therefore order preserving and additive too, as long as no field overflows. Every row value of the
+    supported orders is a partial sum of exponents, so that holds while the total degree is at most
+    ``max_degree``; callers check degrees and raise :class:`CodeOverflow` beyond it.
+
+    Narrow codes (the default) use ``64 // rows`` bits per field (at most 16) and live in uint64 arrays;
+    wide codes are the ring's keys themselves in object arrays: slower, with the ring's own limits.
+    """
+
+    def __init__(self, ring: Ring, wide: bool = False):
+        self.ring = ring
+        nrows = ring._nrows
+        self.wide = wide or 64 // nrows == 0
+        self.bits = FIELD_BITS if self.wide else min(FIELD_BITS, 64 // nrows)
+        self.max_degree = (1 << self.bits) - 1
+        self.dtype = np.dtype(object) if self.wide else np.dtype(np.uint64)
+        rows = ring.order.weight_rows
+        weights = [sum(rows[r][i] << (self.bits * (nrows - 1 - r)) for r in range(nrows)) for i in range(ring.nvars)]
+        self._weights = np.array(weights, dtype=self.dtype)
+        # field j, least significant first (weight row nrows-1-j), sits at bit bits*j of a code and at
+        # bit 16*(j % 4) of word j // 4 of a key
+        self._code_shifts = np.arange(nrows, dtype=np.uint64) * np.uint64(self.bits)
+        self._key_shifts = np.arange(nrows, dtype=np.uint64) % np.uint64(4) * np.uint64(FIELD_BITS)
+        # the total degree is a combination of a few fields (for grevlex the top one alone)
+        degree_weights = ring._winv_t.sum(axis=1)
+        self._degree_fields = np.flatnonzero(degree_weights)
+        self._degree_weights = degree_weights[self._degree_fields]
+
+    def encode(self, exps: np.ndarray) -> np.ndarray:
+        """Codes of exponent vectors (N x nvars)."""
+        return np.asarray(exps).astype(self.dtype) @ self._weights
+
+    def decode(self, codes: np.ndarray) -> np.ndarray:
+        """Exponent vectors (N x nvars, int64) of codes."""
+        if self.wide:
+            return self.ring.decode_many(codes.tolist())
+        return self._fields(codes).astype(np.int64) @ self.ring._winv_t
+
+    def degrees(self, codes: np.ndarray) -> np.ndarray:
+        """Total degrees of codes (int64)."""
+        if self.wide:
+            return self.decode(codes).sum(axis=1)
+        fields = (codes[:, None] >> self._code_shifts[self._degree_fields]) & np.uint64(self.max_degree)
+        return fields.astype(np.int64) @ self._degree_weights
+
+    def from_keys(self, keys: Sequence[int]) -> np.ndarray:
+        """Codes of ring keys; raises :class:`CodeOverflow` if a total degree exceeds max_degree."""
+        if self.wide or not len(keys):
+            return np.array(list(keys), dtype=self.dtype)
+        exps = self.ring.decode_many(keys)
+        top = int(exps.sum(axis=1).max())
+        if top > self.max_degree:
+            raise CodeOverflow(f"degree {top} exceeds the {self.bits}-bit fields of the monomial codes")
+        return self.encode(exps)
+
+    def to_keys(self, codes: np.ndarray) -> list[int]:
+        """Ring keys of codes, as Python ints."""
+        if self.wide:
+            return codes.tolist()
+        placed = self._fields(codes) << self._key_shifts
+        words = [np.bitwise_or.reduce(placed[:, j : j + 4], axis=1) for j in range(0, placed.shape[1], 4)]
+        keys = words[-1].tolist()
+        for word in reversed(words[:-1]):
+            keys = [k << 64 | w for k, w in zip(keys, word.tolist())]
+        return keys
+
+    def _fields(self, codes: np.ndarray) -> np.ndarray:
+        """Field values of narrow codes (N x rows, uint64), least significant first."""
+        return (codes[:, None] >> self._code_shifts) & np.uint64(self.max_degree)
+
+
 def _mod(c, p: int) -> int:
     """Reduce an integer or rational coefficient mod p (raises ZeroDivisionError if p | denominator)."""
     if isinstance(c, int):

@@ -25,6 +25,10 @@ falls. Measured over GF(65521) when this design was chosen:
   multipliers up to degree 8 (1320 rows) and the extended basis P = {o-degree <= 3, (H, b)-degree
   <= 1}, R = o3 P, one relation of the 105 needed is still missing (and P spans only 70 of the 75
   dimensions of the quotient, so higher degrees would be needed anyway);
+* eliminating (H, b) instead (the elimination ideal of 9r3s in the offsets, block order over
+  GF(65521), has 9 generators of degree 6 and 19 of degree 7, and 75 standard monomials up to degree
+  6): offset-only multiples o^k C_i give no offset-only relation at all up to k = 6 (672 x 835), and
+  at k = 7 (960 x 1134) only 4 of the 45 relations of degree <= 7 that the action matrix needs;
 * expanding the F4 trace into multiples of the input equations (needed(g) = union of t' needed(g'))
   gives 777760 rows for 6r4s; tracking exact cofactors instead still gives 176222 rows, of degree up
   to 11;

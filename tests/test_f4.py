@@ -153,6 +153,18 @@ def test_univariate_ideal_is_generated_by_the_gcd():
         assert groebner([f, g], F4Options(backend=be)).basis == (common.monic(),) == (expected,)
 
 
+def test_degrees_beyond_the_narrow_monomial_codes():
+    # 16 variables leave 4 bits per field of the packed monomial codes (degrees up to 15); the pair
+    # (x0^8, x0 x1^8) has degree 16, so the run is repeated with wide codes
+    ring = Ring([f"x{i}" for i in range(16)], 32003)
+    x = ring.gens()
+    polys = [x[0] ** 8 + x[1] + 1, x[0] * x[1] ** 8 + x[2]]
+    results = run_both(polys)
+    assert results["python"].basis == results["numpy"].basis
+    assert max(r.degree for r in results["numpy"].rounds) > 15
+    assert set(results["numpy"].basis) == sympy_basis(ring, polys)
+
+
 def test_reduced_basis_is_minimal_when_one_input_lm_divides_another():
     """x^2 | lm(x^2*y + y^3): the reduced basis is {x^2, y^3}, not {x^2, x^2*y, y^3}."""
     ring = Ring(["x", "y"], 32003)

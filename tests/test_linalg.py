@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from analysis.linalg import _rref_flint, _rref_numpy, get_backend, matmul_mod
+from analysis.linalg import SparseRows, _rref, _rref_dicts, get_backend, matmul_mod
 
 
 def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3):
@@ -38,11 +38,35 @@ def test_numpy_backend_matches_reference(p, seed):
 
 
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
-def test_rref_paths_agree(p):
+@pytest.mark.parametrize("seed", range(3))
+def test_sparse_interface_matches_row_lists(p, seed):
+    rng = np.random.default_rng(seed)
+    ncols = 400
+    pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=300, nrows=120, density=0.1)
+    pivot_rows = SparseRows.from_rows([pivots[c] for c in rng.permutation(sorted(pivots))])  # any order
+    sparse_rows = SparseRows.from_rows(rows)
+    assert sparse_rows.to_rows() == rows
+    assert SparseRows.from_dense(sparse_rows.to_dense(ncols)).to_rows() == rows
+    assert sparse_rows.take([2, 0]).to_rows() == [rows[2], rows[0]]
+    for name in ("python", "numpy"):
+        backend = get_backend(name)
+        reduced = backend.reduce_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
+        assert reduced == backend.reduce(pivots, rows, ncols, p)
+        each = backend.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
+        assert each == backend.reduce_each(pivots, rows, ncols, p)
+
+
+@pytest.mark.parametrize("p", [7, 65521, 2147483647])
+def test_blocked_rref_matches_reference(p):
     rng = np.random.default_rng(p % 97)
-    for r, c, rank in [(60, 500, 60), (120, 400, 30), (80, 90, 80)]:
+    for r, c, rank in [(60, 500, 60), (120, 400, 30), (80, 90, 80), (0, 10, 0)]:
         a = rng.integers(0, p, (r, rank))
         b = rng.integers(0, p, (rank, c)) * (rng.random((rank, c)) < 0.5)
         m = matmul_mod(a, b.astype(np.int64), p)
-        x, y = _rref_numpy(m, p), _rref_flint(m, p)
-        assert x.shape == y.shape and (x == y).all()
+        ref = np.zeros((0, c), dtype=np.int64)
+        rows = _rref_dicts([{j: int(v) for j, v in enumerate(row) if v} for row in m], p)
+        if rows:
+            ref = np.array([[row.get(j, 0) for j in range(c)] for row in rows], dtype=np.int64)
+        for chunk in (1, 7, 16, 200):
+            x = _rref(m, p, chunk)
+            assert x.shape == ref.shape and (x == ref).all(), f"p={p} shape={m.shape} chunk={chunk}"

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from analysis.linalg import matmul_mod
-from analysis.ring import BadPrime, Ring, check_prime
+from analysis.ring import BadPrime, CodeOverflow, MonomialCodes, Ring, check_prime
 
 
 @pytest.mark.parametrize("order", ["grevlex", "lex", "block:2,3"])
@@ -17,6 +17,35 @@ def test_keys_are_additive_order_preserving_and_decode(order):
     assert [tuple(r) for r in ring.decode_many(keys).tolist()] == exps
     for (e1, k1), (e2, k2) in zip(zip(exps, keys), zip(exps[1:], keys[1:])):
         assert ring.key(tuple(x + y for x, y in zip(e1, e2))) == k1 + k2
+
+
+@pytest.mark.parametrize(
+    "nvars,order", [(5, "grevlex"), (5, "lex"), (9, "block:4,5"), (12, "grevlex"), (70, "grevlex")]
+)
+def test_monomial_codes_round_trip_order_and_add_like_keys(nvars, order):
+    ring = Ring([f"x{i}" for i in range(nvars)], 65521, order)
+    rng = np.random.default_rng(nvars)
+    exps = rng.integers(0, 3, (300, nvars)) * (rng.random((300, nvars)) < 4 / nvars)
+    keys = [ring.key(tuple(int(v) for v in e)) for e in exps]
+    for wide in (False, True):
+        codes = MonomialCodes(ring, wide)
+        assert codes.wide == (wide or nvars > 64)
+        c = codes.from_keys(keys)
+        assert codes.to_keys(c) == keys
+        assert (codes.decode(c) == exps).all() and (codes.encode(exps) == c).all()
+        assert (codes.degrees(c) == exps.sum(axis=1)).all()
+        assert [keys[i] for i in np.argsort(c, kind="stable")] == sorted(keys)
+        assert codes.to_keys(c[:-1] + c[1:]) == [a + b for a, b in zip(keys[:-1], keys[1:])]
+
+
+def test_narrow_codes_refuse_degrees_they_cannot_hold():
+    ring = Ring([f"x{i}" for i in range(16)], 65521)  # 4-bit fields: degrees up to 15
+    codes = MonomialCodes(ring)
+    assert codes.max_degree == 15
+    codes.from_keys([ring.key((15,) + (0,) * 15)])
+    with pytest.raises(CodeOverflow):
+        codes.from_keys([ring.key((16,) + (0,) * 15)])
+    assert MonomialCodes(ring, wide=True).from_keys([ring.key((16,) + (0,) * 15)]).dtype == object
 
 
 def test_grevlex_and_lex_compare_like_sympy():
