@@ -95,9 +95,17 @@ def _pack(E: np.ndarray, field: np.dtype) -> np.ndarray:
     return out
 
 
+_GUARDS: dict[tuple[int, int], np.ndarray] = {}
+
+
 def _guard(field: np.dtype, nwords: int) -> np.ndarray:
-    """The top bit of every field of a packed word."""
-    return np.full(nwords, 0x8080808080808080 if field.itemsize == 1 else 0x8000800080008000, dtype=np.uint64)
+    """The top bit of every field of a packed word (cached; do not modify)."""
+    key = (field.itemsize, nwords)
+    guard = _GUARDS.get(key)
+    if guard is None:
+        guard = np.full(nwords, 0x8080808080808080 if field.itemsize == 1 else 0x8000800080008000, dtype=np.uint64)
+        _GUARDS[key] = guard
+    return guard
 
 
 def _divides_words(a: np.ndarray, b: np.ndarray, guard: np.ndarray) -> np.ndarray:
@@ -151,15 +159,16 @@ class _State:
         self.field = _exponent_field(0)
         # per element: packed exponents and degree of the leading monomial, its code, whether it is
         # active, its terms pool[starts : starts + lengths] and their top degree
-        self.E = _pack(np.zeros((16, ring.nvars), dtype=np.int64), self.field)
-        self.lm_degrees = np.zeros(16, dtype=np.int64)
-        self.lm_codes = np.zeros(16, dtype=self.codes.dtype)
-        self.active = np.zeros(16, dtype=bool)
-        self.starts = np.zeros(16, dtype=np.int64)
-        self.lengths = np.zeros(16, dtype=np.int64)
-        self.max_degrees = np.zeros(16, dtype=np.int64)
-        self.pool_codes = np.zeros(1024, dtype=self.codes.dtype)
-        self.pool_coeffs = np.zeros(1024, dtype=np.int64)
+        # room for a typical run, so that the arrays rarely grow
+        self.E = _pack(np.zeros((256, ring.nvars), dtype=np.int64), self.field)
+        self.lm_degrees = np.zeros(256, dtype=np.int64)
+        self.lm_codes = np.zeros(256, dtype=self.codes.dtype)
+        self.active = np.zeros(256, dtype=bool)
+        self.starts = np.zeros(256, dtype=np.int64)
+        self.lengths = np.zeros(256, dtype=np.int64)
+        self.max_degrees = np.zeros(256, dtype=np.int64)
+        self.pool_codes = np.zeros(16384, dtype=self.codes.dtype)
+        self.pool_coeffs = np.zeros(16384, dtype=np.int64)
         self.pool_size = 0
         # pairs: rows (i, j, lcm degree) and the packed lcm exponents
         self.pairs = np.zeros((0, 3), dtype=np.int64)
@@ -215,7 +224,7 @@ class _State:
         self.lm_degrees[new] = leads.sum(axis=1)
         self.lm_codes[new] = codes[indptr[:-1]]
         self.starts[new] = self.pool_size + indptr[:-1]
-        self.lengths[new] = np.diff(indptr)
+        self.lengths[new] = indptr[1:] - indptr[:-1]
         self.max_degrees[new] = np.maximum.reduceat(degrees, indptr[:-1])
         self.pool_size = end
 
@@ -243,7 +252,7 @@ class _State:
         self.polys.extend(polys)
         # activity spans of the partners: born (inserted) before t, made inactive by the first later h_u
         # whose lm divides theirs (a new lm cannot divide an earlier, larger one)
-        partners = np.concatenate([np.flatnonzero(self.active[:k]), np.arange(k, k + m)])
+        partners = np.concatenate([self.active[:k].nonzero()[0], np.arange(k, k + m)])
         born = np.concatenate([np.full(len(partners) - m, -1), np.arange(m)])
         words = self.E.view(np.uint64)
         guard = _guard(self.field, words.shape[1])
@@ -256,7 +265,7 @@ class _State:
         for t0 in range(0, m, step):
             t = np.arange(t0, min(t0 + step, m))
             span = (born[None, :] < t[:, None]) & (dies[None, :] >= t[:, None])
-            live = np.flatnonzero(span.any(axis=0))
+            live = span.any(axis=0).nonzero()[0]
             if not len(live):
                 continue
             span, cand = span[:, live], partners[live]
@@ -314,11 +323,11 @@ class _Rows:
     lengths: np.ndarray
 
     @staticmethod
-    def of(state: "_State", mult: np.ndarray, index: np.ndarray) -> "_Rows":
+    def of(state: "_State", mult: np.ndarray, index: np.ndarray, checked: bool = False) -> "_Rows":
         """The rows mult[r] * g[index[r]]; raises :class:`CodeOverflow` when a product could exceed the
-        degrees the codes can hold."""
+        degrees the codes can hold (unless checked says that no term can exceed a degree already seen)."""
         codes = state.codes
-        if len(index) and not codes.wide:
+        if len(index) and not codes.wide and not checked:
             top = int((codes.degrees(mult) + state.max_degrees[index]).max())
             if top > codes.max_degree:
                 raise CodeOverflow(f"degree {top} exceeds the narrow monomial codes")
@@ -335,8 +344,9 @@ class _Rows:
 
 
 def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each monomial code, the sparsest active element whose leading monomial divides it (the first
-    such in index order on ties): (mask of monomials that have one, their reducers)."""
+    """For each monomial code, the first element of act (the active elements by increasing length, in
+    index order on ties: see :func:`_by_length`) whose leading monomial divides it: (mask of monomials
+    that have one, their reducers)."""
     X = state.codes.decode(monomials)
     field = _exponent_field(int(X.max(initial=0)))
     if field.itemsize < state.field.itemsize:
@@ -344,49 +354,85 @@ def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np
     leads = state.E[act] if field == state.field else _pack(state.lead_exponents(act), field)
     lead_words, mono_words = leads.view(np.uint64), _pack(X, field).view(np.uint64)
     guard = _guard(field, lead_words.shape[1])
-    lengths = state.lengths[act]
-    big = np.iinfo(np.int64).max
+    chunk = max(1, 1_000_000 // len(act))
+    if len(monomials) <= chunk:
+        divides = _divides_words(lead_words, mono_words, guard)
+        best = divides.argmax(axis=1)
+        has = divides[np.arange(len(best)), best]
+        return has, act[best[has]]
     best = np.zeros(len(monomials), dtype=np.int64)
     has = np.zeros(len(monomials), dtype=bool)
-    chunk = max(1, 1_000_000 // len(act))
     for s in range(0, len(monomials), chunk):
         divides = _divides_words(lead_words, mono_words[s : s + chunk], guard)
-        cost = np.where(divides, lengths[None, :], big)
-        best[s : s + chunk] = cost.argmin(axis=1)
+        best[s : s + chunk] = divides.argmax(axis=1)
         has[s : s + chunk] = divides.any(axis=1)
     return has, act[best[has]]
 
 
-def _first_seen(terms: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """The distinct terms that are not in known (sorted), in order of first occurrence."""
+def _by_length(state: _State) -> np.ndarray:
+    """The active elements by increasing number of terms, in index order on ties (the preferred reducers
+    first)."""
+    act = state.active[: len(state.polys)].nonzero()[0]
+    return act[state.lengths[act].argsort(kind="stable")]
+
+
+def _distinct(values: np.ndarray) -> np.ndarray:
+    """The distinct values, ascending (np.unique without its overhead, for short arrays)."""
+    values = np.sort(values)
+    if len(values) > 1:
+        keep = np.empty(len(values), dtype=bool)
+        keep[0] = True
+        np.not_equal(values[1:], values[:-1], out=keep[1:])
+        values = values[keep]
+    return values
+
+
+def _first_seen(terms: np.ndarray, known: np.ndarray, ordered: bool = True) -> np.ndarray:
+    """The distinct terms that are not in known (sorted), in order of first occurrence if ordered, else
+    ascending."""
     if len(known):
-        at = np.minimum(np.searchsorted(known, terms), len(known) - 1)
+        at = known.searchsorted(terms)
+        at[at == len(known)] = 0
         terms = terms[known[at] != terms]
+    if not ordered:
+        return _distinct(terms)
     distinct, first = np.unique(terms, return_index=True)
-    return distinct[np.argsort(first)]
+    return distinct[first.argsort()]
 
 
-def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_Rows, np.ndarray]:
+def _graded(codes: MonomialCodes) -> bool:
+    """Whether the order compares total degrees first: the most significant field of a code is the
+    total degree."""
+    top = codes.ring._nrows - 1
+    return not codes.wide and list(codes._degree_fields) == [top] and int(codes._degree_weights[0]) == 1
+
+
+def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bool = True) -> tuple[_Rows, np.ndarray]:
     """Symbolic preprocessing on arrays: add a reducer row for every matrix monomial divisible by a lead.
 
-    Works in waves: the monomials first seen in one wave (in order of first occurrence) are tested for
-    divisibility against all active leading monomials at once; the reducer of a monomial is the
-    sparsest basis element whose leading monomial divides it. With leads_done=False the leading
-    monomials of the given rows get reducers too (tail reduction). Returns all rows, the given ones first
-    and then the reducers in the order found, and the column codes ascending.
+    Works in waves: the monomials first seen in one wave are tested for divisibility against all active
+    leading monomials at once; the reducer of a monomial is the sparsest basis element whose leading
+    monomial divides it. With leads_done=False the leading monomials of the given rows get reducers too
+    (tail reduction). Returns all rows, the given ones first and then the reducers wave by wave, and the
+    column codes ascending. Within a wave the reducers come in order of first occurrence of their
+    monomials if ordered (for callers that record the rows), else by increasing monomial: the matrix
+    and its reduction do not depend on that order.
     """
-    done = np.unique(state.lm_codes[rows.index] + rows.mult) if leads_done else rows.terms[:0]
-    frontier = _first_seen(rows.terms, done)
-    seen = np.union1d(frontier, done)
+    done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else rows.terms[:0]
+    frontier = _first_seen(rows.terms, done, ordered)
+    seen = _distinct(np.concatenate([frontier, done]))
     parts = [rows]
-    act = np.flatnonzero(state.active[: len(state.polys)])
+    act = _by_length(state)
+    # a reducer's leading monomial is a matrix monomial; in a degree order no other term is of higher
+    # degree, so the reducers need no overflow check
+    graded = _graded(state.codes)
     while len(frontier) and len(act):
         has, red_index = _reducers(state, act, frontier)
         if not len(red_index):
             break
-        parts.append(_Rows.of(state, frontier[has] - state.lm_codes[red_index], red_index))
-        frontier = _first_seen(parts[-1].terms, seen)
-        seen = np.concatenate([seen, np.sort(frontier)])
+        parts.append(_Rows.of(state, frontier[has] - state.lm_codes[red_index], red_index, graded))
+        frontier = _first_seen(parts[-1].terms, seen, ordered)
+        seen = np.concatenate([seen, np.sort(frontier) if ordered else frontier])
         seen.sort(kind="stable")  # two sorted runs: a merge
     return _Rows.concat(parts), seen
 
@@ -402,10 +448,13 @@ def _assemble(state: _State, rows: _Rows, columns: np.ndarray) -> SparseRows:
 def _split_pivots(leads: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One pivot row per leading column (the sparsest, the first on ties), the others to reduce:
     (pivot rows, rows to reduce), each in order of increasing length."""
-    order = np.argsort(lengths, kind="stable")
-    _, first = np.unique(leads[order], return_index=True)
+    order = lengths.argsort(kind="stable")
+    by_lead = leads[order].argsort(kind="stable")
+    sorted_leads = leads[order[by_lead]]
     is_pivot = np.zeros(len(order), dtype=bool)
-    is_pivot[first] = True
+    if len(order):
+        is_pivot[by_lead[0]] = True
+        is_pivot[by_lead[1:][sorted_leads[1:] != sorted_leads[:-1]]] = True
     return order[is_pivot], order[~is_pivot]
 
 
@@ -500,6 +549,9 @@ def _f4(
     state = _State(ring, codes)
     rounds: list[RoundStats] = []
 
+    # in a degree order the terms of the pair rows are of degree at most the pairs' (checked by
+    # _pair_rows), so the rows need no overflow check of their own
+    graded = _graded(codes)
     inputs = [f.monic() for f in polys if f]
     if not inputs:  # only zero polynomials: the zero ideal
         return (), ()
@@ -516,7 +568,7 @@ def _f4(
         t0 = time.perf_counter()
         d, pi, pj, lcms = state.pop_pairs()
         npairs = len(pi)
-        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms)))
+        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms), graded), ordered=False)
         nrows, ncols = len(rows.index), len(columns)
         if nrows * ncols > options.max_matrix_cells:
             raise MatrixTooLarge(
@@ -524,6 +576,7 @@ def _f4(
             )
         matrix = _assemble(state, rows, columns)
         pivot_rows, reduce_rows = _split_pivots(matrix.leads, matrix.lengths)
+        pivot_rows = pivot_rows[matrix.leads[pivot_rows].argsort()]  # by lead: the backend need not sort
         new_rows = backend.reduce_sparse(matrix.take(pivot_rows), matrix.take(reduce_rows), ncols, p)
         if _insert_rows(state, new_rows, columns[::-1]):
             return (ring.one(),), tuple(rounds)
@@ -569,8 +622,8 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     """
     ring = state.ring
     idx = np.flatnonzero(state.active[: len(state.polys)])
-    elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx)
-    rows, columns = _preprocess(state, elements, leads_done=False)
+    elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
+    rows, columns = _preprocess(state, elements, leads_done=False, ordered=False)
     matrix = _assemble(state, rows, columns)
     pivots = matrix.take(np.arange(len(idx), len(rows.index)))
     heads = matrix.take(np.arange(len(idx)))
@@ -578,7 +631,8 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     tail[heads.indptr[:-1]] = False
     tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])
     reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime)
-    keys = state.codes.to_keys(columns[::-1][reduced.cols])
+    column_keys = state.codes.to_keys(columns[::-1])  # fewer than the terms: decode each column once
+    keys = list(map(column_keys.__getitem__, reduced.cols.tolist()))
     vals = reduced.vals.tolist()
     bounds = reduced.indptr.tolist()
     basis = []

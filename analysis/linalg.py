@@ -20,6 +20,7 @@ the echelon form with a blocked row-by-row elimination. Both must return identic
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from itertools import chain
 from typing import Callable, Literal, Sequence
@@ -67,7 +68,7 @@ class SparseRows:
 
     @property
     def lengths(self) -> np.ndarray:
-        return np.diff(self.indptr)
+        return self.indptr[1:] - self.indptr[:-1]
 
     @property
     def leads(self) -> np.ndarray:
@@ -178,15 +179,16 @@ def python_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, 
 # numpy backend
 # ----------------------------------------------------------------------------------------------
 def matmul_mod(x: np.ndarray, y: np.ndarray, p: int) -> np.ndarray:
-    """x @ y mod p for int64 matrices with entries in [0, p), exactly, through float64 BLAS.
+    """x @ y mod p for int64 matrices (or stacks of matrices) with entries in [0, p), exactly, through
+    float64 BLAS.
 
     When every dot product stays below 2**53 one product suffices. Otherwise both factors are split into
     16-bit limbs (p < 2**31 so limbs are < 2**16 and limb dot products stay exact for k < 2**21), and
     the four limb products are recombined mod p in int64.
     """
-    k = x.shape[1]
+    k = x.shape[-1]
     if k == 0:
-        return np.zeros((x.shape[0], y.shape[1]), dtype=np.int64)
+        return np.zeros(np.broadcast_shapes(x.shape[:-2], y.shape[:-2]) + (x.shape[-2], y.shape[-1]), dtype=np.int64)
     if k * (p - 1) ** 2 < 2**53:
         return (x.astype(np.float64) @ y.astype(np.float64)).astype(np.int64) % p
     if k >= 2**21:
@@ -201,146 +203,267 @@ def matmul_mod(x: np.ndarray, y: np.ndarray, p: int) -> np.ndarray:
     return (r00 + r01 * s16 % p + r11 * s32 % p) % p
 
 
-def _solve_unit_upper(x: np.ndarray, t: np.ndarray, p: int) -> np.ndarray:
-    """y with y @ t = x mod p, for t unit upper triangular (k x k) and x (r x k), entries in [0, p).
+def _balanced(x: np.ndarray, p: int) -> np.ndarray:
+    """A representative of x mod p of absolute value below p (at most p/2 + 2), for a float64 array of
+    integers below 2**53 in magnitude (a new array).
 
-    Forward substitution by layers: a column's layer is the longest chain of nonzero entries of t above
-    the diagonal leading to it, so the columns of one layer are final together and are eliminated from
-    all later columns with one product.
+    x - rint(x / p) * p is exact, and the rounded quotient is off by less than 2/p, so the result is
+    zero exactly when x is divisible by p. It costs a few multiplies, against about ten for np.remainder
+    on floats; the float path keeps these representatives and makes them canonical once at the end.
     """
-    dep = np.triu(t, 1)
-    # longest chains by one pass over the entries in column order (t is a small, sparse block; a
-    # vectorised fixpoint would need one pass per layer)
-    dst, src = np.nonzero(dep.T)
-    longest = [0] * len(t)
-    for j, i in zip(dst.tolist(), src.tolist()):
-        if longest[i] >= longest[j]:
-            longest[j] = longest[i] + 1
-    layer = np.array(longest, dtype=np.int64)
-    top = int(layer.max(initial=0))
-    if top == 0:
-        return x
-    order = np.argsort(layer, kind="stable")
-    bounds = np.searchsorted(layer[order], np.arange(1, top + 1)).tolist()
-    dep = dep[np.ix_(order, order)]
-    out = np.empty_like(x)
-    if len(t) * (p - 1) ** 2 + p < 2**53:
-        # a column accumulates one product per predecessor: exact in float64, reduced once when final
-        y = x[:, order].astype(np.float64)
-        dep = dep.astype(np.float64)
-        for start, stop in zip([0] + bounds, bounds):
-            y[:, start:stop] %= p
-            y[:, stop:] -= y[:, start:stop] @ dep[start:stop, stop:]
-        y[:, bounds[-1] :] %= p
-        out[:, order] = y.astype(np.int64)
-        return out
-    y = x[:, order]
-    for start, stop in zip([0] + bounds, bounds):
-        y[:, stop:] = (y[:, stop:] - matmul_mod(y[:, start:stop], dep[start:stop, stop:], p)) % p
-    out[:, order] = y
-    return out
+    q = x * (1.0 / p)
+    np.rint(q, out=q)
+    q *= p
+    return np.subtract(x, q, out=q)
 
 
-def _eliminate(rows: SparseRows, ncols: int, pivots: SparseRows, p: int, block: int = 64) -> np.ndarray:
+def _unit_upper_inverses(t: np.ndarray, p: int, in_float: bool, levels: int = -1) -> np.ndarray:
+    """Inverses mod p of a stack of unit upper triangular (k x k, k a power of two) matrices, in place.
+
+    In float64 when in_float (entries and results as :func:`_balanced` representatives, k * p**2 < 2**53),
+    else in int64 (entries and results in [0, p)).
+
+    By doubling, all matrices at once: the inverse of [[A, B], [0, C]] is [[A^-1, -A^-1 B C^-1], [0, C^-1]],
+    so log2(k) steps of two batched products turn the diagonal blocks of size s, already inverted, into
+    inverted diagonal blocks of size 2s. This replaces a forward substitution per matrix, whose cost is
+    one step per dependency layer. Only the steps s with s & levels are done: the others must have B = 0
+    (true when no entry (i, j), i < j, has s as the top bit of i ^ j).
+    """
+    nb, k = t.shape[0], t.shape[1]
+    item = t.itemsize
+    s = 1
+    while s < k:
+        if not s & levels:
+            s *= 2
+            continue
+        # the diagonal 2s-blocks of every matrix, as a (nb, k / 2s, 2s, 2s) view
+        strides = (k * k * item, 2 * s * (k + 1) * item, k * item, item)
+        diag = np.ndarray((nb, k // (2 * s), 2 * s, 2 * s), t.dtype, t, 0, strides)
+        b = diag[:, :, :s, s:]
+        if s == 1:  # A = C = 1
+            if in_float:
+                np.negative(b, out=b)
+            else:
+                b[...] = (p - b) % p
+        elif in_float:
+            half = (p + 4) / 2  # bound of the representatives
+            ab = diag[:, :, :s, :s] @ b
+            if s * s * half**3 >= 2**53:
+                ab = _balanced(ab, p)
+            np.negative(_balanced(ab @ diag[:, :, s:, s:], p), out=b)
+        else:
+            b[...] = (p - matmul_mod(matmul_mod(diag[:, :, :s, :s], b, p), diag[:, :, s:, s:], p)) % p
+        s *= 2
+    return t
+
+
+_SPARSE_WORK = 2_000_000  # rows x block x width above which sparse pivot blocks may pay ...
+_SPARSE_DENSITY = 8  # ... when at most 1/8 of their entries are nonzero
+_SCRATCH = threading.local()
+_SCRATCH_MAX = 1 << 22  # elements (32 MiB of float64)
+
+
+def _scratch(slot: str, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """A C-contiguous array of the given shape, uninitialised, from a per-thread buffer kept between
+    calls (one per slot and dtype; a later request for the same slot reuses it). Arrays above
+    _SCRATCH_MAX elements are fresh, so that no large buffer outlives a big computation.
+
+    Fresh arrays of a few hundred kilobytes are served by new memory mappings, so every call would pay
+    a page fault per 4 KiB touched; the temporaries of the elimination come from here instead.
+    """
+    size = 1
+    for n in shape:
+        size *= n
+    if size > _SCRATCH_MAX:
+        return np.empty(shape, dtype=dtype)
+    key = (slot, dtype)
+    buffers = _SCRATCH.__dict__
+    buffer = buffers.get(key)
+    if buffer is None or len(buffer) < size:
+        buffer = np.empty(min(max(size, 2 * len(buffer) if buffer is not None else 0), _SCRATCH_MAX), dtype=dtype)
+        buffers[key] = buffer
+    return buffer[:size].reshape(shape)
+
+
+def _eliminate(
+    rows: SparseRows, ncols: int, pivots: SparseRows, p: int, block: int = 64, columns: np.ndarray | None = None
+) -> np.ndarray:
     """The rows as a dense int64 matrix mod p, every pivot column zeroed by the pivot rows (sorted by
-    leading column).
+    leading column); only the given columns if columns is not None.
 
-    A blocked triangular solve: for each block of consecutive pivots, the multipliers of the rows come
-    from a small unit triangular solve on the block's columns, then one product subtracts the block's
-    pivot rows (dense from their first column on) from all rows.
+    A blocked triangular solve: for each block of consecutive pivots, the multipliers of the rows are
+    their entries in the block's columns times the inverse of the block's (unit upper triangular)
+    restriction to those columns, and one product subtracts the block's pivot rows (dense from their
+    first column on) from all rows. The inverses of all blocks are computed together beforehand
+    (:func:`_unit_upper_inverses`).
 
     With p small enough that the sum of all products stays below 2**53, the matrix is kept in float64
-    and reduced mod p only on the few columns a block reads; otherwise every product is reduced mod p
-    in int64 and the (then bounded) differences accumulate in int64.
+    and reduced mod p (to :func:`_balanced` representatives) only on the few columns a block reads;
+    otherwise every product is reduced mod p in int64 and the (then bounded) differences accumulate in
+    int64. Temporaries come from :func:`_scratch`.
     """
     npiv = len(pivots)
     in_float = npiv * (p - 1) ** 2 + p < 2**53
     dtype = np.float64 if in_float else np.int64
-    work = rows.to_dense(ncols, dtype)
-    if not len(work) or not npiv:
-        return work.astype(np.int64)
-    pcols, lengths = pivots.leads, pivots.lengths
-    for start in range(0, npiv, block):
+    if not len(rows) or not npiv:
+        dense = rows.to_dense(ncols)
+        return dense if columns is None else dense[:, columns]
+    work = _scratch("work", (len(rows), ncols), dtype)
+    work.fill(0)
+    work[np.repeat(np.arange(len(rows)), rows.lengths), rows.cols] = rows.vals
+    pcols, lengths, indptr = pivots.leads, pivots.lengths, pivots.indptr
+    block = min(block, 1 << (npiv - 1).bit_length())  # a power of two, for the doubling
+    # the entries of every pivot row in the later pivot columns of its own block
+    owner = np.repeat(np.arange(npiv), lengths)
+    position = np.full(ncols, -1, dtype=np.int64)
+    position[pcols] = np.arange(npiv)
+    at = position[pivots.cols]
+    inside = (at > owner) & (at // block == owner // block)
+    at, row = at[inside], owner[inside]
+    nblocks = -(-npiv // block)
+    diagonal = np.zeros((nblocks, block, block), dtype=dtype)
+    diagonal.reshape(nblocks, block * block)[:, :: block + 1] = 1
+    diagonal[row // block, row % block, at % block] = pivots.vals[inside]
+    # the doubling steps that see an entry: those of the bits of (i ^ j) for the entries (i, j)
+    levels = int(np.bitwise_or.reduce((row % block) ^ (at % block))) if len(row) else 0
+    inverses = _unit_upper_inverses(diagonal, p, in_float, levels) if levels else None
+    for b, start in enumerate(range(0, npiv, block)):
         stop = min(start + block, npiv)
         cols = pcols[start:stop]
-        x = work[:, cols].astype(np.int64) % p
-        live = np.flatnonzero(x.any(axis=1))
+        x = _balanced(work[:, cols], p) if in_float else work[:, cols] % p
+        live = x.any(axis=1).nonzero()[0]
         if not len(live):
             continue
+        if len(live) < len(work):
+            x = x[live]
+        if inverses is not None:  # else every block is the identity
+            inverse = inverses[b, : stop - start, : stop - start]
+            x = _balanced(x @ inverse, p) if in_float else matmul_mod(x.astype(np.int64), inverse, p)
         first = int(cols[0])
-        a, b = pivots.indptr[start], pivots.indptr[stop]
-        dense = np.zeros((stop - start, ncols - first), dtype=dtype)
-        dense[np.repeat(np.arange(stop - start), lengths[start:stop]), pivots.cols[a:b] - first] = pivots.vals[a:b]
-        y = _solve_unit_upper(x[live], dense[:, cols - first].astype(np.int64), p)
-        update = y.astype(np.float64) @ dense if in_float else matmul_mod(y, dense, p)
+        lo, hi = indptr[start], indptr[stop]
+        width = ncols - first
+        if in_float and len(x) * (stop - start) * width > _SPARSE_WORK and (hi - lo) * _SPARSE_DENSITY < (stop - start) * width:
+            # wide, sparse pivot rows and many rows to reduce: a sparse product costs rows x entries
+            # instead of rows x block x width
+            from scipy.sparse import csr_array
+
+            block_rows = csr_array(
+                (pivots.vals[lo:hi].astype(np.float64), pivots.cols[lo:hi] - first, indptr[start : stop + 1] - lo),
+                shape=(stop - start, width),
+            )
+            update = x @ block_rows
+            if len(live) == len(work):
+                work[:, first:] -= update
+            else:
+                work[live, first:] -= update
+            continue
+        dense = _scratch("dense", (stop - start, width), dtype)
+        dense.fill(0)
+        dense[owner[lo:hi] - start, pivots.cols[lo:hi] - first] = pivots.vals[lo:hi]
+        update = _scratch("product", (len(x), width), dtype)
+        if in_float:
+            np.matmul(x, dense, out=update)
+        else:
+            update[...] = matmul_mod(x.astype(np.int64), dense, p)
         if len(live) == len(work):
             work[:, first:] -= update
         else:
             work[live, first:] -= update
-    out = work.astype(np.int64) if in_float else work
-    out %= p
-    return out
+    if columns is not None:
+        work = work[:, columns]
+    if not in_float:
+        return work % p
+    out = _balanced(work, p)
+    np.add(out, p, out=out, where=out < 0)
+    return out.astype(np.int64)
 
 
 def _rref_chunk(m: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
     """Reduced row echelon form of a few rows: (nonzero rows, their pivot columns), row by row.
 
     Each row, reduced by the pivots before it, is zero or gives a new pivot at its leading column,
-    which is then cleared from all other rows (Gauss-Jordan).
+    which is then cleared from all other rows (Gauss-Jordan). int64 entries in [0, p), or float64
+    :func:`_balanced` representatives (chosen by the caller, :func:`_rref`, through the dtype).
     """
+    in_float = m.dtype == np.float64
     m = m.copy()
     pivcols = []
     for row in range(len(m)):
-        nonzero = np.flatnonzero(m[row])
+        nonzero = m[row].nonzero()[0]
         if not len(nonzero):
             continue
         col = int(nonzero[0])
-        lead = m[row] * pow(int(m[row, col]), -1, p) % p
         factors = m[:, col].copy()
         factors[row] = 0
-        m -= np.outer(factors, lead)
-        m %= p
+        if in_float:
+            lead = _balanced(m[row] * pow(int(m[row, col]) % p, -1, p), p)
+            m -= factors[:, None] * lead
+            m[...] = _balanced(m, p)
+        else:
+            lead = m[row] * pow(int(m[row, col]), -1, p) % p
+            m -= factors[:, None] * lead
+            m %= p
         m[row] = lead
         pivcols.append(col)
     return m[m.any(axis=1)], np.array(pivcols, dtype=np.int64)
 
 
 def _rref(m: np.ndarray, p: int, chunk: int = 16) -> np.ndarray:
-    """Reduced row echelon form of a dense int64 matrix (nonzero rows only), chunk by chunk of rows.
+    """Reduced row echelon form of a dense int64 matrix with entries in [0, p) (nonzero rows only),
+    chunk by chunk of rows.
 
     The echelon rows found so far are kept fully reduced; each new chunk is reduced by them with one
     product, brought to echelon form on its own, and then used to clear its pivot columns from the
     earlier echelon rows with one more product. F4 matrices have many zero reductions, which then cost
-    one product each.
+    one product each. When the products stay below 2**53 the work is done in float64 (:func:`_balanced`
+    representatives, cheaper than int64 remainders).
     """
-    echelon = np.zeros((0, m.shape[1]), dtype=np.int64)
+    in_float = m.shape[1] * (p - 1) ** 2 + p < 2**53
+
+    def product(x, y):
+        return _balanced(x @ y, p) if in_float else matmul_mod(x, y, p)
+
+    def reduce(x):
+        return _balanced(x, p) if in_float else x % p
+
+    if in_float:
+        m = m.astype(np.float64)
+    echelon = np.zeros((0, m.shape[1]), dtype=m.dtype)
     pivcols = np.zeros(0, dtype=np.int64)
     for start in range(0, len(m), chunk):
         rows = m[start : start + chunk]
         if len(pivcols):
-            rows = (rows - matmul_mod(rows[:, pivcols], echelon, p)) % p
+            rows = reduce(rows - product(rows[:, pivcols], echelon))
         rows = rows[rows.any(axis=1)]
         if not len(rows):
             continue
         new, new_cols = _rref_chunk(rows, p)
         if len(pivcols):
-            echelon = (echelon - matmul_mod(echelon[:, new_cols], new, p)) % p
+            echelon = reduce(echelon - product(echelon[:, new_cols], new))
         echelon = np.vstack([echelon, new])
         pivcols = np.concatenate([pivcols, new_cols])
-    return echelon[np.argsort(pivcols)]
+    echelon = echelon[pivcols.argsort()]
+    if in_float:
+        echelon = echelon.astype(np.int64)
+        echelon %= p
+    return echelon
 
 
 def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
-    pivots = pivots.take(np.argsort(pivots.leads))
+    leads = pivots.leads
+    if (leads[1:] < leads[:-1]).any():
+        pivots = pivots.take(leads.argsort())
     keep = np.ones(ncols, dtype=bool)
-    keep[pivots.leads] = False
-    free = np.flatnonzero(keep)
-    sub = _eliminate(rows, ncols, pivots, p)[:, free]
+    keep[leads] = False
+    free = keep.nonzero()[0]
+    sub = _eliminate(rows, ncols, pivots, p, columns=free)
     return SparseRows.from_dense(_rref(sub[sub.any(axis=1)], p), free)
 
 
 def numpy_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
-    pivots = pivots.take(np.argsort(pivots.leads))
+    leads = pivots.leads
+    if (leads[1:] < leads[:-1]).any():
+        pivots = pivots.take(leads.argsort())
     return SparseRows.from_dense(_eliminate(rows, ncols, pivots, p))
 
 
