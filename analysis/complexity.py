@@ -59,7 +59,7 @@ import numpy as np
 
 from .degree import DEFAULT_PRIMES
 from .f4 import F4Options, GroebnerResult, groebner
-from .formulations import Formulation, check_root, gf_equations, sample_gf_instance
+from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
 from .linalg import MatrixTooLarge
 from .quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
 from .ring import Poly, Ring
@@ -373,8 +373,7 @@ def root_ranks(formulation: Formulation | str, prime: int = DEFAULT_PRIMES[0], s
     Cheap (no Gröbner basis): used to pick square formulations (n_A + n_B + n_C + minor rank equal to
     the number of unknowns) before a sweep.
     """
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     instance = sample_gf_instance(formulation.config, prime, seed)
     equations = gf_equations(formulation, instance)
     minors = [e for name, e in zip(formulation.equations, equations) if name.startswith("M")]
@@ -543,8 +542,7 @@ def compute_formulation(formulation: Formulation | str, primes: Sequence[int] = 
     After the first instance exceeds the cap, the remaining ones only get their Jacobian rank.
     Returns the combined :class:`FormulationResult`. Paper Section 3, Tables 2-3; reference/NOTES.md.
     """
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     if options is None:
         options = F4Options(max_matrix_cells=DEFAULT_CELLS)
     primes, seeds = tuple(int(p) for p in primes), tuple(int(s) for s in seeds)

@@ -70,6 +70,7 @@ __all__ = [
     "Relabeling",
     "SamplingFailed",
     "TDOAConfig",
+    "as_formulation",
     "canonical_form",
     "check_root",
     "coefficient_expressions",
@@ -168,6 +169,11 @@ class TDOAConfig:
 
 def _as_config(config: TDOAConfig | str) -> TDOAConfig:
     return TDOAConfig.parse(config) if isinstance(config, str) else config
+
+
+def as_formulation(formulation: "Formulation | str") -> "Formulation":
+    """A formulation, parsed from its label (e.g. ``"6r4s:B2,C2-C6,minors"``) when given as text."""
+    return Formulation.parse(formulation) if isinstance(formulation, str) else formulation
 
 
 def _minor_separator(config: TDOAConfig) -> str:

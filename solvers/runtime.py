@@ -338,38 +338,38 @@ class CurvePencilSolver:
             # infinite eigenvalues: smallest |beta| / |alpha|
             order = np.argsort(-np.abs(be) / np.maximum(np.abs(al), 1e-300), kind="stable")[:keep_n]
             with np.errstate(all="ignore"):
-                nu = al[order] / be[order]
                 f = forms[i]
-                fv = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]  # forms at (nu, 1): (7, k)
+                forms_at = lambda nu: f[:, 1:] * nu[None] + f[:, :1]  # noqa: E731  forms at (nu, 1): (7, k)
+                nu = al[order] / be[order]
+                fv = forms_at(nu)
                 sig = fv[0] + fv[1] + fv[2]
                 # o_1 = infinity: sigma = 0 (relative to |(nu, 1)|)
-                keep = np.argsort(-np.abs(sig) / np.sqrt(1.0 + np.abs(nu) ** 2), kind="stable")
-                keep = order[keep[: min(self.basis_size, len(keep) - self.drop_sigma)]]
-                nu = al[keep] / be[keep]
-                x = lin.eigenvector_heads(_complex_eigenvectors(vr, ai, keep), nu)  # (11, k)
+                sel = np.argsort(-np.abs(sig) / np.sqrt(1.0 + np.abs(nu) ** 2), kind="stable")
+                sel = sel[: min(self.basis_size, len(sel) - self.drop_sigma)]
+                nu, fv, sig = nu[sel], fv[:, sel], sig[sel]
+                x = lin.eigenvector_heads(_complex_eigenvectors(vr, ai, order[sel]), nu)  # (11, k)
                 # H, b from the eigenvector, with the scalings at the eigenvalue it belongs to
-                fv = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]
-                w1, w2, sig = fv[0], fv[1], fv[0] + fv[1] + fv[2]
+                w1, w2 = fv[0], fv[1]
                 v = x[:6] / x[:1]
                 # one Newton step on x^T K(nu) x = 0 for the offsets
                 q = np.einsum("akc,ac->kc", (K[i] @ x).transpose(1, 0, 2), x)  # x^T K_k x: (5, k)
                 value = np.sum(q * nu[None] ** powers[:, None], axis=0)
                 slope = np.sum(q[1:] * powers[1:, None] * nu[None] ** (powers[1:, None] - 1), axis=0)
                 nu = nu - value / slope
-                fn = f[:, 1][:, None] * nu[None] + f[:, 0][:, None]
+                fn = forms_at(nu)
                 h = np.stack([sig * w1**2 * v[1], sig * w1 * w2 * v[2], sig * w2**2 * v[3], w1 * v[4], w2 * v[5],
                               fn[3] / (fn[0] + fn[1] + fn[2]), fn[4] / fn[0], fn[5] / fn[1], fn[6] / fn[2]], axis=-1)
-            out[i, : len(keep)] = h
+            out[i, : len(sel)] = h
         return out
 
 
-def _complex_eigenvectors(vr: np.ndarray, ai: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
-    """LAPACK real storage of eigenvectors (conjugate pairs as re, im columns) -> complex columns.
+def _complex_eigenvectors(vr: np.ndarray, ai: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """LAPACK real storage of eigenvectors (conjugate pairs as re, im columns) -> the complex columns wanted.
 
     LAPACK stores a pair at consecutive columns j, j+1 with the positive imaginary part first:
-    v_j = vr_j + i vr_(j+1), v_(j+1) = vr_j - i vr_(j+1). ``columns`` selects the eigenvectors wanted.
+    v_j = vr_j + i vr_(j+1), v_(j+1) = vr_j - i vr_(j+1).
     """
-    cols = np.arange(len(ai)) if columns is None else np.asarray(columns)
+    cols = np.asarray(columns)
     a = ai[cols]
     first, second = a > 0, a < 0
     re = vr[:, np.where(second, cols - 1, cols)]
@@ -394,13 +394,18 @@ def c_pieces(F: np.ndarray, rows: np.ndarray):
 
 def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True):
     """Residuals (P, k) and Jacobian (P, k, 8) of the C equations at x (P, 8) = (h11, h12, h22, b1, b2, o1, o2, o3)."""
-    h11, h12, h22, b1, b2, o1, o2, o3 = (x[:, j : j + 1] for j in range(8))
-    X = c[..., 0] + alpha * o1 + beta[..., 0] * o2
-    Y = c[..., 1] + alpha * o1 + beta[..., 1] * o3
+    h11, h12, h22, b1, b2, o1 = (x[:, j : j + 1] for j in range(6))
+    X, Y = _c_xy(x, c, alpha, beta)
     G = g - alpha * o1 - (h11 * X * X + 2.0 * h12 * X * Y + h22 * Y * Y) + 2.0 * (b1 * X + b2 * Y)
     if not jacobian:
         return G, None
     return G, _c_jacobian(x, X, Y, alpha, beta)[0]
+
+
+def _c_xy(x: np.ndarray, c, alpha, beta):
+    """The rows x = c_1 + alpha o1 + beta_1 o2, y = c_2 + alpha o1 + beta_2 o3 of D~ at x (P, 8): (P, k) each."""
+    o1, o2, o3 = x[:, 5:6], x[:, 6:7], x[:, 7:8]
+    return c[..., 0] + alpha * o1 + beta[..., 0] * o2, c[..., 1] + alpha * o1 + beta[..., 1] * o3
 
 
 def _c_jacobian(x: np.ndarray, X, Y, alpha, beta):
@@ -488,13 +493,10 @@ def _field(x: np.ndarray, pieces, dpieces) -> np.ndarray:
     """Jacobian (P, k, 8) in x and derivative (P, k) in s of the C residuals (chain rule through the data pieces)."""
     c, alpha, beta, g = pieces
     dc, dalpha, dbeta, dg = dpieces
-    o1, o2, o3 = x[:, 5:6], x[:, 6:7], x[:, 7:8]
-    X = c[..., 0] + alpha * o1 + beta[..., 0] * o2
-    Y = c[..., 1] + alpha * o1 + beta[..., 1] * o3
+    X, Y = _c_xy(x, c, alpha, beta)
     J, gx, gy = _c_jacobian(x, X, Y, alpha, beta)
-    dX = dc[..., 0] + dalpha * o1 + dbeta[..., 0] * o2
-    dY = dc[..., 1] + dalpha * o1 + dbeta[..., 1] * o3
-    return J, dg - dalpha * o1 + gx * dX + gy * dY
+    dX, dY = _c_xy(x, dc, dalpha, dbeta)  # the rows are linear in the data pieces
+    return J, dg - dalpha * x[:, 5:6] + gx * dX + gy * dY
 
 
 def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:

@@ -61,7 +61,7 @@ from analysis.f4 import (
     select_pairs,
     split_pivots,
 )
-from analysis.formulations import Formulation, coefficient_expressions, gf_equations, sample_gf_instance
+from analysis.formulations import Formulation, as_formulation, coefficient_expressions, gf_equations, sample_gf_instance
 from analysis.linalg import get_backend
 from analysis.quotient import normal_form, standard_monomials
 from analysis.ring import Poly, Ring
@@ -330,8 +330,7 @@ def build_template(formulation: Formulation | str, options: TemplateOptions = Te
     Raises :class:`TemplateError` if the final template fails its exact check.
     """
     t0 = time.perf_counter()
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     config = formulation.config
     p = options.prime
     ring = Ring(formulation.unknowns, p, "grevlex")
@@ -440,8 +439,7 @@ def gf_degree(formulation: Formulation | str, options: TemplateOptions = Templat
     Computed on the instances with seeds ``options.seed`` and ``options.seed + 1``; raises
     :class:`TemplateError` if they disagree or if the known root of an instance is not a root.
     """
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     p = options.prime
     ring = Ring(formulation.unknowns, p, "grevlex")
     degrees = []
@@ -464,8 +462,7 @@ def term_structure(formulation: Formulation | str) -> tuple[list[list[int]], lis
     order; the table lists the monomials by (degree, grevlex). This is the layout of the coefficient
     vector emitted by :mod:`solvers.codegen` (used for polishing and residuals).
     """
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     ring = Ring(formulation.unknowns, 65521, "grevlex")
     symbolic = coefficient_expressions(formulation, "ring")
     per_eq = [sorted((e for e, c in eq.items() if c), key=ring.key, reverse=True) for eq in symbolic]
@@ -476,8 +473,7 @@ def term_structure(formulation: Formulation | str) -> tuple[list[list[int]], lis
 
 def solver_method(formulation: Formulation | str) -> str:
     """The construction used for a formulation: ``curve-pencil``, ``homotopy`` or ``staged``."""
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     config, eqs = formulation.config, tuple(formulation.equations)
     c_eqs = tuple(f"C{i}" for i in range(2, config.m + 1))
     minors = tuple(e for e in eqs if e.startswith("M"))
@@ -491,8 +487,7 @@ def solver_method(formulation: Formulation | str) -> str:
 def build_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions(),
                method: str | None = None) -> TemplateResult:
     """Build the spec of a formulation's solver by ``method`` (default :func:`solver_method`)."""
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     method = method or solver_method(formulation)
     if method == "curve-pencil":
         return build_pencil_spec(formulation, options)
@@ -557,8 +552,7 @@ def build_pencil_spec(formulation: Formulation | str, options: TemplateOptions =
     (o_1 = infinity), and the remaining 22 contain the known root.
     """
     t0 = time.perf_counter()
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     if solver_method(formulation) != "curve-pencil":
         raise TemplateError(f"{formulation.label}: the curve pencil needs 6r4s with B2, C2-C6 and the 10 minors")
     from scipy.linalg import eigvals
@@ -658,8 +652,7 @@ def build_homotopy_spec(formulation: Formulation | str, options: TemplateOptions
     significant digits (the runtime refines them again when it loads the spec).
     """
     t0 = time.perf_counter()
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     if solver_method(formulation) != "homotopy":
         raise TemplateError(f"{formulation.label}: the homotopy needs a square system of C equations with n = 3")
     from .runtime import CSystemHomotopy, _has_duplicates, c_pieces, c_residual_jacobian
@@ -747,8 +740,7 @@ def macaulay_reducible_rank(formulation: Formulation | str, degree: int, action:
 
     The single template works iff the middle number equals |R|.
     """
-    if isinstance(formulation, str):
-        formulation = Formulation.parse(formulation)
+    formulation = as_formulation(formulation)
     p = options.prime
     ring = Ring(formulation.unknowns, p, "grevlex")
     instance = sample_gf_instance(formulation.config, p, options.seed)
