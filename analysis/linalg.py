@@ -449,6 +449,19 @@ def _rref(m: np.ndarray, p: int, chunk: int = 16) -> np.ndarray:
     return echelon
 
 
+def pivot_columns(m: np.ndarray, p: int) -> np.ndarray:
+    """Pivot columns (increasing) of the row echelon form of a dense matrix over GF(p).
+
+    They index a maximal set of linearly independent columns, the leftmost one; applied to the
+    transpose, the same call picks independent rows. Entries may be any integers (reduced mod p here).
+    """
+    m = np.asarray(m, dtype=np.int64) % p
+    if m.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    echelon = _rref(m, p)
+    return np.sort(np.argmax(echelon != 0, axis=1))
+
+
 def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
     leads = pivots.leads
     if (leads[1:] < leads[:-1]).any():

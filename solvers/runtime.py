@@ -394,35 +394,35 @@ def c_pieces(F: np.ndarray, rows: np.ndarray):
 
 def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True):
     """Residuals (P, k) and Jacobian (P, k, 8) of the C equations at x (P, 8) = (h11, h12, h22, b1, b2, o1, o2, o3)."""
-    h11, h12, h22, b1, b2, o1 = (x[:, j : j + 1] for j in range(6))
-    X, Y = _c_xy(x, c, alpha, beta)
-    G = g - alpha * o1 - (h11 * X * X + 2.0 * h12 * X * Y + h22 * Y * Y) + 2.0 * (b1 * X + b2 * Y)
+    W = _c_xy(x, c, alpha, beta)
+    HW = _c_hw(x, W)
+    G = g - alpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", W, 2.0 * x[:, None, 3:5] - HW)
     if not jacobian:
         return G, None
-    return G, _c_jacobian(x, X, Y, alpha, beta)[0]
+    return G, _c_jacobian(x, W, HW, alpha, beta)[0]
 
 
 def _c_xy(x: np.ndarray, c, alpha, beta):
-    """The rows x = c_1 + alpha o1 + beta_1 o2, y = c_2 + alpha o1 + beta_2 o3 of D~ at x (P, 8): (P, k) each."""
-    o1, o2, o3 = x[:, 5:6], x[:, 6:7], x[:, 7:8]
-    return c[..., 0] + alpha * o1 + beta[..., 0] * o2, c[..., 1] + alpha * o1 + beta[..., 1] * o3
+    """The rows (x, y) = (c_1 + alpha o1 + beta_1 o2, c_2 + alpha o1 + beta_2 o3) of D~ at x (P, 8), stacked: (P, k, 2)."""
+    return c + (alpha * x[:, 5:6])[..., None] + beta * x[:, None, 6:8]
 
 
-def _c_jacobian(x: np.ndarray, X, Y, alpha, beta):
-    """Jacobian (P, k, 8) of the C equations from their X, Y (P, k); also the gradients gx, gy in (X, Y)."""
-    h11, h12, h22, b1, b2 = (x[:, j : j + 1] for j in range(5))
-    gx = 2.0 * (b1 - h11 * X - h12 * Y)
-    gy = 2.0 * (b2 - h12 * X - h22 * Y)
-    J = np.empty(X.shape + (8,), dtype=np.result_type(X, x))
-    J[..., 0] = -X * X
-    J[..., 1] = -2.0 * X * Y
-    J[..., 2] = -Y * Y
-    J[..., 3] = 2.0 * X
-    J[..., 4] = 2.0 * Y
-    J[..., 5] = alpha * (gx + gy - 1.0)
-    J[..., 6] = beta[..., 0] * gx
-    J[..., 7] = beta[..., 1] * gy
-    return J, gx, gy
+def _c_hw(x: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """H (x, y) for every row (P, k, 2), H = [[h11, h12], [h12, h22]] of each path."""
+    H = x[:, (0, 1, 1, 2)].reshape(-1, 2, 2)
+    return W @ H
+
+
+def _c_jacobian(x: np.ndarray, W, HW, alpha, beta):
+    """Jacobian (P, k, 8) of the C equations from their rows W = (x, y) and H W; also their gradient in (x, y)."""
+    gxy = 2.0 * (x[:, None, 3:5] - HW)
+    J = np.empty(W.shape[:-1] + (8,), dtype=np.result_type(W, x))
+    J[..., 0:3:2] = -W * W
+    J[..., 1] = -2.0 * W[..., 0] * W[..., 1]
+    J[..., 3:5] = 2.0 * W
+    J[..., 5] = alpha * (gxy.sum(axis=-1) - 1.0)
+    J[..., 6:8] = beta * gxy
+    return J, gxy
 
 
 @dataclass(frozen=True)
@@ -446,33 +446,42 @@ class TrackerOptions:
 
 
 class _CPath:
-    """Data pieces along the straight segment F(s) = F0 + s (F1 - F0), quadratic in s, per path."""
+    """Data pieces along the straight segment F(s) = F0 + s (F1 - F0), quadratic in s, per path.
+
+    The pieces (c, alpha, beta, g) of :func:`c_pieces` are stacked into one array (P, k, 6) per
+    coefficient of s, so that evaluating them at a step is a handful of numpy operations.
+    """
 
     def __init__(self, F0: np.ndarray, F1: np.ndarray, rows: np.ndarray):
         D = F1 - F0
-        p0, pd, p1 = c_pieces(F0, rows), c_pieces(D, rows), c_pieces(F0 + D, rows)
-        # quadratic pieces (c, g): q(F0 + sD) = q(F0) + s (q(F0 + D) - q(F0) - q(D)) + s^2 q(D);
-        # linear pieces (alpha, beta): l(F0) + s l(D)
+        p0, pd, p1 = (_stack_pieces(c_pieces(G, rows)) for G in (F0, D, F0 + D))
+        # c and g are quadratic in the data: q(F0 + sD) = q(F0) + s (q(F0 + D) - q(F0) - q(D)) + s^2 q(D);
+        # alpha and beta are linear: l(F0) + s l(D)
+        quad = np.array([True, True, False, False, False, True])
         self.k0 = p0
-        self.k1 = tuple((b - a - dd) if quad else dd for a, dd, b, quad in zip(p0, pd, p1, (True, False, False, True)))
-        self.k2 = tuple(dd if quad else np.zeros_like(dd) for dd, quad in zip(pd, (True, False, False, True)))
+        self.k1 = np.where(quad, p1 - p0 - pd, pd)
+        self.k2 = np.where(quad, pd, 0.0)
         self.target = c_pieces(F1, rows)
 
     def take(self, idx: np.ndarray) -> "_CPath":
         out = _CPath.__new__(_CPath)
-        out.k0 = tuple(a[idx] for a in self.k0)
-        out.k1 = tuple(a[idx] for a in self.k1)
-        out.k2 = tuple(a[idx] for a in self.k2)
+        out.k0, out.k1, out.k2 = self.k0[idx], self.k1[idx], self.k2[idx]
         out.target = tuple(a[idx] for a in self.target)
         return out
 
     def at(self, s: np.ndarray):
-        out, dout = [], []
-        for a, b, c in zip(self.k0, self.k1, self.k2):
-            sh = s.reshape((-1,) + (1,) * (a.ndim - 1))
-            out.append(a + sh * (b + sh * c))
-            dout.append(b + 2.0 * sh * c)
-        return out, dout
+        """The pieces (c, alpha, beta, g) at s (P,) and their derivatives in s."""
+        sh = s[:, None, None]
+        return _split_pieces(self.k0 + sh * (self.k1 + sh * self.k2)), _split_pieces(self.k1 + (2.0 * sh) * self.k2)
+
+
+def _stack_pieces(pieces) -> np.ndarray:
+    c, alpha, beta, g = pieces
+    return np.concatenate([c, alpha[..., None], beta, g[..., None]], axis=-1)
+
+
+def _split_pieces(Z: np.ndarray):
+    return Z[..., 0:2], Z[..., 2], Z[..., 3:5], Z[..., 5]
 
 
 def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -493,10 +502,10 @@ def _field(x: np.ndarray, pieces, dpieces) -> np.ndarray:
     """Jacobian (P, k, 8) in x and derivative (P, k) in s of the C residuals (chain rule through the data pieces)."""
     c, alpha, beta, g = pieces
     dc, dalpha, dbeta, dg = dpieces
-    X, Y = _c_xy(x, c, alpha, beta)
-    J, gx, gy = _c_jacobian(x, X, Y, alpha, beta)
-    dX, dY = _c_xy(x, dc, dalpha, dbeta)  # the rows are linear in the data pieces
-    return J, dg - dalpha * x[:, 5:6] + gx * dX + gy * dY
+    W = _c_xy(x, c, alpha, beta)
+    J, gxy = _c_jacobian(x, W, _c_hw(x, W), alpha, beta)
+    dW = _c_xy(x, dc, dalpha, dbeta)  # the rows are linear in the data pieces
+    return J, dg - dalpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", gxy, dW)
 
 
 def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
