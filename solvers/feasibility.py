@@ -33,7 +33,14 @@ import scipy.sparse.linalg
 
 from analysis.f4 import groebner
 from analysis.linalg import pivot_columns
-from analysis.formulations import Formulation, as_formulation, gf_equations, real_equations, sample_gf_instance
+from analysis.formulations import (
+    Formulation,
+    as_formulation,
+    evaluate_gf,
+    gf_equations,
+    real_equations,
+    sample_gf_instance,
+)
 from analysis.orderings import MonomialOrder
 from analysis.quotient import standard_monomials
 from analysis.ring import Ring
@@ -59,6 +66,8 @@ MULTIPLIER_FAMILIES = ("total", "offsets", "linear-offsets")
 #: Quotient bases: standard monomials of the grevlex basis; or of the elimination ideal in the offsets
 #: (block order (H, b) > o, then grevlex in o), whose monomials involve the offsets only.
 BASES = ("grevlex", "offsets")
+#: The prime on which :func:`gf_basis` confirms the number of roots (65521 if the instance's prime is this one).
+SECOND_PRIME = 32749
 #: Eliminations of the excess columns tried by :func:`template_numerics`.
 ELIMINATIONS = ("svd", "lu", "splu-natural", "splu-colamd")
 
@@ -153,29 +162,53 @@ def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p
     return M.rank()
 
 
+def _grevlex_degree(formulation: Formulation, prime: int, seed: int) -> int:
+    """|B| of the grevlex basis on a seeded consistent instance, whose known root is checked first."""
+    instance = sample_gf_instance(formulation.config, prime, seed)
+    equations = gf_equations(formulation, instance)
+    if any(evaluate_gf(e, instance.root, prime) for e in equations):
+        raise ValueError(f"the known root does not satisfy {formulation.label} over GF({prime}), seed {seed}")
+    ring = Ring(formulation.unknowns, prime, "grevlex")
+    return len(standard_monomials(groebner([ring.from_terms(e) for e in equations])))
+
+
 def gf_basis(formulation: Formulation | str, basis: str = "grevlex", prime: int = 65521,
              seed: int = 1) -> tuple[list[dict], list[Exponent]]:
-    """Equations of a consistent GF(p) instance and a quotient basis of their ideal (see :data:`BASES`)."""
+    """Equations of a consistent GF(p) instance and a quotient basis of their ideal (see :data:`BASES`).
+
+    The number of roots is confirmed on a second instance (seed + 1) over a second prime; a
+    disagreement (a non-generic instance) raises ``ValueError``, as does a known root that is not one.
+    """
     formulation = as_formulation(formulation)
     if basis not in BASES:
         raise ValueError(f"unknown basis {basis!r}; valid: {', '.join(BASES)}")
     unknowns = formulation.unknowns
-    equations = gf_equations(formulation, sample_gf_instance(formulation.config, prime, seed))
+    instance = sample_gf_instance(formulation.config, prime, seed)
+    equations = gf_equations(formulation, instance)
+    if any(evaluate_gf(e, instance.root, prime) for e in equations):
+        raise ValueError(f"the known root does not satisfy {formulation.label} over GF({prime}), seed {seed}")
     if basis == "grevlex":
         ring = Ring(unknowns, prime, "grevlex")
         gb = groebner([ring.from_terms(e) for e in equations])
-        return equations, [ring.exps(m) for m in standard_monomials(gb)]
-    mask = _offset_mask(unknowns)
-    k = int(mask.sum())
-    if not k or not np.all(mask[len(unknowns) - k:]):
-        raise ValueError("the offsets basis needs the offsets as the last unknowns")
-    ring = Ring(unknowns, prime, MonomialOrder("block", len(unknowns), (len(unknowns) - k, k)))
-    gb = groebner([ring.from_terms(e) for e in equations])
-    head = len(unknowns) - k
-    elim = [g for g in gb.basis if all(not any(ring.exps(m)[:head]) for m in g.mons)]
-    sub = Ring(unknowns[head:], prime, "grevlex")
-    gb_o = groebner([sub.from_terms({ring.exps(m)[head:]: c for m, c in zip(g.mons, g.coeffs)}) for g in elim])
-    return equations, [(0,) * head + sub.exps(m) for m in standard_monomials(gb_o)]
+        B = [ring.exps(m) for m in standard_monomials(gb)]
+    else:
+        mask = _offset_mask(unknowns)
+        k = int(mask.sum())
+        if not k or not np.all(mask[len(unknowns) - k:]):
+            raise ValueError("the offsets basis needs the offsets as the last unknowns")
+        ring = Ring(unknowns, prime, MonomialOrder("block", len(unknowns), (len(unknowns) - k, k)))
+        gb = groebner([ring.from_terms(e) for e in equations])
+        head = len(unknowns) - k
+        elim = [g for g in gb.basis if all(not any(ring.exps(m)[:head]) for m in g.mons)]
+        sub = Ring(unknowns[head:], prime, "grevlex")
+        gb_o = groebner([sub.from_terms({ring.exps(m)[head:]: c for m, c in zip(g.mons, g.coeffs)}) for g in elim])
+        B = [(0,) * head + sub.exps(m) for m in standard_monomials(gb_o)]
+    other = SECOND_PRIME if prime != SECOND_PRIME else 65521
+    check = _grevlex_degree(formulation, other, seed + 1)
+    if check != len(B):
+        raise ValueError(f"{formulation.label}: {len(B)} roots over GF({prime}) (seed {seed}) but {check} over "
+                         f"GF({other}) (seed {seed + 1}); a non-generic instance - try another seed")
+    return equations, B
 
 
 def relation_count(formulation: Formulation | str, family: str, degree: int, action: str,

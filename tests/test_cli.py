@@ -91,3 +91,23 @@ def test_tdoa_export_and_unknown_equation(capsys, tmp_path):
     assert code == 0 and "ideal(" in target.read_text()
     code, _, err = run(capsys, "degree", "--tdoa", "6r4s", "--equations", "B2,Q7")
     assert code == 2 and "unknown equation 'Q7'" in err
+
+
+def test_template_check_counts_relations(capsys):
+    assert main(["template-check", "9r3s:C2-C9", "--family", "linear-offsets", "--degrees", "2-3", "--stop"]) == 0
+    out = capsys.readouterr().out
+    assert "|B| = 75 (grevlex basis), action o1" in out
+    assert "degree 2: 480 x 597, 38/63 relations, incomplete" in out  # as in tables/template_evidence_9r3s.csv
+    assert "degree 3: 960 x 1001, 46/63 relations, incomplete" in out
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--degrees", "3-1"], "--degrees must be N or N-M"),
+    (["--action", "q"], "unknown action 'q'"),
+    (["--family", "bogus"], "unknown multiplier family"),
+    (["--basis", "lex"], "unknown basis"),
+])
+def test_template_check_bad_input(capsys, args, fragment):
+    assert main(["template-check", "9r3s:C2-C9", "--degrees", "1", *args]) == 2
+    err = capsys.readouterr().err
+    assert fragment in err and len(err.strip().splitlines()) == 1
