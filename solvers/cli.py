@@ -6,8 +6,8 @@ degree     number of solutions (|B|), dimension and Gröbner basis of a system i
            or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``)
 tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
 generate   regenerate a numeric solver (spec over GF(p) -> solvers/generated/) and print its statistics
-template-check  how many action-matrix relations single elimination templates of a formulation reach
-           over GF(p), for a multiplier family and a range of degrees (solvers.feasibility)
+template-check  how many action-matrix relations single elimination templates of a formulation or of
+           a system file reach over GF(p), per multiplier family and degree (solvers.feasibility)
 reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
 
 Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
@@ -253,20 +253,22 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 def _add_template_check(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "template-check", help="do single elimination templates of a formulation reach the action-matrix relations?",
-        description="For a TDOA formulation, multiply its equations by a family of monomials up to each degree "
-        "and count, over GF(p) on a consistent instance, how many of the relations x*B \\ B -> B the action "
-        "matrix of ACTION needs the Macaulay matrix reaches (exact ranks). A template is complete when it reaches "
-        "all of them. Families: total (all monomials of degree <= d), offsets (monomials in o_j), linear-offsets "
-        "((H, b)-degree <= 1 times offsets). Bases: grevlex standard monomials, or those of the elimination "
-        "ideal in the offsets.")
-    p.add_argument("formulation", help="formulation label, e.g. 9r3s:C2-C9 or '6r4s:B2,C2-C6,minors(10)'")
+        "template-check", help="do single elimination templates of a system reach the action-matrix relations?",
+        description="Multiply the equations of a TDOA formulation (a label such as 9r3s:C2-C9) or of your own "
+        "system (a FILE in msolve format) by a family of monomials up to each degree and count, over GF(p), how "
+        "many of the relations x*B \\ B -> B that the action matrix of ACTION needs the Macaulay matrix reaches "
+        "(exact ranks). A template is complete when it reaches all of them. Families: total (all monomials of "
+        "degree <= d), offsets (monomials in o_j), linear-offsets ((H, b)-degree <= 1 times offsets). Bases: "
+        "grevlex standard monomials, or (formulations) those of the elimination ideal in the offsets. A "
+        "formulation is sampled as a consistent GF(p) instance; a characteristic-0 file is reduced mod p, and "
+        "its number of roots is confirmed mod a second prime.")
+    p.add_argument("system", help="formulation label (e.g. 9r3s:C2-C9) or a system FILE in msolve format")
     p.add_argument("--family", default="total", help="multiplier family: total, offsets, linear-offsets (default total)")
     p.add_argument("--degrees", default="1-3", help="multiplier degrees, e.g. 2 or 1-4 (default 1-3)")
     p.add_argument("--action", help="action unknown (default: the first offset, else the first unknown)")
     p.add_argument("--basis", default="grevlex", help="quotient basis: grevlex or offsets (default grevlex)")
-    p.add_argument("--prime", type=int, default=65521, help="prime of the instance (default 65521)")
-    p.add_argument("--seed", type=int, default=1, help="seed of the consistent GF(p) instance (default 1)")
+    p.add_argument("--prime", type=int, default=65521, help="prime (default 65521; a file of characteristic p uses p)")
+    p.add_argument("--seed", type=int, default=1, help="formulations: seed of the consistent GF(p) instance (default 1)")
     p.add_argument("--stop", action="store_true", help="stop at the first complete degree")
     p.set_defaults(func=cmd_template_check)
 
@@ -282,25 +284,62 @@ def _degree_range(text: str) -> range:
     return range(lo_i, hi_i + 1)
 
 
+def _file_system(path: str, prime: int, basis: str):
+    """Equations over GF(p), unknowns, basis and a description for a user's system file."""
+    from analysis.io import InputError, read_system
+    from analysis.ring import BadPrime, check_prime
+    from solvers.feasibility import SECOND_PRIME, system_basis
+
+    if basis != "grevlex":
+        raise UserError(f"--basis {basis} needs a TDOA formulation; a system file uses the grevlex basis")
+    try:
+        system = read_system(path)
+        prime = system.characteristic or check_prime(prime)
+        ring, polys = system.to_ring(prime)
+    except (InputError, BadPrime) as e:
+        raise UserError(str(e)) from None
+    except OSError as e:
+        raise UserError(f"cannot read {path}: {e.strerror}") from None
+    equations = [{ring.exps(m): c for m, c in zip(f.mons, f.coeffs)} for f in polys if f.mons]
+    B = system_basis(equations, system.variables, prime)
+    note = f"GF({prime})"
+    if not system.characteristic:
+        other = SECOND_PRIME if prime != SECOND_PRIME else 65521
+        ring2, polys2 = system.to_ring(other)
+        check = system_basis([{ring2.exps(m): c for m, c in zip(f.mons, f.coeffs)} for f in polys2 if f.mons],
+                             system.variables, other)
+        if len(check) != len(B):
+            raise UserError(f"{path}: {len(B)} roots mod {prime} but {len(check)} mod {other}; try another --prime")
+        note += f", confirmed mod {other}"
+    return equations, tuple(system.variables), B, prime, note
+
+
 def cmd_template_check(args: argparse.Namespace) -> int:
     import time
 
     from analysis.formulations import as_formulation
     from solvers.feasibility import count_relations, gf_basis, multipliers
 
-    formulation = as_formulation(args.formulation)
-    unknowns = formulation.unknowns
+    if os.path.exists(args.system):
+        equations, unknowns, basis, prime, note = _file_system(args.system, args.prime, args.basis)
+        label = args.system
+    elif ":" in args.system:
+        formulation = as_formulation(args.system)
+        unknowns, prime, label = formulation.unknowns, args.prime, formulation.label
+        equations, basis = gf_basis(formulation, args.basis, prime, args.seed)
+        note = f"GF({prime}) seed {args.seed}"
+    else:
+        raise UserError(f"{args.system!r} is neither a file nor a formulation label such as 9r3s:C2-C9")
     action = args.action or next((u for u in unknowns if u.startswith("o")), unknowns[0])
     if action not in unknowns:
         raise UserError(f"unknown action {action!r}; valid: {', '.join(unknowns)}")
     degrees = _degree_range(args.degrees)
-    equations, basis = gf_basis(formulation, args.basis, args.prime, args.seed)
-    print(f"{formulation.label}: |B| = {len(basis)} ({args.basis} basis), action {action}, GF({args.prime}) "
-          f"seed {args.seed}, {args.family} multipliers", flush=True)
+    print(f"{label}: |B| = {len(basis)} ({args.basis} basis), action {action}, {note}, {args.family} multipliers",
+          flush=True)
     for d in degrees:
         t0 = time.perf_counter()
         mult = multipliers(unknowns, args.family, d)
-        rows, cols, rel, need = count_relations(equations, mult, basis, unknowns.index(action), args.prime)
+        rows, cols, rel, need = count_relations(equations, mult, basis, unknowns.index(action), prime)
         state = "complete" if rel == need else "incomplete"
         print(f"degree {d}: {rows} x {cols}, {rel}/{need} relations, {state} ({time.perf_counter() - t0:.1f} s)",
               flush=True)

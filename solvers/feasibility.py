@@ -55,6 +55,7 @@ __all__ = [
     "gf_basis",
     "multipliers",
     "relation_count",
+    "system_basis",
     "template_numerics",
 ]
 
@@ -209,6 +210,22 @@ def gf_basis(formulation: Formulation | str, basis: str = "grevlex", prime: int 
         raise ValueError(f"{formulation.label}: {len(B)} roots over GF({prime}) (seed {seed}) but {check} over "
                          f"GF({other}) (seed {seed + 1}); a non-generic instance - try another seed")
     return equations, B
+
+
+def system_basis(equations: Sequence[Mapping[Exponent, int]], variables: Sequence[str], prime: int) -> list[Exponent]:
+    """Grevlex standard monomials of any polynomial system over GF(prime) (a user's own system).
+
+    Raises ``ValueError`` if the system has no solutions or is not zero-dimensional.
+    """
+    from analysis.quotient import is_zero_dimensional
+
+    ring = Ring(tuple(variables), prime, "grevlex")
+    gb = groebner([ring.from_terms({e: c % prime for e, c in f.items()}) for f in equations])
+    if gb.is_unit:
+        raise ValueError("the system has no solutions (its Groebner basis is {1})")
+    if not is_zero_dimensional(gb):
+        raise ValueError("the system is not zero-dimensional: no finite quotient basis, no action matrix")
+    return [ring.exps(m) for m in standard_monomials(gb)]
 
 
 def relation_count(formulation: Formulation | str, family: str, degree: int, action: str,

@@ -111,3 +111,18 @@ def test_template_check_bad_input(capsys, args, fragment):
     assert main(["template-check", "9r3s:C2-C9", "--degrees", "1", *args]) == 2
     err = capsys.readouterr().err
     assert fragment in err and len(err.strip().splitlines()) == 1
+
+
+def test_template_check_on_a_system_file(capsys, tmp_path):
+    # two generic quadrics: 4 roots, complete in degree d1 + d2 - 1 = 3 (multipliers of degree 1)
+    f = tmp_path / "q.ms"
+    f.write_text("x, y\n0\n3*x^2 + 5*x*y - 7*y^2 + 2*x - 11*y + 13,\n-4*x^2 + 9*x*y + 6*y^2 - 8*x + 3*y - 5\n")
+    assert main(["template-check", str(f), "--degrees", "0-3", "--stop"]) == 0
+    out = capsys.readouterr().out
+    assert "|B| = 4 (grevlex basis), action x, GF(65521), confirmed mod 32749" in out
+    assert "degree 0: 2 x 6, 2/3 relations, incomplete" in out
+    assert "degree 1: 6 x 10, 3/3 relations, complete" in out and "degree 2" not in out
+    g = tmp_path / "line.ms"
+    g.write_text("x, y\n0\nx + y - 1\n")
+    assert main(["template-check", str(g)]) == 2
+    assert "not zero-dimensional" in capsys.readouterr().err
