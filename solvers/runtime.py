@@ -444,6 +444,10 @@ class TrackerOptions:
     final_newton: int = 3
     max_iterations: int = 3000
 
+    def __post_init__(self) -> None:
+        if self.newton < 1:
+            raise ValueError(f"the tracker needs at least one corrector step per step (newton >= 1), got {self.newton}")
+
 
 class _CPath:
     """Data pieces along the straight segment F(s) = F0 + s (F1 - F0), quadratic in s, per path.
@@ -486,26 +490,38 @@ def _split_pieces(Z: np.ndarray):
 
 def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Batched J^-1 r for (P, n, n), (P, n); NaN for non-finite or singular systems (never raises)."""
-    bad = ~np.isfinite(J.sum(axis=(1, 2)) + r.sum(axis=1))  # one pass: NaN/inf anywhere poisons the sum
+    return _solve_many(J, r[..., None])[..., 0]
+
+
+def _solve_many(J: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Batched J^-1 R for (P, n, n), (P, n, k): one factorisation for k right-hand sides; NaN as :func:`_solve`."""
+    bad = ~np.isfinite(J.sum(axis=(1, 2)) + R.sum(axis=(1, 2)))  # one pass: NaN/inf anywhere poisons the sum
     if bad.any():
         J = np.where(bad[:, None, None], np.eye(J.shape[1]), J)
-        r = np.where(bad[:, None], 0.0, r)
+        R = np.where(bad[:, None, None], 0.0, R)
     try:
-        out = np.linalg.solve(J, r[..., None])[..., 0]
+        out = np.linalg.solve(J, R)
     except np.linalg.LinAlgError:
-        out = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(J, r)])
+        out = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(J, R)])
     out[bad] = np.nan
     return out
 
 
-def _field(x: np.ndarray, pieces, dpieces) -> np.ndarray:
-    """Jacobian (P, k, 8) in x and derivative (P, k) in s of the C residuals (chain rule through the data pieces)."""
+def _field(x: np.ndarray, pieces, dpieces, residual: bool = False):
+    """Jacobian (P, k, 8) in x and derivative (P, k) in s of the C residuals (chain rule through the data pieces).
+
+    With ``residual=True`` the residuals (P, k) come first: (G, J, dG/ds), sharing the rows and H (x, y).
+    """
     c, alpha, beta, g = pieces
     dc, dalpha, dbeta, dg = dpieces
     W = _c_xy(x, c, alpha, beta)
-    J, gxy = _c_jacobian(x, W, _c_hw(x, W), alpha, beta)
+    HW = _c_hw(x, W)
+    J, gxy = _c_jacobian(x, W, HW, alpha, beta)
     dW = _c_xy(x, dc, dalpha, dbeta)  # the rows are linear in the data pieces
-    return J, dg - dalpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", gxy, dW)
+    ds = dg - dalpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", gxy, dW)
+    if not residual:
+        return J, ds
+    return g - alpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", W, 2.0 * x[:, None, 3:5] - HW), J, ds
 
 
 def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
@@ -520,6 +536,9 @@ def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions
     s = np.zeros(P)
     h = np.full(P, options.h0)
     steps = np.zeros(P, dtype=np.int64)
+    # tangent dx/ds at (x, s) per path, NaN until known: the last corrector step of an accepted step
+    # factors J at (almost) the new point, and the same factorisation gives the next step's first stage
+    tangent = np.full(x.shape, np.nan, dtype=complex)
     active = np.arange(P)
     sub = path
     it = 0
@@ -532,18 +551,29 @@ def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions
             def field(xx, ss):
                 return -_solve(*_field(xx, *sub.at(ss)))
 
-            k1 = field(xa, sa)
+            k1 = tangent[active]
+            missing = np.flatnonzero(~np.isfinite(k1).all(axis=1))
+            if len(missing) == len(active):
+                k1 = field(xa, sa)
+            elif len(missing):
+                part = sub.take(missing)
+                k1[missing] = -_solve(*_field(xa[missing], *part.at(sa[missing])))
             k2 = field(xa + 0.5 * ha[:, None] * k1, sa + 0.5 * ha)
             k3 = field(xa + 0.5 * ha[:, None] * k2, sa + 0.5 * ha)
             k4 = field(xa + ha[:, None] * k3, sa + ha)
             xp = xa + (ha / 6.0)[:, None] * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
             sn = np.where(ha >= 1.0 - sa, 1.0, sa + ha)
-            pc, _ = sub.at(sn)
+            pc, dpc = sub.at(sn)
             scale = np.linalg.norm(xp, axis=1) + 1.0
             e0 = e = np.full(len(active), np.inf)
             for k in range(options.newton):
-                G, J = c_residual_jacobian(xp, *pc)
-                dx = _solve(J, G)
+                if k == options.newton - 1:
+                    G, J, dG = _field(xp, pc, dpc, residual=True)
+                    both = _solve_many(J, np.stack([G, dG], axis=-1))
+                    dx, tan = both[..., 0], -both[..., 1]
+                else:
+                    G, J = c_residual_jacobian(xp, *pc)
+                    dx = _solve(J, G)
                 xp = xp - dx
                 e = np.linalg.norm(dx, axis=1) / scale
                 if k == 0:
@@ -552,6 +582,7 @@ def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions
             acc = active[ok]
             x[acc] = xp[ok]
             s[acc] = sn[ok]
+            tangent[acc] = tan[ok]  # rejected paths keep theirs: their (x, s) did not move
             steps[acc] += 1
             h[acc] = np.minimum(np.where(e0[ok] < options.grow, 2.0, 1.0) * h[acc], options.hmax)
             h[active[~ok]] *= 0.5

@@ -75,6 +75,7 @@ from analysis.ring import Poly, Ring
 
 __all__ = [
     "SPEC_FORMAT",
+    "START_DIGITS",
     "STAGED_FORMAT",
     "METHODS",
     "TemplateError",
@@ -649,14 +650,20 @@ def monodromy(F0: np.ndarray, x0: np.ndarray, rows: np.ndarray, degree: int, rng
     return roots, max_loops
 
 
+#: Significant digits of the stored start roots: fewer than their accuracy (about 13 digits after
+#: Newton on F0), so that the spec does not change when the tracker's rounding does (at 14 digits
+#: any change of the numerics flipped last digits); two Newton steps at load time restore them.
+START_DIGITS = 11
+
+
 def build_homotopy_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
     """Spec of the parameter-homotopy solver for a square set of C equations (three transmitters).
 
     The start instance is :func:`complex_instance` with seed ``options.monodromy_seed``; its roots come
     from :func:`monodromy` and must number the GF(p) degree, be pairwise distinct and have residuals
     below 1e-10 (after two Newton steps); the solver must then find the known root of seeded real
-    networks. Roots get three Newton steps on F0 and are stored as [re, im] pairs rounded to 14
-    significant digits (the runtime refines them again when it loads the spec).
+    networks. Roots get three Newton steps on F0 and are stored as [re, im] pairs rounded to
+    :data:`START_DIGITS` significant digits (the runtime refines them again when it loads the spec).
     """
     t0 = time.perf_counter()
     formulation = as_formulation(formulation)
@@ -677,10 +684,10 @@ def build_homotopy_spec(formulation: Formulation | str, options: TemplateOptions
     for _ in range(3):  # Newton on F0: the stored digits do not depend on the monodromy paths
         G, J = c_residual_jacobian(roots, *pieces)
         roots = roots - np.linalg.solve(J, G[..., None])[..., 0]
-    roots = np.vectorize(lambda v: complex(float(f"{v.real:.14g}"), float(f"{v.imag:.14g}")))(roots)
     G, _ = c_residual_jacobian(roots, *pieces, jacobian=False)
     if np.max(np.abs(G)) > 1e-10 or _has_duplicates(roots):
         raise TemplateError(f"start roots: max residual {np.max(np.abs(G)):.1e}, duplicates {_has_duplicates(roots)}")
+    roots = np.vectorize(lambda v: complex(float(f"{v.real:.{START_DIGITS}g}"), float(f"{v.imag:.{START_DIGITS}g}")))(roots)
     order = np.lexsort((roots.imag[:, 0], roots.real[:, 0]))
     roots = roots[order]
     spec = _common_spec(formulation, options, "homotopy", degree)
