@@ -139,15 +139,17 @@ def count_relations(equations: Sequence[Mapping[Exponent, int]], multiplier_set:
     bset = set(map(tuple, basis))
     nv = len(next(iter(bset)))
     reducible = sorted({tuple(b[j] + (j == action) for j in range(nv)) for b in bset} - bset)
-    rows = []
-    for f in equations:
-        for t in multiplier_set:
-            rows.append({tuple(a + b for a, b in zip(e, t)): c % p for e, c in f.items()})
+    rows = [{m: c % p for m, c in row.items()} for row in _macaulay_rows(equations, multiplier_set)]
     columns = set().union(*rows)
     excess = sorted(columns - set(reducible) - bset)
     r_excess = _rank(rows, excess, p)
     r_both = _rank(rows, excess + reducible, p)
     return len(rows), len(columns), r_both - r_excess, len(reducible)
+
+
+def _macaulay_rows(equations: Sequence[Mapping[Exponent, object]], multiplier_set: Sequence[Exponent]) -> list[dict]:
+    """t f for every equation f and multiplier t (equation-major), as {exponent: coefficient}."""
+    return [{tuple(a + b for a, b in zip(e, t)): c for e, c in f.items()} for f in equations for t in multiplier_set]
 
 
 def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> int:
@@ -163,14 +165,13 @@ def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p
     return M.rank()
 
 
-def _grevlex_degree(formulation: Formulation, prime: int, seed: int) -> int:
-    """|B| of the grevlex basis on a seeded consistent instance, whose known root is checked first."""
+def _instance_equations(formulation: Formulation, prime: int, seed: int) -> list[dict]:
+    """Equations of a seeded consistent GF(p) instance, after checking that its known root is a root."""
     instance = sample_gf_instance(formulation.config, prime, seed)
     equations = gf_equations(formulation, instance)
     if any(evaluate_gf(e, instance.root, prime) for e in equations):
         raise ValueError(f"the known root does not satisfy {formulation.label} over GF({prime}), seed {seed}")
-    ring = Ring(formulation.unknowns, prime, "grevlex")
-    return len(standard_monomials(groebner([ring.from_terms(e) for e in equations])))
+    return equations
 
 
 def gf_basis(formulation: Formulation | str, basis: str = "grevlex", prime: int = 65521,
@@ -184,14 +185,9 @@ def gf_basis(formulation: Formulation | str, basis: str = "grevlex", prime: int 
     if basis not in BASES:
         raise ValueError(f"unknown basis {basis!r}; valid: {', '.join(BASES)}")
     unknowns = formulation.unknowns
-    instance = sample_gf_instance(formulation.config, prime, seed)
-    equations = gf_equations(formulation, instance)
-    if any(evaluate_gf(e, instance.root, prime) for e in equations):
-        raise ValueError(f"the known root does not satisfy {formulation.label} over GF({prime}), seed {seed}")
+    equations = _instance_equations(formulation, prime, seed)
     if basis == "grevlex":
-        ring = Ring(unknowns, prime, "grevlex")
-        gb = groebner([ring.from_terms(e) for e in equations])
-        B = [ring.exps(m) for m in standard_monomials(gb)]
+        B = system_basis(equations, unknowns, prime)
     else:
         mask = _offset_mask(unknowns)
         k = int(mask.sum())
@@ -205,7 +201,7 @@ def gf_basis(formulation: Formulation | str, basis: str = "grevlex", prime: int 
         gb_o = groebner([sub.from_terms({ring.exps(m)[head:]: c for m, c in zip(g.mons, g.coeffs)}) for g in elim])
         B = [(0,) * head + sub.exps(m) for m in standard_monomials(gb_o)]
     other = SECOND_PRIME if prime != SECOND_PRIME else 65521
-    check = _grevlex_degree(formulation, other, seed + 1)
+    check = len(system_basis(_instance_equations(formulation, other, seed + 1), unknowns, other))
     if check != len(B):
         raise ValueError(f"{formulation.label}: {len(B)} roots over GF({prime}) (seed {seed}) but {check} over "
                          f"GF({other}) (seed {seed + 1}); a non-generic instance - try another seed")
@@ -288,7 +284,7 @@ def template_numerics(formulation: Formulation | str, family: str, degree: int, 
     nv = len(unknowns)
     R = sorted({tuple(b[j] + (j == act) for j in range(nv)) for b in bset} - bset)
     mult = multipliers(unknowns, family, degree)
-    gf_rows = [{tuple(a + b for a, b in zip(e, t)): c for e, c in f.items()} for f in equations_gf for t in mult]
+    gf_rows = _macaulay_rows(equations_gf, mult)
     E = sorted(set().union(*gf_rows) - set(R) - bset, key=lambda e: (-sum(e), e))
     cols = E + R + list(B)
     index = {c: j for j, c in enumerate(cols)}
@@ -300,12 +296,9 @@ def template_numerics(formulation: Formulation | str, family: str, degree: int, 
     excess = pivot_columns(M_gf[:, :nE], prime)
     rank_e = len(excess)
     M = np.zeros(M_gf.shape)
-    r = 0
-    for f in real_equations(formulation, F):
-        for t in mult:
-            for e, c in f.items():
-                M[r, index[tuple(a + b for a, b in zip(e, t))]] = c
-            r += 1
+    for r, row in enumerate(_macaulay_rows(real_equations(formulation, F), mult)):
+        for mon, c in row.items():
+            M[r, index[mon]] = c
     col_scale = np.ones(len(cols))
     for _ in range(3):
         M /= np.linalg.norm(M, axis=1, keepdims=True)

@@ -396,7 +396,7 @@ def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True)
     """Residuals (P, k) and Jacobian (P, k, 8) of the C equations at x (P, 8) = (h11, h12, h22, b1, b2, o1, o2, o3)."""
     W = _c_xy(x, c, alpha, beta)
     HW = _c_hw(x, W)
-    G = g - alpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", W, 2.0 * x[:, None, 3:5] - HW)
+    G = _c_residual(x, W, HW, alpha, g)
     if not jacobian:
         return G, None
     return G, _c_jacobian(x, W, HW, alpha, beta)[0]
@@ -405,6 +405,11 @@ def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True)
 def _c_xy(x: np.ndarray, c, alpha, beta):
     """The rows (x, y) = (c_1 + alpha o1 + beta_1 o2, c_2 + alpha o1 + beta_2 o3) of D~ at x (P, 8), stacked: (P, k, 2)."""
     return c + (alpha * x[:, 5:6])[..., None] + beta * x[:, None, 6:8]
+
+
+def _c_residual(x: np.ndarray, W, HW, alpha, g) -> np.ndarray:
+    """C residuals (P, k) from the rows W = (x, y) and H W: g - alpha o1 - W^T H W + 2 b^T W."""
+    return g - alpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", W, 2.0 * x[:, None, 3:5] - HW)
 
 
 def _c_hw(x: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -521,7 +526,7 @@ def _field(x: np.ndarray, pieces, dpieces, residual: bool = False):
     ds = dg - dalpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", gxy, dW)
     if not residual:
         return J, ds
-    return g - alpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", W, 2.0 * x[:, None, 3:5] - HW), J, ds
+    return _c_residual(x, W, HW, alpha, g), J, ds
 
 
 def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
