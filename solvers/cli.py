@@ -295,19 +295,17 @@ def _file_system(path: str, prime: int, basis: str):
     try:
         system = read_system(path)
         prime = system.characteristic or check_prime(prime)
-        ring, polys = system.to_ring(prime)
+        polys = system.to_ring(prime)[1]
     except (InputError, BadPrime) as e:
         raise UserError(str(e)) from None
     except OSError as e:
         raise UserError(f"cannot read {path}: {e.strerror}") from None
-    equations = [{ring.exps(m): c for m, c in zip(f.mons, f.coeffs)} for f in polys if f.mons]
+    equations = [dict(f.terms()) for f in polys if f]
     B = system_basis(equations, system.variables, prime)
     note = f"GF({prime})"
     if not system.characteristic:
         other = SECOND_PRIME if prime != SECOND_PRIME else 65521
-        ring2, polys2 = system.to_ring(other)
-        check = system_basis([{ring2.exps(m): c for m, c in zip(f.mons, f.coeffs)} for f in polys2 if f.mons],
-                             system.variables, other)
+        check = system_basis([dict(f.terms()) for f in system.to_ring(other)[1] if f], system.variables, other)
         if len(check) != len(B):
             raise UserError(f"{path}: {len(B)} roots mod {prime} but {len(check)} mod {other}; try another --prime")
         note += f", confirmed mod {other}"

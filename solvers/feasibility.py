@@ -198,7 +198,7 @@ def gf_basis(formulation: Formulation | str, basis: str = "grevlex", prime: int 
         head = len(unknowns) - k
         elim = [g for g in gb.basis if all(not any(ring.exps(m)[:head]) for m in g.mons)]
         sub = Ring(unknowns[head:], prime, "grevlex")
-        gb_o = groebner([sub.from_terms({ring.exps(m)[head:]: c for m, c in zip(g.mons, g.coeffs)}) for g in elim])
+        gb_o = groebner([sub.from_terms({e[head:]: c for e, c in g.terms()}) for g in elim])
         B = [(0,) * head + sub.exps(m) for m in standard_monomials(gb_o)]
     other = SECOND_PRIME if prime != SECOND_PRIME else 65521
     check = len(system_basis(_instance_equations(formulation, other, seed + 1), unknowns, other))
