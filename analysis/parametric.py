@@ -399,3 +399,25 @@ def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSys
                             tuple(sympy.sstr(p.as_expr()) for p in polys),
                             nonzero=("h11*h22 - h12**2",) if saturate_det_h else (),
                             scale_powers=powers, definitions=definitions, gf_sampler=sampler)
+
+
+def square(system: ParametricSystem, keep: int, seed: int = 0, name: str | None = None) -> ParametricSystem:
+    """A square system: the first ``keep`` equations and random combinations of the others.
+
+    The remaining equations (e.g. dependent rank-2 minors) are replaced by N - keep combinations with
+    small random integer coefficients (deterministic given ``seed``; integers keep the system exact over
+    GF(p) and in floating point). The square system's roots contain those of the original; its count
+    (certified like any other) may be larger, and the extra roots are filtered by the full system.
+    """
+    N = len(system.unknowns)
+    rest = system.equations[keep:]
+    if keep > N or N - keep > len(rest):
+        raise ParametricError(f"{system.name}: cannot square {len(system.equations)} equations in {N} unknowns "
+                              f"keeping {keep}")
+    rng = np.random.default_rng(seed)
+    combos = []
+    for _ in range(N - keep):
+        c = rng.integers(1, 10, size=len(rest)) * rng.choice([-1, 1], size=len(rest))
+        combos.append(" + ".join(f"({int(a)})*({e})" for a, e in zip(c, rest)))
+    return replace(system, name=name or f"{system.name} squared (seed {seed})",
+                   equations=tuple(system.equations[:keep]) + tuple(combos))

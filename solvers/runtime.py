@@ -9,8 +9,6 @@ of its equations; the numerics live here, vectorised over a leading batch axis:
   rational curve with an explicit linear parametrisation; on it, C2..C6 are linear in (H, b) and B2
   is quadratic, so the roots are the eigenvalues of an 11 x 11 quartic matrix polynomial (bordered
   matrix), solved by the QZ algorithm on its companion pencil;
-* :class:`CSystemHomotopy` (9r3s): parameter homotopy from a stored generic complex instance whose 75
-  roots were found by monodromy, tracked by a batched RK4 predictor / Newton corrector;
 * :class:`StagedSolver`: the legacy replay of a staged F4-trace template (kept as the fallback path).
 
 Why not a single elimination template: see :mod:`solvers.template` (degree falls make the single
@@ -27,19 +25,14 @@ import numpy as np
 from scipy.linalg import lapack
 
 __all__ = [
-    "CSystemHomotopy",
     "CurvePencilSolver",
     "PolySystem",
     "StagedSolver",
-    "TrackerOptions",
-    "c_pieces",
-    "c_residual_jacobian",
     "data_scale",
     "load_solver",
     "polish",
     "solve_batch",
     "solve_one",
-    "track",
 ]
 
 
@@ -378,310 +371,6 @@ def _complex_eigenvectors(vr: np.ndarray, ai: np.ndarray, columns: np.ndarray) -
 
 
 # --------------------------------------------------------------------------------------------------
-# 9r3s: parameter homotopy on the C equations
-# --------------------------------------------------------------------------------------------------
-
-
-def c_pieces(F: np.ndarray, rows: np.ndarray):
-    """Data of the equations C_i (i = rows + 2) of an m x 3 configuration: c (.., k, 2), alpha, beta, g.
-
-    C_i = l - h11 x^2 - 2 h12 x y - h22 y^2 + 2 b1 x + 2 b2 y with x = c_1 + alpha o1 + beta_1 o2,
-    y = c_2 + alpha o1 + beta_2 o3, l = g - alpha o1 (D~ rows i - 1, first two columns).
-    """
-    c, alpha, beta, g = compaction_pieces(F)
-    return c[..., rows, :2], alpha[..., rows], beta[..., rows, :2], g[..., rows]
-
-
-def c_residual_jacobian(x: np.ndarray, c, alpha, beta, g, jacobian: bool = True):
-    """Residuals (P, k) and Jacobian (P, k, 8) of the C equations at x (P, 8) = (h11, h12, h22, b1, b2, o1, o2, o3)."""
-    W = _c_xy(x, c, alpha, beta)
-    HW = _c_hw(x, W)
-    G = _c_residual(x, W, HW, alpha, g)
-    if not jacobian:
-        return G, None
-    return G, _c_jacobian(x, W, HW, alpha, beta)[0]
-
-
-def _c_xy(x: np.ndarray, c, alpha, beta):
-    """The rows (x, y) = (c_1 + alpha o1 + beta_1 o2, c_2 + alpha o1 + beta_2 o3) of D~ at x (P, 8), stacked: (P, k, 2)."""
-    return c + (alpha * x[:, 5:6])[..., None] + beta * x[:, None, 6:8]
-
-
-def _c_residual(x: np.ndarray, W, HW, alpha, g) -> np.ndarray:
-    """C residuals (P, k) from the rows W = (x, y) and H W: g - alpha o1 - W^T H W + 2 b^T W."""
-    return g - alpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", W, 2.0 * x[:, None, 3:5] - HW)
-
-
-def _c_hw(x: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """H (x, y) for every row (P, k, 2), H = [[h11, h12], [h12, h22]] of each path."""
-    H = x[:, (0, 1, 1, 2)].reshape(-1, 2, 2)
-    return W @ H
-
-
-def _c_jacobian(x: np.ndarray, W, HW, alpha, beta):
-    """Jacobian (P, k, 8) of the C equations from their rows W = (x, y) and H W; also their gradient in (x, y)."""
-    gxy = 2.0 * (x[:, None, 3:5] - HW)
-    J = np.empty(W.shape[:-1] + (8,), dtype=np.result_type(W, x))
-    J[..., 0:3:2] = -W * W
-    J[..., 1] = -2.0 * W[..., 0] * W[..., 1]
-    J[..., 3:5] = 2.0 * W
-    J[..., 5] = alpha * (gxy.sum(axis=-1) - 1.0)
-    J[..., 6:8] = beta * gxy
-    return J, gxy
-
-
-@dataclass(frozen=True)
-class TrackerOptions:
-    """Step control of the path tracker (relative Newton corrections e0 (first), e (last)).
-
-    A step is accepted when e0 < accept and the corrector contracts (e < 0.05 e0 or e < tol); the step
-    doubles when e0 < grow and halves on rejection. ``newton``: corrector iterations per step;
-    ``final_newton``: iterations at s = 1 on the exact target data.
-    """
-
-    h0: float = 0.1
-    hmax: float = 0.5
-    hmin: float = 1e-10
-    accept: float = 0.1
-    grow: float = 1e-3
-    tol: float = 1e-7
-    newton: int = 2
-    final_newton: int = 3
-    max_iterations: int = 3000
-
-    def __post_init__(self) -> None:
-        if self.newton < 1:
-            raise ValueError(f"the tracker needs at least one corrector step per step (newton >= 1), got {self.newton}")
-
-
-class _CPath:
-    """Data pieces along the straight segment F(s) = F0 + s (F1 - F0), quadratic in s, per path.
-
-    The pieces (c, alpha, beta, g) of :func:`c_pieces` are stacked into one array (P, k, 6) per
-    coefficient of s, so that evaluating them at a step is a handful of numpy operations.
-    """
-
-    def __init__(self, F0: np.ndarray, F1: np.ndarray, rows: np.ndarray):
-        D = F1 - F0
-        p0, pd, p1 = (_stack_pieces(c_pieces(G, rows)) for G in (F0, D, F0 + D))
-        # c and g are quadratic in the data: q(F0 + sD) = q(F0) + s (q(F0 + D) - q(F0) - q(D)) + s^2 q(D);
-        # alpha and beta are linear: l(F0) + s l(D)
-        quad = np.array([True, True, False, False, False, True])
-        self.k0 = p0
-        self.k1 = np.where(quad, p1 - p0 - pd, pd)
-        self.k2 = np.where(quad, pd, 0.0)
-        self.target = c_pieces(F1, rows)
-
-    def take(self, idx: np.ndarray) -> "_CPath":
-        out = _CPath.__new__(_CPath)
-        out.k0, out.k1, out.k2 = self.k0[idx], self.k1[idx], self.k2[idx]
-        out.target = tuple(a[idx] for a in self.target)
-        return out
-
-    def at(self, s: np.ndarray):
-        """The pieces (c, alpha, beta, g) at s (P,) and their derivatives in s."""
-        sh = s[:, None, None]
-        return _split_pieces(self.k0 + sh * (self.k1 + sh * self.k2)), _split_pieces(self.k1 + (2.0 * sh) * self.k2)
-
-
-def _stack_pieces(pieces) -> np.ndarray:
-    c, alpha, beta, g = pieces
-    return np.concatenate([c, alpha[..., None], beta, g[..., None]], axis=-1)
-
-
-def _split_pieces(Z: np.ndarray):
-    return Z[..., 0:2], Z[..., 2], Z[..., 3:5], Z[..., 5]
-
-
-def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Batched J^-1 r for (P, n, n), (P, n); NaN for non-finite or singular systems (never raises)."""
-    return _solve_many(J, r[..., None])[..., 0]
-
-
-def _solve_many(J: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Batched J^-1 R for (P, n, n), (P, n, k): one factorisation for k right-hand sides; NaN as :func:`_solve`."""
-    bad = ~np.isfinite(J.sum(axis=(1, 2)) + R.sum(axis=(1, 2)))  # one pass: NaN/inf anywhere poisons the sum
-    if bad.any():
-        J = np.where(bad[:, None, None], np.eye(J.shape[1]), J)
-        R = np.where(bad[:, None, None], 0.0, R)
-    try:
-        out = np.linalg.solve(J, R)
-    except np.linalg.LinAlgError:
-        out = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(J, R)])
-    out[bad] = np.nan
-    return out
-
-
-def _field(x: np.ndarray, pieces, dpieces, residual: bool = False):
-    """Jacobian (P, k, 8) in x and derivative (P, k) in s of the C residuals (chain rule through the data pieces).
-
-    With ``residual=True`` the residuals (P, k) come first: (G, J, dG/ds), sharing the rows and H (x, y).
-    """
-    c, alpha, beta, g = pieces
-    dc, dalpha, dbeta, dg = dpieces
-    W = _c_xy(x, c, alpha, beta)
-    HW = _c_hw(x, W)
-    J, gxy = _c_jacobian(x, W, HW, alpha, beta)
-    dW = _c_xy(x, dc, dalpha, dbeta)  # the rows are linear in the data pieces
-    ds = dg - dalpha * x[:, 5:6] + np.einsum("pkj,pkj->pk", gxy, dW)
-    if not residual:
-        return J, ds
-    return _c_residual(x, W, HW, alpha, g), J, ds
-
-
-def track(path: _CPath, x0: np.ndarray, options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
-    """Track the roots x0 (P, 8) of F0 along the segment to F1 (one path per row; ``path`` holds P rows).
-
-    Returns the endpoints (P, 8) after ``final_newton`` Newton steps on the target data, NaN where a
-    path did not reach s = 1, and the number of accepted steps per path (-1 for a lost path whose last
-    point had norm above :data:`DIVERGED`).
-    """
-    P = x0.shape[0]
-    x = x0.astype(complex).copy()
-    s = np.zeros(P)
-    h = np.full(P, options.h0)
-    steps = np.zeros(P, dtype=np.int64)
-    # tangent dx/ds at (x, s) per path, NaN until known: the last corrector step of an accepted step
-    # factors J at (almost) the new point, and the same factorisation gives the next step's first stage
-    tangent = np.full(x.shape, np.nan, dtype=complex)
-    active = np.arange(P)
-    sub = path
-    it = 0
-    with np.errstate(all="ignore"):
-        while len(active) and it < options.max_iterations:
-            it += 1
-            xa, sa = x[active], s[active]
-            ha = np.minimum(h[active], 1.0 - sa)
-
-            def field(xx, ss):
-                return -_solve(*_field(xx, *sub.at(ss)))
-
-            k1 = tangent[active]
-            missing = np.flatnonzero(~np.isfinite(k1).all(axis=1))
-            if len(missing) == len(active):
-                k1 = field(xa, sa)
-            elif len(missing):
-                part = sub.take(missing)
-                k1[missing] = -_solve(*_field(xa[missing], *part.at(sa[missing])))
-            k2 = field(xa + 0.5 * ha[:, None] * k1, sa + 0.5 * ha)
-            k3 = field(xa + 0.5 * ha[:, None] * k2, sa + 0.5 * ha)
-            k4 = field(xa + ha[:, None] * k3, sa + ha)
-            xp = xa + (ha / 6.0)[:, None] * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-            sn = np.where(ha >= 1.0 - sa, 1.0, sa + ha)
-            pc, dpc = sub.at(sn)
-            scale = np.linalg.norm(xp, axis=1) + 1.0
-            e0 = e = np.full(len(active), np.inf)
-            for k in range(options.newton):
-                if k == options.newton - 1:
-                    G, J, dG = _field(xp, pc, dpc, residual=True)
-                    both = _solve_many(J, np.stack([G, dG], axis=-1))
-                    dx, tan = both[..., 0], -both[..., 1]
-                else:
-                    G, J = c_residual_jacobian(xp, *pc)
-                    dx = _solve(J, G)
-                xp = xp - dx
-                e = np.linalg.norm(dx, axis=1) / scale
-                if k == 0:
-                    e0 = e
-            ok = np.isfinite(e) & (e0 < options.accept) & ((e < options.tol) | (e < 0.05 * e0))
-            acc = active[ok]
-            x[acc] = xp[ok]
-            s[acc] = sn[ok]
-            tangent[acc] = tan[ok]  # rejected paths keep theirs: their (x, s) did not move
-            steps[acc] += 1
-            h[acc] = np.minimum(np.where(e0[ok] < options.grow, 2.0, 1.0) * h[acc], options.hmax)
-            h[active[~ok]] *= 0.5
-            live = (s[active] < 1.0) & (h[active] > options.hmin)
-            if not live.all():
-                keep = np.flatnonzero(live)
-                active = active[keep]
-                sub = sub.take(keep)
-        lost = s < 1.0
-        diverged = lost & ~(np.linalg.norm(x, axis=1) < DIVERGED)
-        x[lost] = np.nan
-        tgt = path.target
-        for _ in range(options.final_newton):
-            G, J = c_residual_jacobian(x, *tgt)
-            x = x - _solve(J, G)
-    steps[diverged] = -1
-    return x, steps
-
-
-#: A lost path whose last point has norm above this (normalised units) is taken to diverge (a root
-#: near infinity, physically meaningless) and is not retracked.
-DIVERGED = 1e4
-
-
-class CSystemHomotopy:
-    """Parameter homotopy for a square system of C equations (m receivers, 3 transmitters).
-
-    The spec stores a generic complex data matrix F0 and all roots of its system (found by monodromy,
-    :func:`solvers.template.build_homotopy_spec`). For data F1 every root of F0 is tracked along the
-    complex segment F0 -> F1 (a real segment of the complex parameter space, which misses the
-    discriminant hypersurface with probability one; Sommese and Wampler 2005, ch. 7), the system being
-    evaluated in factored form from the compaction data (exact structure at every point of the path).
-    Endpoints get Newton steps on the target data. A path that stalls (step below ``hmin``) without
-    diverging is retracked with smaller minimum steps, and so is every path of an instance in which
-    two paths ended at the same root (path jumping). Paths to roots near infinity are left as NaN.
-    """
-
-    def __init__(self, spec: dict, options: TrackerOptions | None = None):
-        self.spec = spec
-        h = spec["homotopy"]
-        self.rows = np.array(h["rows"], dtype=np.intp)
-        self.F0 = np.array([[complex(re, im) for re, im in row] for row in spec["start_data"]])
-        self.x0 = np.array([[complex(re, im) for re, im in r] for r in spec["start_roots"]])
-        self.basis_size = len(self.x0)
-        self.nvars = self.x0.shape[1]
-        self.options = options or TrackerOptions(**h.get("tracker", {}))
-        self._refine_start()
-
-    def _refine_start(self) -> None:
-        pieces = c_pieces(self.F0, self.rows)
-        x = self.x0
-        with np.errstate(all="ignore"):
-            for _ in range(2):
-                P = len(x)
-                G, J = c_residual_jacobian(x, *(np.broadcast_to(p, (P,) + p.shape) for p in pieces))
-                x = x - _solve(J, G)
-        self.x0 = x
-
-    def roots(self, F: np.ndarray, options: TrackerOptions | None = None) -> np.ndarray:
-        """Candidate roots (batch, K, 8) of the normalised data F (batch, m, 3); NaN rows for lost paths."""
-        options = options or self.options
-        B, K = F.shape[0], self.basis_size
-        F1 = np.repeat(F.astype(complex), K, axis=0)
-        F0 = np.broadcast_to(self.F0, F1.shape)
-        x, steps = track(_CPath(F0, F1, self.rows), np.tile(self.x0, (B, 1)), options)
-        x = x.reshape(B, K, -1)
-        # paths that failed without diverging, and whole instances where two paths met (path
-        # jumping): retrack with tight step control
-        lost = ~np.all(np.isfinite(x), axis=2) & (steps.reshape(B, K) >= 0)
-        for i in range(B):
-            if _has_duplicates(x[i]):
-                lost[i] = True
-        bi, ki = np.nonzero(lost)
-        if len(bi):
-            xr, _ = track(_CPath(np.broadcast_to(self.F0, (len(bi),) + self.F0.shape), F[bi].astype(complex), self.rows),
-                          self.x0[ki], _TIGHT)
-            x[bi, ki] = xr
-        return x
-
-
-#: Step control for retracking lost or jumped paths.
-_TIGHT = TrackerOptions(h0=0.02, hmin=1e-14, accept=0.05, newton=3, max_iterations=3000)
-
-
-def _has_duplicates(x: np.ndarray, tol: float = 1e-6) -> bool:
-    """Whether two finite rows of x (K, n) coincide (relative tolerance)."""
-    finite = x[np.all(np.isfinite(x), axis=1)]
-    d = np.linalg.norm(finite[:, None, :] - finite[None, :, :], axis=2)
-    scale = 1.0 + np.linalg.norm(finite, axis=1)
-    d[np.arange(len(d)), np.arange(len(d))] = np.inf
-    return bool(np.any(d < tol * scale[:, None]))
-
-
-# --------------------------------------------------------------------------------------------------
 # legacy: replay of a staged F4-trace template (fallback path, not used by the generated solvers)
 # --------------------------------------------------------------------------------------------------
 
@@ -861,12 +550,10 @@ class _Solver:
         kind = spec.get("kind", "staged")
         if kind == "curve-pencil":
             self.kernel = CurvePencilSolver(spec)
-        elif kind == "homotopy":
-            self.kernel = CSystemHomotopy(spec)
         elif kind == "staged":
             self.kernel = StagedSolver(spec)
         else:
-            raise ValueError(f"unknown solver kind {kind!r}; valid: curve-pencil, homotopy, staged")
+            raise ValueError(f"unknown solver kind {kind!r}; valid: curve-pencil, staged (homotopy: solvers.methods)")
         self.kind = kind
         self.basis_size = self.kernel.basis_size
         self.nvars = len(spec["unknowns"])

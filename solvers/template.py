@@ -9,10 +9,8 @@ number of roots of a formulation (the size of the standard monomial basis of its
   curve, parametrised linearly by the kernel of [c | alpha | beta]; on it the roots are the eigenvalues
   of an 11 x 11 quartic matrix polynomial (:class:`solvers.runtime.CurvePencilSolver`). The spec holds
   the chart and the number of spurious eigenvalues to drop, both checked here on seeded real data.
-* ``homotopy`` (9r3s: C2-C9, or any square set of C equations with three transmitters): a generic
-  complex instance and all its roots, found by monodromy from one known root (loops in the parameter
-  space until the GF(p) degree is reached); :class:`solvers.runtime.CSystemHomotopy` tracks them to
-  the data.
+* ``homotopy`` (9r3s: C2-C9 and every other square formulation): built by :mod:`solvers.generate`
+  with the general parameter homotopy of :mod:`solvers.methods.homotopy`.
 * ``staged`` (fallback, :func:`build_template`): the trace of F4 over GF(p) replayed in floating point.
 
 Why not one elimination template (Kukelova et al. 2008; Larsson et al. 2017). The C equations are
@@ -75,17 +73,14 @@ from analysis.ring import Poly, Ring
 
 __all__ = [
     "SPEC_FORMAT",
-    "START_DIGITS",
     "STAGED_FORMAT",
     "METHODS",
     "TemplateError",
     "TemplateOptions",
     "TemplateResult",
-    "build_homotopy_spec",
     "build_pencil_spec",
     "build_spec",
     "build_template",
-    "complex_instance",
     "dump_spec",
     "gf_degree",
     "load_spec",
@@ -500,7 +495,8 @@ def build_spec(formulation: Formulation | str, options: TemplateOptions = Templa
     if method == "curve-pencil":
         return build_pencil_spec(formulation, options)
     if method == "homotopy":
-        return build_homotopy_spec(formulation, options)
+        raise TemplateError(f"{formulation.label}: homotopy solvers are built by solvers.generate "
+                            "(tdoa-workbench generate)")
     if method == "staged":
         return build_template(formulation, options)
     raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
@@ -592,116 +588,6 @@ def build_pencil_spec(formulation: Formulation | str, options: TemplateOptions =
     if found.mean() < 0.9:
         raise TemplateError(f"the pencil finds the known root in only {found.sum()}/{len(found)} seeded networks")
     return TemplateResult(spec, time.perf_counter() - t0, ({"method": "curve-pencil", "degree": degree,
-                                                            "verified": int(found.sum()), "trials": len(found)},))
-
-
-# --------------------------------------------------------------------------------------------------
-# homotopy (9r3s): complex start instance and monodromy
-# --------------------------------------------------------------------------------------------------
-
-
-def complex_instance(m: int, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A complex network's data F (m, n), normalised by its RMS modulus, and its root in that frame.
-
-    Receivers, transmitters and offsets are complex normal; d_ij is a square root of the (complex)
-    squared distance (the equations use only d_ij^2). The root is (H, b, o) with H = (4 S^T S)^-1,
-    b = -1/2 S^-1 s_1 (r_1 translated to 0; transposes, not conjugates), as in solvers.synthetic.
-    """
-    r = rng.normal(size=(m, 2)) + 1j * rng.normal(size=(m, 2))
-    t = rng.normal(size=(n, 2)) + 1j * rng.normal(size=(n, 2))
-    o = rng.normal(size=n) + 1j * rng.normal(size=n)
-    F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + o[None, :]
-    s1 = t[0] - r[0]
-    S = np.column_stack([t[1] - t[0], t[2] - t[0]])
-    H = np.linalg.inv(4.0 * S.T @ S)
-    b = -0.5 * np.linalg.solve(S, s1)
-    x = np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
-    scale = np.sqrt(np.mean(np.abs(F) ** 2))
-    powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
-    return F / scale, x / scale**powers
-
-
-def monodromy(F0: np.ndarray, x0: np.ndarray, rows: np.ndarray, degree: int, rng: np.random.Generator,
-              max_loops: int = 60, radius: float = 0.5) -> tuple[np.ndarray, int]:
-    """All roots of the C system of F0 from one root x0, by monodromy (triangle loops F0 -> Fa -> Fb -> F0).
-
-    Each loop tracks every known root around a random triangle in the complex parameter space; the
-    endpoints that are new roots are added. Stops when ``degree`` roots are known. Returns (roots,
-    loops used). Reference: Duff, Hill, Jensen, Lee, Leykin, Sommese, "Solving polynomial systems via
-    homotopy continuation and monodromy", IMA J. Numer. Anal. 2019.
-    """
-    from .runtime import _CPath, track
-
-    roots = x0[None].astype(complex)
-    for loop in range(1, max_loops + 1):
-        Fa = F0 + radius * (rng.normal(size=F0.shape) + 1j * rng.normal(size=F0.shape))
-        Fb = F0 + radius * (rng.normal(size=F0.shape) + 1j * rng.normal(size=F0.shape))
-        xs = roots
-        for start, end in ((F0, Fa), (Fa, Fb), (Fb, F0)):
-            P = len(xs)
-            xs, _ = track(_CPath(np.broadcast_to(start, (P,) + F0.shape), np.broadcast_to(end, (P,) + F0.shape), rows), xs)
-            xs = xs[np.all(np.isfinite(xs), axis=1)]
-        for x in xs:
-            scale = 1.0 + np.linalg.norm(x)
-            if np.min(np.linalg.norm(roots - x, axis=1)) > 1e-6 * scale:
-                roots = np.vstack([roots, x])
-        if len(roots) >= degree:
-            return roots, loop
-    return roots, max_loops
-
-
-#: Significant digits of the stored start roots: fewer than their accuracy (about 13 digits after
-#: Newton on F0), so that the spec does not change when the tracker's rounding does (at 14 digits
-#: any change of the numerics flipped last digits); two Newton steps at load time restore them.
-START_DIGITS = 11
-
-
-def build_homotopy_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
-    """Spec of the parameter-homotopy solver for a square set of C equations (three transmitters).
-
-    The start instance is :func:`complex_instance` with seed ``options.monodromy_seed``; its roots come
-    from :func:`monodromy` and must number the GF(p) degree, be pairwise distinct and have residuals
-    below 1e-10 (after two Newton steps); the solver must then find the known root of seeded real
-    networks. Roots get three Newton steps on F0 and are stored as [re, im] pairs rounded to
-    :data:`START_DIGITS` significant digits (the runtime refines them again when it loads the spec).
-    """
-    t0 = time.perf_counter()
-    formulation = as_formulation(formulation)
-    if solver_method(formulation) != "homotopy":
-        raise TemplateError(f"{formulation.label}: the homotopy needs a square system of C equations with n = 3")
-    from .runtime import CSystemHomotopy, _has_duplicates, c_pieces, c_residual_jacobian
-
-    degree = gf_degree(formulation, options)
-    m, n = formulation.config.m, formulation.config.n
-    rows = np.array([int(e[1:]) - 2 for e in formulation.equations], dtype=np.intp)
-    rng = np.random.default_rng(options.monodromy_seed)
-    F0, x0 = complex_instance(m, n, rng)
-    roots, loops = monodromy(F0, x0, rows, degree, rng, options.max_loops)
-    if len(roots) != degree:
-        raise TemplateError(f"monodromy found {len(roots)} of {degree} roots in {loops} loops "
-                            f"(seed {options.monodromy_seed})")
-    pieces = [np.broadcast_to(q, (len(roots),) + q.shape) for q in c_pieces(F0, rows)]
-    for _ in range(3):  # Newton on F0: the stored digits do not depend on the monodromy paths
-        G, J = c_residual_jacobian(roots, *pieces)
-        roots = roots - np.linalg.solve(J, G[..., None])[..., 0]
-    G, _ = c_residual_jacobian(roots, *pieces, jacobian=False)
-    if np.max(np.abs(G)) > 1e-10 or _has_duplicates(roots):
-        raise TemplateError(f"start roots: max residual {np.max(np.abs(G)):.1e}, duplicates {_has_duplicates(roots)}")
-    roots = np.vectorize(lambda v: complex(float(f"{v.real:.{START_DIGITS}g}"), float(f"{v.imag:.{START_DIGITS}g}")))(roots)
-    order = np.lexsort((roots.imag[:, 0], roots.real[:, 0]))
-    roots = roots[order]
-    spec = _common_spec(formulation, options, "homotopy", degree)
-    spec["size"] = [degree, len(formulation.unknowns)]
-    spec["homotopy"] = {"rows": [int(r) for r in rows], "monodromy_seed": options.monodromy_seed,
-                        "monodromy_loops": loops}
-    # one line per data row and per root in the JSON text (see dump_spec)
-    spec["start_data"] = [[[float(z.real), float(z.imag)] for z in row] for row in F0]
-    spec["start_roots"] = [[[float(z.real), float(z.imag)] for z in x] for x in roots]
-    F, X = _real_trials(formulation, options.verify_trials)
-    found = _found(CSystemHomotopy(spec).roots(F), X)
-    if found.mean() < 0.9:
-        raise TemplateError(f"the homotopy finds the known root in only {found.sum()}/{len(found)} seeded networks")
-    return TemplateResult(spec, time.perf_counter() - t0, ({"method": "homotopy", "degree": degree, "loops": loops,
                                                             "verified": int(found.sum()), "trials": len(found)},))
 
 

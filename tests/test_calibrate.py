@@ -14,8 +14,9 @@ from solvers.synthetic import random_network, true_root
 @pytest.mark.parametrize("bad,match", [
     (np.ones(12), "2-D"),
     (np.ones((6, 4, 1)), "2-D"),
-    (np.ones((5, 4)), "too few"),
+    (np.ones((4, 4)), "too few"),
     (np.ones((5, 3)), "too few"),
+    (np.ones((4, 6)), "too few"),
     (np.ones((12, 2)), "too few"),
     (np.full((6, 4), np.nan), "NaN"),
     (np.full((6, 4), np.inf), "NaN or infinite"),
@@ -34,14 +35,16 @@ def test_dispatch():
     assert select_solver(8, 3).label == "8r3s"
     assert select_solver(7, 3).label == "7r3s"
     assert select_solver(6, 3).label == "6r3s"
+    assert select_solver(5, 4).label == "5r4s"
+    assert select_solver(5, 7).label == "5r4s"
 
 
-@pytest.mark.parametrize("m,seed", [(8, 21), (7, 22)])
-def test_noiseless_calibration_with_three_transmitters(m, seed):
-    net = random_network(m, 3, np.random.default_rng(seed))
+@pytest.mark.parametrize("m,n,seed", [(8, 3, 21), (7, 3, 22), (5, 4, 23), (5, 6, 24)])
+def test_noiseless_calibration_of_the_new_cells(m, n, seed):
+    net = random_network(m, n, np.random.default_rng(seed))
     best = calibrate(net.measurements())[0]
     err = calibration_errors(best, net)
-    assert err.position < 1e-8 and err.offset < 1e-8, (m, seed, err)
+    assert err.position < 1e-8 and err.offset < 1e-8, (m, n, seed, err)
 
 
 def test_minimal_6r3s_returns_every_exact_solution():

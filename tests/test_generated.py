@@ -126,32 +126,3 @@ def test_polynomial_system_jacobian_matches_finite_differences():
         fm, _ = system.residual_jacobian(x - dx, C, jacobian=False)
         np.testing.assert_allclose(J[..., v], (fp - fm) / (2 * eps), rtol=1e-6, atol=1e-8)
     assert isinstance(system, PolySystem)
-
-
-def test_c_system_jacobian_and_path_derivative_match_finite_differences():
-    from solvers.runtime import _CPath, _field, c_residual_jacobian
-
-    rng = np.random.default_rng(7)
-    F0 = rng.normal(size=(2, 9, 3)) + 1j * rng.normal(size=(2, 9, 3))
-    F1 = rng.normal(size=(2, 9, 3))
-    path = _CPath(F0, F1, np.arange(8))
-    x = rng.normal(size=(2, 8)) + 1j * rng.normal(size=(2, 8))
-    s = np.array([0.3, 0.7])
-    pc, dp = path.at(s)
-    G, J = c_residual_jacobian(x, *pc)
-    eps = 1e-6
-    for v in range(8):
-        dx = np.zeros(8)
-        dx[v] = eps
-        Gp, _ = c_residual_jacobian(x + dx, *pc, jacobian=False)
-        Gm, _ = c_residual_jacobian(x - dx, *pc, jacobian=False)
-        np.testing.assert_allclose(J[..., v], (Gp - Gm) / (2 * eps), rtol=1e-6, atol=1e-8)
-    Gp, _ = c_residual_jacobian(x, *path.at(s + eps)[0], jacobian=False)
-    Gm, _ = c_residual_jacobian(x, *path.at(s - eps)[0], jacobian=False)
-    Jf, ds = _field(x, pc, dp)
-    np.testing.assert_allclose(Jf, J, rtol=1e-13, atol=1e-13)
-    np.testing.assert_allclose(ds, (Gp - Gm) / (2 * eps), rtol=1e-6, atol=1e-8)
-    # the path ends at the target data
-    end, _ = path.at(np.ones(2))
-    for a, b in zip(end, path.target):
-        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)

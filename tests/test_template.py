@@ -9,10 +9,8 @@ import pytest
 
 from analysis.formulations import Formulation, gf_equations, sample_gf_instance
 from solvers.codegen import GENERATED_DIR, SOLVERS, generated_specs, module_name
-from solvers.runtime import _has_duplicates, c_pieces, c_residual_jacobian
 from solvers.template import (
     SPEC_FORMAT,
-    START_DIGITS,
     TemplateError,
     TemplateOptions,
     build_pencil_spec,
@@ -39,7 +37,7 @@ def built_6r4s():
 
 def test_methods_of_the_paper_solvers():
     assert solver_method(SOLVERS["6r4s"]) == "curve-pencil"
-    assert solver_method(SOLVERS["9r3s"]) == "homotopy"
+    assert solver_method("9r3s:C2-C9") == "homotopy"
     assert solver_method("6r4s:B2,C2-C6,M123_123,M124_123,M125_123") == "staged"
 
 

@@ -26,15 +26,15 @@ import json
 import re
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
-import sympy
-
-from analysis.parametric import ParametricSystem
 
 from . import tracker
 from .tracker import SystemStructure, TrackerOptions
+
+if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
+    from analysis.parametric import ParametricSystem
 
 __all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "build", "coefficient_source",
            "load_coefficients", "structure", "affine_start"]
@@ -43,6 +43,10 @@ SPEC_FORMAT = "tdoa-homotopy/1"
 
 #: Significant digits of stored start data and roots (refined by Newton's method when loaded).
 START_DIGITS = 11
+
+
+#: Paths of an instance are retracked with tight step control only when at most this fraction failed.
+RETRACK_FRACTION = 0.2
 
 
 class HomotopyError(RuntimeError):
@@ -78,6 +82,8 @@ _FRACTION = re.compile(r"(?<![\w.])(\d+)/(\d+)")
 
 
 def _print(expr) -> str:
+    import sympy
+
     text = sympy.sstr(expr, order="lex")
     return _FRACTION.sub(lambda mm: repr(int(mm.group(1)) / int(mm.group(2))), text)
 
@@ -88,6 +94,8 @@ def coefficient_source(system: ParametricSystem, name: str = "coefficients") -> 
     Definitions are computed first (in order), then the coefficients with shared subexpressions
     (``sympy.cse``); byte-stable for a given system.
     """
+    import sympy
+
     coeffs = [c for eq in system.terms for _, c in eq]
     lines = [f"def {name}(q):",
              f'    """Coefficients of the {len(coeffs)} terms from the {len(system.parameters)} parameters q (K, P) -> (K, T)."""',
@@ -193,13 +201,28 @@ class HomotopySolver:
         status = stats[:, 0].reshape(B, K)
         redo = (status == 1)
         for b in range(B):
-            if _has_duplicates(x[b]):
-                redo[b] = True
+            redo[b] |= _duplicated(x[b])
+            if redo[b].sum() > max(8, RETRACK_FRACTION * K):
+                redo[b] = False  # most paths fail: degenerate data (e.g. coincident nodes), not path jumping
         bi, ki = np.nonzero(redo)
         if len(bi):
             xr, _ = self.track(self.q0[None], q, self.x0[ki], bi, tracker.TIGHT)
             x[bi, ki] = xr
         return x
+
+
+def _duplicated(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """Mask of the rows of x (K, n) that coincide with another finite row (path jumping)."""
+    out = np.zeros(len(x), dtype=bool)
+    ok = np.flatnonzero(np.all(np.isfinite(x), axis=1))
+    if len(ok) < 2:
+        return out
+    f = x[ok]
+    d = np.linalg.norm(f[:, None, :] - f[None, :, :], axis=2)
+    d[np.arange(len(d)), np.arange(len(d))] = np.inf
+    scale = 1.0 + np.linalg.norm(f, axis=1)
+    out[ok] = np.any(d < tol * scale[:, None], axis=1)
+    return out
 
 
 def _has_duplicates(x: np.ndarray, tol: float = 1e-6) -> bool:
@@ -248,8 +271,12 @@ def affine_start(system: ParametricSystem, coefficients: Callable, rng: np.rando
 
 
 def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int, rng: np.random.Generator,
-              options: HomotopyOptions, progress: Callable[[str], None] | None = None) -> tuple[np.ndarray, int]:
+              options: HomotopyOptions, progress: Callable[[str], None] | None = None,
+              excluded: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """All ``count`` roots of the system at q0 from the roots x0, by monodromy loops (triangles).
+
+    New endpoints count only when Newton's method has converged on them and, with ``excluded`` (a
+    mask of points on the locus of the non-vanishing conditions), when they lie off that locus.
 
     Stops when ``count`` distinct roots are known; raises :class:`HomotopyError` after
     ``max_loops`` loops or ``stall_loops`` loops without a new root.
@@ -265,7 +292,13 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
             xs, _ = solver.track(a[None], b[None], xs)
             xs = xs[np.all(np.isfinite(xs), axis=1)]
         if len(xs):
-            xs = solver.newton(xs, q0[None], steps=2)
+            xs = solver.newton(xs, q0[None], steps=3)
+            # keep converged roots off the excluded locus (non-vanishing conditions)
+            step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
+            keep = step < 1e-8
+            if excluded is not None:
+                keep &= ~excluded(xs)
+            xs = xs[keep]
         before = len(roots)
         for x in xs:
             if not np.all(np.isfinite(x)):
@@ -285,6 +318,25 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
             break
     raise HomotopyError(f"monodromy found {len(roots)} of the certified {count} roots in {loop} loops "
                         f"(seed {options.seed}); the solver would miss roots")
+
+
+def _excluded(system: ParametricSystem) -> Callable[[np.ndarray], np.ndarray] | None:
+    """Mask of points where a non-vanishing condition is (numerically) zero, or None without conditions."""
+    if not system.nonzero:
+        return None
+    import sympy
+
+    funcs = [sympy.lambdify(system.x_symbols, g, "numpy") for g in system.nonzero_exprs]
+    degs = [sympy.Poly(g, *system.x_symbols).total_degree() for g in system.nonzero_exprs]
+
+    def mask(x: np.ndarray) -> np.ndarray:
+        scale = 1.0 + np.linalg.norm(x, axis=1)
+        out = np.zeros(len(x), dtype=bool)
+        for f, d in zip(funcs, degs):
+            out |= np.abs(f(*x.T)) < 1e-8 * scale ** d
+        return out
+
+    return mask
 
 
 def build(system: ParametricSystem, count: int, start: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]] | None = None,
@@ -326,7 +378,7 @@ def build(system: ParametricSystem, count: int, start: Callable[[np.random.Gener
     x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
     if solver.residual(x0, q0[None]).max() > 1e-8:
         raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
-    roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress)
+    roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress, _excluded(system))
     roots = solver.newton(roots, solver.q0[None], steps=3)
     res = solver.residual(roots, solver.q0[None]).max()
     if res > 1e-10 or _has_duplicates(roots):

@@ -41,14 +41,14 @@ class TrackerOptions:
     h0: float = 0.05
     hmin: float = 1e-9
     hmax: float = 0.5
-    target: float = 1e-4
-    accept: float = 1e-2
+    target: float = 1e-2
+    accept: float = 0.1
     tol: float = 1e-9
-    newton: int = 3
+    newton: int = 2
     final_newton: int = 3
-    max_steps: int = 2000
+    max_steps: int = 600
     big: float = 1e8
-    contract: float = 0.05
+    contract: float = 0.1
 
     def as_array(self) -> np.ndarray:
         return np.array([self.h0, self.hmin, self.hmax, self.target, self.accept, self.tol, self.newton,
@@ -56,7 +56,7 @@ class TrackerOptions:
 
 
 #: Step control for retracking a path that stalled or jumped: smaller steps, stricter acceptance.
-TIGHT = TrackerOptions(h0=0.01, hmin=1e-13, target=1e-6, accept=1e-3, max_steps=20000)
+TIGHT = TrackerOptions(h0=0.01, hmin=1e-13, target=1e-5, accept=1e-3, newton=3, contract=0.05, max_steps=4000)
 
 
 @dataclass(frozen=True)
