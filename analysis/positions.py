@@ -1,0 +1,606 @@
+"""Positions formulations of 2D TDOA self-calibration: unknowns are coordinates (and offsets), not (H, b).
+
+This module owns a second family of problem definitions, beside :mod:`analysis.formulations` (the
+paper's H, b, o formulation). The paper's formulation is positive-dimensional for m = 4 receivers
+(tables/NOTES.md, cells 4/5 and 4/6), so the minimal problem 4r/5s and the over-determined 4r/6s need
+equations written directly in the positions. Everything here is exact (sympy over ZZ, GF(p)); the
+float paths exist only to check numeric solvers at a real root. This module never imports ``solvers``.
+
+Problem. Measurements f_ij = |r_i - s_j| + o_j, receivers r_i (i = 1..m), transmitters s_j = (u_j, v_j)
+(j = 1..n), offsets o_j; every equation below only involves (f_ij - o_j)^2 = |r_i - s_j|^2.
+
+Gauge (paper Section 3): r_1 = 0 and r_2 = (x2, 0); receivers i >= 3 are r_i = (x_i, y_i). This leaves
+the group Z2 x Z2 of the reflections y -> -y and x -> -x (their product is the rotation by pi): every
+geometric solution appears 4 times, as sign changes of the coordinates (offsets are invariant). The
+group is returned as sign vectors on the unknowns (:attr:`PositionsSystem.sign_group`).
+
+Derivation. Subtracting the range equation of receiver 1 (r_1 = 0) from that of receiver i >= 2,
+
+    (f_ij - o_j)^2 - (f_1j - o_j)^2 = |r_i|^2 - 2 r_i . s_j
+    <=>  L_ij := a_ij - 2 delta_ij o_j + 2 r_i . s_j - |r_i|^2 = 0,
+         a_ij = f_ij^2 - f_1j^2,  delta_ij = f_ij - f_1j,
+
+which is LINEAR in (s_j, o_j) for known receivers. Together with the range of receiver 1,
+
+    R_j := (f_1j - o_j)^2 - u_j^2 - v_j^2 = 0,
+
+the m equations {R_j, L_2j..L_mj} are equivalent to the original m range equations of transmitter j.
+The variants eliminate some of the linear unknowns:
+
+``full``          unknowns receivers, offsets, transmitters ((2m-3) + 3n); equations R_j and L_ij
+                  (m per transmitter, degrees 2). Exactly the original problem in this gauge: nothing to
+                  saturate.
+``transmitters``  o_j eliminated with L_2j (its coefficient -2 delta_2j is data, nonzero for generic
+                  data, so no denominator in the unknowns): unknowns receivers, transmitters
+                  ((2m-3) + 2n); equations
+                      T_j  := 4 delta_2j^2 R_j with o_j = (a_2j + 2 x2 u_j - x2^2) / (2 delta_2j),
+                              i.e. (2 delta_2j f_1j - a_2j - 2 x2 u_j + x2^2)^2 - 4 delta_2j^2 (u_j^2 + v_j^2),
+                      E_ij := delta_2j L_ij - delta_ij L_2j   (i = 3..m; o_j cancels),
+                  degrees 4 and 2. Equivalent to ``full`` for data with f_2j != f_1j: nothing to saturate.
+``offsets``       s_j eliminated with L_2j, L_3j (Cramer, denominator x2 y3): unknowns receivers,
+                  offsets ((2m-3) + n); with c_ij = |r_i|^2 - a_ij + 2 delta_ij o_j (so L_ij = 2 r_i.s_j - c_ij),
+                      u_j = c_2j / (2 x2),  v_j = (x2 c_3j - x3 c_2j) / (2 x2 y3),
+                      P_j  := 4 x2^2 y3^2 R_j = 4 x2^2 y3^2 (f_1j - o_j)^2 - y3^2 c_2j^2 - (x2 c_3j - x3 c_2j)^2,
+                      K_ij := x_i y3 c_2j + y_i (x2 c_3j - x3 c_2j) - x2 y3 c_ij   (i = 4..m; 2 x2 y3 L_ij),
+                  degrees 6 and 4; saturate by x2 y3 (r_1, r_2, r_3 not collinear).
+``receivers``     (s_j, o_j) eliminated with L_2j, L_3j, L_4j (Cramer on A_j w = g_j with rows
+                  A_j[i] = (x_i, y_i, -delta_ij), g_ij = (|r_i|^2 - a_ij) / 2, w = (u_j, v_j, o_j)):
+                  unknowns the 2m-3 receiver coordinates only; with D_j = det A_j and N_j = adj(A_j) g_j,
+                      Q_j  := 4 D_j^2 R_j = (2 f_1j D_j - 2 N_oj)^2 - 4 N_uj^2 - 4 N_vj^2 ... (see below)
+                      G_ij := x_i N_uj + y_i N_vj - delta_ij N_oj - D_j g_ij   (i = 5..m; D_j L_ij / 2),
+                  degrees 8 and 4 (m = 4: square, 2m-3 = 5 = n unknowns for 4r/5s); saturate by prod D_j.
+                  (With w = N / D: (f_1j - N_o/D)^2 - (N_u/D)^2 - (N_v/D)^2 = 0, times D^2:
+                  Q_j = (f_1j D_j - N_oj)^2 - N_uj^2 - N_vj^2.)
+
+Counting: 4r/5s is minimal (20 measurements, 2*4 + 3*5 - 3 = 20 degrees of freedom); ``full`` is square
+for every minimal configuration (m n equations, (2m - 3) + 3n unknowns).
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Literal, Sequence
+
+import numpy as np
+import sympy
+from sympy.polys.rings import PolyElement
+from sympy.polys.rings import ring as poly_ring
+
+from .formulations import InconsistentSample, SamplingFailed, _powmod_vec, _rng, sqrt_mod
+from .ring import Poly, Ring, check_prime
+
+__all__ = [
+    "VARIANTS",
+    "PositionsSystem",
+    "positions_system",
+    "gf_system",
+    "evaluate_gf",
+    "evaluate_real",
+    "sample_gf_positions",
+    "sample_real_positions",
+    "network_from_root",
+    "apply_sign",
+]
+
+Variant = Literal["full", "transmitters", "offsets", "receivers", "orbits", "dual"]
+VARIANTS: tuple[str, ...] = ("full", "transmitters", "offsets", "receivers", "orbits", "dual")
+
+
+@dataclass(frozen=True)
+class PositionsSystem:
+    """A positions formulation for m receivers and n transmitters (see the module docstring).
+
+    Attributes
+    ----------
+    m, n, variant : configuration and variant name (one of :data:`VARIANTS`).
+    unknowns : unknown names, in order (``x2, x3, y3, ..., xm, ym`` then ``o1..on`` and/or ``u1, v1, ...``).
+    parameters : data names ``f<i>_<j>`` (1-based, row-major: receiver i, transmitter j), the same
+        symbols as :func:`analysis.formulations.data_symbols`.
+    equation_names : one name per equation (``R3``, ``L2_3``, ``T1``, ``E3_1``, ``P2``, ``K4_2``, ``Q5``, ...).
+    equations : polynomial sympy expressions in unknowns and parameters (denominators cleared).
+    saturate_by : sympy expressions in the unknowns (and parameters) that are nonzero at every
+        geometric solution; the solution set is V(equations) minus their zeros (empty: nothing to remove).
+    sign_group : the Z2 x Z2 gauge symmetry as sign vectors on the unknowns (identity first); each maps
+        solutions to solutions for every data matrix.
+    """
+
+    m: int
+    n: int
+    variant: str
+    unknowns: tuple[str, ...]
+    parameters: tuple[str, ...]
+    equation_names: tuple[str, ...]
+    equations: tuple[sympy.Expr, ...]
+    saturate_by: tuple[sympy.Expr, ...]
+    sign_group: tuple[tuple[int, ...], ...]
+    _polys: tuple = ()  # ZZ[unknowns, parameters] elements of equations (then saturate_by)
+
+    @property
+    def label(self) -> str:
+        return f"{self.m}r{self.n}s:positions-{self.variant}"
+
+    @property
+    def n_unknowns(self) -> int:
+        return len(self.unknowns)
+
+    @property
+    def n_equations(self) -> int:
+        return len(self.equations)
+
+    @property
+    def degrees(self) -> tuple[int, ...]:
+        """Total degree of each equation in the unknowns."""
+        k = self.n_unknowns
+        return tuple(max(sum(e[:k]) for e in p.monoms()) for p in self._polys[: self.n_equations])
+
+    def unknown_index(self, name: str) -> int:
+        return self.unknowns.index(name)
+
+
+def _receiver_names(m: int) -> list[str]:
+    names = ["x2"]
+    for i in range(3, m + 1):
+        names += [f"x{i}", f"y{i}"]
+    return names
+
+
+def _check_config(m: int, n: int, variant: str) -> None:
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; valid: {', '.join(VARIANTS)}")
+    if variant == "dual" and n < 3:
+        raise ValueError("variant 'dual' eliminates receivers with transmitters 1-3: needs n >= 3")
+    if m < 3 or n < 1:
+        raise ValueError(f"need m >= 3 receivers and n >= 1 transmitters, got {m}r{n}s")
+    if variant in ("receivers", "orbits") and m < 4:
+        raise ValueError(f"variant {variant!r} eliminates (s_j, o_j) with receivers 2-4: needs m >= 4")
+
+
+def positions_system(m: int, n: int, variant: Variant = "full") -> PositionsSystem:
+    """Build the positions formulation ``variant`` for m receivers and n transmitters.
+
+    Parameters
+    ----------
+    m : receivers, m >= 3 (m >= 4 for ``receivers``).
+    n : transmitters, n >= 1.
+    variant : ``"full"``, ``"transmitters"``, ``"offsets"`` or ``"receivers"`` (module docstring).
+
+    Returns a :class:`PositionsSystem` (cached per arguments; sympy expressions are immutable).
+    """
+    _check_config(m, n, variant)
+    return _build(m, n, variant)
+
+
+@lru_cache(maxsize=None)
+def _build(m: int, n: int, variant: str) -> PositionsSystem:
+    rec = _receiver_names(m)
+    offs = [f"o{j}" for j in range(1, n + 1)]
+    tra = [name for j in range(1, n + 1) for name in (f"u{j}", f"v{j}")]
+    orb = ["X", "Y", "xi3"] + [name for i in range(4, m + 1) for name in (f"xi{i}", f"eta{i}")]
+    unknowns = {
+        "full": rec + offs + tra,
+        "transmitters": rec + tra,
+        "offsets": rec + offs,
+        "receivers": rec,
+        "orbits": orb,
+        "dual": offs + tra,
+    }[variant]
+    params = [f"f{i}_{j}" for i in range(1, m + 1) for j in range(1, n + 1)]
+    R, *gens = poly_ring(unknowns + params, sympy.ZZ)
+    sym = dict(zip(unknowns + params, gens))
+    zero = R.zero
+
+    one = R.one
+
+    def x(i: int):
+        return zero if i == 1 else sym[f"x{i}"]
+
+    def y(i: int):
+        return zero if i <= 2 else sym[f"y{i}"]
+
+    def xi(i: int):  # x_i / x2
+        return one if i == 2 else sym[f"xi{i}"]
+
+    def eta(i: int):  # y_i / y3
+        return zero if i == 2 else one if i == 3 else sym[f"eta{i}"]
+
+    def f(i: int, j: int):
+        return sym[f"f{i}_{j}"]
+
+    def a(i: int, j: int):
+        return f(i, j) ** 2 - f(1, j) ** 2
+
+    def delta(i: int, j: int):
+        return f(i, j) - f(1, j)
+
+    def norm2(i: int):
+        if variant == "orbits":
+            return sym["X"] * xi(i) ** 2 + sym["Y"] * eta(i) ** 2
+        return x(i) ** 2 + y(i) ** 2
+
+    names: list[str] = []
+    polys: list[PolyElement] = []
+    sat: list[PolyElement] = []
+    if variant == "dual":
+        _dual_equations(m, n, sym, f, a, delta, names, polys, sat)
+    for j in range(1, n + 1 if variant != "dual" else 1):
+        if variant in ("full", "transmitters"):
+            u, v = sym[f"u{j}"], sym[f"v{j}"]
+        if variant in ("full", "offsets"):
+            o = sym[f"o{j}"]
+        if variant == "full":
+            names.append(f"R{j}")
+            polys.append((f(1, j) - o) ** 2 - u**2 - v**2)
+            for i in range(2, m + 1):
+                names.append(f"L{i}_{j}")
+                polys.append(a(i, j) - 2 * delta(i, j) * o + 2 * (x(i) * u + y(i) * v) - norm2(i))
+        elif variant == "transmitters":
+            def L(i: int):  # L_ij with o_j's term kept apart: L = rest - 2 delta o
+                return a(i, j) + 2 * (x(i) * u + y(i) * v) - norm2(i)
+
+            d2 = delta(2, j)
+            names.append(f"T{j}")
+            polys.append((2 * d2 * f(1, j) - L(2)) ** 2 - 4 * d2**2 * (u**2 + v**2))
+            for i in range(3, m + 1):
+                names.append(f"E{i}_{j}")
+                polys.append(d2 * L(i) - delta(i, j) * L(2))
+        elif variant == "offsets":
+            def c(i: int):
+                return norm2(i) - a(i, j) + 2 * delta(i, j) * o
+
+            x2, x3, y3 = x(2), x(3), y(3)
+            names.append(f"P{j}")
+            polys.append(4 * x2**2 * y3**2 * (f(1, j) - o) ** 2 - y3**2 * c(2) ** 2 - (x2 * c(3) - x3 * c(2)) ** 2)
+            for i in range(4, m + 1):
+                names.append(f"K{i}_{j}")
+                polys.append(x(i) * y3 * c(2) + y(i) * (x2 * c(3) - x3 * c(2)) - x2 * y3 * c(i))
+        elif variant == "orbits":
+            X, Y = sym["X"], sym["Y"]
+            A = [[xi(i), eta(i), -delta(i, j)] for i in (2, 3, 4)]  # A_j = A'_j diag(x2, y3, 1)
+            g2 = [norm2(i) - a(i, j) for i in (2, 3, 4)]
+            D = _det3(A)
+            adj = _adjugate3(A)
+            M2 = [sum((adj[k][l] * g2[l] for l in range(3)), zero) for k in range(3)]  # 2 D' (x2 u, y3 v, o)
+            names.append(f"W{j}")
+            polys.append(X * Y * (2 * f(1, j) * D - M2[2]) ** 2 - Y * M2[0] ** 2 - X * M2[1] ** 2)
+            for i in range(5, m + 1):
+                names.append(f"V{i}_{j}")
+                polys.append(xi(i) * M2[0] + eta(i) * M2[1] - delta(i, j) * M2[2] - D * (norm2(i) - a(i, j)))
+            sat.append(D)
+        else:  # receivers
+            A = [[x(i), y(i), -delta(i, j)] for i in (2, 3, 4)]
+            g2 = [norm2(i) - a(i, j) for i in (2, 3, 4)]  # 2 g_ij
+            D = _det3(A)
+            adj = _adjugate3(A)
+            # N = adj(A) g with g = g2 / 2; keep integers: N2 = adj(A) g2 = 2 N
+            N2 = [sum((adj[k][l] * g2[l] for l in range(3)), zero) for k in range(3)]
+            # Q = (f D - N_o)^2 - N_u^2 - N_v^2, times 4: (2 f D - N2_o)^2 - N2_u^2 - N2_v^2
+            names.append(f"Q{j}")
+            polys.append((2 * f(1, j) * D - N2[2]) ** 2 - N2[0] ** 2 - N2[1] ** 2)
+            for i in range(5, m + 1):
+                names.append(f"G{i}_{j}")
+                # 2 (x_i N_u + y_i N_v - delta N_o - D g_i) = x_i N2_u + y_i N2_v - delta N2_o - D (2 g_i)
+                polys.append(x(i) * N2[0] + y(i) * N2[1] - delta(i, j) * N2[2] - D * (norm2(i) - a(i, j)))
+            sat.append(D)
+    if variant == "offsets":
+        sat.append(x(2) * y(3))
+    if variant in ("receivers", "transmitters", "full"):
+        sat.append(x(2))
+    if variant == "orbits":
+        sat.append(sym["X"] * sym["Y"])
+    group = _sign_group(unknowns) if variant != "orbits" else ((1,) * len(unknowns),)
+    exprs = tuple(p.as_expr() for p in polys)
+    return PositionsSystem(m, n, variant, tuple(unknowns), tuple(params), tuple(names), exprs,
+                           tuple(p.as_expr() for p in sat), group, tuple(polys) + tuple(sat))
+
+
+def _dual_equations(m, n, sym, f, a, delta, names, polys, sat) -> None:
+    """Equations of variant ``dual`` (receivers eliminated linearly; see the module docstring)."""
+    u = {j: sym[f"u{j}"] for j in range(1, n + 1)}
+    v = {j: sym[f"v{j}"] for j in range(1, n + 1)}
+    o = {j: sym[f"o{j}"] for j in range(1, n + 1)}
+    # S = [s2 - s1, s3 - s1] (columns); adj(S)^T maps (e2, e3) to rho with S^T rho = P (e2, e3)
+    s11, s21 = u[2] - u[1], v[2] - v[1]
+    s12, s22 = u[3] - u[1], v[3] - v[1]
+    P = s11 * s22 - s12 * s21
+    for j in range(1, n + 1):
+        names.append(f"R{j}")
+        polys.append((f(1, j) - o[j]) ** 2 - u[j] ** 2 - v[j] ** 2)
+    for i in range(2, m + 1):
+        def c(j: int):  # L_ij = 2 r_i.s_j - |r_i|^2 - c(j)
+            return 2 * delta(i, j) * o[j] - a(i, j)
+
+        e2, e3 = c(2) - c(1), c(3) - c(1)
+        # S^T r = (e2, e3) / 2;  (S^T)^{-1} = adj(S^T) / P,  adj(S^T) = [[s22, -s21], [-s12, s11]]
+        rho_x, rho_y = s22 * e2 - s21 * e3, -s12 * e2 + s11 * e3  # r_i = rho / (2 P)
+        if i == 2:
+            names.append("Z2")
+            polys.append(rho_y)
+            sat.append(rho_x)
+        names.append(f"J{i}")
+        polys.append(4 * P * (rho_x * u[1] + rho_y * v[1]) - rho_x**2 - rho_y**2 - 4 * P**2 * c(1))
+        for j in range(4, n + 1):
+            names.append(f"H{i}_{j}")
+            polys.append(rho_x * (u[j] - u[1]) + rho_y * (v[j] - v[1]) - P * (c(j) - c(1)))
+    sat.append(P)
+
+
+def _det3(A) -> PolyElement:
+    return (A[0][0] * (A[1][1] * A[2][2] - A[1][2] * A[2][1])
+            - A[0][1] * (A[1][0] * A[2][2] - A[1][2] * A[2][0])
+            + A[0][2] * (A[1][0] * A[2][1] - A[1][1] * A[2][0]))
+
+
+def _adjugate3(A) -> list[list]:
+    """adj(A) with A adj(A) = det(A) I (transpose of the cofactor matrix)."""
+    cof = [[None] * 3 for _ in range(3)]
+    for r in range(3):
+        for c in range(3):
+            rows = [k for k in range(3) if k != r]
+            cols = [k for k in range(3) if k != c]
+            minor = A[rows[0]][cols[0]] * A[rows[1]][cols[1]] - A[rows[0]][cols[1]] * A[rows[1]][cols[0]]
+            cof[r][c] = minor if (r + c) % 2 == 0 else -minor
+    return [[cof[c][r] for c in range(3)] for r in range(3)]
+
+
+def _sign_group(unknowns: Sequence[str]) -> tuple[tuple[int, ...], ...]:
+    """Sign vectors of {identity, y -> -y, x -> -x, rotation by pi} on the unknowns."""
+    out = []
+    for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        out.append(tuple(sx if name[0] in "xu" else sy if name[0] in "yv" else 1 for name in unknowns))
+    return tuple(out)
+
+
+def apply_sign(root: Sequence, sign: Sequence[int], p: int | None = None) -> tuple:
+    """Image of a root under a sign vector (over GF(p) when p is given)."""
+    if p is None:
+        return tuple(s * r for s, r in zip(sign, root))
+    return tuple((s * int(r)) % p for s, r in zip(sign, root))
+
+
+# --------------------------------------------------------------------------------------------------
+# Specialising to data: GF(p) and real evaluation
+# --------------------------------------------------------------------------------------------------
+
+
+def _data_values(system: PositionsSystem, F) -> list:
+    F = [list(r) for r in F]
+    if len(F) != system.m or any(len(r) != system.n for r in F):
+        raise ValueError(f"data must be {system.m} x {system.n} (receivers x transmitters)")
+    return [F[i][j] for i in range(system.m) for j in range(system.n)]
+
+
+def _specialise_gf(poly: PolyElement, k: int, values: Sequence[int], p: int) -> dict[tuple[int, ...], int]:
+    """{exponent in the k unknowns: coefficient mod p} of a ZZ[unknowns, params] polynomial at params."""
+    out: dict[tuple[int, ...], int] = {}
+    for exp, c in poly.terms():
+        term = int(c) % p
+        for val, e in zip(values, exp[k:]):
+            if e:
+                term = term * pow(val, e, p) % p
+        if term:
+            key = exp[:k]
+            out[key] = (out.get(key, 0) + term) % p
+    return {e: c for e, c in out.items() if c}
+
+
+def gf_system(system: PositionsSystem, F, p: int, order: str = "grevlex") -> tuple[list[Poly], list[Poly]]:
+    """(equations, saturating polynomials) over GF(p) for the data matrix F (m x n integers).
+
+    Both are :class:`analysis.ring.Poly` in one ring over the unknowns (``order``: any order the
+    ring accepts).
+    """
+    p = check_prime(p)
+    ring = Ring(system.unknowns, p, order)
+    values = [int(v) % p for v in _data_values(system, F)]
+    k = system.n_unknowns
+    polys = [ring.from_terms(_specialise_gf(q, k, values, p)) for q in system._polys]
+    return polys[: system.n_equations], polys[system.n_equations:]
+
+
+def evaluate_gf(system: PositionsSystem, F, root: Sequence[int], p: int) -> tuple[list[int], list[int]]:
+    """(equation values, saturating-polynomial values) mod p at a point, for data F."""
+    values = [int(v) % p for v in _data_values(system, F)]
+    point = [int(r) % p for r in root] + values
+    out = []
+    for q in system._polys:
+        total = 0
+        for exp, c in q.terms():
+            term = int(c) % p
+            for val, e in zip(point, exp):
+                if e:
+                    term = term * pow(val, e, p) % p
+            total += term
+        out.append(total % p)
+    return out[: system.n_equations], out[system.n_equations:]
+
+
+def evaluate_real(system: PositionsSystem, F, root: Sequence) -> tuple[np.ndarray, np.ndarray]:
+    """(equation values, relative residuals |value| / sum|terms|) at a real or complex point."""
+    point = list(root) + [float(v) for v in _data_values(system, F)]
+    vals, rel = [], []
+    for q in system._polys[: system.n_equations]:
+        total, scale = 0.0, 0.0
+        for exp, c in q.terms():
+            term = complex(int(c))
+            for val, e in zip(point, exp):
+                if e:
+                    term *= val**e
+            total += term
+            scale += abs(term)
+        vals.append(total)
+        rel.append(abs(total) / max(scale, np.finfo(float).tiny))
+    vals = np.array(vals)
+    if np.all(np.isreal(vals)):
+        vals = vals.real
+    return vals, np.array(rel)
+
+
+# --------------------------------------------------------------------------------------------------
+# Instances with a known root
+# --------------------------------------------------------------------------------------------------
+
+
+def _root_from_network(system: PositionsSystem, receivers, transmitters, offsets, p: int | None = None) -> tuple:
+    """The root in the unknowns of ``system`` for a network already in the gauge (over GF(p) if p)."""
+    value = {"x2": receivers[1][0]}
+    for i in range(3, system.m + 1):
+        value[f"x{i}"], value[f"y{i}"] = receivers[i - 1][0], receivers[i - 1][1]
+    if system.variant == "orbits":
+        x2, y3 = receivers[1][0], receivers[2][1]
+        if p is None:
+            inv_x2, inv_y3 = 1.0 / x2, 1.0 / y3
+        else:
+            inv_x2, inv_y3 = pow(int(x2), -1, p), pow(int(y3), -1, p)
+        value["X"], value["Y"] = x2 * x2, y3 * y3
+        for i in range(3, system.m + 1):
+            value[f"xi{i}"] = receivers[i - 1][0] * inv_x2
+            value[f"eta{i}"] = receivers[i - 1][1] * inv_y3
+    for j in range(1, system.n + 1):
+        value[f"o{j}"] = offsets[j - 1]
+        value[f"u{j}"], value[f"v{j}"] = transmitters[j - 1][0], transmitters[j - 1][1]
+    return tuple(value[name] for name in system.unknowns)
+
+
+def sample_gf_positions(m: int, n: int, p: int, rng: "np.random.Generator | int", variant: Variant = "full", *,
+                        max_tries: int = 200) -> tuple[tuple[tuple[int, ...], ...], tuple[int, ...]]:
+    """A consistent random GF(p) instance in the gauge r_1 = 0, r_2 = (x2, 0), and its known root.
+
+    Draws receivers (x2 and r_3..r_m uniform in GF(p)), then each transmitter uniformly among the
+    points whose squared distances to all receivers are nonzero quadratic residues, then offsets
+    uniform in GF(p); f_ij = sqrt(d_ij^2) + o_j (the smaller square root). The draw is repeated until
+    the instance is generic for the variant (f_2j != f_1j, every saturating polynomial nonzero at the
+    root). Returns (F as m x n nested tuples, root in ``positions_system(m, n, variant).unknowns``).
+    Raises :class:`SamplingFailed` (naming the seed) or :class:`InconsistentSample` (a bug).
+    """
+    system = positions_system(m, n, variant)
+    p = check_prime(p)
+    gen, seed_text = _rng(rng)
+    half = (p - 1) // 2
+    for _ in range(max_tries):
+        receivers = np.zeros((m, 2), dtype=np.int64)
+        receivers[1, 0] = gen.integers(1, p)
+        receivers[2:] = gen.integers(0, p, size=(m - 2, 2))
+        transmitters = []
+        for _j in range(n):
+            for _b in range(200):
+                cand = gen.integers(0, p, size=(256, 2))
+                dx = (cand[:, None, 0] - receivers[None, :, 0]) % p
+                dy = (cand[:, None, 1] - receivers[None, :, 1]) % p
+                d2 = (dx * dx % p + dy * dy % p) % p
+                ok = np.flatnonzero(np.all((d2 != 0) & (_powmod_vec(d2, half, p) == 1), axis=1))
+                if ok.size:
+                    transmitters.append(cand[ok[0]])
+                    break
+            else:
+                raise SamplingFailed(f"no transmitter with residue distances mod {p} ({m}r{n}s, {seed_text})")
+        offsets = gen.integers(0, p, size=n)
+        rec = [(int(a) % p, int(b) % p) for a, b in receivers]
+        tra = [(int(a), int(b)) for a, b in transmitters]
+        offs = [int(o) for o in offsets]
+        F = tuple(tuple((sqrt_mod((rx - sx) ** 2 + (ry - sy) ** 2, p) + o) % p for (sx, sy), o in zip(tra, offs))
+                  for rx, ry in rec)
+        if any(F[1][j] == F[0][j] for j in range(n)):
+            continue
+        if rec[1][0] * rec[2][1] % p == 0:
+            continue
+        root = tuple(int(v) % p for v in _root_from_network(system, rec, tra, offs, p))
+        eq_values, sat_values = evaluate_gf(system, F, root, p)
+        if any(v == 0 for v in sat_values):
+            continue
+        if any(eq_values):
+            bad = [nm for nm, v in zip(system.equation_names, eq_values) if v]
+            raise InconsistentSample(f"known root fails {', '.join(bad)} of {system.label} mod {p} ({seed_text})")
+        return F, root
+    raise SamplingFailed(f"no generic instance of {system.label} mod {p} after {max_tries} draws ({seed_text})")
+
+
+def _to_gauge(receivers: np.ndarray, transmitters: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Translate r_1 to 0 and rotate r_2 onto the positive x axis."""
+    t = receivers[0].copy()
+    rec, tra = receivers - t, transmitters - t
+    ang = np.arctan2(rec[1, 1], rec[1, 0])
+    c, s = np.cos(ang), np.sin(ang)
+    Q = np.array([[c, s], [-s, c]])  # rotation by -ang
+    rec, tra = rec @ Q.T, tra @ Q.T
+    rec[0] = 0.0
+    rec[1, 1] = 0.0
+    return rec, tra
+
+
+def sample_real_positions(m: int, n: int, rng: "np.random.Generator | int", variant: Variant = "full",
+                          scale: float = 10.0, offset_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A random real instance (paper Section 4: positions N(0, scale^2), offsets N(0, offset_scale^2)).
+
+    The network is moved into the gauge r_1 = 0, r_2 = (x2, 0) with x2 > 0 (distances unchanged).
+    Returns (F, an m x n array; root in ``positions_system(m, n, variant).unknowns``, float64).
+    """
+    system = positions_system(m, n, variant)
+    gen, _ = _rng(rng)
+    receivers = gen.normal(0.0, scale, size=(m, 2))
+    transmitters = gen.normal(0.0, scale, size=(n, 2))
+    offsets = gen.normal(0.0, offset_scale, size=n)
+    rec, tra = _to_gauge(receivers, transmitters)
+    F = np.linalg.norm(rec[:, None, :] - tra[None, :, :], axis=2) + offsets[None, :]
+    root = np.array(_root_from_network(system, rec, tra, offsets), dtype=float)
+    return F, root
+
+
+def network_from_root(system: PositionsSystem, root: Sequence, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(receivers (m, 2), transmitters (n, 2), offsets (n,)) of a root, in the gauge r_1 = 0, r_2 = (x2, 0).
+
+    Eliminated unknowns are recovered as in the derivation (module docstring): o_j from L_2j
+    (``transmitters``), s_j by Cramer on L_2j, L_3j (``offsets``), (s_j, o_j) by solving L_2j..L_4j
+    (``receivers``). Values may be complex (complex roots); the dtype follows the root.
+    """
+    root = np.asarray(root)
+    dtype = np.result_type(root.dtype, np.float64)
+    F = np.asarray(F, dtype=dtype)
+    m, n = system.m, system.n
+    value = dict(zip(system.unknowns, root))
+    rec = np.zeros((m, 2), dtype=dtype)
+    if system.variant == "dual":
+        offs = np.array([value[f"o{j}"] for j in range(1, n + 1)], dtype=dtype)
+        tra = np.array([(value[f"u{j}"], value[f"v{j}"]) for j in range(1, n + 1)], dtype=dtype)
+        c = 2 * (F - F[0]) * offs[None, :] - (F**2 - F[0] ** 2)  # c_ij, L_ij = 2 r_i.s_j - |r_i|^2 - c_ij
+        St = np.array([tra[1] - tra[0], tra[2] - tra[0]])  # S^T
+        for i in range(1, m):
+            rec[i] = np.linalg.solve(2 * St, [c[i, 1] - c[i, 0], c[i, 2] - c[i, 0]])
+        return rec, tra, offs
+    if system.variant == "orbits":  # one representative of the orbit: principal square roots
+        x2, y3 = np.sqrt(value["X"] + 0j), np.sqrt(value["Y"] + 0j)
+        if np.isrealobj(root) and value["X"] > 0 and value["Y"] > 0:
+            x2, y3 = x2.real, y3.real
+        else:
+            dtype = np.complex128
+            rec = rec.astype(dtype)
+        rec[1, 0] = x2
+        rec[2] = (value["xi3"] * x2, y3)
+        for i in range(4, m + 1):
+            rec[i - 1] = (value[f"xi{i}"] * x2, value[f"eta{i}"] * y3)
+        F = F.astype(dtype)
+    else:
+        rec[1, 0] = value["x2"]
+        for i in range(3, m + 1):
+            rec[i - 1] = (value[f"x{i}"], value[f"y{i}"])
+    tra = np.zeros((n, 2), dtype=dtype)
+    offs = np.zeros(n, dtype=dtype)
+    norm2 = rec[:, 0] ** 2 + rec[:, 1] ** 2
+    for j in range(n):
+        a = F[:, j] ** 2 - F[0, j] ** 2
+        delta = F[:, j] - F[0, j]
+        if system.variant in ("full", "transmitters"):
+            tra[j] = (value[f"u{j + 1}"], value[f"v{j + 1}"])
+        if system.variant in ("full", "offsets"):
+            offs[j] = value[f"o{j + 1}"]
+        if system.variant == "transmitters":
+            offs[j] = (a[1] + 2 * rec[1, 0] * tra[j, 0] - norm2[1]) / (2 * delta[1])
+        elif system.variant == "offsets":
+            c = norm2 - a + 2 * delta * offs[j]
+            tra[j, 0] = c[1] / (2 * rec[1, 0])
+            tra[j, 1] = (rec[1, 0] * c[2] - rec[2, 0] * c[1]) / (2 * rec[1, 0] * rec[2, 1])
+        elif system.variant in ("receivers", "orbits"):
+            A = np.column_stack([2 * rec[1:4, 0], 2 * rec[1:4, 1], -2 * delta[1:4]])
+            w = np.linalg.solve(A, norm2[1:4] - a[1:4])
+            tra[j], offs[j] = w[:2], w[2]
+    return rec, tra, offs
