@@ -83,8 +83,10 @@ __all__ = [
     "apply_sign",
 ]
 
-Variant = Literal["full", "transmitters", "offsets", "receivers", "orbits", "dual"]
-VARIANTS: tuple[str, ...] = ("full", "transmitters", "offsets", "receivers", "orbits", "dual")
+Variant = Literal["full", "transmitters", "offsets", "receivers", "receivers-orbits", "dual", "dual-orbits"]
+VARIANTS: tuple[str, ...] = ("full", "transmitters", "offsets", "receivers", "receivers-orbits", "dual", "dual-orbits")
+ORBIT_VARIANTS: tuple[str, ...] = ("receivers-orbits", "dual-orbits")
+"""Variants whose unknowns are invariants of the sign group (one unknown vector per geometric solution)."""
 
 
 @dataclass(frozen=True)
@@ -148,11 +150,11 @@ def _receiver_names(m: int) -> list[str]:
 def _check_config(m: int, n: int, variant: str) -> None:
     if variant not in VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; valid: {', '.join(VARIANTS)}")
-    if variant == "dual" and n < 3:
-        raise ValueError("variant 'dual' eliminates receivers with transmitters 1-3: needs n >= 3")
+    if variant in ("dual", "dual-orbits") and n < 3:
+        raise ValueError(f"variant {variant!r} eliminates receivers with transmitters 1-3: needs n >= 3")
     if m < 3 or n < 1:
         raise ValueError(f"need m >= 3 receivers and n >= 1 transmitters, got {m}r{n}s")
-    if variant in ("receivers", "orbits") and m < 4:
+    if variant in ("receivers", "receivers-orbits") and m < 4:
         raise ValueError(f"variant {variant!r} eliminates (s_j, o_j) with receivers 2-4: needs m >= 4")
 
 
@@ -182,8 +184,9 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
         "transmitters": rec + tra,
         "offsets": rec + offs,
         "receivers": rec,
-        "orbits": orb,
-        "dual": offs + tra,
+        "receivers-orbits": orb,
+        "dual": offs + [name for name in tra if name != "v1"],
+        "dual-orbits": offs + ["U"] + [f"alpha{j}" for j in range(2, n + 1)] + ["V"] + [f"beta{j}" for j in range(3, n + 1)],
     }[variant]
     params = [f"f{i}_{j}" for i in range(1, m + 1) for j in range(1, n + 1)]
     R, *gens = poly_ring(unknowns + params, sympy.ZZ)
@@ -214,16 +217,16 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
         return f(i, j) - f(1, j)
 
     def norm2(i: int):
-        if variant == "orbits":
+        if variant == "receivers-orbits":
             return sym["X"] * xi(i) ** 2 + sym["Y"] * eta(i) ** 2
         return x(i) ** 2 + y(i) ** 2
 
     names: list[str] = []
     polys: list[PolyElement] = []
     sat: list[PolyElement] = []
-    if variant == "dual":
-        _dual_equations(m, n, sym, f, a, delta, names, polys, sat)
-    for j in range(1, n + 1 if variant != "dual" else 1):
+    if variant in ("dual", "dual-orbits"):
+        _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits=variant == "dual-orbits")
+    for j in range(1, n + 1 if variant not in ("dual", "dual-orbits") else 1):
         if variant in ("full", "transmitters"):
             u, v = sym[f"u{j}"], sym[f"v{j}"]
         if variant in ("full", "offsets"):
@@ -254,7 +257,7 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
             for i in range(4, m + 1):
                 names.append(f"K{i}_{j}")
                 polys.append(x(i) * y3 * c(2) + y(i) * (x2 * c(3) - x3 * c(2)) - x2 * y3 * c(i))
-        elif variant == "orbits":
+        elif variant == "receivers-orbits":
             X, Y = sym["X"], sym["Y"]
             A = [[xi(i), eta(i), -delta(i, j)] for i in (2, 3, 4)]  # A_j = A'_j diag(x2, y3, 1)
             g2 = [norm2(i) - a(i, j) for i in (2, 3, 4)]
@@ -286,43 +289,57 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
         sat.append(x(2) * y(3))
     if variant in ("receivers", "transmitters", "full"):
         sat.append(x(2))
-    if variant == "orbits":
+    if variant == "receivers-orbits":
         sat.append(sym["X"] * sym["Y"])
-    group = _sign_group(unknowns) if variant != "orbits" else ((1,) * len(unknowns),)
+    group = _sign_group(unknowns) if variant not in ORBIT_VARIANTS else ((1,) * len(unknowns),)
     exprs = tuple(p.as_expr() for p in polys)
     return PositionsSystem(m, n, variant, tuple(unknowns), tuple(params), tuple(names), exprs,
                            tuple(p.as_expr() for p in sat), group, tuple(polys) + tuple(sat))
 
 
-def _dual_equations(m, n, sym, f, a, delta, names, polys, sat) -> None:
-    """Equations of variant ``dual`` (receivers eliminated linearly; see the module docstring)."""
-    u = {j: sym[f"u{j}"] for j in range(1, n + 1)}
-    v = {j: sym[f"v{j}"] for j in range(1, n + 1)}
+def _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits: bool) -> None:
+    """Equations of variants ``dual`` and ``dual-orbits`` (receivers eliminated linearly, gauge v1 = 0).
+
+    ``dual``: (ut, vt) = (u, v), wU = wV = 1. ``dual-orbits``: u_j = u1 alpha_j, v_j = v2 beta_j
+    (alpha_1 = 1, beta_1 = 0, beta_2 = 1), (ut, vt) = (alpha, beta), wU = U = u1^2, wV = V = v2^2; then
+    P = u1 v2 P~, rho_x = v2 rho~_x, rho_y = u1 rho~_y, and each equation is the ``dual`` one divided
+    by a monomial in u1, v2 (module docstring).
+    """
+    one = sym["o1"] ** 0
+    zero = 0 * one
     o = {j: sym[f"o{j}"] for j in range(1, n + 1)}
-    # S = [s2 - s1, s3 - s1] (columns); adj(S)^T maps (e2, e3) to rho with S^T rho = P (e2, e3)
-    s11, s21 = u[2] - u[1], v[2] - v[1]
-    s12, s22 = u[3] - u[1], v[3] - v[1]
+    if orbits:
+        wU, wV = sym["U"], sym["V"]
+        ut = {j: (sym[f"alpha{j}"] if j > 1 else one) for j in range(1, n + 1)}
+        vt = {j: (sym[f"beta{j}"] if j > 2 else one if j == 2 else zero) for j in range(1, n + 1)}
+    else:
+        wU = wV = one
+        ut = {j: sym[f"u{j}"] for j in range(1, n + 1)}
+        vt = {j: (sym[f"v{j}"] if j > 1 else zero) for j in range(1, n + 1)}
+    # S = [s2 - s1, s3 - s1] (columns), P = det S; S^T r_i = (e_i2, e_i3) / 2
+    s11, s21 = ut[2] - ut[1], vt[2] - vt[1]
+    s12, s22 = ut[3] - ut[1], vt[3] - vt[1]
     P = s11 * s22 - s12 * s21
     for j in range(1, n + 1):
         names.append(f"R{j}")
-        polys.append((f(1, j) - o[j]) ** 2 - u[j] ** 2 - v[j] ** 2)
+        polys.append((f(1, j) - o[j]) ** 2 - wU * ut[j] ** 2 - wV * vt[j] ** 2)
     for i in range(2, m + 1):
         def c(j: int):  # L_ij = 2 r_i.s_j - |r_i|^2 - c(j)
             return 2 * delta(i, j) * o[j] - a(i, j)
 
         e2, e3 = c(2) - c(1), c(3) - c(1)
-        # S^T r = (e2, e3) / 2;  (S^T)^{-1} = adj(S^T) / P,  adj(S^T) = [[s22, -s21], [-s12, s11]]
-        rho_x, rho_y = s22 * e2 - s21 * e3, -s12 * e2 + s11 * e3  # r_i = rho / (2 P)
-        if i == 2:
-            names.append("Z2")
-            polys.append(rho_y)
-            sat.append(rho_x)
+        # (S^T)^{-1} = adj(S^T) / P with adj(S^T) = [[s22, -s21], [-s12, s11]]: r_i = rho / (2 P)
+        rho_x, rho_y = s22 * e2 - s21 * e3, -s12 * e2 + s11 * e3
         names.append(f"J{i}")
-        polys.append(4 * P * (rho_x * u[1] + rho_y * v[1]) - rho_x**2 - rho_y**2 - 4 * P**2 * c(1))
+        polys.append(4 * wU * wV * P * rho_x * ut[1] - wV * rho_x**2 - wU * rho_y**2 - 4 * wU * wV * P**2 * c(1))
         for j in range(4, n + 1):
             names.append(f"H{i}_{j}")
-            polys.append(rho_x * (u[j] - u[1]) + rho_y * (v[j] - v[1]) - P * (c(j) - c(1)))
-    sat.append(P)
+            polys.append(rho_x * (ut[j] - ut[1]) + rho_y * (vt[j] - vt[1]) - P * (c(j) - c(1)))
+    if orbits:
+        sat.append(wU * wV * P)
+    else:
+        sat.append(P)
+        sat.append(ut[1])
 
 
 def _det3(A) -> PolyElement:
@@ -446,7 +463,14 @@ def _root_from_network(system: PositionsSystem, receivers, transmitters, offsets
     value = {"x2": receivers[1][0]}
     for i in range(3, system.m + 1):
         value[f"x{i}"], value[f"y{i}"] = receivers[i - 1][0], receivers[i - 1][1]
-    if system.variant == "orbits":
+    if system.variant == "dual-orbits":
+        u1, v2 = transmitters[0][0], transmitters[1][1]
+        inv_u1, inv_v2 = (1.0 / u1, 1.0 / v2) if p is None else (pow(int(u1), -1, p), pow(int(v2), -1, p))
+        value["U"], value["V"] = u1 * u1, v2 * v2
+        for j in range(2, system.n + 1):
+            value[f"alpha{j}"] = transmitters[j - 1][0] * inv_u1
+            value[f"beta{j}"] = transmitters[j - 1][1] * inv_v2
+    if system.variant == "receivers-orbits":
         x2, y3 = receivers[1][0], receivers[2][1]
         if p is None:
             inv_x2, inv_y3 = 1.0 / x2, 1.0 / y3
@@ -477,14 +501,19 @@ def sample_gf_positions(m: int, n: int, p: int, rng: "np.random.Generator | int"
     p = check_prime(p)
     gen, seed_text = _rng(rng)
     half = (p - 1) // 2
+    dual = variant in ("dual", "dual-orbits")
     for _ in range(max_tries):
         receivers = np.zeros((m, 2), dtype=np.int64)
         receivers[1, 0] = gen.integers(1, p)
         receivers[2:] = gen.integers(0, p, size=(m - 2, 2))
+        if dual:  # gauge s_1 = (u1, 0) instead of r_2 = (x2, 0)
+            receivers[1, 1] = gen.integers(0, p)
         transmitters = []
-        for _j in range(n):
+        for j in range(n):
             for _b in range(200):
                 cand = gen.integers(0, p, size=(256, 2))
+                if dual and j == 0:
+                    cand[:, 1] = 0
                 dx = (cand[:, None, 0] - receivers[None, :, 0]) % p
                 dy = (cand[:, None, 1] - receivers[None, :, 1]) % p
                 d2 = (dx * dx % p + dy * dy % p) % p
@@ -502,7 +531,9 @@ def sample_gf_positions(m: int, n: int, p: int, rng: "np.random.Generator | int"
                   for rx, ry in rec)
         if any(F[1][j] == F[0][j] for j in range(n)):
             continue
-        if rec[1][0] * rec[2][1] % p == 0:
+        if not dual and rec[1][0] * rec[2][1] % p == 0:
+            continue
+        if dual and tra[0][0] * tra[1][1] % p == 0:
             continue
         root = tuple(int(v) % p for v in _root_from_network(system, rec, tra, offs, p))
         eq_values, sat_values = evaluate_gf(system, F, root, p)
@@ -515,24 +546,32 @@ def sample_gf_positions(m: int, n: int, p: int, rng: "np.random.Generator | int"
     raise SamplingFailed(f"no generic instance of {system.label} mod {p} after {max_tries} draws ({seed_text})")
 
 
-def _to_gauge(receivers: np.ndarray, transmitters: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Translate r_1 to 0 and rotate r_2 onto the positive x axis."""
+def _to_gauge(receivers: np.ndarray, transmitters: np.ndarray, dual: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Translate r_1 to 0 and rotate r_2 (``dual``: s_1) onto the positive x axis."""
     t = receivers[0].copy()
     rec, tra = receivers - t, transmitters - t
-    ang = np.arctan2(rec[1, 1], rec[1, 0])
-    c, s = np.cos(ang), np.sin(ang)
-    Q = np.array([[c, s], [-s, c]])  # rotation by -ang
-    rec, tra = rec @ Q.T, tra @ Q.T
+    rec, tra = _rotate_onto_x(rec, tra, tra[0] if dual else rec[1])
     rec[0] = 0.0
-    rec[1, 1] = 0.0
+    if dual:
+        tra[0, 1] = 0.0
+    else:
+        rec[1, 1] = 0.0
     return rec, tra
+
+
+def _rotate_onto_x(rec: np.ndarray, tra: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotate everything by Q with Q w = (|w|, 0); for complex w, |w| = sqrt(w . w) (Q^T Q = I still)."""
+    norm = np.sqrt(w[0] * w[0] + w[1] * w[1] + (0j if np.iscomplexobj(w) else 0.0))
+    Q = np.array([[w[0], w[1]], [-w[1], w[0]]]) / norm
+    return rec @ Q.T, tra @ Q.T
 
 
 def sample_real_positions(m: int, n: int, rng: "np.random.Generator | int", variant: Variant = "full",
                           scale: float = 10.0, offset_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """A random real instance (paper Section 4: positions N(0, scale^2), offsets N(0, offset_scale^2)).
 
-    The network is moved into the gauge r_1 = 0, r_2 = (x2, 0) with x2 > 0 (distances unchanged).
+    The network is moved into the gauge r_1 = 0, r_2 = (x2, 0) with x2 > 0 (``dual``: s_1 = (u1, 0),
+    u1 > 0); distances are unchanged.
     Returns (F, an m x n array; root in ``positions_system(m, n, variant).unknowns``, float64).
     """
     system = positions_system(m, n, variant)
@@ -540,10 +579,17 @@ def sample_real_positions(m: int, n: int, rng: "np.random.Generator | int", vari
     receivers = gen.normal(0.0, scale, size=(m, 2))
     transmitters = gen.normal(0.0, scale, size=(n, 2))
     offsets = gen.normal(0.0, offset_scale, size=n)
-    rec, tra = _to_gauge(receivers, transmitters)
+    rec, tra = _to_gauge(receivers, transmitters, dual=variant in ("dual", "dual-orbits"))
     F = np.linalg.norm(rec[:, None, :] - tra[None, :, :], axis=2) + offsets[None, :]
     root = np.array(_root_from_network(system, rec, tra, offsets), dtype=float)
     return F, root
+
+
+def _principal_sqrt(z):
+    """sqrt of a real positive number as a float, of anything else as a complex number."""
+    if not np.iscomplexobj(z) and z > 0:
+        return np.sqrt(z)
+    return np.sqrt(complex(z))
 
 
 def network_from_root(system: PositionsSystem, root: Sequence, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -559,21 +605,28 @@ def network_from_root(system: PositionsSystem, root: Sequence, F) -> tuple[np.nd
     m, n = system.m, system.n
     value = dict(zip(system.unknowns, root))
     rec = np.zeros((m, 2), dtype=dtype)
-    if system.variant == "dual":
+    if system.variant in ("dual", "dual-orbits"):
         offs = np.array([value[f"o{j}"] for j in range(1, n + 1)], dtype=dtype)
-        tra = np.array([(value[f"u{j}"], value[f"v{j}"]) for j in range(1, n + 1)], dtype=dtype)
+        if system.variant == "dual":
+            tra = np.array([(value[f"u{j}"], value.get(f"v{j}", 0.0)) for j in range(1, n + 1)], dtype=dtype)
+        else:  # one representative of the orbit: principal square roots
+            u1, v2 = _principal_sqrt(value["U"]), _principal_sqrt(value["V"])
+            dtype = np.result_type(dtype, u1, v2)
+            alpha = [1.0] + [value[f"alpha{j}"] for j in range(2, n + 1)]
+            beta = [0.0, 1.0] + [value[f"beta{j}"] for j in range(3, n + 1)]
+            tra = np.array([(al * u1, be * v2) for al, be in zip(alpha, beta)], dtype=dtype)
+            offs, F, rec = offs.astype(dtype), F.astype(dtype), rec.astype(dtype)
         c = 2 * (F - F[0]) * offs[None, :] - (F**2 - F[0] ** 2)  # c_ij, L_ij = 2 r_i.s_j - |r_i|^2 - c_ij
         St = np.array([tra[1] - tra[0], tra[2] - tra[0]])  # S^T
         for i in range(1, m):
             rec[i] = np.linalg.solve(2 * St, [c[i, 1] - c[i, 0], c[i, 2] - c[i, 0]])
+        rec, tra = _rotate_onto_x(rec, tra, rec[1])  # back to the gauge r_2 = (x2, 0)
+        rec[1, 1] = 0.0
         return rec, tra, offs
-    if system.variant == "orbits":  # one representative of the orbit: principal square roots
-        x2, y3 = np.sqrt(value["X"] + 0j), np.sqrt(value["Y"] + 0j)
-        if np.isrealobj(root) and value["X"] > 0 and value["Y"] > 0:
-            x2, y3 = x2.real, y3.real
-        else:
-            dtype = np.complex128
-            rec = rec.astype(dtype)
+    if system.variant == "receivers-orbits":  # one representative of the orbit: principal square roots
+        x2, y3 = _principal_sqrt(value["X"]), _principal_sqrt(value["Y"])
+        dtype = np.result_type(dtype, x2, y3)
+        rec = rec.astype(dtype)
         rec[1, 0] = x2
         rec[2] = (value["xi3"] * x2, y3)
         for i in range(4, m + 1):
@@ -599,7 +652,7 @@ def network_from_root(system: PositionsSystem, root: Sequence, F) -> tuple[np.nd
             c = norm2 - a + 2 * delta * offs[j]
             tra[j, 0] = c[1] / (2 * rec[1, 0])
             tra[j, 1] = (rec[1, 0] * c[2] - rec[2, 0] * c[1]) / (2 * rec[1, 0] * rec[2, 1])
-        elif system.variant in ("receivers", "orbits"):
+        elif system.variant in ("receivers", "receivers-orbits"):
             A = np.column_stack([2 * rec[1:4, 0], 2 * rec[1:4, 1], -2 * delta[1:4]])
             w = np.linalg.solve(A, norm2[1:4] - a[1:4])
             tra[j], offs[j] = w[:2], w[2]
