@@ -16,6 +16,7 @@ counts only when every (prime, seed) agrees (STYLE.md habit 6); :func:`count` ra
 """
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Literal, Sequence
@@ -27,6 +28,7 @@ from .complexity import _variable_action_matrices, jacobian_rank
 from .degree import DEFAULT_PRIMES, PrimeDisagreement
 from .f4 import F4Options, groebner
 from .formulations import InconsistentSample
+from .linalg import MatrixTooLarge
 from .positions import PositionsSystem, gf_system, positions_system, sample_gf_positions
 from .quotient import dimension, standard_monomials
 from .ring import Poly, Ring
@@ -68,12 +70,16 @@ class InstanceCount:
     jacobian_rank: rank of the Jacobian of the equations (in the original unknowns) at the known root.
     free_action: the sign group has no fixed point among the solutions (None if not checked).
     simple_roots: all roots are simple (None if not checked or not zero-dimensional).
+    satisfy_full: for a subsystem, how many of its roots (with multiplicity) satisfy every equation of
+        the system (degree of the subsystem's basis plus all equations); None for the full system.
+    status: ``"ok"`` or ``"too-large"`` (an F4 matrix exceeded the cap; degree and dimension are None
+        and ``max_matrix`` is the refused matrix).
     """
 
     prime: int
     seed: int
     degree: int | None
-    dimension: int
+    dimension: int | None
     root_ok: bool
     jacobian_rank: int
     free_action: bool | None
@@ -81,6 +87,8 @@ class InstanceCount:
     gb_size: int
     max_matrix: tuple[int, int]
     seconds: float
+    satisfy_full: int | None = None
+    status: str = "ok"
 
 
 @dataclass(frozen=True)
@@ -97,11 +105,13 @@ class CountRecord:
     equations: int
     equation_degrees: str
     group_order: int
+    status: str
     degree: int | None
-    dimension: int
+    dimension: int | None
     orbits: int | None
     free_action: bool | None
     simple_roots: bool | None
+    satisfy_full: int | None
     primes: tuple[int, ...]
     seeds: tuple[int, ...]
     instance_degrees: tuple
@@ -114,10 +124,11 @@ class CountRecord:
             "label": self.label, "variant": self.variant, "config": f"{self.m}r{self.n}s",
             "subsystem": self.subsystem, "saturate_by": self.saturate_by, "unknowns": self.unknowns,
             "equations": self.equations, "equation_degrees": self.equation_degrees,
-            "group_order": self.group_order, "degree": self.degree, "dimension": self.dimension,
-            "orbits": self.orbits, "free_action": self.free_action, "simple_roots": self.simple_roots,
+            "group_order": self.group_order, "status": self.status, "degree": self.degree,
+            "dimension": self.dimension, "orbits": self.orbits, "free_action": self.free_action,
+            "simple_roots": self.simple_roots, "satisfy_full": self.satisfy_full,
             "primes": " ".join(map(str, self.primes)), "seeds": " ".join(map(str, self.seeds)),
-            "instance_degrees": " ".join("dim" if d is None else str(d) for d in self.instance_degrees),
+            "instance_degrees": " ".join(str(d) for d in self.instance_degrees),
             "max_matrix": f"{self.max_matrix[0]}x{self.max_matrix[1]}", "seconds": round(self.seconds, 2),
         }
 
@@ -195,13 +206,16 @@ def count_instance(system: PositionsSystem, p: int, seed: int, *, subsystem: Sub
     """
     t0 = time.perf_counter()
     F, root = sample_gf_positions(system.m, system.n, p, seed, system.variant)
-    eqs, sat = gf_system(system, F, p)
-    eqs, _ = _select(system, eqs, subsystem, seed)
+    all_eqs, sat = gf_system(system, F, p)
+    eqs, _ = _select(system, all_eqs, subsystem, seed)
     base = eqs[0].ring
     jac = jacobian_rank([dict(e.terms()) for e in eqs], root, p)
     f, _ = _saturating(system, sat, saturate, base)
     if f is None:
-        ring, polys, point = base, [e for e in eqs if e], list(root)
+        ring, point = base, list(root)
+
+        def lift(g: Poly) -> Poly:
+            return g
     else:
         ring = Ring(("t_",) + base.variables, p)
 
@@ -211,15 +225,21 @@ def count_instance(system: PositionsSystem, p: int, seed: int, *, subsystem: Sub
         fval = f.evaluate(root)
         if fval == 0:
             raise InconsistentSample(f"saturating polynomial vanishes at the known root ({system.label}, p={p}, seed {seed})")
-        polys = [lift(g) for g in eqs if g] + [ring.gen(0) * lift(f) - 1]
         point = [pow(fval, -1, p)] + list(root)
-    gb = groebner(polys, options)
+    polys = [lift(g) for g in eqs if g] + ([] if f is None else [ring.gen(0) * lift(f) - 1])
+    try:
+        gb = groebner(polys, options)
+    except MatrixTooLarge as exc:
+        found = re.search(r"(\d+) x (\d+)", str(exc))
+        shape = (int(found.group(1)), int(found.group(2))) if found else (0, 0)
+        return InstanceCount(p, seed, None, None, False, jac, None, None, 0, shape, time.perf_counter() - t0,
+                             status="too-large")
     root_ok = all(g.evaluate(point) == 0 for g in gb.basis)
     if not root_ok:
         raise InconsistentSample(f"known root not on the variety of {system.label} (p={p}, seed {seed})")
     dim = dimension(gb)
     deg = len(standard_monomials(gb)) if dim == 0 else None
-    free = simple = None
+    free = simple = full = None
     if deg is not None and check_group and len(system.sign_group) > 1:
         free = True
         offset = 0 if f is None else 1
@@ -230,8 +250,12 @@ def count_instance(system: PositionsSystem, p: int, seed: int, *, subsystem: Sub
                 break
     if deg is not None and check_simple:
         simple = _simple_roots(gb, p, np.random.default_rng(seed + 2000))
+    if deg is not None and subsystem.kind != "all":
+        full_gb = groebner(list(gb.basis) + [lift(g) for g in all_eqs if g], options)
+        full = len(standard_monomials(full_gb)) if dimension(full_gb) == 0 else None
     mx = max(((r.rows, r.cols) for r in gb.rounds), key=lambda rc: rc[0] * rc[1], default=(0, 0))
-    return InstanceCount(p, seed, deg, dim, root_ok, jac, free, simple, len(gb.basis), mx, time.perf_counter() - t0)
+    return InstanceCount(p, seed, deg, dim, root_ok, jac, free, simple, len(gb.basis), mx, time.perf_counter() - t0,
+                         satisfy_full=full)
 
 
 def count(system: PositionsSystem | tuple[int, int, str], *, primes: Sequence[int] = DEFAULT_PRIMES,
@@ -240,33 +264,51 @@ def count(system: PositionsSystem | tuple[int, int, str], *, primes: Sequence[in
           check_simple: bool = True) -> CountRecord:
     """Degree agreed by every (prime, seed); raises :class:`PrimeDisagreement` (listing them) otherwise.
 
-    ``orbits`` = degree / |sign group| when the group acts freely (checked), else None.
+    ``orbits`` = degree / |sign group| when the group acts freely (checked), else None. When an F4
+    matrix exceeds ``options.max_matrix_cells`` the record has status ``"too-large"`` (the remaining
+    instances are skipped) and ``max_matrix`` is the refused matrix.
     """
     if not isinstance(system, PositionsSystem):
         system = positions_system(*system)
     t0 = time.perf_counter()
-    results = [count_instance(system, p, s, subsystem=subsystem, saturate=saturate, options=options,
-                              check_group=check_group, check_simple=check_simple) for p in primes for s in seeds]
-    keys = {(r.degree, r.dimension) for r in results}
-    if len(keys) != 1:
-        summary = ", ".join(f"p={r.prime} seed {r.seed}: degree {r.degree} dim {r.dimension}" for r in results)
-        raise PrimeDisagreement(f"{system.label} ({subsystem.label}): instances disagree ({summary})")
+    results = []
+    for p in primes:
+        for s in seeds:
+            r = count_instance(system, p, s, subsystem=subsystem, saturate=saturate, options=options,
+                               check_group=check_group, check_simple=check_simple)
+            results.append(r)
+            if r.status == "too-large":  # the other instances would only hit the cap again
+                break
+        if results[-1].status == "too-large":
+            break
+    status = "too-large" if any(r.status == "too-large" for r in results) else "ok"
+    if status == "ok":
+        keys = {(r.degree, r.dimension) for r in results}
+        if len(keys) != 1:
+            summary = ", ".join(f"p={r.prime} seed {r.seed}: degree {r.degree} dim {r.dimension}" for r in results)
+            raise PrimeDisagreement(f"{system.label} ({subsystem.label}): instances disagree ({summary})")
     first = results[0]
-    frees = {r.free_action for r in results}
-    simples = {r.simple_roots for r in results}
-    free = frees.pop() if len(frees) == 1 else None
-    simple = simples.pop() if len(simples) == 1 else None
+
+    def agreed(values):
+        values = set(values)
+        return values.pop() if len(values) == 1 else None
+
+    free = agreed(r.free_action for r in results)
+    simple = agreed(r.simple_roots for r in results)
     group = len(system.sign_group)
-    orbits = first.degree // group if (first.degree is not None and (free or group == 1)) else None
+    orbits = first.degree // group if (status == "ok" and first.degree is not None and (free or group == 1)) else None
     n_eq = system.n_equations if subsystem.kind == "all" else (
         system.n_equations - len(subsystem.names) if subsystem.kind == "drop" else
         system.n_equations - len(subsystem.names) + subsystem.k)
     return CountRecord(
         label=system.label, variant=system.variant, m=system.m, n=system.n, subsystem=subsystem.label,
         saturate_by=_sat_names(system, saturate), unknowns=system.n_unknowns, equations=n_eq,
-        equation_degrees=" ".join(map(str, system.degrees)), group_order=group, degree=first.degree,
-        dimension=first.dimension, orbits=orbits, free_action=free, simple_roots=simple,
-        primes=tuple(primes), seeds=tuple(seeds), instance_degrees=tuple(r.degree for r in results),
+        equation_degrees=" ".join(map(str, system.degrees)), group_order=group, status=status,
+        degree=first.degree if status == "ok" else None, dimension=first.dimension if status == "ok" else None,
+        orbits=orbits, free_action=free, simple_roots=simple, satisfy_full=agreed(r.satisfy_full for r in results),
+        primes=tuple(primes), seeds=tuple(seeds),
+        instance_degrees=tuple(r.status if r.status != "ok" else ("dim" + str(r.dimension) if r.degree is None else r.degree)
+                               for r in results),
         max_matrix=max((r.max_matrix for r in results), key=lambda rc: rc[0] * rc[1]),
         seconds=time.perf_counter() - t0, per_instance=tuple(results))
 
@@ -275,6 +317,5 @@ def _sat_names(system: PositionsSystem, saturate: Saturation) -> str:
     if saturate == "none" or (saturate == "all" and not system.saturate_by):
         return "none"
     if saturate == "all":
-        return " * ".join(str(e) for e in system.saturate_by) if len(system.saturate_by) <= 2 else \
-            f"product of {len(system.saturate_by)} listed ({', '.join(str(e) for e in system.saturate_by[-1:])}, ...)"
+        return "*".join(system.saturate_names)
     return "*".join(saturate)

@@ -28,15 +28,15 @@ the m equations {R_j, L_2j..L_mj} are equivalent to the original m range equatio
 The variants eliminate some of the linear unknowns:
 
 ``full``          unknowns receivers, offsets, transmitters ((2m-3) + 3n); equations R_j and L_ij
-                  (m per transmitter, degrees 2). Exactly the original problem in this gauge: nothing to
-                  saturate.
+                  (m per transmitter, degrees 2). Exactly the original problem in this gauge; the only
+                  nonzero condition is the gauge's x2 != 0 (r_2 != r_1).
 ``transmitters``  o_j eliminated with L_2j (its coefficient -2 delta_2j is data, nonzero for generic
                   data, so no denominator in the unknowns): unknowns receivers, transmitters
                   ((2m-3) + 2n); equations
                       T_j  := 4 delta_2j^2 R_j with o_j = (a_2j + 2 x2 u_j - x2^2) / (2 delta_2j),
                               i.e. (2 delta_2j f_1j - a_2j - 2 x2 u_j + x2^2)^2 - 4 delta_2j^2 (u_j^2 + v_j^2),
                       E_ij := delta_2j L_ij - delta_ij L_2j   (i = 3..m; o_j cancels),
-                  degrees 4 and 2. Equivalent to ``full`` for data with f_2j != f_1j: nothing to saturate.
+                  degrees 4 and 2. Equivalent to ``full`` for data with f_2j != f_1j; nonzero: x2.
 ``offsets``       s_j eliminated with L_2j, L_3j (Cramer, denominator x2 y3): unknowns receivers,
                   offsets ((2m-3) + n); with c_ij = |r_i|^2 - a_ij + 2 delta_ij o_j (so L_ij = 2 r_i.s_j - c_ij),
                       u_j = c_2j / (2 x2),  v_j = (x2 c_3j - x3 c_2j) / (2 x2 y3),
@@ -46,14 +46,51 @@ The variants eliminate some of the linear unknowns:
 ``receivers``     (s_j, o_j) eliminated with L_2j, L_3j, L_4j (Cramer on A_j w = g_j with rows
                   A_j[i] = (x_i, y_i, -delta_ij), g_ij = (|r_i|^2 - a_ij) / 2, w = (u_j, v_j, o_j)):
                   unknowns the 2m-3 receiver coordinates only; with D_j = det A_j and N_j = adj(A_j) g_j,
-                      Q_j  := 4 D_j^2 R_j = (2 f_1j D_j - 2 N_oj)^2 - 4 N_uj^2 - 4 N_vj^2 ... (see below)
-                      G_ij := x_i N_uj + y_i N_vj - delta_ij N_oj - D_j g_ij   (i = 5..m; D_j L_ij / 2),
-                  degrees 8 and 4 (m = 4: square, 2m-3 = 5 = n unknowns for 4r/5s); saturate by prod D_j.
-                  (With w = N / D: (f_1j - N_o/D)^2 - (N_u/D)^2 - (N_v/D)^2 = 0, times D^2:
-                  Q_j = (f_1j D_j - N_oj)^2 - N_uj^2 - N_vj^2.)
+                  w = N_j / D_j, and R_j times D_j^2 (then times 4 to keep integer coefficients):
+                      Q_j  := (2 f_1j D_j - 2 N_oj)^2 - (2 N_uj)^2 - (2 N_vj)^2,
+                      G_ij := x_i 2N_uj + y_i 2N_vj - delta_ij 2N_oj - D_j 2g_ij   (i = 5..m; 2 D_j L_ij),
+                  degrees 8 and 4 (m = 4: 5 equations in 5 unknowns for 4r/5s); saturate by x2 prod D_j.
+``receivers-orbits``  the ``receivers`` variant in invariants of the sign group: X = x2^2, Y = y3^2,
+                  xi_i = x_i / x2 (i >= 3), eta_i = y_i / y3 (i >= 4). With A_j = A~_j diag(x2, y3, 1),
+                  A~_j rows (xi_i, eta_i, -delta_ij) (xi_2 = 1, eta_2 = 0, eta_3 = 1), D_j = x2 y3 D~_j and
+                  M_j = adj(A~_j) 2g_j = 2 D~_j (x2 u_j, y3 v_j, o_j):
+                      W_j  := X Y (2 f_1j D~_j - M_oj)^2 - Y M_uj^2 - X M_vj^2,
+                      V_ij := xi_i M_uj + eta_i M_vj - delta_ij M_oj - D~_j 2g_ij   (i = 5..m),
+                  degrees 10 and 5; saturate by X Y prod D~_j. One unknown vector per geometric solution
+                  (x2 = sqrt X, y3 = sqrt Y: the 4 sign choices are the orbit); trivial sign group.
+``dual``          the receivers eliminated instead (natural for m > n), in the gauge r_1 = 0, s_1 = (u1, 0)
+                  (rotation fixed on transmitter 1 instead of receiver 2; :func:`network_from_root`
+                  rotates back to r_2 = (x2, 0)). With c_ij = 2 delta_ij o_j - a_ij (so L_ij =
+                  2 r_i.s_j - |r_i|^2 - c_ij), e_ij = c_ij - c_i1 and S = [s_2 - s_1, s_3 - s_1]:
+                  L_ij - L_i1 gives 2 S^T r_i = (e_i2, e_i3), so r_i = rho_i / (2P), P = det S,
+                  rho_i = adj(S^T) (e_i2, e_i3). Unknowns o_1..o_n, u1, (u_j, v_j) j >= 2 (3n - 1);
+                      R_j,
+                      J_i  := 4 P^2 L_i1 = 4 P u1 rho_ix - |rho_i|^2 - 4 P^2 c_i1          (i = 2..m),
+                      H_ij := P (L_ij - L_i1) = rho_i . (s_j - s_1) - P e_ij              (i = 2..m, j >= 4),
+                  degrees 2, 5, 3; saturate by P u1. The sign group acts on (u, v) as before.
+``dual-orbits``   ``dual`` in invariants: U = u1^2, V = v2^2, alpha_j = u_j / u1 (j >= 2), beta_j = v_j / v2
+                  (j >= 3); P = u1 v2 P~, rho_x = v2 rho~_x, rho_y = u1 rho~_y, and
+                      R_j = (f_1j - o_j)^2 - U alpha_j^2 - V beta_j^2,
+                      J_i / (u1^2 v2^2) ~ 4 U V P~ rho~_x - V rho~_x^2 - U rho~_y^2 - 4 U V P~^2 c_i1,
+                      H_ij / (u1 v2) = rho~_x (alpha_j - 1) + rho~_y beta_j - P~ e_ij,
+                  degrees 3, 7, 3; saturate by U V P~. For n = 3 the unknowns (U, V, alpha, beta, o)
+                  are the O(2) invariants of the paper's (H, b, o) up to a change of chart: H =
+                  (4 S^T S)^-1 and b = -S^-1 s_1 / 2 make J_i the paper's C equation and R_1..R_3 its
+                  A, B2, B3 (paper Section 2.1), so 6r/3s must give the paper's 180 (saturated).
 
-Counting: 4r/5s is minimal (20 measurements, 2*4 + 3*5 - 3 = 20 degrees of freedom); ``full`` is square
-for every minimal configuration (m n equations, (2m - 3) + 3n unknowns).
+Why the eliminations lose no solution. Every complex solution of ``full`` is a network (r, s, o) in the
+gauge that produces F. The networks with D_j = 0, x2 = 0, P = 0, u1 = 0 or y3 = 0 form proper
+subvarieties of the (2m + 3n - 3)-dimensional network space, so for a minimal configuration their
+images under the measurement map are proper subvarieties of the data space: a generic F has no such
+solution, and on the complement each elimination is an isomorphism (Cramer). Hence, for generic data,
+the saturated degree of every variant is the number of networks in its gauge (4 per geometric
+solution: the sign group acts freely when x2 y3 != 0), and the orbit variants give the number of
+geometric solutions directly. Measured counts: tables/minimal_problems.md.
+
+Counting: 4r/5s is minimal (20 measurements, 2*4 + 3*5 - 3 = 20 degrees of freedom); ``full``,
+``transmitters``, ``offsets``, ``receivers``, ``dual`` and the orbit variants are all square for
+minimal configurations. Equations only involve (f_ij - o_j)^2, so solutions with f_ij - o_j < 0
+("negative ranges") are solutions all the same.
 """
 from __future__ import annotations
 
@@ -102,7 +139,8 @@ class PositionsSystem:
     equation_names : one name per equation (``R3``, ``L2_3``, ``T1``, ``E3_1``, ``P2``, ``K4_2``, ``Q5``, ...).
     equations : polynomial sympy expressions in unknowns and parameters (denominators cleared).
     saturate_by : sympy expressions in the unknowns (and parameters) that are nonzero at every
-        geometric solution; the solution set is V(equations) minus their zeros (empty: nothing to remove).
+        geometric solution for generic data; the solution set is V(equations) minus their zeros.
+    saturate_names : a short name for each (``D3`` = det A_3, ``x2``, ``P`` = det S, ...).
     sign_group : the Z2 x Z2 gauge symmetry as sign vectors on the unknowns (identity first); each maps
         solutions to solutions for every data matrix.
     """
@@ -115,6 +153,7 @@ class PositionsSystem:
     equation_names: tuple[str, ...]
     equations: tuple[sympy.Expr, ...]
     saturate_by: tuple[sympy.Expr, ...]
+    saturate_names: tuple[str, ...]
     sign_group: tuple[tuple[int, ...], ...]
     _polys: tuple = ()  # ZZ[unknowns, parameters] elements of equations (then saturate_by)
 
@@ -224,8 +263,10 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
     names: list[str] = []
     polys: list[PolyElement] = []
     sat: list[PolyElement] = []
+    sat_names: list[str] = []
     if variant in ("dual", "dual-orbits"):
         _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits=variant == "dual-orbits")
+        sat_names.extend(["U*V*P~"] if variant == "dual-orbits" else ["P", "u1"])
     for j in range(1, n + 1 if variant not in ("dual", "dual-orbits") else 1):
         if variant in ("full", "transmitters"):
             u, v = sym[f"u{j}"], sym[f"v{j}"]
@@ -270,6 +311,7 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
                 names.append(f"V{i}_{j}")
                 polys.append(xi(i) * M2[0] + eta(i) * M2[1] - delta(i, j) * M2[2] - D * (norm2(i) - a(i, j)))
             sat.append(D)
+            sat_names.append(f"D~{j}")
         else:  # receivers
             A = [[x(i), y(i), -delta(i, j)] for i in (2, 3, 4)]
             g2 = [norm2(i) - a(i, j) for i in (2, 3, 4)]  # 2 g_ij
@@ -285,16 +327,20 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
                 # 2 (x_i N_u + y_i N_v - delta N_o - D g_i) = x_i N2_u + y_i N2_v - delta N2_o - D (2 g_i)
                 polys.append(x(i) * N2[0] + y(i) * N2[1] - delta(i, j) * N2[2] - D * (norm2(i) - a(i, j)))
             sat.append(D)
+            sat_names.append(f"D{j}")
     if variant == "offsets":
         sat.append(x(2) * y(3))
+        sat_names.append("x2*y3")
     if variant in ("receivers", "transmitters", "full"):
         sat.append(x(2))
+        sat_names.append("x2")
     if variant == "receivers-orbits":
         sat.append(sym["X"] * sym["Y"])
+        sat_names.append("X*Y")
     group = _sign_group(unknowns) if variant not in ORBIT_VARIANTS else ((1,) * len(unknowns),)
     exprs = tuple(p.as_expr() for p in polys)
     return PositionsSystem(m, n, variant, tuple(unknowns), tuple(params), tuple(names), exprs,
-                           tuple(p.as_expr() for p in sat), group, tuple(polys) + tuple(sat))
+                           tuple(p.as_expr() for p in sat), tuple(sat_names), group, tuple(polys) + tuple(sat))
 
 
 def _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits: bool) -> None:
