@@ -56,8 +56,8 @@ class Subsystem:
         if self.kind == "all":
             return "all"
         if self.kind == "drop":
-            return "drop " + ",".join(self.names)
-        return f"{self.k} random combinations of " + ",".join(self.names)
+            return "drop " + " ".join(self.names)
+        return f"{self.k} random combinations of " + " ".join(self.names)
 
 
 @dataclass(frozen=True)

@@ -41,21 +41,21 @@ The variants eliminate some of the linear unknowns:
                   offsets ((2m-3) + n); with c_ij = |r_i|^2 - a_ij + 2 delta_ij o_j (so L_ij = 2 r_i.s_j - c_ij),
                       u_j = c_2j / (2 x2),  v_j = (x2 c_3j - x3 c_2j) / (2 x2 y3),
                       P_j  := 4 x2^2 y3^2 R_j = 4 x2^2 y3^2 (f_1j - o_j)^2 - y3^2 c_2j^2 - (x2 c_3j - x3 c_2j)^2,
-                      K_ij := x_i y3 c_2j + y_i (x2 c_3j - x3 c_2j) - x2 y3 c_ij   (i = 4..m; 2 x2 y3 L_ij),
+                      K_ij := x_i y3 c_2j + y_i (x2 c_3j - x3 c_2j) - x2 y3 c_ij   (i = 4..m; x2 y3 L_ij),
                   degrees 6 and 4; saturate by x2 y3 (r_1, r_2, r_3 not collinear).
 ``receivers``     (s_j, o_j) eliminated with L_2j, L_3j, L_4j (Cramer on A_j w = g_j with rows
                   A_j[i] = (x_i, y_i, -delta_ij), g_ij = (|r_i|^2 - a_ij) / 2, w = (u_j, v_j, o_j)):
                   unknowns the 2m-3 receiver coordinates only; with D_j = det A_j and N_j = adj(A_j) g_j,
                   w = N_j / D_j, and R_j times D_j^2 (then times 4 to keep integer coefficients):
                       Q_j  := (2 f_1j D_j - 2 N_oj)^2 - (2 N_uj)^2 - (2 N_vj)^2,
-                      G_ij := x_i 2N_uj + y_i 2N_vj - delta_ij 2N_oj - D_j 2g_ij   (i = 5..m; 2 D_j L_ij),
+                      G_ij := x_i 2N_uj + y_i 2N_vj - delta_ij 2N_oj - D_j 2g_ij   (i = 5..m; = D_j L_ij),
                   degrees 8 and 4 (m = 4: 5 equations in 5 unknowns for 4r/5s); saturate by x2 prod D_j.
 ``receivers-orbits``  the ``receivers`` variant in invariants of the sign group: X = x2^2, Y = y3^2,
                   xi_i = x_i / x2 (i >= 3), eta_i = y_i / y3 (i >= 4). With A_j = A~_j diag(x2, y3, 1),
                   A~_j rows (xi_i, eta_i, -delta_ij) (xi_2 = 1, eta_2 = 0, eta_3 = 1), D_j = x2 y3 D~_j and
                   M_j = adj(A~_j) 2g_j = 2 D~_j (x2 u_j, y3 v_j, o_j):
                       W_j  := X Y (2 f_1j D~_j - M_oj)^2 - Y M_uj^2 - X M_vj^2,
-                      V_ij := xi_i M_uj + eta_i M_vj - delta_ij M_oj - D~_j 2g_ij   (i = 5..m),
+                      V_ij := xi_i M_uj + eta_i M_vj - delta_ij M_oj - D~_j 2g_ij   (i = 5..m; = D~_j L_ij),
                   degrees 10 and 5; saturate by X Y prod D~_j. One unknown vector per geometric solution
                   (x2 = sqrt X, y3 = sqrt Y: the 4 sign choices are the orbit); trivial sign group.
 ``dual``          the receivers eliminated instead (natural for m > n), in the gauge r_1 = 0, s_1 = (u1, 0)
@@ -71,7 +71,7 @@ The variants eliminate some of the linear unknowns:
 ``dual-orbits``   ``dual`` in invariants: U = u1^2, V = v2^2, alpha_j = u_j / u1 (j >= 2), beta_j = v_j / v2
                   (j >= 3); P = u1 v2 P~, rho_x = v2 rho~_x, rho_y = u1 rho~_y, and
                       R_j = (f_1j - o_j)^2 - U alpha_j^2 - V beta_j^2,
-                      J_i / (u1^2 v2^2) ~ 4 U V P~ rho~_x - V rho~_x^2 - U rho~_y^2 - 4 U V P~^2 c_i1,
+                      J_i  = 4 U V P~ rho~_x - V rho~_x^2 - U rho~_y^2 - 4 U V P~^2 c_i1   (the same J_i),
                       H_ij / (u1 v2) = rho~_x (alpha_j - 1) + rho~_y beta_j - P~ e_ij,
                   degrees 3, 7, 3; saturate by U V P~. For n = 3 the unknowns (U, V, alpha, beta, o)
                   are the O(2) invariants of the paper's (H, b, o) up to a change of chart: H =
@@ -96,7 +96,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Literal, Sequence
 
 import numpy as np
@@ -151,11 +151,18 @@ class PositionsSystem:
     unknowns: tuple[str, ...]
     parameters: tuple[str, ...]
     equation_names: tuple[str, ...]
-    equations: tuple[sympy.Expr, ...]
-    saturate_by: tuple[sympy.Expr, ...]
     saturate_names: tuple[str, ...]
     sign_group: tuple[tuple[int, ...], ...]
-    _polys: tuple = ()  # ZZ[unknowns, parameters] elements of equations (then saturate_by)
+    _polys: tuple = ()  # ZZ[unknowns, parameters] elements of the equations, then of saturate_by
+
+    @cached_property
+    def equations(self) -> tuple[sympy.Expr, ...]:
+        """The equations as expanded sympy expressions (converted on first use: ~1 s for 4r/5s receivers)."""
+        return tuple(q.as_expr() for q in self._polys[: len(self.equation_names)])
+
+    @cached_property
+    def saturate_by(self) -> tuple[sympy.Expr, ...]:
+        return tuple(q.as_expr() for q in self._polys[len(self.equation_names):])
 
     @property
     def label(self) -> str:
@@ -167,7 +174,7 @@ class PositionsSystem:
 
     @property
     def n_equations(self) -> int:
-        return len(self.equations)
+        return len(self.equation_names)
 
     @property
     def degrees(self) -> tuple[int, ...]:
@@ -324,7 +331,7 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
             polys.append((2 * f(1, j) * D - N2[2]) ** 2 - N2[0] ** 2 - N2[1] ** 2)
             for i in range(5, m + 1):
                 names.append(f"G{i}_{j}")
-                # 2 (x_i N_u + y_i N_v - delta N_o - D g_i) = x_i N2_u + y_i N2_v - delta N2_o - D (2 g_i)
+                # x_i N2_u + y_i N2_v - delta N2_o - D (2 g_i) = D L_ij  (N2 = 2 D w)
                 polys.append(x(i) * N2[0] + y(i) * N2[1] - delta(i, j) * N2[2] - D * (norm2(i) - a(i, j)))
             sat.append(D)
             sat_names.append(f"D{j}")
@@ -338,9 +345,8 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
         sat.append(sym["X"] * sym["Y"])
         sat_names.append("X*Y")
     group = _sign_group(unknowns) if variant not in ORBIT_VARIANTS else ((1,) * len(unknowns),)
-    exprs = tuple(p.as_expr() for p in polys)
-    return PositionsSystem(m, n, variant, tuple(unknowns), tuple(params), tuple(names), exprs,
-                           tuple(p.as_expr() for p in sat), tuple(sat_names), group, tuple(polys) + tuple(sat))
+    return PositionsSystem(m, n, variant, tuple(unknowns), tuple(params), tuple(names), tuple(sat_names), group,
+                           tuple(polys) + tuple(sat))
 
 
 def _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits: bool) -> None:
@@ -349,7 +355,7 @@ def _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits: bool) -> 
     ``dual``: (ut, vt) = (u, v), wU = wV = 1. ``dual-orbits``: u_j = u1 alpha_j, v_j = v2 beta_j
     (alpha_1 = 1, beta_1 = 0, beta_2 = 1), (ut, vt) = (alpha, beta), wU = U = u1^2, wV = V = v2^2; then
     P = u1 v2 P~, rho_x = v2 rho~_x, rho_y = u1 rho~_y, and each equation is the ``dual`` one divided
-    by a monomial in u1, v2 (module docstring).
+    by a monomial in u1, v2 (J_i by 1, H_ij by u1 v2; module docstring).
     """
     one = sym["o1"] ** 0
     zero = 0 * one
