@@ -72,8 +72,8 @@ class InstanceCount:
     simple_roots: all roots are simple (None if not checked or not zero-dimensional).
     satisfy_full: for a subsystem, how many of its roots (with multiplicity) satisfy every equation of
         the system (degree of the subsystem's basis plus all equations); None for the full system.
-    status: ``"ok"`` or ``"too-large"`` (an F4 matrix exceeded the cap; degree and dimension are None
-        and ``max_matrix`` is the refused matrix).
+    status: ``"ok"`` or ``"too-large"`` (an F4 matrix exceeded the cap; degree and dimension are None,
+        ``max_matrix`` is the refused matrix and ``refused_degree`` its F4 degree).
     """
 
     prime: int
@@ -89,6 +89,7 @@ class InstanceCount:
     seconds: float
     satisfy_full: int | None = None
     status: str = "ok"
+    refused_degree: int | None = None
 
 
 @dataclass(frozen=True)
@@ -129,7 +130,9 @@ class CountRecord:
             "simple_roots": self.simple_roots, "satisfy_full": self.satisfy_full,
             "primes": " ".join(map(str, self.primes)), "seeds": " ".join(map(str, self.seeds)),
             "instance_degrees": " ".join(str(d) for d in self.instance_degrees),
-            "max_matrix": f"{self.max_matrix[0]}x{self.max_matrix[1]}", "seconds": round(self.seconds, 2),
+            "max_matrix": f"{self.max_matrix[0]}x{self.max_matrix[1]}" + (
+                f" at degree {self.per_instance[-1].refused_degree}" if self.status == "too-large" else ""),
+            "seconds": round(self.seconds, 2),
         }
 
 
@@ -230,10 +233,10 @@ def count_instance(system: PositionsSystem, p: int, seed: int, *, subsystem: Sub
     try:
         gb = groebner(polys, options)
     except MatrixTooLarge as exc:
-        found = re.search(r"(\d+) x (\d+)", str(exc))
+        found = re.search(r"(\d+) x (\d+) at degree (\d+)", str(exc))
         shape = (int(found.group(1)), int(found.group(2))) if found else (0, 0)
         return InstanceCount(p, seed, None, None, False, jac, None, None, 0, shape, time.perf_counter() - t0,
-                             status="too-large")
+                             status="too-large", refused_degree=int(found.group(3)) if found else None)
     root_ok = all(g.evaluate(point) == 0 for g in gb.basis)
     if not root_ok:
         raise InconsistentSample(f"known root not on the variety of {system.label} (p={p}, seed {seed})")
