@@ -94,7 +94,6 @@ minimal configurations. Equations only involve (f_ij - o_j)^2, so solutions with
 """
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from typing import Literal, Sequence
