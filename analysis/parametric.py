@@ -421,3 +421,26 @@ def square(system: ParametricSystem, keep: int, seed: int = 0, name: str | None 
         combos.append(" + ".join(f"({int(a)})*({e})" for a, e in zip(c, rest)))
     return replace(system, name=name or f"{system.name} squared (seed {seed})",
                    equations=tuple(system.equations[:keep]) + tuple(combos))
+
+
+def from_positions(m: int, n: int, variant: str = "receivers-orbits") -> ParametricSystem:
+    """A positions formulation (analysis.positions; unknowns are coordinates) as a parametric system.
+
+    The default variant eliminates transmitters and offsets and writes the receivers in invariants of
+    the gauge's sign group, so that each geometric solution is one root (4r/5s: 344). Its nonzero
+    conditions (saturation) exclude the spurious components; scaling the data by t scales the squared
+    coordinates X, Y by t^2 and leaves the ratios xi, eta unchanged.
+    """
+    from .positions import positions_system, sample_gf_positions
+
+    ps = positions_system(m, n, variant)
+
+    def sampler(p: int, seed: int) -> GFSample:
+        F, root = sample_gf_positions(m, n, p, seed, variant)
+        return [int(v) for row in F for v in row], [int(v) for v in root]
+
+    powers = tuple(2.0 if u in ("X", "Y") else 0.0 if u[:2] in ("xi", "et") else 1.0 for u in ps.unknowns)
+    return ParametricSystem(ps.label, tuple(ps.unknowns), tuple(ps.parameters),
+                            tuple(sympy.sstr(e) for e in ps.equations),
+                            nonzero=tuple(sympy.sstr(e) for e in ps.saturate_by),
+                            scale_powers=powers if variant == "receivers-orbits" else None, gf_sampler=sampler)

@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from analysis.parametric import ParametricSystem, from_formulation, square
+from analysis.parametric import ParametricSystem, from_formulation, from_positions, square
 
 from .methods import homotopy
 from .template import dump_spec, spec_sha256
@@ -39,7 +39,11 @@ SOLVERS = {
     "7r3s": "7r3s:B2,B3,C2-C7",
     "6r3s": "6r3s:A,B2,B3,C2-C6",
     "5r4s": "5r4s:A,B2,B3,C2-C5,minors",
+    "4r5s": "4r5s:positions-receivers-orbits",
 }
+
+#: Configurations solved in a positions formulation (analysis.positions) instead of (H, b, o).
+POSITIONS = {"4r5s": "receivers-orbits"}
 
 #: Over-determined formulations (dependent rank-2 minors): keep this many leading equations and replace
 #: the minors by random integer combinations (analysis.parametric.square); counted on one seed.
@@ -50,6 +54,9 @@ SQUARED = {"5r4s": 7}
 
 def solver_system(label: str) -> ParametricSystem:
     """The (square) parametric system of a registered configuration, det H saturated."""
+    if label in POSITIONS:
+        m, n = (int(v) for v in label[:-1].split("r"))
+        return from_positions(m, n, POSITIONS[label])
     system = from_formulation(SOLVERS[label], saturate_det_h=True)
     if label in SQUARED:
         system = square(system, SQUARED[label], seed=0, name=f"{system.name} (minors squared, seed 0)")
@@ -107,6 +114,36 @@ def _tdoa_start(m: int, n: int) -> Callable[[np.random.Generator], tuple[np.ndar
         return F.ravel(), x
 
     return start
+
+
+def _positions_start(m: int, n: int, variant: str) -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
+    """Complex networks in the gauge of analysis.positions, normalised by the RMS modulus of F."""
+    from analysis.positions import _root_from_network, _to_gauge, positions_system
+
+    ps = positions_system(m, n, variant)
+
+    def start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        r = rng.normal(size=(m, 2)) + 1j * rng.normal(size=(m, 2))
+        t = rng.normal(size=(n, 2)) + 1j * rng.normal(size=(n, 2))
+        o = rng.normal(size=n) + 1j * rng.normal(size=n)
+        rec, tra = _to_gauge(r, t)
+        F = np.sqrt(((rec[:, None, :] - tra[None, :, :]) ** 2).sum(axis=-1)) + o[None, :]
+        s = np.sqrt(np.mean(np.abs(F) ** 2))
+        rec, tra, o = rec / s, tra / s, o / s
+        return (F / s).ravel(), np.array(_root_from_network(ps, rec, tra, o), dtype=complex)
+
+    return start
+
+
+def _positions_trials(m: int, n: int, variant: str, powers) -> Callable[[int], tuple[np.ndarray, np.ndarray]]:
+    from analysis.positions import sample_real_positions
+
+    def trial(seed: int) -> tuple[np.ndarray, np.ndarray]:
+        F, root = sample_real_positions(m, n, 10_000 + seed, variant)
+        s = np.sqrt(np.mean(F * F))
+        return (F / s).ravel(), root / s ** np.array(powers)
+
+    return trial
 
 
 def _tdoa_trials(label: str, powers: tuple[float, ...]) -> Callable[[int], tuple[np.ndarray, np.ndarray]]:
@@ -250,6 +287,10 @@ def generate(label: str, directory: str = GENERATED_DIR, seed: int = 0,
         raise ValueError(f"no homotopy solver registered for {label!r}; valid: {', '.join(SOLVERS)}")
     system = solver_system(label)
     m, n = (int(v) for v in label[:-1].split("r"))
+    if label in POSITIONS:
+        start, trials = _positions_start(m, n, POSITIONS[label]), _positions_trials(m, n, POSITIONS[label], system.scale_powers)
+    else:
+        start, trials = _tdoa_start(m, n), _tdoa_trials(label, system.scale_powers)
     return generate_system(system, f"tdoa_{label}", directory, homotopy.HomotopyOptions(seed=seed),
-                           _tdoa_start(m, n), _tdoa_trials(label, system.scale_powers), (m, n), progress,
+                           start, trials, (m, n), progress,
                            seeds=(0,) if label in SQUARED else (0, 1))

@@ -320,20 +320,21 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
                         f"(seed {options.seed}); the solver would miss roots")
 
 
-def _excluded(system: ParametricSystem) -> Callable[[np.ndarray], np.ndarray] | None:
-    """Mask of points where a non-vanishing condition is (numerically) zero, or None without conditions."""
+def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+    """Mask of points where a non-vanishing condition is (numerically) zero at parameters q0, or None."""
     if not system.nonzero:
         return None
     import sympy
 
-    funcs = [sympy.lambdify(system.x_symbols, g, "numpy") for g in system.nonzero_exprs]
+    args = system.x_symbols + system.q_symbols
+    funcs = [sympy.lambdify(args, g, "numpy") for g in system.nonzero_exprs]
     degs = [sympy.Poly(g, *system.x_symbols).total_degree() for g in system.nonzero_exprs]
 
     def mask(x: np.ndarray) -> np.ndarray:
         scale = 1.0 + np.linalg.norm(x, axis=1)
         out = np.zeros(len(x), dtype=bool)
         for f, d in zip(funcs, degs):
-            out |= np.abs(f(*x.T)) < 1e-8 * scale ** d
+            out |= np.abs(f(*x.T, *q0)) < 1e-8 * scale ** d
         return out
 
     return mask
@@ -378,7 +379,7 @@ def build(system: ParametricSystem, count: int, start: Callable[[np.random.Gener
     x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
     if solver.residual(x0, q0[None]).max() > 1e-8:
         raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
-    roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress, _excluded(system))
+    roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress, _excluded(system, solver.q0))
     roots = solver.newton(roots, solver.q0[None], steps=3)
     res = solver.residual(roots, solver.q0[None]).max()
     if res > 1e-10 or _has_duplicates(roots):
