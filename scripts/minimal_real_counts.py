@@ -171,7 +171,7 @@ def orbit_representatives(sols: np.ndarray, group) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--instances", type=int, default=20)
+    ap.add_argument("--instances", type=int, default=12)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-loops", type=int, default=40)
     args = ap.parse_args(argv)
