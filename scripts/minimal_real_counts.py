@@ -15,7 +15,8 @@ parameter homotopy in the data F (complex straight segments, batched predictor-c
    network_from_root), and check that the true network is among them.
 
 Writes tables/minimal_real_counts.csv (one row per instance) and prints a summary.
-Usage: OPENBLAS_NUM_THREADS=1 python scripts/minimal_real_counts.py [--instances 20] [--seed 0]
+Usage: OPENBLAS_NUM_THREADS=1 python scripts/minimal_real_counts.py [--instances 12] [--seed 0] [--max-loops 30]
+(about 7 minutes on the loaded 2-core machine; numbers in tables/minimal_problems.md).
 """
 from __future__ import annotations
 
@@ -170,7 +171,7 @@ def orbit_representatives(sols: np.ndarray, group) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--instances", type=int, default=20)
+    ap.add_argument("--instances", type=int, default=12)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-loops", type=int, default=40)
     args = ap.parse_args(argv)
