@@ -62,6 +62,7 @@ from .f4 import F4Options, GroebnerResult, groebner
 from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
 from .linalg import MatrixTooLarge
 from .quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
+from .quotient import saturated_degree, variable_action_matrices as _variable_action_matrices
 from .ring import Poly, Ring
 
 __all__ = [
@@ -284,87 +285,6 @@ def jacobian_rank(polys: Sequence[Mapping[tuple[int, ...], int]], point: Sequenc
     if not polys:
         return 0
     return flint.nmod_mat(len(polys), nvars, entries, p).rank()
-
-
-def _variable_action_matrices(gb: GroebnerResult, basis: Sequence[int]) -> np.ndarray:
-    """Action matrices of all variables on the standard monomials (row convention of
-    :func:`analysis.quotient.action_matrix`: row j is NF(x_i b_j)), shape (nvars, |B|, |B|).
-
-    FGLM border recursion: border monomials u = x_i b are visited in increasing order; u is either a
-    leading monomial of the reduced basis (NF(u) = -tail) or u = x_k u' with u' a smaller border
-    monomial, and then NF(u) = NF(u') M_k, whose needed rows NF(x_k b_j), b_j < u', are already known.
-    Each step is one vector-matrix product reduced mod p; it runs in int64 when |B| (p-1)^2 < 2^63
-    (always for the default primes below 2^16) and in Python integers otherwise.
-    """
-    ring = gb.ring
-    p = ring.prime
-    nb, nvars = len(basis), ring.nvars
-    pos = {k: i for i, k in enumerate(basis)}
-    lead = {g.lm: g for g in gb.basis}
-    vkeys = [ring.variable_key(i) for i in range(nvars)]
-    M = np.zeros((nvars, nb, nb), dtype=np.int64)
-    border: dict[int, list[tuple[int, int]]] = {}
-    for j, b in enumerate(basis):
-        for i in range(nvars):
-            u = b + vkeys[i]
-            if u in pos:
-                M[i, j, pos[u]] = 1
-            else:
-                border.setdefault(u, []).append((i, j))
-    nf: dict[int, np.ndarray] = {}
-    big = nb * (p - 1) ** 2 >= 1 << 63  # int64 dot products could overflow: use Python integers
-    for u in sorted(border):
-        g = lead.get(u)
-        if g is not None:
-            v = np.zeros(nb, dtype=np.int64)
-            for k, c in zip(g.mons[1:], g.coeffs[1:]):
-                v[pos[k]] = (-c) % p
-        else:
-            e = ring.exps(u)
-            for k in range(nvars):
-                if e[k] and (u - vkeys[k]) in nf:
-                    prev = nf[u - vkeys[k]]
-                    if big:
-                        v = np.array((prev.astype(object) @ M[k].astype(object)) % p, dtype=np.int64)
-                    else:
-                        v = (prev @ M[k]) % p
-                    break
-            else:  # pragma: no cover - impossible for a reduced Gröbner basis of a zero-dimensional ideal
-                raise RuntimeError(f"border monomial {ring.monomial_str(u)} has no smaller border divisor")
-        nf[u] = v
-        for i, j in border[u]:
-            M[i, j] = v
-    return M
-
-
-def _flint(M: np.ndarray, p: int) -> "flint.nmod_mat":
-    return flint.nmod_mat(M.shape[0], M.shape[1], [int(x) for x in M.ravel()], p)
-
-
-def saturated_degree(gb: GroebnerResult, f: Poly, basis: Sequence[int] | None = None) -> int:
-    """deg(I : f^inf) for a zero-dimensional I given by its reduced Gröbner basis: rank of M_f^N, N >= |B|.
-
-    Raises :class:`analysis.quotient.NotZeroDimensional` for positive-dimensional ideals.
-    """
-    if basis is None:
-        basis = standard_monomials(gb)
-    nb = len(basis)
-    if nb == 0:
-        return 0
-    p = gb.ring.prime
-    var_mats = [_flint(X, p) for X in _variable_action_matrices(gb, basis)]
-    Mf = flint.nmod_mat(nb, nb, p)
-    for exps, c in f.terms():
-        term = flint.nmod_mat(nb, nb, [c if i == j else 0 for i in range(nb) for j in range(nb)], p)
-        for i, e in enumerate(exps):
-            for _ in range(e):
-                term = term * var_mats[i]
-        Mf = Mf + term
-    power = 1
-    while power < nb:
-        Mf = Mf * Mf
-        power *= 2
-    return Mf.rank()
 
 
 def root_ranks(formulation: Formulation | str, prime: int = DEFAULT_PRIMES[0], seed: int = 0) -> tuple[int, int]:

@@ -27,6 +27,70 @@ class UserError(Exception):
     """An error caused by the input; printed as one line."""
 
 
+MAX_MEMORY_ENV = "TDOA_WORKBENCH_MAX_MEMORY"
+"""Environment variable with the default of ``--max-memory`` (e.g. ``4G``)."""
+
+BASIS_LIMIT = 10_000
+"""Default of ``--basis-limit``: the most standard monomials ``--basis`` lists."""
+
+
+def _nonnegative(option: str):
+    """An argparse type: an integer >= 0, with an error naming the option."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {value}")
+        return value
+
+    parse.__name__ = option
+    return parse
+
+
+def _memory_size(text: str) -> int:
+    """Bytes from ``8G``, ``512M``, ``1.5GB`` or a plain number of bytes (binary units)."""
+    units = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    t = text.strip().upper().removesuffix("IB").removesuffix("B")
+    unit = t[-1:] if t[-1:] in units else ""
+    try:
+        value = float(t[: len(t) - len(unit)]) * units[unit]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"memory size must look like 8G, 512M or 1000000, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"memory size must be positive, got {text!r}")
+    return int(value)
+
+
+def _default_max_memory() -> str:
+    from analysis.f4 import DEFAULT_MAX_MEMORY
+
+    return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
+
+
+def _f4_options(args: argparse.Namespace):
+    from analysis.f4 import F4Options
+
+    return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
+                     verbose=args.verbose)
+
+
+def _export(system, fmt: str, path: str) -> None:
+    """Write the system for another CAS; a path that cannot be written is a one-line user error."""
+    from analysis.io import WRITE_FORMATS, write_system
+
+    if fmt not in WRITE_FORMATS:
+        raise UserError(f"--export: unknown format {fmt!r}; valid: {', '.join(WRITE_FORMATS)}")
+    if os.path.isdir(path):
+        raise UserError(f"--export: {path} is a directory; give a file name, e.g. {os.path.join(path, 'system.' + fmt)}")
+    try:
+        write_system(system, path, fmt)
+    except OSError as e:
+        raise UserError(f"--export: cannot write {path}: {e.strerror}; give a file in an existing, writable directory") from None
+
+
 def _add_degree(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "degree",
@@ -46,7 +110,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="with --tdoa: equations, e.g. 'B2,C2-C6,minors', 'C*', 'A,B2,B3,C2-C6', 'M123_123,...', 'all'",
     )
-    p.add_argument("--seed", type=int, default=0, help="with --tdoa: seed of the consistent random instance")
+    p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
+                   help="with --tdoa: seed of the consistent random instance")
     p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H = h11*h22 - h12^2")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
@@ -56,9 +121,14 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
     p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
+    p.add_argument("--basis-limit", type=_nonnegative("--basis-limit"), default=BASIS_LIMIT, metavar="N",
+                   help=f"--basis lists at most N standard monomials (default {BASIS_LIMIT})")
     p.add_argument("--gb", action="store_true", help="also print the reduced Groebner basis (first prime)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--max-cells", type=int, default=400_000_000, help="cap on F4 matrix rows*cols")
+    p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=400_000_000,
+                   help="cap on F4 matrix rows*cols")
+    p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
+                   help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
     p.add_argument("--backend", default="numpy", help="linear algebra backend: numpy (fast) or python (reference)")
     p.add_argument("-v", "--verbose", action="store_true", help="per-round F4 statistics on stderr")
     p.set_defaults(func=cmd_degree)
@@ -66,8 +136,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
 
 def cmd_degree(args: argparse.Namespace) -> int:
     from analysis.degree import DEFAULT_PRIMES, analyse
-    from analysis.f4 import F4Options
-    from analysis.io import InputError, System, parse_msolve, parse_polynomial
+    from analysis.io import InputError, System, decode_text, parse_msolve, parse_polynomial
     from analysis.ring import check_prime, BadPrime
 
     if args.tdoa:
@@ -79,11 +148,11 @@ def cmd_degree(args: argparse.Namespace) -> int:
     if args.file is None:
         raise UserError("give a FILE in msolve format, or --tdoa CONFIG --equations SPEC")
     try:
-        text = sys.stdin.read() if args.file == "-" else open(args.file, encoding="utf-8").read()
+        data = sys.stdin.buffer.read() if args.file == "-" else open(args.file, "rb").read()
     except OSError as e:
         raise UserError(f"cannot read {args.file}: {e.strerror}") from None
     try:
-        system: System = parse_msolve(text, source=args.file)
+        system: System = parse_msolve(decode_text(data, "<stdin>" if args.file == "-" else args.file), source=args.file)
     except InputError as e:
         raise UserError(str(e)) from None
     try:
@@ -98,7 +167,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
         primes = (system.characteristic,)
     elif primes is None:
         primes = DEFAULT_PRIMES
-    options = F4Options(backend=args.backend, max_matrix_cells=args.max_cells, verbose=args.verbose)
+    options = _f4_options(args)
 
     def polys(p: int):
         try:
@@ -122,61 +191,107 @@ def cmd_degree(args: argparse.Namespace) -> int:
         sat = saturating_poly
 
     if args.export:
-        from analysis.io import write_system
+        _export(system, args.export[0], args.export[1])
+    report = analyse(polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
+    return _finish_report(report.as_dict(), report, args)
 
-        write_system(system, args.export[1], args.export[0])
-    report = analyse(polys, primes, options, saturate_by=sat)
-    out = report.as_dict()
-    if args.basis:
+
+def _finish_report(out: dict, report, args: argparse.Namespace, header: str | None = None) -> int:
+    """Print a degree report with the requested listings; a standard basis above --basis-limit is not
+    listed (its size is, and the exit status is 2)."""
+    too_many = args.basis and report.degree is not None and report.degree > args.basis_limit
+    if args.basis and not too_many:
         out["standard_basis"] = report.standard_basis()
     if args.gb:
         out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
+    if header and not args.json:
+        print(header)
     _print_report(out, args.json)
+    if too_many:
+        raise UserError(f"--basis: the standard basis has {report.degree} monomials, more than --basis-limit "
+                        f"{args.basis_limit}; give --basis-limit {report.degree} to list them all")
     return 0
 
 
 def _degree_tdoa(args: argparse.Namespace) -> int:
-    """Degree of one TDOA formulation on consistent random instances (known root checked per prime)."""
+    """Degree of one TDOA formulation on consistent random instances (known root checked per prime).
+
+    The rank of the Jacobian at the known root comes first (milliseconds): below the number of unknowns,
+    the root lies on a positive-dimensional solution set (generic smoothness, see
+    :mod:`analysis.complexity`) and that is the answer, without a Gröbner basis (unless --gb).
+    """
     from analysis import formulations as tf
+    from analysis.complexity import jacobian_rank
     from analysis.degree import DEFAULT_PRIMES, analyse
-    from analysis.f4 import F4Options
     from analysis.ring import BadPrime, Ring, check_prime
 
+    if args.equations is not None and not args.equations.strip():
+        raise UserError("--equations is empty; give e.g. 'C2-C6', 'B2,C2-C6,minors' or 'all'")
     try:
         config = tf.TDOAConfig.parse(args.tdoa)
         formulation = tf.Formulation(config, tf.parse_equations(config, args.equations or "all"))
         primes = tuple(check_prime(p) for p in args.prime) if args.prime else DEFAULT_PRIMES
     except (ValueError, BadPrime) as e:
         raise UserError(str(e)) from None
-    options = F4Options(backend=args.backend, max_matrix_cells=args.max_cells, verbose=args.verbose)
+    options = _f4_options(args)
     rings: dict[int, Ring] = {}
+    instances: dict[int, tuple] = {}
+
+    def equations(p: int):
+        if p not in instances:
+            instance = tf.sample_gf_instance(config, p, args.seed)
+            tf.check_root(formulation, instance)
+            instances[p] = (instance, tf.gf_equations(formulation, instance, p))
+        return instances[p]
 
     def polys(p: int):
-        instance = tf.sample_gf_instance(config, p, args.seed)
-        tf.check_root(formulation, instance)
         ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
-        return [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
+        return [ring.from_terms(eq) for eq in equations(p)[1]]
 
     def det_h(p: int):
         ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
         return ring.gen("h11") * ring.gen("h22") - ring.gen("h12") ** 2
 
+    header = f"formulation {formulation.label} (seed {args.seed})"
     if args.export:
-        from analysis.io import System, write_system
+        from analysis.io import System
 
         ring = Ring(config.unknowns, primes[0], args.order)
-        write_system(System.from_polys(ring, polys(primes[0])), args.export[1], args.export[0])
-    report = analyse(polys, primes, options, saturate_by=det_h if args.saturate_det_h else None)
+        _export(System.from_polys(ring, polys(primes[0])), args.export[0], args.export[1])
+    instance, eqs = equations(primes[0])
+    n = config.n_unknowns
+    rank = jacobian_rank(eqs, instance.root, primes[0])
+    if rank < n and not args.gb:
+        return _report_rank_deficient(formulation, args, rank, header)
+    method = "rabinowitsch" if args.gb or args.basis else "rank"
+    report = analyse(polys, primes, options, saturate_by=det_h if args.saturate_det_h else None, saturation=method)
     out = {"formulation": formulation.label, "seed": args.seed, **report.as_dict()}
     if args.saturate_det_h:
         out["saturated_by"] = "det H"
-    if args.basis:
-        out["standard_basis"] = report.standard_basis()
-    if args.gb:
-        out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
-    if not args.json:
-        print(f"formulation {formulation.label} (seed {args.seed})")
-    _print_report(out, args.json)
+    return _finish_report(out, report, args, header)
+
+
+def _report_rank_deficient(formulation, args: argparse.Namespace, rank: int, header: str) -> int:
+    """Report a formulation whose Jacobian at the known root has rank below the number of unknowns."""
+    n = formulation.config.n_unknowns
+    tangent = n - rank
+    # independent equations at a smooth point: a local complete intersection of dimension n - rank
+    exact = rank == formulation.n_equations
+    hint = (f"add equations: {rank} of the {formulation.n_equations} equations are independent at the known root, "
+            f"{n} unknowns need {n}")
+    out = {"formulation": formulation.label, "seed": args.seed, "degree": None,
+           "dimension": tangent if exact else None, "zero_dimensional": False, "tangent_dim": tangent,
+           "jacobian_rank": rank, "unknowns": n, "hint": hint}
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(header)
+    if exact:
+        print(f"positive-dimensional: dimension {tangent} at the known root (Jacobian rank {rank} < {n} unknowns)")
+    else:
+        print(f"positive-dimensional: the known root lies on a solution set of dimension 1 to {tangent} "
+              f"(Jacobian rank {rank} < {n} unknowns)")
+    print(f"{hint}; no Groebner basis computed (--gb computes one anyway)")
     return 0
 
 
@@ -187,7 +302,8 @@ def _print_report(out: dict, as_json: bool) -> None:
     if out["dimension"] == -1:
         print("inconsistent system (the ideal is the whole ring): degree 0")
     elif out["zero_dimensional"]:
-        print(f"degree {out['degree']}  (zero-dimensional)")
+        saturated = f", after saturating by {out['saturated_by']}" if out.get("saturated_by") else ""
+        print(f"degree {out['degree']}  (zero-dimensional{saturated})")
     else:
         print(f"positive-dimensional: dimension {out['dimension']} (no finite count of solutions)")
     print(f"primes {', '.join(map(str, out['primes']))}; Groebner basis: {out['gb_size']} elements; "
@@ -247,8 +363,25 @@ def cmd_generate(args: argparse.Namespace) -> int:
     if label not in SOLVERS:
         raise UserError(f"unknown solver configuration {args.config!r}; valid: {', '.join(SOLVERS)}")
     stats = generate(label)
-    print(stats)
+    print(_summary(stats))
     return 0
+
+
+def _summary(stats) -> str:
+    """A readable multi-line summary of a result record (a dataclass or anything with fields)."""
+    import dataclasses
+
+    if not dataclasses.is_dataclass(stats):
+        return str(stats)
+    lines = [f"{type(stats).__name__}:"]
+    for f in dataclasses.fields(stats):
+        value = getattr(stats, f.name)
+        if isinstance(value, float):
+            value = f"{value:.3g}"
+        elif isinstance(value, (tuple, list)) and len(value) == 2 and all(isinstance(v, int) for v in value):
+            value = f"{value[0]} x {value[1]}"
+        lines.append(f"  {f.name.replace('_', ' ')}: {value}")
+    return "\n".join(lines)
 
 
 def _add_template_check(sub: argparse._SubParsersAction) -> None:
@@ -268,7 +401,8 @@ def _add_template_check(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--action", help="action unknown (default: the first offset, else the first unknown)")
     p.add_argument("--basis", default="grevlex", help="quotient basis: grevlex or offsets (default grevlex)")
     p.add_argument("--prime", type=int, default=65521, help="prime (default 65521; a file of characteristic p uses p)")
-    p.add_argument("--seed", type=int, default=1, help="formulations: seed of the consistent GF(p) instance (default 1)")
+    p.add_argument("--seed", type=_nonnegative("--seed"), default=1,
+                   help="formulations: seed of the consistent GF(p) instance (default 1)")
     p.add_argument("--stop", action="store_true", help="stop at the first complete degree")
     p.set_defaults(func=cmd_template_check)
 
@@ -375,11 +509,21 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tdoa-workbench")
+    except PackageNotFoundError:  # pragma: no cover - running from a checkout without installing
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tdoa-workbench",
         description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_degree(sub)
     _add_tables(sub)
@@ -389,27 +533,54 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
+def _run(args: argparse.Namespace) -> int:
+    """Run a subcommand; every error a user can cause becomes one line on stderr (exit 2, 3 when primes
+    disagree), never a traceback."""
     from analysis.degree import PrimeDisagreement
+    from analysis.formulations import InconsistentSample, SamplingFailed
     from analysis.linalg import MatrixTooLarge
     from analysis.quotient import NotZeroDimensional
 
+    def error(message: str, status: int = 2) -> int:
+        print(f"tdoa-workbench {args.command}: error: {' '.join(str(message).split())}", file=sys.stderr)
+        return status
+
+    try:
+        status = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return status
+    except BrokenPipeError:
+        # the reader went away (e.g. | head): stop quietly, as a command killed by SIGPIPE would
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except MatrixTooLarge as e:
+        return error(f"{e}; raise --max-memory / --max-cells if the machine allows, or give a smaller system")
+    except MemoryError:
+        return error("out of memory; lower --max-memory so that the computation stops before the machine's limit")
+    except SamplingFailed as e:
+        return error(e)
+    except InconsistentSample as e:
+        return error(f"{e}; try another --seed")
+    except (UserError, NotZeroDimensional, ValueError, OverflowError) as e:
+        return error(e)
+    except PrimeDisagreement as e:
+        return error(e, 3)
+    except OSError as e:
+        where = f"{e.filename}: " if e.filename else ""
+        return error(f"{where}{e.strerror or e}")
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    try:
-        return args.func(args)
-    except (UserError, MatrixTooLarge, NotZeroDimensional, ValueError, OverflowError) as e:
-        print(f"tdoa-workbench {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    except PrimeDisagreement as e:
-        print(f"tdoa-workbench {args.command}: error: {e}", file=sys.stderr)
-        return 3
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    return _run(args)
 
 
 if __name__ == "__main__":
