@@ -61,6 +61,8 @@ from .degree import DEFAULT_PRIMES
 from .f4 import F4Options, GroebnerResult, groebner
 from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
 from .linalg import MatrixTooLarge
+from .paths import cache_dir
+from .progress import Progress
 from .quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
 from .quotient import saturated_degree, variable_action_matrices as _variable_action_matrices
 from .ring import Poly, Ring
@@ -112,8 +114,8 @@ def repo_root() -> Path:
 
 
 def default_cache_dir() -> Path:
-    """``<repo>/.cache/complexity``."""
-    return repo_root() / ".cache" / "complexity"
+    """The ``complexity`` directory of the user cache (:func:`analysis.paths.cache_dir`)."""
+    return cache_dir("complexity")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -583,36 +585,14 @@ def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
             conn.send(("crash", traceback.format_exc()))
 
 
-class _Progress:
-    """tqdm if installed, else a one-line counter on stderr."""
+class _Progress(Progress):
+    """The sweep's progress line: one phase, one step per formulation, the last label and status."""
 
-    def __init__(self, total: int, enabled: bool):
-        self.total, self.done, self.enabled = total, 0, enabled
-        self.bar = None
-        if enabled:
-            try:
-                from tqdm.auto import tqdm
-                self.bar = tqdm(total=total, desc="complexity sweep", unit="formulation", file=sys.stderr,
-                                dynamic_ncols=True)
-            except ImportError:
-                self.bar = None
+    def __init__(self, total: int, enabled: bool, phase: str = "complexity sweep"):
+        super().__init__(phase, total, enabled, "formulations")
 
-    def update(self, label: str, status: str) -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.set_postfix_str(f"{label} {status}"[:60], refresh=False)
-            self.bar.update(1)
-        else:
-            print(f"\r[sweep] {self.done}/{self.total}  {label[:50]:50s} {status:20s}", end="", file=sys.stderr,
-                  flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-        elif self.enabled and self.total:
-            print(file=sys.stderr)
+    def update(self, label: str, status: str) -> None:  # type: ignore[override]
+        super().update(1, f"{label[:50]} {status}")
 
 
 @dataclass
@@ -628,7 +608,8 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
           seeds: Sequence[int] = DEFAULT_SEEDS, options: F4Options | None = None, saturate: bool = False,
           jobs: int = 2, cache_dir: Path | str | None = None, use_cache: bool = True, progress: bool = True,
           timeout: float | None = 600.0, positive_dimensional_cells: int = POSITIVE_DIMENSIONAL_CELLS,
-          on_result: Callable[[FormulationResult, bool], None] | None = None) -> list[FormulationResult]:
+          on_result: Callable[[FormulationResult, bool], None] | None = None,
+          phase: str = "complexity sweep") -> list[FormulationResult]:
     """:func:`compute_formulation` for many formulations, in parallel, cached on disk.
 
     Parameters
@@ -637,10 +618,10 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
     primes, seeds, options, saturate, positive_dimensional_cells : as in :func:`compute_formulation`.
     jobs : worker processes (spawned; each runs with one BLAS thread). ``jobs <= 1`` with
         ``timeout=None`` computes in this process.
-    cache_dir : JSON cache directory (default ``<repo>/.cache/complexity``); each result is stored as
+    cache_dir : JSON cache directory (default :func:`default_cache_dir`); each result is stored as
         soon as it is known, keyed by label, primes, seeds and :data:`ENGINE_VERSION`.
     use_cache : read the cache (results are written either way).
-    progress : progress bar on stderr (tqdm when installed).
+    progress : progress on stderr (:class:`analysis.progress.Progress`), named ``phase``.
     timeout : wall-clock seconds per formulation; on expiry the worker is killed and replaced and the
         result has status "timeout" (the instances finished before it are kept).
     on_result : called as ``on_result(result, from_cache)`` with each result as it becomes known (cached
@@ -656,7 +637,7 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
     labels = [Formulation.parse(x).label for x in labels]  # validate and normalise before any work
     unique = list(dict.fromkeys(labels))
     results: dict[str, FormulationResult] = {}
-    bar = _Progress(len(unique), progress)
+    bar = _Progress(len(unique), progress, phase)
 
     def finish(result: FormulationResult) -> None:
         results[result.label] = result

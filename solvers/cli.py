@@ -315,27 +315,54 @@ def _print_report(out: dict, as_json: bool) -> None:
                 print(f"  {s}")
 
 
-QUICK_DIR = "tables/quick"
-"""Where quick runs write, so that they never overwrite the full reproduction under tables/."""
+QUICK_DIR = "quick"
+"""Quick runs write to this subdirectory of the output directory, so that they never overwrite the full
+reproduction."""
+
+
+def _add_output_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", metavar="DIR",
+                   help="output directory (default: tables/ of the source checkout when run from one, else ./tables; "
+                   f"--quick writes to its {QUICK_DIR}/ subdirectory)")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="cache directory (default $TDOA_WORKBENCH_CACHE, else $XDG_CACHE_HOME/tdoa-workbench, "
+                   "else ~/.cache/tdoa-workbench)")
+
+
+def _output_dir(args: argparse.Namespace):
+    """The output directory of tables/reproduce; --cache-dir is put in the environment, so that worker
+    processes inherit it."""
+    from pathlib import Path
+
+    from analysis.paths import CACHE_ENV, default_output_dir
+
+    if args.cache_dir:
+        os.environ[CACHE_ENV] = str(Path(args.cache_dir).expanduser().resolve())
+    if args.out:
+        out = Path(args.out).expanduser()
+        if out.exists() and not out.is_dir():
+            raise UserError(f"--out {args.out} is a file; give a directory")
+        return out.resolve()
+    return default_output_dir() / QUICK_DIR if args.quick else default_output_dir()
 
 
 def _add_tables(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tables", help="reproduce Tables 2 and 3 (complexity sweep, cached and parallel)",
-                       description="Run the complexity sweep over TDOA formulations and write tables/table2.*, "
-                       "tables/table3.*, tables/section32.csv and tables/formulations.csv (--quick: a small budget, "
-                       f"written to {QUICK_DIR}/). Results are cached under .cache/complexity, so a rerun is instant "
-                       "and an interrupted sweep resumes.")
+                       description="Run the complexity sweep over TDOA formulations and write table2.*, table3.*, "
+                       "section32.csv and formulations.csv to the output directory (--out; --quick: a small budget, "
+                       f"written to its {QUICK_DIR}/ subdirectory). Results and the sweep plan are cached in the user "
+                       "cache directory, so a rerun takes seconds and an interrupted sweep resumes; files whose "
+                       "results did not change are not rewritten.")
     p.add_argument("--quick", action="store_true", help=f"Table 2 and two formulations per cell, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
-    p.add_argument("--no-cache", action="store_true", help="recompute instead of reading .cache/complexity")
+    p.add_argument("--no-cache", action="store_true", help="recompute instead of reading the cache")
+    _add_output_options(p)
     p.set_defaults(func=cmd_tables)
 
 
-def _run_tables(quick: bool, jobs: int, use_cache: bool = True) -> None:
-    from analysis.complexity import repo_root
+def _run_tables(quick: bool, jobs: int, out_dir, use_cache: bool = True) -> None:
     from analysis.tables import make_tables
 
-    out_dir = repo_root() / QUICK_DIR if quick else None
     summary = make_tables(quick=quick, jobs=jobs, use_cache=use_cache, out_dir=out_dir)
     print(summary.report())
 
@@ -343,7 +370,7 @@ def _run_tables(quick: bool, jobs: int, use_cache: bool = True) -> None:
 def cmd_tables(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise UserError("--jobs must be at least 1")
-    _run_tables(args.quick, args.jobs, use_cache=not args.no_cache)
+    _run_tables(args.quick, args.jobs, _output_dir(args), use_cache=not args.no_cache)
     return 0
 
 
@@ -483,27 +510,28 @@ def cmd_template_check(args: argparse.Namespace) -> int:
 def _add_reproduce(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="the main job: reproduce Tables 2, 3, 4 and Figures 1, 2",
                        description="Regenerate the paper's Tables 2 and 3 (complexity sweep), Table 4 and "
-                       "Figures 1 and 2 (synthetic experiments, 1000 trials per row as in the paper) under tables/, "
-                       "with progress output and a final comparison with the paper. Cached: a rerun resumes where "
-                       f"the last one stopped. --quick: small sweep budget and 100 trials, written to {QUICK_DIR}/.")
+                       "Figures 1 and 2 (synthetic experiments, 1000 trials per row as in the paper) in the output "
+                       "directory (--out), with progress output and a final comparison with the paper. Cached: a rerun "
+                       "resumes where the last one stopped. --quick: small sweep budget and 100 trials, written to "
+                       f"the {QUICK_DIR}/ subdirectory.")
     p.add_argument("--quick", action="store_true", help=f"a few minutes: fewer formulations and trials, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    _add_output_options(p)
     p.set_defaults(func=cmd_reproduce)
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    from analysis.complexity import repo_root
-    from solvers.experiments import reproduce
-
     if args.jobs < 1:
         raise UserError("--jobs must be at least 1")
+    out = _output_dir(args)
+    from solvers.experiments import reproduce  # after _output_dir: its cache directory comes from the environment
+
     t0 = time.perf_counter()
     print("== Tables 2 and 3: complexity sweep ==", flush=True)
-    _run_tables(args.quick, args.jobs)
+    _run_tables(args.quick, args.jobs, out)
     print("== Table 4 and Figures 1, 2: synthetic experiments ==", flush=True)
-    out = repo_root() / (QUICK_DIR if args.quick else "tables")
     reproduce(quick=args.quick, jobs=args.jobs, tables_dir=out)
     print(f"reproduce: done in {time.perf_counter() - t0:.0f} s; outputs under {out}")
     return 0
