@@ -561,18 +561,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _user_error(e: Exception) -> tuple[str, int] | None:
+    """(one-line message, exit status) for an exception a user's input can cause, else None. Looks the
+    exception classes up only in modules already imported (none can be raised from the others), so
+    that a command does not import sympy just to report errors."""
+    def cls(module: str, name: str) -> type:
+        return getattr(sys.modules.get(module), name, ())
+
+    if isinstance(e, cls("analysis.degree", "PrimeDisagreement")):
+        return str(e), 3
+    if isinstance(e, cls("analysis.linalg", "MatrixTooLarge")):
+        return f"{e}; raise --max-memory / --max-cells if the machine allows, or give a smaller system", 2
+    if isinstance(e, cls("analysis.formulations", "InconsistentSample")):
+        return f"{e}; try another --seed", 2
+    if isinstance(e, (UserError, ValueError, OverflowError, cls("analysis.formulations", "SamplingFailed"))):
+        return str(e), 2  # ValueError covers InputError, BadPrime and NotZeroDimensional
+    if isinstance(e, MemoryError):
+        return "out of memory; lower --max-memory so that the computation stops before the machine's limit", 2
+    if isinstance(e, OSError):
+        return (f"{e.filename}: " if e.filename else "") + str(e.strerror or e), 2
+    return None
+
+
 def _run(args: argparse.Namespace) -> int:
     """Run a subcommand; every error a user can cause becomes one line on stderr (exit 2, 3 when primes
-    disagree), never a traceback."""
-    from analysis.degree import PrimeDisagreement
-    from analysis.formulations import InconsistentSample, SamplingFailed
-    from analysis.linalg import MatrixTooLarge
-    from analysis.quotient import NotZeroDimensional
-
-    def error(message: str, status: int = 2) -> int:
-        print(f"tdoa-workbench {args.command}: error: {' '.join(str(message).split())}", file=sys.stderr)
-        return status
-
+    disagree), never a traceback. Anything else is a bug and keeps its traceback."""
     try:
         status = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
@@ -582,24 +595,16 @@ def _run(args: argparse.Namespace) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
-    except MatrixTooLarge as e:
-        return error(f"{e}; raise --max-memory / --max-cells if the machine allows, or give a smaller system")
-    except MemoryError:
-        return error("out of memory; lower --max-memory so that the computation stops before the machine's limit")
-    except SamplingFailed as e:
-        return error(e)
-    except InconsistentSample as e:
-        return error(f"{e}; try another --seed")
-    except (UserError, NotZeroDimensional, ValueError, OverflowError) as e:
-        return error(e)
-    except PrimeDisagreement as e:
-        return error(e, 3)
-    except OSError as e:
-        where = f"{e.filename}: " if e.filename else ""
-        return error(f"{where}{e.strerror or e}")
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except Exception as e:
+        known = _user_error(e)
+        if known is None:
+            raise
+        message, status = known
+        print(f"tdoa-workbench {args.command}: error: {' '.join(message.split())}", file=sys.stderr)
+        return status
 
 
 def main(argv: list[str] | None = None) -> int:
