@@ -442,6 +442,68 @@ def symbolic_equations(formulation: Formulation) -> dict[str, sympy.Expr]:
     return out
 
 
+def _symbols(prefix: str, m: int, n: int, first: int = 1) -> list[list[sympy.Symbol]]:
+    return [[sympy.Symbol(f"{prefix}{i}_{j}") for j in range(1, n + 1)] for i in range(first, m + 1)]
+
+
+def factored_equations(formulation: Formulation) -> tuple[list[sympy.Poly], dict[sympy.Symbol, sympy.Expr]]:
+    """The equations as polynomials in the unknowns whose coefficients are expressions in the factored
+    data symbols, and the definitions of those symbols in terms of f<i>_<j>.
+
+    Symbols: e<i>_<j> = f_ij - f_1j and p<i>_<j> = f_ij + f_1j (i >= 2), c<i>_<j> = e p - e p (the
+    constant of D~_ij), f1_<j>. Same conventions as :func:`analysis.formulations.symbolic_equations`
+    (paper Sections 2-3); checked against it numerically in tests/test_generated.py.
+    """
+    config = formulation.config
+    m, n = config.m, config.n
+    unknowns = unknown_symbols(config)
+    h11, h12, h22, b1, b2, *offsets = unknowns
+    f = _symbols("f", m, n)
+    e = [[None] * n] + _symbols("e", m, n, first=2)
+    p = [[None] * n] + _symbols("p", m, n, first=2)
+    c = _symbols("c", m - 1, n - 1)
+    defs: dict[sympy.Symbol, sympy.Expr] = {}
+    for i in range(1, m):
+        for j in range(n):
+            defs[e[i][j]] = f[i][j] - f[0][j]
+            defs[p[i][j]] = f[i][j] + f[0][j]
+    for i in range(m - 1):
+        for j in range(n - 1):
+            defs[c[i][j]] = e[i + 1][j + 1] * p[i + 1][j + 1] - e[i + 1][0] * p[i + 1][0]
+
+    def comp(i: int, j: int):  # D~_ij, 1-based
+        return c[i - 1][j - 1] + 2 * e[i][0] * offsets[0] - 2 * e[i][j] * offsets[j]
+
+    def d2_diff(i: int, j: int):  # d_ij^2 - d_1j^2, i >= 2
+        return e[i - 1][j - 1] * (p[i - 1][j - 1] - 2 * offsets[j - 1])
+
+    H = sympy.Matrix([[h11, h12], [h12, h22]])
+    b = sympy.Matrix([b1, b2])
+    adj, det = H.adjugate(), H.det()
+    d2_11 = (f[0][0] - offsets[0]) ** 2
+    out = []
+    for name in formulation.equations:
+        if name == "A":
+            expr = d2_11 * det - (b.T * adj * b)[0, 0]
+        elif name.startswith("B"):
+            j = int(name[1:])
+            ev = sympy.Matrix([1, 0]) if j == 2 else sympy.Matrix([0, 1])
+            lhs = (f[0][j - 1] - offsets[j - 1]) ** 2 - d2_11
+            expr = lhs * det - sympy.Rational(1, 4) * (ev.T * adj * ev)[0, 0] + (b.T * adj * ev)[0, 0]
+        elif name.startswith("C"):
+            i = int(name[1:])
+            r = sympy.Matrix([comp(i - 1, 1), comp(i - 1, 2)])
+            expr = d2_diff(i, 1) - ((r.T * H * r)[0, 0] - 2 * (b.T * r)[0, 0])
+        else:
+            rows_s, cols_s = name[1:].split("_")
+            sep = "." if "." in name else ""
+            rows = [int(x) for x in (rows_s.split(".") if sep else rows_s)]
+            cols = [int(x) for x in (cols_s.split(".") if sep else cols_s)]
+            expr = sympy.Matrix(3, 3, lambda a, bb: comp(rows[a], cols[bb])).det(method="berkowitz")
+        out.append(sympy.Poly(sympy.expand(expr), *unknowns))
+    return out, defs
+
+
 # --------------------------------------------------------------------------------------------------
 # Fast sparse builder (one implementation for GF(p), float and sympy coefficients)
 # --------------------------------------------------------------------------------------------------

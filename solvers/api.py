@@ -1,7 +1,7 @@
 """Public entry points: from TDOA measurements to calibrations (paper Section 3 pipeline).
 
-``calibrate(F)`` validates the data, runs a generated minimal solver on a subset (6r4s when n >= 4 and
-m >= 6, else 9r3s; the first receivers and transmitters), recovers positions and offsets from every
+``calibrate(F)`` validates the data, runs the cheapest generated solver that fits the network on a
+subset (the first receivers and transmitters; :data:`SOLVER_ORDER`), recovers positions and offsets from every
 real candidate with all receivers (:mod:`solvers.recovery`), places the transmitters the solver did
 not use by linear TDOA multilateration, refines with Levenberg-Marquardt on all m*n measurements
 (:mod:`solvers.refine`) and returns the calibrations best first. ``solve_roots(F)`` is the lower-level
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +19,7 @@ import numpy as np
 from .recovery import Calibration, recover, rms_residual
 from .refine import refine as _refine
 
-__all__ = ["SolverChoice", "calibrate", "select_solver", "solve_roots"]
+__all__ = ["SOLVER_ORDER", "SolverChoice", "calibrate", "minimal_configuration", "select_solver", "solve_roots"]
 
 _GENERATED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
 
@@ -40,6 +41,19 @@ def _module_for(label: str):
     return importlib.import_module(f"solvers.generated.{names[-1]}")
 
 
+#: Solvers by expected cost (paths or pencil size, measured in tables/solvers.csv): the first one
+#: whose configuration fits inside the network (m >= m_s and n >= n_s) is used.
+SOLVER_ORDER = ("6r4s", "9r3s", "8r3s", "7r3s", "6r3s")
+
+#: Configurations with as many measurements as degrees of freedom (2m + 3n - 3 = mn).
+MINIMAL = ((6, 3), (4, 5))
+
+
+def minimal_configuration(m: int, n: int) -> bool:
+    """Whether an m x n network is a minimal problem (its real solutions all fit the data exactly)."""
+    return (m, n) in MINIMAL
+
+
 def _validate(F) -> np.ndarray:
     try:
         arr = np.asarray(F, dtype=float)
@@ -49,20 +63,28 @@ def _validate(F) -> np.ndarray:
         raise ValueError(f"F must be a 2-D (receivers x transmitters) array, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError("F contains NaN or infinite values")
-    m, n = arr.shape
-    if not ((m >= 9 and n >= 3) or (m >= 6 and n >= 4)):
-        raise ValueError(f"too few nodes: {m} receivers x {n} transmitters; the solvers need at least "
-                         "9 receivers and 3 transmitters (9r3s) or 6 receivers and 4 transmitters (6r4s)")
+    select_solver(*arr.shape)
     return arr
 
 
+def _available() -> list[tuple[str, int, int]]:
+    names = os.listdir(_GENERATED)
+    out = []
+    for label in SOLVER_ORDER:
+        if any(f.startswith(f"tdoa_{label}_") and f.endswith(".py") for f in names):
+            m, n = (int(v) for v in label[:-1].split("r"))
+            out.append((label, m, n))
+    return out
+
+
 def select_solver(m: int, n: int) -> SolverChoice:
-    """6r4s when n >= 4 and m >= 6, else 9r3s (needs m >= 9, n >= 3)."""
-    if n >= 4 and m >= 6:
-        return SolverChoice("6r4s", 6, 4, _module_for("6r4s").__name__)
-    if m >= 9 and n >= 3:
-        return SolverChoice("9r3s", 9, 3, _module_for("9r3s").__name__)
-    raise ValueError(f"no solver for {m} receivers x {n} transmitters (need 9r3s or 6r4s)")
+    """The cheapest generated solver whose configuration fits an m x n network (see :data:`SOLVER_ORDER`)."""
+    avail = _available()
+    for label, ms, ns in avail:
+        if m >= ms and n >= ns:
+            return SolverChoice(label, ms, ns, _module_for(label).__name__)
+    have = ", ".join(f"{ms}r/{ns}s" for _, ms, ns in avail)
+    raise ValueError(f"too few nodes: {m} receivers x {n} transmitters; the solvers need at least one of {have}")
 
 
 def solve_roots(F) -> np.ndarray:
@@ -115,12 +137,15 @@ def calibrate(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]
 
     Parameters
     ----------
-    F: (m, n) finite array, m >= 9 and n >= 3, or m >= 6 and n >= 4.
+    F: (m, n) finite array containing at least one solved configuration (6r/3s, 6r/4s, 7r/3s, ...).
     refine: run Levenberg-Marquardt on all m*n measurements from each recovered candidate.
-    max_refined: refine only this many candidates (the smallest residuals after recovery).
+    max_refined: refine only this many candidates (the smallest residuals after recovery); for a
+        minimal network (6r/3s) every real solution is refined and returned.
 
     Returns the calibrations (gauge r_1 = 0, r_2 = (r_2x, 0)) sorted by RMS residual, best first;
     an empty list when no candidate is real and geometrically valid (e.g. collinear receivers).
+    For minimal data all real solutions fit exactly and a warning says that the data cannot tell
+    them apart.
     Raises ValueError for malformed input (wrong shape, NaN/inf, too few nodes).
     Paper Section 3.1 (steps 1-4) and 3.2 (trilateration of the remaining transmitters).
     """
@@ -138,6 +163,9 @@ def calibrate(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]
             if cal is not None:
                 cands.append(cal)
     cands.sort(key=lambda c: c.residual)
+    minimal = minimal_configuration(*F.shape)
+    if minimal:
+        max_refined = len(cands)
     if refine:
         refined = []
         for cal in cands[:max_refined]:
@@ -149,7 +177,14 @@ def calibrate(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]
                 refined.append(out)
         cands = refined
         cands.sort(key=lambda c: c.residual)
-    return _dedupe(cands)
+    out = _dedupe(cands)
+    if minimal:
+        scale = np.sqrt(np.mean(F * F))
+        out = [c for c in out if c.residual <= 1e-6 * scale]
+        if len(out) > 1:
+            warnings.warn(f"minimal data ({F.shape[0]}r/{F.shape[1]}s): {len(out)} real solutions fit the "
+                          "measurements exactly; the data cannot tell them apart", stacklevel=2)
+    return out
 
 
 def _dedupe(cands: list[Calibration], tol: float = 1e-8) -> list[Calibration]:

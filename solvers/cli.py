@@ -18,9 +18,22 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # F4 matrices are small: BLAS threads only add overhead
+
+
+def _set_numba_cache() -> None:
+    """numba's compiled kernels go to the user cache (by default numba writes next to the module, i.e. into
+    site-packages for an installed package); only before numba is imported, and never over a user's choice."""
+    from analysis.paths import cache_dir
+
+    if "numba" not in sys.modules and "NUMBA_CACHE_DIR" not in os.environ:
+        os.environ["NUMBA_CACHE_DIR"] = str(cache_dir("numba"))
+
+
+_set_numba_cache()
 
 
 class UserError(Exception):
@@ -338,6 +351,8 @@ def _output_dir(args: argparse.Namespace):
 
     if args.cache_dir:
         os.environ[CACHE_ENV] = str(Path(args.cache_dir).expanduser().resolve())
+        if "numba" not in sys.modules:
+            os.environ["NUMBA_CACHE_DIR"] = str(Path(os.environ[CACHE_ENV]) / "numba")
     if args.out:
         out = Path(args.out).expanduser()
         if out.exists() and not out.is_dir():
@@ -374,41 +389,75 @@ def cmd_tables(args: argparse.Namespace) -> int:
     return 0
 
 
+def _read_text(path: str) -> str:
+    """A text file's content, or a one-line UserError naming it."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return fh.read()
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not a UTF-8 text file") from None
+    except OSError as exc:
+        raise UserError(f"{path}: {exc.strerror or exc}") from None
+
+
 def _add_generate(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("generate", help="regenerate a numeric solver from its formulation (spec + module)",
-                       description="Build the solver spec over GF(p) (root count, structure) for a configuration "
-                       "(9r3s or 6r4s), emit solvers/generated/tdoa_<config>_<method><size>.{py,json} and print "
-                       "the template statistics.")
-    p.add_argument("config", help="solver configuration: 9r3s or 6r4s")
+    p = sub.add_parser(
+        "generate", help="build a numeric solver: a Table 3 configuration, any formulation, or your own system",
+        description="Certify the root count over GF(p) (two primes, two seeds), build the solver and write "
+        "<name>.json (spec) and <name>.py (module with solve(F)). TARGET is a committed configuration "
+        "(6r4s: eigenvalue pencil; 9r3s, 8r3s, 7r3s, 6r3s: parameter homotopy; written to solvers/generated/), "
+        "a TDOA formulation label such as 7r3s:B2,B3,C2-C7, or a FILE with a parametric system (lines "
+        "'unknowns: x, y', 'parameters: a, b', optional 'nonzero: x', then 'equations:' and one polynomial per "
+        "line); formulations and files need --out DIR.")
+    p.add_argument("target", help="configuration (6r4s, 9r3s, 8r3s, 7r3s, 6r3s), formulation label or system FILE")
+    p.add_argument("--out", metavar="DIR", help="output directory (required for formulations and files)")
+    p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")
     p.set_defaults(func=cmd_generate)
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
-    from solvers.codegen import SOLVERS, generate
+    from analysis.parametric import ParametricError, from_formulation, parse
+    from solvers import generate as gen
+    from solvers.codegen import SOLVERS as PENCILS
+    from solvers.codegen import generate as generate_pencil
+    from solvers.methods.homotopy import HomotopyError
 
-    label = args.config.replace("/", "")
-    if label not in SOLVERS:
-        raise UserError(f"unknown solver configuration {args.config!r}; valid: {', '.join(SOLVERS)}")
-    stats = generate(label)
-    print(_summary(stats))
+    if args.seed < 0:
+        raise UserError(f"--seed must be a non-negative integer, got {args.seed}")
+
+    def progress(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    target = args.target.replace("/", "") if ":" not in args.target and not os.path.exists(args.target) else args.target
+    try:
+        if target in PENCILS and target not in gen.SOLVERS:
+            stats = generate_pencil(target)
+            print(f"{stats.formulation}: {stats.method}, {stats.degree} roots certified over GF(p), pencil "
+                  f"{stats.size[0]} x {stats.size[1]}; {stats.seconds:.1f} s -> {stats.module}")
+            return 0
+        if target in gen.SOLVERS:
+            print(gen.generate(target, seed=args.seed, progress=progress).summary())
+            return 0
+        if not args.out:
+            raise UserError(f"{args.target}: give --out DIR for a formulation or a system file "
+                            f"(committed configurations: {', '.join(sorted(set(gen.SOLVERS) | set(PENCILS)))})")
+        if os.path.exists(target):
+            system = parse(_read_text(target), os.path.basename(target))
+            name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
+            config = None
+        else:
+            system = from_formulation(target, saturate_det_h=True)
+            name = "tdoa_" + re.sub(r"\W+", "_", target).strip("_")
+            config = (int(target.split("r")[0]), int(target.split("r")[1].split("s")[0]))
+        os.makedirs(args.out, exist_ok=True)
+        result = gen.generate_system(system, name, args.out, gen.homotopy.HomotopyOptions(seed=args.seed),
+                                     gen._tdoa_start(*config) if config else None, None, config, progress)
+        print(result.summary())
+    except (ParametricError, HomotopyError) as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"{args.out or args.target}: {exc.strerror or exc}") from None
     return 0
-
-
-def _summary(stats) -> str:
-    """A readable multi-line summary of a result record (a dataclass or anything with fields)."""
-    import dataclasses
-
-    if not dataclasses.is_dataclass(stats):
-        return str(stats)
-    lines = [f"{type(stats).__name__}:"]
-    for f in dataclasses.fields(stats):
-        value = getattr(stats, f.name)
-        if isinstance(value, float):
-            value = f"{value:.3g}"
-        elif isinstance(value, (tuple, list)) and len(value) == 2 and all(isinstance(v, int) for v in value):
-            value = f"{value[0]} x {value[1]}"
-        lines.append(f"  {f.name.replace('_', ' ')}: {value}")
-    return "\n".join(lines)
 
 
 def _add_template_check(sub: argparse._SubParsersAction) -> None:

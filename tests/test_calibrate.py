@@ -15,7 +15,8 @@ from solvers.synthetic import random_network, true_root
     (np.ones(12), "2-D"),
     (np.ones((6, 4, 1)), "2-D"),
     (np.ones((5, 4)), "too few"),
-    (np.ones((8, 3)), "too few"),
+    (np.ones((5, 3)), "too few"),
+    (np.ones((12, 2)), "too few"),
     (np.full((6, 4), np.nan), "NaN"),
     (np.full((6, 4), np.inf), "NaN or infinite"),
     ([["a"] * 4] * 6, "real numbers"),
@@ -30,6 +31,30 @@ def test_dispatch():
     assert select_solver(12, 7).label == "6r4s"
     assert select_solver(9, 3).label == "9r3s"
     assert select_solver(15, 3).label == "9r3s"
+    assert select_solver(8, 3).label == "8r3s"
+    assert select_solver(7, 3).label == "7r3s"
+    assert select_solver(6, 3).label == "6r3s"
+
+
+@pytest.mark.parametrize("m,seed", [(8, 21), (7, 22)])
+def test_noiseless_calibration_with_three_transmitters(m, seed):
+    net = random_network(m, 3, np.random.default_rng(seed))
+    best = calibrate(net.measurements())[0]
+    err = calibration_errors(best, net)
+    assert err.position < 1e-8 and err.offset < 1e-8, (m, seed, err)
+
+
+def test_minimal_6r3s_returns_every_exact_solution():
+    import warnings
+
+    net = random_network(6, 3, np.random.default_rng(5))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cals = calibrate(net.measurements())
+    assert cals and all(c.residual < 1e-8 * np.abs(net.measurements()).max() for c in cals)
+    assert min(calibration_errors(c, net).position for c in cals) < 1e-8
+    # several exact solutions come with a warning that the data cannot tell them apart
+    assert (len(cals) > 1) == any("cannot tell them apart" in str(w.message) for w in caught)
 
 
 @pytest.mark.parametrize("m,n,seed", [(6, 4, 11), (9, 3, 12), (8, 6, 13), (11, 3, 14)])

@@ -152,19 +152,7 @@ def test_underdetermined_formulation_is_reported_from_the_jacobian(capsys, confi
     assert not report["zero_dimensional"] and "add equations" in report["hint"]
 
 
-def test_version_and_generate_summary(capsys):
-    import dataclasses
-
-    from solvers.cli import _summary
-
+def test_version(capsys):
     with pytest.raises(SystemExit):
         main(["--version"])
     assert capsys.readouterr().out.startswith("tdoa-workbench ")
-
-    @dataclasses.dataclass
-    class Stats:
-        config: str
-        shape: tuple
-        seconds: float
-
-    assert _summary(Stats("9r3s", (75, 75), 1.23456)) == "Stats:\n  config: 9r3s\n  shape: 75 x 75\n  seconds: 1.23"

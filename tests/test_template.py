@@ -62,27 +62,6 @@ def test_pencil_spec_is_stable_and_matches_committed(built_6r4s):
         assert fh.read() == text, "committed 6r4s spec differs from a fresh build (seed 1, p = 65521)"
 
 
-def test_homotopy_start_system_is_complete():
-    # the committed start instance: as many distinct roots as the GF(p) degree, all with tiny residuals
-    spec = _committed("9r3s")
-    assert spec["kind"] == "homotopy" and spec["degree"] == 75  # paper Section 3.1
-    h = spec["homotopy"]
-    F0 = np.array([[complex(a, b) for a, b in row] for row in spec["start_data"]])
-    x = np.array([[complex(a, b) for a, b in r] for r in spec["start_roots"]])
-    assert x.shape == (75, 8)
-    pieces = [np.broadcast_to(q, (len(x),) + q.shape) for q in c_pieces(F0, np.array(h["rows"]))]
-    # stored to START_DIGITS significant digits: two Newton steps (as at load time) reach roots that
-    # round to the stored ones, with residuals at rounding level
-    refined = x
-    for _ in range(2):
-        G, J = c_residual_jacobian(refined, *pieces)
-        refined = refined - np.linalg.solve(J, G[..., None])[..., 0]
-    G, _ = c_residual_jacobian(refined, *pieces, jacobian=False)
-    assert np.max(np.abs(G)) < 1e-12
-    assert np.all(np.abs(refined - x) <= 10.0 ** (1 - START_DIGITS) * np.abs(x) + 1e-300)
-    assert not _has_duplicates(x)
-
-
 def test_term_structure_matches_gf_supports():
     form = Formulation.parse(SOLVERS["6r4s"])
     monomials, inputs = term_structure(form)

@@ -1,0 +1,401 @@
+"""Parametric polynomial systems: equations in unknowns whose coefficients are polynomials in parameters.
+
+A :class:`ParametricSystem` is the input of the general solver generator (``solvers.methods``): the
+unknowns x, the parameters q (the data of one instance, e.g. the TDOA measurements f_ij), the
+equations f(x; q) = 0, optional non-vanishing conditions (the ideal is saturated by their product, so
+roots on which they vanish are not counted), and an optional group of sign changes of the unknowns
+that maps roots to roots for every q.
+
+This module is exact algebra: it builds the system from a TDOA formulation or from a user's text file,
+specialises it over GF(p) at given parameter values and counts its roots there (two primes and
+several parameter points must agree; analysis.degree). It imports nothing from ``solvers``.
+
+Text format (``parse``)::
+
+    # comment
+    unknowns: x, y
+    parameters: a, b
+    nonzero: x            (optional; products and several entries allowed)
+    equations:
+    x^2 + y^2 - a
+    x*y - b
+
+One equation per line (or separated by ';'); ``^`` or ``**`` for powers; rational coefficients.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import Callable, Sequence
+
+import numpy as np
+import sympy
+
+from .degree import DEFAULT_PRIMES, DegreeReport, PrimeDisagreement, analyse
+from .ring import Poly, Ring
+
+__all__ = ["ParametricSystem", "ParametricError", "GFSample", "parse", "from_formulation"]
+
+
+class ParametricError(ValueError):
+    """A parametric system that cannot be used as given (bad names, parameters that do not occur, ...)."""
+
+
+#: (parameter values mod p, a known root mod p or None) for one prime and one seed.
+GFSample = tuple[list[int], "list[int] | None"]
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class ParametricSystem:
+    """Equations f(x; q) = 0 in ``unknowns`` x with coefficients polynomial in ``parameters`` q.
+
+    equations / nonzero: sympy-parseable strings (kept as text so a system is plain data; the sympy
+    forms are cached). symmetry: sign vectors (tuples of +-1, one per unknown), the non-identity
+    elements of a group acting on the roots of every instance. gf_sampler: optional
+    ``(p, seed) -> (q mod p, root mod p)``; without it, parameters are drawn at random (only sound
+    for square systems, whose generic instance has roots). scale_powers: optional weights w_k such
+    that scaling the parameters by t scales unknown k by t^w_k (used to normalise data).
+    definitions: optional auxiliary names ``(name, expression)`` defined from the parameters (and
+    earlier definitions) that the equations may use: a factored form keeps coefficients short and
+    accurate in floating point (e.g. differences of measurements), the GF(p) counts substitute them.
+    """
+
+    name: str
+    unknowns: tuple[str, ...]
+    parameters: tuple[str, ...]
+    equations: tuple[str, ...]
+    nonzero: tuple[str, ...] = ()
+    symmetry: tuple[tuple[int, ...], ...] = ()
+    scale_powers: tuple[float, ...] | None = None
+    definitions: tuple[tuple[str, str], ...] = ()
+    gf_sampler: Callable[[int, int], GFSample] | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for kind, names in (("unknown", self.unknowns), ("parameter", self.parameters)):
+            for v in names:
+                if not _NAME.match(v):
+                    raise ParametricError(f"{self.name}: {kind} name {v!r} is not an identifier")
+        clash = set(self.unknowns) & set(self.parameters)
+        if clash:
+            raise ParametricError(f"{self.name}: {sorted(clash)} declared both as unknown and parameter")
+        if len(set(self.unknowns)) != len(self.unknowns) or len(set(self.parameters)) != len(self.parameters):
+            raise ParametricError(f"{self.name}: a name is declared twice")
+        if not self.unknowns:
+            raise ParametricError(f"{self.name}: no unknowns")
+        if not self.equations:
+            raise ParametricError(f"{self.name}: no equations")
+        for g in self.symmetry:
+            if len(g) != len(self.unknowns) or any(v not in (1, -1) for v in g):
+                raise ParametricError(f"{self.name}: symmetry {g} is not a sign vector on the {len(self.unknowns)} unknowns")
+        if self.scale_powers is not None and len(self.scale_powers) != len(self.unknowns):
+            raise ParametricError(f"{self.name}: scale_powers needs one weight per unknown")
+
+    # ---------------------------------------------------------------------------------------------
+    # symbolic forms
+    # ---------------------------------------------------------------------------------------------
+
+    @cached_property
+    def aux_symbols(self) -> tuple[sympy.Symbol, ...]:
+        return tuple(sympy.Symbol(name) for name, _ in self.definitions)
+
+    @cached_property
+    def aux_exprs(self) -> tuple[sympy.Expr, ...]:
+        """The definitions, each in the parameters and earlier definitions."""
+        out = []
+        for k, (name, text) in enumerate(self.definitions):
+            expr = self._parse_expr(text, f"definition {name}", aux=k)
+            if expr.free_symbols & set(self.x_symbols):
+                raise ParametricError(f"{self.name}: definition {name} uses an unknown")
+            out.append(expr)
+        return tuple(out)
+
+    @cached_property
+    def aux_degrees(self) -> dict[sympy.Symbol, int]:
+        """Degree in the parameters of every definition."""
+        deg: dict[sympy.Symbol, int] = {q: 1 for q in self.q_symbols}
+        for sym, expr in zip(self.aux_symbols, self.aux_exprs):
+            deg[sym] = _weighted_degree(expr, deg)
+        return deg
+
+    @cached_property
+    def x_symbols(self) -> tuple[sympy.Symbol, ...]:
+        return tuple(sympy.Symbol(v) for v in self.unknowns)
+
+    @cached_property
+    def q_symbols(self) -> tuple[sympy.Symbol, ...]:
+        return tuple(sympy.Symbol(v) for v in self.parameters)
+
+    def _parse_expr(self, text: str, what: str, aux: int | None = None) -> sympy.Expr:
+        usable = self.aux_symbols if aux is None else self.aux_symbols[:aux]
+        names = {s.name: s for s in self.x_symbols + self.q_symbols + usable}
+        try:
+            expr = sympy.sympify(text.replace("^", "**"), locals=names, rational=True)
+        except (sympy.SympifyError, SyntaxError, TypeError) as exc:
+            raise ParametricError(f"{self.name}: cannot read {what} {text!r}: {exc}") from None
+        if not isinstance(expr, sympy.Expr):
+            raise ParametricError(f"{self.name}: {what} {text!r} is not an expression")
+        unknown = {s.name for s in expr.free_symbols} - set(names)
+        if unknown:
+            raise ParametricError(f"{self.name}: {what} {text!r} uses undeclared names {sorted(unknown)}")
+        expr = sympy.expand(expr)
+        if not expr.is_polynomial(*names.values()):
+            raise ParametricError(f"{self.name}: {what} {text!r} is not a polynomial")
+        return expr
+
+    @cached_property
+    def exprs(self) -> tuple[sympy.Expr, ...]:
+        return tuple(self._parse_expr(e, f"equation {k + 1}") for k, e in enumerate(self.equations))
+
+    @cached_property
+    def nonzero_exprs(self) -> tuple[sympy.Expr, ...]:
+        return tuple(self._parse_expr(e, "nonzero condition") for e in self.nonzero)
+
+    @cached_property
+    def terms(self) -> tuple[tuple[tuple[tuple[int, ...], sympy.Expr], ...], ...]:
+        """Per equation: its terms (exponents in the unknowns, coefficient as an expression in q).
+
+        Sorted by exponent (deterministic); equations without any unknown are an error (they would
+        constrain the data, not the roots).
+        """
+        out = []
+        for k, expr in enumerate(self.exprs):
+            poly = sympy.Poly(expr, *self.x_symbols)
+            terms = tuple(sorted(poly.terms(), key=lambda t: t[0]))
+            if not terms or all(sum(m) == 0 for m, _ in terms):
+                raise ParametricError(f"{self.name}: equation {k + 1} does not involve the unknowns")
+            out.append(terms)
+        return tuple(out)
+
+    @cached_property
+    def coefficient_degrees(self) -> tuple[int, ...]:
+        """Degree in the parameters of every term's coefficient (terms in equation order)."""
+        return tuple(_weighted_degree(c, self.aux_degrees) for eq in self.terms for _, c in eq)
+
+    def check_parameters_occur(self) -> None:
+        """Raise unless every declared parameter occurs in some coefficient."""
+        used: set[str] = set()
+        for eq in self.terms:
+            for _, c in eq:
+                used |= {s.name for s in c.free_symbols}
+        for sym, expr in zip(reversed(self.aux_symbols), reversed(self.aux_exprs)):
+            if sym.name in used:
+                used |= {s.name for s in expr.free_symbols}
+        missing = [q for q in self.parameters if q not in used]
+        if missing:
+            raise ParametricError(f"{self.name}: parameters {missing} do not occur in the equations")
+        if not self.parameters:
+            raise ParametricError(f"{self.name}: no parameters: a solver needs data to vary")
+
+    @cached_property
+    def _gf_coefficients(self):
+        """Per equation and term: (exponent, [(exponents in q + aux, rational coefficient), ...])."""
+        gens = self.q_symbols + self.aux_symbols or (sympy.Symbol("_dummy"),)
+        out = []
+        for eq in self.terms:
+            row = []
+            for mon, c in eq:
+                cp = sympy.Poly(c, *gens)
+                row.append((mon, [(e, sympy.Rational(v)) for e, v in cp.terms()]))
+            out.append(row)
+        return out
+
+    @cached_property
+    def _gf_definitions(self):
+        out = []
+        for k, expr in enumerate(self.aux_exprs):
+            gens = self.q_symbols + self.aux_symbols[:k] or (sympy.Symbol("_dummy"),)
+            out.append([(e, sympy.Rational(v)) for e, v in sympy.Poly(expr, *gens).terms()])
+        return out
+
+    # ---------------------------------------------------------------------------------------------
+    # GF(p)
+    # ---------------------------------------------------------------------------------------------
+
+    def ring(self, p: int) -> Ring:
+        return Ring(list(self.unknowns), p)
+
+    def gf_polys(self, q: Sequence[int], p: int) -> list[Poly]:
+        """The system over GF(p) at parameter values q (integers mod p)."""
+        R = self.ring(p)
+        qv = [int(v) % p for v in q]
+        if len(qv) != len(self.parameters):
+            raise ParametricError(f"{self.name}: {len(self.parameters)} parameter values needed, got {len(qv)}")
+        for cterms in self._gf_definitions:
+            qv.append(_gf_value(cterms, qv, p))
+        polys = []
+        for row in self._gf_coefficients:
+            terms = {mon: v for mon, cterms in row if (v := _gf_value(cterms, qv, p))}
+            polys.append(R.from_terms(terms))
+        return polys
+
+    def gf_nonzero(self, q: Sequence[int], p: int) -> Poly | None:
+        """The product of the non-vanishing conditions over GF(p) at q, or None."""
+        if not self.nonzero:
+            return None
+        sub = ParametricSystem(self.name, self.unknowns, self.parameters, self.nonzero, definitions=self.definitions)
+        out = None
+        for f in sub.gf_polys(q, p):
+            out = f if out is None else out * f
+        return out
+
+    def sample_gf(self, p: int, seed: int) -> GFSample:
+        """Parameter values mod p (and a known root when the sampler gives one) for one seed."""
+        if self.gf_sampler is not None:
+            return self.gf_sampler(p, seed)
+        rng = np.random.default_rng(seed)
+        return [int(v) for v in rng.integers(1, p, size=len(self.parameters))], None
+
+    def degree(self, primes: Sequence[int] = DEFAULT_PRIMES, seeds: Sequence[int] = (0, 1), **kwargs) -> DegreeReport:
+        """Number of roots at generic parameters, over every prime and seed (all must agree).
+
+        The known root of each sample (if the sampler gives one) must satisfy the system. With
+        non-vanishing conditions the ideal is saturated by their product. Raises
+        :class:`PrimeDisagreement` when primes or seeds disagree.
+        """
+        reports = []
+        for seed in seeds:
+            cache: dict[int, GFSample] = {}
+
+            def sample(p: int) -> GFSample:
+                if p not in cache:
+                    cache[p] = self.sample_gf(p, seed)
+                return cache[p]
+
+            def system(p: int) -> list[Poly]:
+                q, root = sample(p)
+                polys = self.gf_polys(q, p)
+                if root is not None:
+                    bad = [k + 1 for k, f in enumerate(polys) if f.evaluate(root) % p]
+                    if bad:
+                        raise ParametricError(f"{self.name}: the known root of seed {seed} mod {p} fails equations {bad}")
+                return polys
+
+            report = analyse(system, primes, **kwargs)
+            if self.nonzero:
+                report = self._saturated(report, sample, system, primes, kwargs)
+            reports.append(report)
+        first = reports[0]
+        for seed, r in zip(seeds[1:], reports[1:]):
+            if (r.degree, r.dimension) != (first.degree, first.dimension):
+                raise PrimeDisagreement(f"{self.name}: seeds disagree (seed {seeds[0]}: degree {first.degree}, "
+                                        f"seed {seed}: degree {r.degree}); a non-generic instance?")
+        return first
+
+    def _saturated(self, report: DegreeReport, sample, system, primes, kwargs) -> DegreeReport:
+        """The report of I : (product of the nonzero conditions)^inf.
+
+        Zero-dimensional I: the rank of a high power of the condition's action matrix on the standard
+        monomials (cheap; analysis.complexity.saturated_degree); otherwise the Rabinowitsch trick.
+        """
+        if report.zero_dimensional:
+            from .complexity import saturated_degree
+
+            sats = {r.prime: saturated_degree(r.gb, self.gf_nonzero(sample(r.prime)[0], r.prime)) for r in report.per_prime}
+            if len(set(sats.values())) != 1:
+                raise PrimeDisagreement(f"{self.name}: primes disagree on the saturated degree {sats}")
+            return replace(report, degree=next(iter(sats.values())))
+        return analyse(system, primes, saturate_by=lambda p: self.gf_nonzero(sample(p)[0], p), **kwargs)
+
+    # ---------------------------------------------------------------------------------------------
+    # shape
+    # ---------------------------------------------------------------------------------------------
+
+    @property
+    def is_square(self) -> bool:
+        return len(self.equations) == len(self.unknowns)
+
+    def text(self) -> str:
+        """The system in the text format read by :func:`parse`."""
+        lines = [f"# {self.name}", "unknowns: " + ", ".join(self.unknowns), "parameters: " + ", ".join(self.parameters)]
+        if self.nonzero:
+            lines.append("nonzero: " + ", ".join(self.nonzero))
+        lines.append("equations:")
+        lines.extend(self.equations)
+        return "\n".join(lines) + "\n"
+
+
+def _weighted_degree(expr: sympy.Expr, weights: dict) -> int:
+    """Degree of a polynomial expression when symbol s has degree weights[s] (others 0)."""
+    syms = [s for s in expr.free_symbols if weights.get(s)]
+    if not syms:
+        return 0
+    return max(sum(e * weights[g] for e, g in zip(mon, syms)) for mon in sympy.Poly(expr, *syms).monoms())
+
+
+def _gf_value(cterms, values: Sequence[int], p: int) -> int:
+    """A polynomial given as [(exponents, rational)] evaluated mod p at ``values``."""
+    val = 0
+    for e, r in cterms:
+        t = r.p % p * pow(r.q % p, -1, p) % p
+        for qi, ei in zip(values, e):
+            if ei:
+                t = t * pow(qi, ei, p) % p
+        val = (val + t) % p
+    return val
+
+
+def parse(text: str, name: str = "<system>") -> ParametricSystem:
+    """Read a parametric system from the text format of the module docstring."""
+    fields: dict[str, list[str]] = {}
+    current = None
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        head, sep, rest = line.partition(":")
+        key = head.strip().lower()
+        if sep and key in ("unknowns", "variables", "parameters", "nonzero", "equations"):
+            key = "unknowns" if key == "variables" else key
+            if key in fields:
+                raise ParametricError(f"{name}, line {lineno}: '{key}:' given twice")
+            fields[key] = []
+            current = key
+            line = rest.strip()
+            if not line:
+                continue
+        if current is None:
+            raise ParametricError(f"{name}, line {lineno}: expected 'unknowns:', 'parameters:' or 'equations:' first")
+        if current == "equations":
+            fields[current].extend(e.strip() for e in line.split(";") if e.strip())
+        else:
+            fields[current].extend(e.strip() for e in line.split(",") if e.strip())
+    for key in ("unknowns", "parameters", "equations"):
+        if not fields.get(key):
+            raise ParametricError(f"{name}: no '{key}:' section (or it is empty)")
+    system = ParametricSystem(name, tuple(fields["unknowns"]), tuple(fields["parameters"]), tuple(fields["equations"]),
+                              tuple(fields.get("nonzero", ())))
+    system.exprs  # parse now: errors name the file
+    system.nonzero_exprs
+    return system
+
+
+def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSystem:
+    """The TDOA formulation (paper Sections 2-3; unknowns h, b, o) as a parametric system in the f_ij.
+
+    Equations A and B carry the factor det H, whose vanishing gives spurious roots; with
+    ``saturate_det_h`` (what a solver wants) det H != 0 is a non-vanishing condition and the count
+    drops them; without it the count is the paper's |B| as generated (Tables 2-3). The
+    sampler draws consistent networks over GF(p) (analysis.formulations.sample_gf_instance).
+    """
+    from .formulations import as_formulation, data_symbols, factored_equations, sample_gf_instance
+
+    formulation = as_formulation(formulation)
+    config = formulation.config
+    polys, defs = factored_equations(formulation)
+    params = tuple(s.name for row in data_symbols(config) for s in row)
+    # definitions in dependency order: e, p (from f), then c (from e, p)
+    order = sorted(defs, key=lambda s: ("epc".index(s.name[0]), tuple(int(v) for v in s.name[1:].split("_"))))
+    definitions = tuple((s.name, sympy.sstr(defs[s])) for s in order)
+    powers = tuple(-2.0 if u.startswith("h") else 0.0 if u.startswith("b") else 1.0 for u in config.unknowns)
+
+    def sampler(p: int, seed: int) -> GFSample:
+        inst = sample_gf_instance(config, p, seed)
+        return [int(v) for row in inst.F for v in row], [int(v) for v in inst.root]
+
+    return ParametricSystem(formulation.label, tuple(config.unknowns), params,
+                            tuple(sympy.sstr(p.as_expr()) for p in polys),
+                            nonzero=("h11*h22 - h12**2",) if saturate_det_h else (),
+                            scale_powers=powers, definitions=definitions, gf_sampler=sampler)

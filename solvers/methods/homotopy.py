@@ -1,0 +1,376 @@
+"""Parameter homotopy: the general solving method, offline build and online solver side by side.
+
+Offline (:func:`build`): from a square :class:`analysis.parametric.ParametricSystem`
+1. certify the number of roots at generic parameters over GF(p) (two primes, two seeds);
+2. draw a generic complex start instance q0 with one known root (a complex network, or any system
+   whose equations are affine in the parameters: pick x0, solve for q0);
+3. find all roots of q0 by monodromy (loops q0 -> qa -> qb -> q0 in parameter space, every known
+   root tracked around each loop, new endpoints kept) until their number equals the certified count;
+   a run that cannot reach it within its budget is an error naming how many roots it found;
+4. check the solver on seeded real instances (the known root must be among the endpoints);
+5. write a plain-JSON spec (start parameters and roots rounded to 11 digits, refined at load time).
+
+Online (:class:`HomotopySolver`): for target parameters q1, every start root is tracked along the
+complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`); paths that stall,
+and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
+step control. Because q0 is a generic complex point, the segment misses the discriminant with
+probability one (the gamma trick; Sommese & Wampler 2005, ch. 7).
+
+References: Duff, Hill, Jensen, Lee, Leykin, Sommese, "Solving polynomial systems via homotopy
+continuation and monodromy", IMA J. Numer. Anal. 2019; Ferranti et al., EUSIPCO 2021 (TDOA by
+homotopy continuation).
+"""
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import sympy
+
+from analysis.parametric import ParametricSystem
+
+from . import tracker
+from .tracker import SystemStructure, TrackerOptions
+
+__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "build", "coefficient_source",
+           "load_coefficients", "structure", "affine_start"]
+
+SPEC_FORMAT = "tdoa-homotopy/1"
+
+#: Significant digits of stored start data and roots (refined by Newton's method when loaded).
+START_DIGITS = 11
+
+
+class HomotopyError(RuntimeError):
+    """The homotopy solver cannot be built as asked (count not reached, verification failed, ...)."""
+
+
+@dataclass(frozen=True)
+class HomotopyOptions:
+    seed: int = 0
+    max_loops: int = 200
+    stall_loops: int = 30
+    radius: float = 1.0
+    verify_trials: int = 20
+    tracker: TrackerOptions = TrackerOptions()
+
+
+# --------------------------------------------------------------------------------------------------
+# structure and coefficient code
+# --------------------------------------------------------------------------------------------------
+
+
+def structure(system: ParametricSystem) -> tuple[np.ndarray, np.ndarray]:
+    """Exponents (T, N) and equation index (T,) of every term, in the system's term order."""
+    exps, eq = [], []
+    for e, terms in enumerate(system.terms):
+        for mon, _ in terms:
+            exps.append(mon)
+            eq.append(e)
+    return np.array(exps, dtype=np.int64), np.array(eq, dtype=np.int64)
+
+
+_FRACTION = re.compile(r"(?<![\w.])(\d+)/(\d+)")
+
+
+def _print(expr) -> str:
+    text = sympy.sstr(expr, order="lex")
+    return _FRACTION.sub(lambda mm: repr(int(mm.group(1)) / int(mm.group(2))), text)
+
+
+def coefficient_source(system: ParametricSystem, name: str = "coefficients") -> str:
+    """Python source of ``name(q)``: parameters (K, P) -> term coefficients (K, T), numpy only.
+
+    Definitions are computed first (in order), then the coefficients with shared subexpressions
+    (``sympy.cse``); byte-stable for a given system.
+    """
+    coeffs = [c for eq in system.terms for _, c in eq]
+    lines = [f"def {name}(q):",
+             f'    """Coefficients of the {len(coeffs)} terms from the {len(system.parameters)} parameters q (K, P) -> (K, T)."""',
+             "    q = np.asarray(q)",
+             f"    out = np.zeros((q.shape[0], {len(coeffs)}), dtype=np.result_type(q.dtype, np.float64))"]
+    used = set().union(*(c.free_symbols for c in coeffs)) if coeffs else set()
+    aux = dict(zip(system.aux_symbols, system.aux_exprs))
+    needed = {s for s in used if s in aux}
+    for sym in reversed(system.aux_symbols):  # definitions used by needed definitions
+        if sym in needed:
+            needed |= aux[sym].free_symbols & set(aux)
+    used_q = used | set().union(*(aux[s].free_symbols for s in needed)) if needed else used
+    for k, qs in enumerate(system.q_symbols):
+        if qs in used_q:
+            lines.append(f"    {qs} = q[:, {k}]")
+    for sym in system.aux_symbols:
+        if sym in needed:
+            lines.append(f"    {sym} = {_print(aux[sym])}")
+    repl, reduced = sympy.cse(coeffs, symbols=sympy.numbered_symbols("t_"), order="canonical")
+    for sym, expr in repl:
+        lines.append(f"    {sym} = {_print(expr)}")
+    for k, expr in enumerate(reduced):
+        lines.append(f"    out[:, {k}] = {_print(expr)}")
+    lines.append("    return out")
+    return "\n".join(lines) + "\n"
+
+
+def load_coefficients(source: str, name: str = "coefficients") -> Callable:
+    """Compile the source of :func:`coefficient_source` into a function."""
+    namespace: dict = {"np": np}
+    exec(compile(source, f"<coefficients {name}>", "exec"), namespace)
+    return namespace[name]
+
+
+# --------------------------------------------------------------------------------------------------
+# runtime
+# --------------------------------------------------------------------------------------------------
+
+
+def _complex_array(rows) -> np.ndarray:
+    a = np.asarray(rows, dtype=float)
+    return a[..., 0] + 1j * a[..., 1]
+
+
+def _pairs(z: np.ndarray) -> list:
+    def r(v: float) -> float:
+        return float(f"{v:.{START_DIGITS}g}")
+
+    if z.ndim == 1:
+        return [[r(v.real), r(v.imag)] for v in z]
+    return [_pairs(row) for row in z]
+
+
+class HomotopySolver:
+    """Tracks the stored start roots from q0 to target parameters (the online half of the method)."""
+
+    def __init__(self, spec: dict, coefficients: Callable):
+        self.coefficients = coefficients
+        self.structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
+        self.degree = int(spec["coefficient_degree"])
+        self.q0 = _complex_array(spec["start_parameters"])
+        roots = spec["start_roots"]
+        self.x0 = _complex_array(roots) if roots else np.zeros((0, self.structure.nvars), complex)
+        self.options = TrackerOptions(**spec.get("tracker", {}))
+        self.nvars = self.structure.nvars
+        self.n_paths = len(self.x0)
+        if self.n_paths:
+            self.x0 = self.newton(self.x0, np.broadcast_to(self.q0, (1, len(self.q0))), steps=2)
+
+    def segment(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        return tracker.segment_coefficients(self.coefficients, q0, q1, self.degree)
+
+    def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
+        """Newton steps on the system at parameters q (B, P); x (P', N), path p on instance inst[p]."""
+        G = self.segment(q, q)
+        for _ in range(steps):
+            H, J, _ = tracker.evaluate(self.structure, G, x, np.zeros(len(x)), inst)
+            with np.errstate(all="ignore"):
+                try:
+                    x = x - np.linalg.solve(J, H[..., None])[..., 0]
+                except np.linalg.LinAlgError:
+                    x = x - np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(J, H)])
+        return x
+
+    def residual(self, x: np.ndarray, q: np.ndarray, inst: np.ndarray | None = None) -> np.ndarray:
+        G = self.segment(q, q)
+        H, _, _ = tracker.evaluate(self.structure, G, x, np.zeros(len(x)), inst)
+        return np.abs(H).max(axis=1)
+
+    def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
+              options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats."""
+        G = self.segment(q0, q1)
+        return tracker.track(self.structure, G, x0, inst, options or self.options)
+
+    def roots(self, q: np.ndarray) -> np.ndarray:
+        """Candidate roots (B, K, N) for target parameters q (B, P); NaN rows for lost paths."""
+        q = np.atleast_2d(np.asarray(q, dtype=complex))
+        B, K = len(q), self.n_paths
+        inst = np.repeat(np.arange(B), K)
+        x, stats = self.track(self.q0[None], q, np.tile(self.x0, (B, 1)), inst)
+        x = x.reshape(B, K, -1)
+        status = stats[:, 0].reshape(B, K)
+        redo = (status == 1)
+        for b in range(B):
+            if _has_duplicates(x[b]):
+                redo[b] = True
+        bi, ki = np.nonzero(redo)
+        if len(bi):
+            xr, _ = self.track(self.q0[None], q, self.x0[ki], bi, tracker.TIGHT)
+            x[bi, ki] = xr
+        return x
+
+
+def _has_duplicates(x: np.ndarray, tol: float = 1e-6) -> bool:
+    finite = x[np.all(np.isfinite(x), axis=1)]
+    if len(finite) < 2:
+        return False
+    d = np.linalg.norm(finite[:, None, :] - finite[None, :, :], axis=2)
+    d[np.arange(len(d)), np.arange(len(d))] = np.inf
+    scale = 1.0 + np.linalg.norm(finite, axis=1)
+    return bool(np.any(d < tol * scale[:, None]))
+
+
+# --------------------------------------------------------------------------------------------------
+# offline build
+# --------------------------------------------------------------------------------------------------
+
+
+def affine_start(system: ParametricSystem, coefficients: Callable, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A random complex root x0 and parameters q0 that make it a root, for systems affine in q.
+
+    The residual is affine in q: f(x0; q) = A q + b; q0 is a random point of that affine space.
+    Raises :class:`HomotopyError` if the system is not affine in its parameters or A lacks rank.
+    """
+    if system.definitions or any(c > 1 for c in system.coefficient_degrees):
+        raise HomotopyError(f"{system.name}: parameters enter non-linearly; give a start sampler "
+                            "(a point q0 with a known root) to build a homotopy")
+    N, P = len(system.unknowns), len(system.parameters)
+    exps, eq = structure(system)
+    st = SystemStructure.from_exponents(exps, eq)
+    x0 = rng.normal(size=N) + 1j * rng.normal(size=N)
+
+    def f(q):
+        G = tracker.segment_coefficients(coefficients, q[None], q[None], 1)
+        H, _, _ = tracker.evaluate(st, G, x0[None], np.zeros(1))
+        return H[0]
+
+    b = f(np.zeros(P, dtype=complex))
+    A = np.column_stack([f(np.eye(P, dtype=complex)[k]) - b for k in range(P)])
+    if np.linalg.matrix_rank(A) < N:
+        raise HomotopyError(f"{system.name}: the parameters do not move every equation (rank {np.linalg.matrix_rank(A)} < {N})")
+    q_part = np.linalg.lstsq(A, -b, rcond=None)[0]
+    _, _, Vh = np.linalg.svd(A)
+    null = Vh[np.linalg.matrix_rank(A):].conj().T
+    q0 = q_part + null @ (rng.normal(size=null.shape[1]) + 1j * rng.normal(size=null.shape[1]))
+    return q0, x0
+
+
+def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int, rng: np.random.Generator,
+              options: HomotopyOptions, progress: Callable[[str], None] | None = None) -> tuple[np.ndarray, int]:
+    """All ``count`` roots of the system at q0 from the roots x0, by monodromy loops (triangles).
+
+    Stops when ``count`` distinct roots are known; raises :class:`HomotopyError` after
+    ``max_loops`` loops or ``stall_loops`` loops without a new root.
+    """
+    roots = np.array(x0, dtype=complex).reshape(-1, solver.nvars)
+    scale = np.sqrt(np.mean(np.abs(q0) ** 2))
+    stall = 0
+    for loop in range(1, options.max_loops + 1):
+        qa = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
+        qb = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
+        xs = roots
+        for a, b in ((q0, qa), (qa, qb), (qb, q0)):
+            xs, _ = solver.track(a[None], b[None], xs)
+            xs = xs[np.all(np.isfinite(xs), axis=1)]
+        if len(xs):
+            xs = solver.newton(xs, q0[None], steps=2)
+        before = len(roots)
+        for x in xs:
+            if not np.all(np.isfinite(x)):
+                continue
+            d = np.linalg.norm(roots - x, axis=1)
+            if np.min(d) > 1e-6 * (1.0 + np.linalg.norm(x)):
+                roots = np.vstack([roots, x])
+        stall = 0 if len(roots) > before else stall + 1
+        if progress:
+            progress(f"monodromy loop {loop}: {len(roots)}/{count} roots")
+        if len(roots) >= count:
+            if len(roots) > count:
+                raise HomotopyError(f"monodromy found {len(roots)} roots, more than the certified {count}: "
+                                    "numerical duplicates or a wrong count")
+            return roots, loop
+        if stall >= options.stall_loops:
+            break
+    raise HomotopyError(f"monodromy found {len(roots)} of the certified {count} roots in {loop} loops "
+                        f"(seed {options.seed}); the solver would miss roots")
+
+
+def build(system: ParametricSystem, count: int, start: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]] | None = None,
+          trials: Callable[[int], tuple[np.ndarray, np.ndarray]] | None = None,
+          options: HomotopyOptions = HomotopyOptions(), progress: Callable[[str], None] | None = None) -> tuple[dict, str, dict]:
+    """Spec, coefficient source and build report of the homotopy solver of a square system.
+
+    count: the certified number of roots (GF(p), two primes). start: rng -> (q0, x0) generic complex
+    parameters with one known root (default :func:`affine_start`). trials: seed -> (q real, known
+    root) for the verification on seeded real instances (skipped when None).
+    """
+    t0 = time.perf_counter()
+    if not system.is_square:
+        raise HomotopyError(f"{system.name}: {len(system.equations)} equations in {len(system.unknowns)} unknowns; "
+                            "a homotopy needs a square system (square it first)")
+    system.check_parameters_occur()
+    source = coefficient_source(system)
+    coefficients = load_coefficients(source)
+    rng = np.random.default_rng(options.seed)
+    q0, x0 = start(rng) if start is not None else affine_start(system, coefficients, rng)
+    exps, eq = structure(system)
+    spec = {
+        "format": SPEC_FORMAT,
+        "kind": "homotopy",
+        "system": system.name,
+        "unknowns": list(system.unknowns),
+        "parameters": list(system.parameters),
+        "degree": int(count),
+        "coefficient_degree": int(max(system.coefficient_degrees)),
+        "monodromy": {"seed": options.seed},
+        "tracker": {},
+        "term_equation": eq.tolist(),
+        "exponents": exps.tolist(),
+        "start_parameters": _pairs(np.asarray(q0, dtype=complex)),
+        "start_roots": [],
+    }
+    solver = HomotopySolver(spec, coefficients)
+    solver.q0 = np.asarray(q0, dtype=complex)
+    x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
+    if solver.residual(x0, q0[None]).max() > 1e-8:
+        raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
+    roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress)
+    roots = solver.newton(roots, solver.q0[None], steps=3)
+    res = solver.residual(roots, solver.q0[None]).max()
+    if res > 1e-10 or _has_duplicates(roots):
+        raise HomotopyError(f"{system.name}: start roots residual {res:.1e}, duplicates {_has_duplicates(roots)}")
+    order = np.lexsort((np.round(roots.imag[:, 0], 8), np.round(roots.real[:, 0], 8)))
+    spec["start_parameters"] = _pairs(solver.q0)
+    spec["start_roots"] = _pairs(roots[order])
+    spec["monodromy"]["loops"] = loops
+    report = {"method": "homotopy", "degree": int(count), "loops": loops, "paths": len(roots)}
+    if trials is not None and options.verify_trials:
+        final = HomotopySolver(spec, coefficients)
+        found = 0
+        for seed in range(options.verify_trials):
+            q, xt = trials(seed)
+            x = final.roots(q[None])[0]
+            d = np.linalg.norm(x - xt, axis=1) / (1.0 + np.linalg.norm(xt))
+            found += bool(np.nanmin(d) < 1e-6)
+        report["verified"] = f"{found}/{options.verify_trials}"
+        if found < 0.9 * options.verify_trials:
+            raise HomotopyError(f"{system.name}: the solver finds the known root in only {found}/{options.verify_trials} seeded instances")
+    report["seconds"] = round(time.perf_counter() - t0, 2)
+    return spec, source, report
+
+
+def load_spec(text: str) -> dict:
+    """A spec from its JSON text; raises :class:`HomotopyError` for another format."""
+    spec = json.loads(text)
+    if spec.get("format") != SPEC_FORMAT:
+        raise HomotopyError(f"unknown homotopy spec format {spec.get('format')!r}; expected {SPEC_FORMAT}")
+    return spec
+
+
+def solve_scaled(solver: HomotopySolver, F, shape: tuple[int, ...], powers: tuple[float, ...] | None) -> np.ndarray:
+    """Roots for data F (..., *shape): parameters normalised by their RMS when ``powers`` (the scaling
+    weights of the unknowns) are known, roots mapped back to the data's scale."""
+    F = np.asarray(F)
+    if F.shape[F.ndim - len(shape):] != tuple(shape):
+        raise ValueError(f"data of shape {F.shape} given; the solver needs (..., {', '.join(map(str, shape))})")
+    batch = F.shape[: F.ndim - len(shape)]
+    Q = F.reshape(-1, int(np.prod(shape))).astype(complex)
+    if powers is not None:
+        s = np.sqrt(np.mean(np.abs(Q) ** 2, axis=1))
+        s = np.where(s > 0, s, 1.0)
+        x = solver.roots(Q / s[:, None]) * s[:, None, None] ** np.asarray(powers)[None, None, :]
+    else:
+        x = solver.roots(Q)
+    return x.reshape(batch + x.shape[1:])

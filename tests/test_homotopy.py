@@ -1,0 +1,206 @@
+"""Tests for the general solver generator: parametric systems, the compiled tracker, monodromy, and the
+committed homotopy solvers (fresh emission, complete start systems, known roots found)."""
+from __future__ import annotations
+
+import importlib
+import os
+
+import numpy as np
+import pytest
+import sympy
+
+from analysis.parametric import ParametricError, from_formulation, parse
+from solvers.generate import GENERATED_DIR, SOLVERS, emit_homotopy_module
+from solvers.methods import homotopy as hm
+from solvers.methods import tracker
+
+HOMOTOPY_SPECS = sorted(f for f in os.listdir(GENERATED_DIR) if "_homotopy" in f and f.endswith(".json"))
+
+
+def _spec(name: str) -> tuple[str, dict]:
+    with open(os.path.join(GENERATED_DIR, name), encoding="utf-8") as fh:
+        text = fh.read()
+    return text, hm.load_spec(text)
+
+
+def _module(stem: str):
+    return importlib.import_module(f"solvers.generated.{stem}")
+
+
+# --------------------------------------------------------------------------------------------------
+# parametric systems
+# --------------------------------------------------------------------------------------------------
+
+USER = """
+# circle and hyperbola
+unknowns: x, y
+parameters: a, b, c
+equations:
+x^2 + y^2 - a
+x*y - b*x + c
+"""
+
+
+def test_user_system_counts_like_sympy():
+    system = parse(USER, "user")
+    report = system.degree()
+    # sympy's Groebner basis of one GF(p) instance, same parameter values
+    q, _ = system.sample_gf(65521, 0)
+    x, y = sympy.symbols("x y")
+    a, b, c = q
+    gb = sympy.groebner([x**2 + y**2 - a, x * y - b * x + c], x, y, modulus=65521, order="grevlex")
+    lead = [sympy.Poly(g, x, y).monoms(order="grevlex")[0] for g in gb.exprs]
+    standard = [(i, j) for i in range(10) for j in range(10) if not any(i >= l[0] and j >= l[1] for l in lead)]
+    assert report.degree == len(standard) == 4
+
+
+@pytest.mark.parametrize("text, match", [
+    ("unknowns: x\nparameters: a\nequations:\nx^2 - z\n", "undeclared"),
+    ("unknowns: x\nparameters: a, b\nequations:\nx^2 - a\n", None),
+    ("unknowns: x\nequations:\nx - 1\n", "parameters"),
+    ("unknowns: x\nparameters: a\nequations:\nsin(x) - a\n", "polynomial"),
+    ("parameters: a\nequations:\nx - a\n", "unknowns"),
+    ("unknowns: x\nparameters: x\nequations:\nx\n", "both"),
+])
+def test_user_system_errors_are_one_line(text, match):
+    if match is None:  # parses, but the generator refuses a parameter that does not occur
+        with pytest.raises(ParametricError, match="do not occur"):
+            parse(text).check_parameters_occur()
+        return
+    with pytest.raises(ParametricError, match=match):
+        parse(text)
+
+
+def test_factored_tdoa_system_equals_the_expanded_formulation():
+    from analysis.formulations import Formulation, symbolic_equations
+
+    system = from_formulation("7r3s:B2,B3,C2-C7")
+    ref = symbolic_equations(Formulation.parse("7r3s:B2,B3,C2-C7"))
+    aux = {}
+    for sym, expr in zip(system.aux_symbols, system.aux_exprs):
+        aux[sym] = expr.subs(aux)
+    for got, want in zip(system.exprs, ref.values()):
+        assert sympy.expand(got.subs(aux) - want) == 0
+
+
+# --------------------------------------------------------------------------------------------------
+# tracker
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def system_9r3s():
+    system = from_formulation("9r3s:C2-C9")
+    exps, eq = hm.structure(system)
+    return system, hm.load_coefficients(hm.coefficient_source(system)), tracker.SystemStructure.from_exponents(exps, eq)
+
+
+def test_tracker_evaluation_matches_sympy_and_finite_differences(system_9r3s):
+    system, coefficients, st = system_9r3s
+    rng = np.random.default_rng(4)
+    q0, q1 = rng.normal(size=(2, 27)) + 1j * rng.normal(size=(2, 27))
+    x = rng.normal(size=8) + 1j * rng.normal(size=8)
+    G = tracker.segment_coefficients(coefficients, q0, q1, 4)
+    s = 0.37
+    H, J, Hs = tracker.evaluate(st, G, x[None], np.array([s]))
+    # value against sympy at q(s)
+    qs = q0 + s * (q1 - q0)
+    subs = dict(zip(system.q_symbols, qs)) | dict(zip(system.x_symbols, x))
+    for sym, expr in zip(system.aux_symbols, system.aux_exprs):
+        subs[sym] = complex(expr.subs(subs))
+    ref = np.array([complex(e.subs(subs)) for e in system.exprs])
+    assert np.max(np.abs(H[0] - ref)) < 1e-11 * np.max(np.abs(ref))
+    eps = 1e-6
+    for k in range(8):
+        dx = np.zeros(8, complex)
+        dx[k] = eps
+        fd = (tracker.evaluate(st, G, (x + dx)[None], np.array([s]))[0] - tracker.evaluate(st, G, (x - dx)[None], np.array([s]))[0]) / (2 * eps)
+        assert np.max(np.abs(fd[0] - J[0, :, k])) < 1e-6 * np.max(np.abs(J[0]))
+    fd = (tracker.evaluate(st, G, x[None], np.array([s + eps]))[0] - tracker.evaluate(st, G, x[None], np.array([s - eps]))[0]) / (2 * eps)
+    assert np.max(np.abs(fd[0] - Hs[0])) < 1e-6 * np.max(np.abs(Hs[0]))
+
+
+def test_tracker_follows_a_known_path():
+    # x^2 = 1 + 3 s, x y = 2 - s: the path from (1, 2) ends at (2, 1/2)
+    st = tracker.SystemStructure.from_exponents(np.array([[2, 0], [0, 0], [1, 1], [0, 0]]), np.array([0, 0, 1, 1]))
+    G = np.zeros((1, 4, 2), complex)
+    G[0, :, 0] = [1, -1, 1, -2]
+    G[0, :, 1] = [0, -3, 0, 1]
+    x, stats = tracker.track(st, G, np.array([[1.0, 2.0]], complex))
+    assert stats[0, 0] == 0
+    assert np.allclose(x[0], [2.0, 0.5], atol=1e-13)
+
+
+def test_monodromy_finds_every_root_of_a_user_system():
+    system = parse(USER, "user")
+    coefficients = hm.load_coefficients(hm.coefficient_source(system))
+    spec, _, report = hm.build(system, 4, options=hm.HomotopyOptions(seed=3, verify_trials=0))
+    assert len(spec["start_roots"]) == 4
+    solver = hm.HomotopySolver(spec, coefficients)
+    q = np.array([[2.0, 0.3, 0.1]])
+    roots = solver.roots(q)[0]
+    assert np.all(np.isfinite(roots)) and not hm._has_duplicates(roots)
+    assert solver.residual(roots, q).max() < 1e-12
+
+
+def test_monodromy_that_cannot_reach_the_count_is_an_error():
+    system = parse(USER, "user")
+    with pytest.raises(hm.HomotopyError, match="of the certified 5 roots"):
+        hm.build(system, 5, options=hm.HomotopyOptions(seed=3, verify_trials=0, stall_loops=3))
+
+
+def test_non_square_system_is_refused():
+    system = parse("unknowns: x, y\nparameters: a\nequations:\nx - a\n", "thin")
+    with pytest.raises(hm.HomotopyError, match="square"):
+        hm.build(system, 1)
+
+
+# --------------------------------------------------------------------------------------------------
+# committed solvers
+# --------------------------------------------------------------------------------------------------
+
+
+def test_every_registered_solver_is_committed():
+    have = {f.split("_")[1] for f in HOMOTOPY_SPECS}
+    assert set(SOLVERS) <= have
+
+
+@pytest.mark.parametrize("name", HOMOTOPY_SPECS)
+def test_homotopy_module_is_fresh_emission(name):
+    text, spec = _spec(name)
+    system = from_formulation(SOLVERS[spec["name"].split("_")[1]], saturate_det_h=True)
+    with open(os.path.join(GENERATED_DIR, name[:-5] + ".py"), encoding="utf-8") as fh:
+        committed = fh.read()
+    assert committed == emit_homotopy_module(text, name, hm.coefficient_source(system)), (
+        f"stale: run tdoa-workbench generate {spec['name'].split('_')[1]}")
+
+
+@pytest.mark.parametrize("name", HOMOTOPY_SPECS)
+def test_start_system_is_complete(name):
+    _, spec = _spec(name)
+    module = _module(name[:-5])
+    solver = module.solver()
+    # as many distinct roots as certified over GF(p), each a root of the start instance to rounding
+    assert spec["paths"] == spec["degree"] == spec["certified"]["degree"]
+    assert len(spec["certified"]["primes"]) == 2
+    assert solver.x0.shape == (spec["degree"], len(spec["unknowns"]))
+    # a Newton step no longer moves them: roots to about 12 digits
+    step = solver.newton(solver.x0, solver.q0[None]) - solver.x0
+    assert np.max(np.linalg.norm(step, axis=1) / (1 + np.linalg.norm(solver.x0, axis=1))) < 1e-11
+    assert not hm._has_duplicates(solver.x0)
+
+
+@pytest.mark.parametrize("name", HOMOTOPY_SPECS)
+def test_known_root_among_candidates(name):
+    from analysis.formulations import sample_real_instance
+
+    module = _module(name[:-5])
+    m, n = module.CONFIG
+    errs = []
+    for seed in range(3):
+        inst = sample_real_instance(f"{m}r{n}s", seed)
+        roots = module.solve(np.array(inst.F))
+        x = np.array(inst.root)
+        assert roots.shape == (module.PATHS, len(module.UNKNOWNS))
+        errs.append(np.nanmin(np.linalg.norm(roots - x, axis=1)) / np.linalg.norm(x))
+    assert max(errs) < 1e-9, errs
