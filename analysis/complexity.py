@@ -61,7 +61,10 @@ from .degree import DEFAULT_PRIMES
 from .f4 import F4Options, GroebnerResult, groebner
 from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
 from .linalg import MatrixTooLarge
+from .paths import cache_dir
+from .progress import Progress
 from .quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
+from .quotient import saturated_degree, variable_action_matrices as _variable_action_matrices
 from .ring import Poly, Ring
 
 __all__ = [
@@ -111,8 +114,8 @@ def repo_root() -> Path:
 
 
 def default_cache_dir() -> Path:
-    """``<repo>/.cache/complexity``."""
-    return repo_root() / ".cache" / "complexity"
+    """The ``complexity`` directory of the user cache (:func:`analysis.paths.cache_dir`)."""
+    return cache_dir("complexity")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -284,87 +287,6 @@ def jacobian_rank(polys: Sequence[Mapping[tuple[int, ...], int]], point: Sequenc
     if not polys:
         return 0
     return flint.nmod_mat(len(polys), nvars, entries, p).rank()
-
-
-def _variable_action_matrices(gb: GroebnerResult, basis: Sequence[int]) -> np.ndarray:
-    """Action matrices of all variables on the standard monomials (row convention of
-    :func:`analysis.quotient.action_matrix`: row j is NF(x_i b_j)), shape (nvars, |B|, |B|).
-
-    FGLM border recursion: border monomials u = x_i b are visited in increasing order; u is either a
-    leading monomial of the reduced basis (NF(u) = -tail) or u = x_k u' with u' a smaller border
-    monomial, and then NF(u) = NF(u') M_k, whose needed rows NF(x_k b_j), b_j < u', are already known.
-    Each step is one vector-matrix product reduced mod p; it runs in int64 when |B| (p-1)^2 < 2^63
-    (always for the default primes below 2^16) and in Python integers otherwise.
-    """
-    ring = gb.ring
-    p = ring.prime
-    nb, nvars = len(basis), ring.nvars
-    pos = {k: i for i, k in enumerate(basis)}
-    lead = {g.lm: g for g in gb.basis}
-    vkeys = [ring.variable_key(i) for i in range(nvars)]
-    M = np.zeros((nvars, nb, nb), dtype=np.int64)
-    border: dict[int, list[tuple[int, int]]] = {}
-    for j, b in enumerate(basis):
-        for i in range(nvars):
-            u = b + vkeys[i]
-            if u in pos:
-                M[i, j, pos[u]] = 1
-            else:
-                border.setdefault(u, []).append((i, j))
-    nf: dict[int, np.ndarray] = {}
-    big = nb * (p - 1) ** 2 >= 1 << 63  # int64 dot products could overflow: use Python integers
-    for u in sorted(border):
-        g = lead.get(u)
-        if g is not None:
-            v = np.zeros(nb, dtype=np.int64)
-            for k, c in zip(g.mons[1:], g.coeffs[1:]):
-                v[pos[k]] = (-c) % p
-        else:
-            e = ring.exps(u)
-            for k in range(nvars):
-                if e[k] and (u - vkeys[k]) in nf:
-                    prev = nf[u - vkeys[k]]
-                    if big:
-                        v = np.array((prev.astype(object) @ M[k].astype(object)) % p, dtype=np.int64)
-                    else:
-                        v = (prev @ M[k]) % p
-                    break
-            else:  # pragma: no cover - impossible for a reduced Gröbner basis of a zero-dimensional ideal
-                raise RuntimeError(f"border monomial {ring.monomial_str(u)} has no smaller border divisor")
-        nf[u] = v
-        for i, j in border[u]:
-            M[i, j] = v
-    return M
-
-
-def _flint(M: np.ndarray, p: int) -> "flint.nmod_mat":
-    return flint.nmod_mat(M.shape[0], M.shape[1], [int(x) for x in M.ravel()], p)
-
-
-def saturated_degree(gb: GroebnerResult, f: Poly, basis: Sequence[int] | None = None) -> int:
-    """deg(I : f^inf) for a zero-dimensional I given by its reduced Gröbner basis: rank of M_f^N, N >= |B|.
-
-    Raises :class:`analysis.quotient.NotZeroDimensional` for positive-dimensional ideals.
-    """
-    if basis is None:
-        basis = standard_monomials(gb)
-    nb = len(basis)
-    if nb == 0:
-        return 0
-    p = gb.ring.prime
-    var_mats = [_flint(X, p) for X in _variable_action_matrices(gb, basis)]
-    Mf = flint.nmod_mat(nb, nb, p)
-    for exps, c in f.terms():
-        term = flint.nmod_mat(nb, nb, [c if i == j else 0 for i in range(nb) for j in range(nb)], p)
-        for i, e in enumerate(exps):
-            for _ in range(e):
-                term = term * var_mats[i]
-        Mf = Mf + term
-    power = 1
-    while power < nb:
-        Mf = Mf * Mf
-        power *= 2
-    return Mf.rank()
 
 
 def root_ranks(formulation: Formulation | str, prime: int = DEFAULT_PRIMES[0], seed: int = 0) -> tuple[int, int]:
@@ -663,36 +585,14 @@ def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
             conn.send(("crash", traceback.format_exc()))
 
 
-class _Progress:
-    """tqdm if installed, else a one-line counter on stderr."""
+class _Progress(Progress):
+    """The sweep's progress line: one phase, one step per formulation, the last label and status."""
 
-    def __init__(self, total: int, enabled: bool):
-        self.total, self.done, self.enabled = total, 0, enabled
-        self.bar = None
-        if enabled:
-            try:
-                from tqdm.auto import tqdm
-                self.bar = tqdm(total=total, desc="complexity sweep", unit="formulation", file=sys.stderr,
-                                dynamic_ncols=True)
-            except ImportError:
-                self.bar = None
+    def __init__(self, total: int, enabled: bool, phase: str = "complexity sweep"):
+        super().__init__(phase, total, enabled, "formulations")
 
-    def update(self, label: str, status: str) -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.set_postfix_str(f"{label} {status}"[:60], refresh=False)
-            self.bar.update(1)
-        else:
-            print(f"\r[sweep] {self.done}/{self.total}  {label[:50]:50s} {status:20s}", end="", file=sys.stderr,
-                  flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-        elif self.enabled and self.total:
-            print(file=sys.stderr)
+    def update(self, label: str, status: str) -> None:  # type: ignore[override]
+        super().update(1, f"{label[:50]} {status}")
 
 
 @dataclass
@@ -708,7 +608,8 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
           seeds: Sequence[int] = DEFAULT_SEEDS, options: F4Options | None = None, saturate: bool = False,
           jobs: int = 2, cache_dir: Path | str | None = None, use_cache: bool = True, progress: bool = True,
           timeout: float | None = 600.0, positive_dimensional_cells: int = POSITIVE_DIMENSIONAL_CELLS,
-          on_result: Callable[[FormulationResult, bool], None] | None = None) -> list[FormulationResult]:
+          on_result: Callable[[FormulationResult, bool], None] | None = None,
+          phase: str = "complexity sweep") -> list[FormulationResult]:
     """:func:`compute_formulation` for many formulations, in parallel, cached on disk.
 
     Parameters
@@ -717,10 +618,10 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
     primes, seeds, options, saturate, positive_dimensional_cells : as in :func:`compute_formulation`.
     jobs : worker processes (spawned; each runs with one BLAS thread). ``jobs <= 1`` with
         ``timeout=None`` computes in this process.
-    cache_dir : JSON cache directory (default ``<repo>/.cache/complexity``); each result is stored as
+    cache_dir : JSON cache directory (default :func:`default_cache_dir`); each result is stored as
         soon as it is known, keyed by label, primes, seeds and :data:`ENGINE_VERSION`.
     use_cache : read the cache (results are written either way).
-    progress : progress bar on stderr (tqdm when installed).
+    progress : progress on stderr (:class:`analysis.progress.Progress`), named ``phase``.
     timeout : wall-clock seconds per formulation; on expiry the worker is killed and replaced and the
         result has status "timeout" (the instances finished before it are kept).
     on_result : called as ``on_result(result, from_cache)`` with each result as it becomes known (cached
@@ -736,7 +637,7 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
     labels = [Formulation.parse(x).label for x in labels]  # validate and normalise before any work
     unique = list(dict.fromkeys(labels))
     results: dict[str, FormulationResult] = {}
-    bar = _Progress(len(unique), progress)
+    bar = _Progress(len(unique), progress, phase)
 
     def finish(result: FormulationResult) -> None:
         results[result.label] = result

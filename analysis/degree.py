@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 from .f4 import F4Options, GroebnerResult, groebner
-from .quotient import dimension, is_zero_dimensional, saturate, standard_monomials
+from .quotient import (count_standard_monomials, dimension, fglm, is_zero_dimensional, saturate, saturated_degree,
+                       standard_monomials)
 from .ring import Poly
 
 DEFAULT_PRIMES = (65521, 32749)
@@ -72,12 +73,43 @@ class DegreeReport:
         }
 
 
-def analyse_prime(polys: Sequence[Poly], options: F4Options = F4Options(), saturate_by: Poly | None = None) -> PrimeResult:
-    """Gröbner basis, dimension and degree over one prime (optionally after saturating by a polynomial)."""
+def _groebner(polys: Sequence[Poly], options: F4Options) -> GroebnerResult:
+    """Reduced Gröbner basis in the ring's order; for orders other than grevlex, through grevlex and FGLM
+    when the ideal is zero-dimensional (F4 in lex can swell far beyond the ideal's degree: katsura-4,
+    16 solutions, outgrew 24 GB), else directly."""
+    ring = polys[0].ring
+    if ring.order.name == "grevlex":
+        return groebner(polys, options)
+    graded = ring.with_order("grevlex")
+    gb = groebner([graded.from_terms(f.terms()) for f in polys], options)
+    if not is_zero_dimensional(gb):
+        return groebner(polys, options)
+    return fglm(gb, ring)
+
+
+def analyse_prime(polys: Sequence[Poly], options: F4Options = F4Options(), saturate_by: Poly | None = None,
+                  saturation: str = "rank") -> PrimeResult:
+    """Gröbner basis, dimension and degree over one prime (optionally after saturating by a polynomial).
+
+    saturation: "rank" gives the saturated degree of a zero-dimensional ideal as the rank of a power of
+    the action matrix of the saturating polynomial (:func:`analysis.quotient.saturated_degree`; the
+    basis kept is then that of the unsaturated ideal); positive-dimensional ideals, and "rabinowitsch",
+    compute the saturated ideal's own basis (:func:`analysis.quotient.saturate`).
+    """
+    if saturation not in ("rank", "rabinowitsch"):
+        raise ValueError(f"unknown saturation method {saturation!r}; valid: rank, rabinowitsch")
     t0 = time.perf_counter()
-    gb = saturate(polys, saturate_by, options) if saturate_by is not None else groebner(polys, options)
-    dim = dimension(gb)
-    deg = len(standard_monomials(gb)) if is_zero_dimensional(gb) else None
+    gb = None
+    if saturate_by is None or saturation == "rank":
+        gb = _groebner(polys, options)
+    if saturate_by is not None and gb is not None and is_zero_dimensional(gb):
+        deg = saturated_degree(gb, saturate_by.ring.with_order(gb.ring.order).from_terms(saturate_by.terms()))
+        dim = 0 if deg else -1
+    else:
+        if saturate_by is not None:
+            gb = saturate(polys, saturate_by, options)
+        dim = dimension(gb)
+        deg = count_standard_monomials(gb) if is_zero_dimensional(gb) else None
     return PrimeResult(
         prime=polys[0].ring.prime,
         degree=deg,
@@ -94,6 +126,7 @@ def analyse(
     primes: Sequence[int] = DEFAULT_PRIMES,
     options: F4Options = F4Options(),
     saturate_by: Callable[[int], Poly] | None = None,
+    saturation: str = "rank",
 ) -> DegreeReport:
     """Degree and dimension of a system, computed modulo each prime and required to agree.
 
@@ -102,6 +135,7 @@ def analyse(
     system: prime -> the polynomials of the system over GF(prime).
     primes: at least one prime; two or more for a checked degree.
     saturate_by: optional prime -> polynomial f; the ideal is replaced by its saturation I : f^inf.
+    saturation: how (see :func:`analyse_prime`).
     """
     if not primes:
         raise ValueError("at least one prime is needed")
@@ -110,7 +144,7 @@ def analyse(
         polys = list(system(p))
         if not polys:
             raise ValueError("empty system: no polynomials given")
-        results.append(analyse_prime(polys, options, saturate_by(p) if saturate_by else None))
+        results.append(analyse_prime(polys, options, saturate_by(p) if saturate_by else None, saturation))
     first = results[0]
     for r in results[1:]:
         if (r.degree, r.dimension) != (first.degree, first.dimension):

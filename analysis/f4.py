@@ -26,18 +26,40 @@ from .linalg import Backend, MatrixTooLarge, Row, SparseRows, get_backend
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
+DEFAULT_MAX_MEMORY = 8 << 30
+"""Default memory cap of one F4 matrix reduction (8 GiB), well inside a 16-24 GB machine."""
+
+
 @dataclass(frozen=True)
 class F4Options:
     """Options of an F4 run.
 
     backend: linear algebra backend ("numpy" fast, "python" reference).
     max_matrix_cells: stop with :class:`MatrixTooLarge` when rows*cols of a matrix exceeds this.
+    max_memory: stop with :class:`MatrixTooLarge` before reducing a matrix whose estimated working
+        memory (:func:`matrix_memory`) exceeds this many bytes.
     verbose: print one line per round to stderr.
     """
 
     backend: str = "numpy"
     max_matrix_cells: int = 400_000_000
+    max_memory: int = DEFAULT_MAX_MEMORY
     verbose: bool = False
+
+
+def format_bytes(n: float) -> str:
+    """``1.5 GiB``, ``300 MiB``, ``12 KiB``, ``100 B``."""
+    for unit, shift in (("GiB", 30), ("MiB", 20), ("KiB", 10)):
+        if n >= 1 << shift:
+            return f"{n / (1 << shift):.3g} {unit}"
+    return f"{int(n)} B"
+
+
+def matrix_memory(reduce_rows: int, cols: int, nonzeros: int) -> int:
+    """Estimated peak bytes of reducing one F4 matrix: the rows to reduce as a dense float64 matrix and
+    its two reduced copies (see :func:`analysis.linalg._eliminate`), plus the sparse matrix (column and
+    value arrays, int64) and its pivot / non-pivot copies."""
+    return 24 * reduce_rows * cols + 48 * nonzeros
 
 
 @dataclass(frozen=True)
@@ -78,11 +100,14 @@ class GroebnerResult:
 
 
 def _exponent_field(top: int) -> np.dtype:
-    """The narrowest unsigned field (uint8 or uint16) holding exponents up to top with its top bit free."""
+    """The narrowest unsigned field (uint8, uint16 or uint32) holding exponents up to top with its top bit
+    free (the parser's limit, total degree 65535, needs uint32 from 32768 on)."""
     if top < 128:
         return np.dtype(np.uint8)
     if top < 32768:
         return np.dtype(np.uint16)
+    if top < 1 << 31:
+        return np.dtype(np.uint32)
     raise OverflowError("exponent too large for packed divisibility tests")
 
 
@@ -96,6 +121,7 @@ def _pack(E: np.ndarray, field: np.dtype) -> np.ndarray:
 
 
 _GUARDS: dict[tuple[int, int], np.ndarray] = {}
+_GUARD_BITS = {1: 0x8080808080808080, 2: 0x8000800080008000, 4: 0x8000000080000000}
 
 
 def _guard(field: np.dtype, nwords: int) -> np.ndarray:
@@ -103,7 +129,7 @@ def _guard(field: np.dtype, nwords: int) -> np.ndarray:
     key = (field.itemsize, nwords)
     guard = _GUARDS.get(key)
     if guard is None:
-        guard = np.full(nwords, 0x8080808080808080 if field.itemsize == 1 else 0x8000800080008000, dtype=np.uint64)
+        guard = np.full(nwords, _GUARD_BITS[field.itemsize], dtype=np.uint64)
         _GUARDS[key] = guard
     return guard
 
@@ -576,6 +602,12 @@ def _f4(
             )
         matrix = _assemble(state, rows, columns)
         pivot_rows, reduce_rows = _split_pivots(matrix.leads, matrix.lengths)
+        need = matrix_memory(len(reduce_rows), ncols, len(matrix.cols))
+        if need > options.max_memory:
+            raise MatrixTooLarge(
+                f"F4 matrix {nrows} x {ncols} at degree {d} needs about {format_bytes(need)}, above the memory cap "
+                f"of {format_bytes(options.max_memory)}"
+            )
         pivot_rows = pivot_rows[matrix.leads[pivot_rows].argsort()]  # by lead: the backend need not sort
         new_rows = backend.reduce_sparse(matrix.take(pivot_rows), matrix.take(reduce_rows), ncols, p)
         if _insert_rows(state, new_rows, columns[::-1]):

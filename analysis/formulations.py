@@ -910,14 +910,36 @@ def _gf_root(receivers, transmitters, offsets, p: int) -> tuple[int, ...] | None
     return (h11, h12, h22, b1, b2) + tuple(int(o) % p for o in offsets)
 
 
+RECEIVERS_FIRST_LIMIT = 16
+"""Up to this many receivers, receivers are drawn first and each transmitter by rejection against all of
+them (acceptance about 2^-m per candidate); beyond it the roles swap (acceptance about 2^-n)."""
+
+REJECTION_LIMIT = 16
+"""Largest min(m, n) the rejection sampler accepts: each point of the later side needs its squared
+distances to all points of the earlier side to be squares, which a random point satisfies with
+probability about 2^-min(m, n)."""
+
+
+def _residue_mask(points: np.ndarray, anchors: np.ndarray, p: int) -> np.ndarray:
+    """Rows of points whose squared distance to every anchor is a nonzero quadratic residue mod p."""
+    dx = (points[:, None, 0] - anchors[None, :, 0]) % p
+    dy = (points[:, None, 1] - anchors[None, :, 1]) % p
+    d2 = (dx * dx % p + dy * dy % p) % p  # (batch, anchors)
+    return np.all((d2 != 0) & (_powmod_vec(d2, (p - 1) // 2, p) == 1), axis=1)
+
+
 def sample_gf_instance(config: TDOAConfig | str, p: int, rng: "np.random.Generator | int", *,
                        max_batches: int = 200) -> Instance:
     """A consistent random instance over GF(p) with its known root.
 
-    Draws, in this order: receivers r_2..r_m uniform in GF(p)^2 (r_1 = 0 fixes translation); then each
-    transmitter s_1, s_2, ... uniformly among the points whose squared distance to every receiver is a
-    nonzero quadratic residue (rejection in vectorised batches; s_3 is also redrawn while
-    S = [s_2 - s_1, s_3 - s_1] is singular); then offsets o_j uniform in GF(p). Measurements are
+    For m <= :data:`RECEIVERS_FIRST_LIMIT` receivers it draws, in this order: receivers r_2..r_m uniform
+    in GF(p)^2 (r_1 = 0 fixes translation); then each transmitter s_1, s_2, ... uniformly among the
+    points whose squared distance to every receiver is a nonzero quadratic residue (rejection in
+    vectorised batches; s_3 is also redrawn while S = [s_2 - s_1, s_3 - s_1] is singular); then offsets
+    o_j uniform in GF(p). A random point passes with probability about 2^-m, so for more receivers the
+    roles swap: transmitters s_1..s_n uniform (s_3 redrawn while S is singular), then receivers among the
+    points at residue squared distance from every transmitter (probability about 2^-n; several per
+    batch), then the offsets, and the network is translated so that r_1 = 0. Measurements are
     f_ij = sqrt(d_ij^2) + o_j with the smaller square root.
 
     Parameters
@@ -925,40 +947,70 @@ def sample_gf_instance(config: TDOAConfig | str, p: int, rng: "np.random.Generat
     config : configuration or label.
     p : prime, 2 < p < 2^31 (``BadPrime`` otherwise).
     rng : ``numpy.random.default_rng(seed)`` or an integer seed.
-    max_batches : rejection budget per transmitter; ``SamplingFailed`` (naming the seed) if exceeded.
+    max_batches : rejection budget per point; ``SamplingFailed`` (naming the seed) if exceeded.
 
+    Raises ``SamplingFailed`` at once when both m and n exceed :data:`REJECTION_LIMIT`, and when the
+    budget runs out (only plausible for small p, where few points qualify).
     Paper Sections 2.1 and 3.1 (known root: module docstring).
     """
     config = _as_config(config)
     p = check_prime(p)
     gen, seed_text = _rng(rng)
     m, n = config.m, config.n
-    receivers = np.zeros((m, 2), dtype=np.int64)
-    receivers[1:] = gen.integers(0, p, size=(m - 1, 2))
-    batch = int(min(max(64, 4 * 2 ** m), 1 << 16))
-    half = (p - 1) // 2
+    if min(m, n) > REJECTION_LIMIT:
+        raise SamplingFailed(
+            f"{config.label}: cannot sample a GF(p) instance with more than {REJECTION_LIMIT} receivers and more "
+            f"than {REJECTION_LIMIT} transmitters (every point must lie at a square distance from all points on the "
+            f"other side, probability about 2^-{min(m, n)} per candidate); use fewer receivers or transmitters")
+    receivers_first = m <= RECEIVERS_FIRST_LIMIT
 
-    def draw_transmitter(extra_ok=None) -> np.ndarray:
+    def singular_s(s1, s2, s3) -> bool:
+        return ((s2[0] - s1[0]) * (s3[1] - s1[1]) - (s3[0] - s1[0]) * (s2[1] - s1[1])) % p == 0
+
+    if receivers_first:
+        receivers = np.zeros((m, 2), dtype=np.int64)
+        receivers[1:] = gen.integers(0, p, size=(m - 1, 2))
+        batch = int(min(max(64, 4 * 2 ** m), 1 << 16))
+
+        def draw_transmitter(extra_ok=None) -> np.ndarray:
+            for _ in range(max_batches):
+                cand = gen.integers(0, p, size=(batch, 2))
+                for idx in np.flatnonzero(_residue_mask(cand, receivers, p)):
+                    if extra_ok is None or extra_ok(cand[idx]):
+                        return cand[idx]
+            raise SamplingFailed(f"no transmitter position with all squared distances nonzero residues mod {p} "
+                                 f"after {max_batches} batches of {batch} ({config.label}, {seed_text}); "
+                                 "use a larger prime or another seed")
+
+        transmitters: list[np.ndarray] = []
+        for j in range(n):
+            if j == 2:
+                s1, s2 = transmitters
+                transmitters.append(draw_transmitter(lambda s3: not singular_s(s1, s2, s3)))
+            else:
+                transmitters.append(draw_transmitter())
+    else:
+        tx = gen.integers(0, p, size=(n, 2))
         for _ in range(max_batches):
-            cand = gen.integers(0, p, size=(batch, 2))
-            dx = (cand[:, None, 0] - receivers[None, :, 0]) % p
-            dy = (cand[:, None, 1] - receivers[None, :, 1]) % p
-            d2 = (dx * dx % p + dy * dy % p) % p  # (batch, m)
-            ok = np.all((d2 != 0) & (_powmod_vec(d2, half, p) == 1), axis=1)
-            for idx in np.flatnonzero(ok):
-                if extra_ok is None or extra_ok(cand[idx]):
-                    return cand[idx]
-        raise SamplingFailed(f"no transmitter position with all squared distances nonzero residues mod {p} "
-                             f"after {max_batches} batches of {batch} ({config.label}, {seed_text}); use a larger prime")
-
-    transmitters: list[np.ndarray] = []
-    for j in range(n):
-        if j == 2:
-            s1, s2 = transmitters
-            transmitters.append(draw_transmitter(
-                lambda s3: ((s2[0] - s1[0]) * (s3[1] - s1[1]) - (s3[0] - s1[0]) * (s2[1] - s1[1])) % p != 0))
+            if not singular_s(*tx[:3]):
+                break
+            tx[2] = gen.integers(0, p, size=2)
         else:
-            transmitters.append(draw_transmitter())
+            raise SamplingFailed(f"no nonsingular S = [s2 - s1, s3 - s1] mod {p} ({config.label}, {seed_text})")
+        batch = int(min(max(64, 4 * 2 ** n * m), 1 << 16))
+        found: list[np.ndarray] = []
+        for _ in range(max_batches * m):
+            cand = gen.integers(0, p, size=(batch, 2))
+            found.extend(cand[_residue_mask(cand, tx, p)][: m - len(found)])
+            if len(found) == m:
+                break
+        else:
+            raise SamplingFailed(f"no receiver position with all squared distances nonzero residues mod {p} "
+                                 f"after {max_batches * m} batches of {batch} ({config.label}, {seed_text}); "
+                                 "use a larger prime or another seed")
+        origin = found[0].copy()
+        receivers = (np.array(found, dtype=np.int64) - origin) % p
+        transmitters = list((tx - origin) % p)
     offsets = gen.integers(0, p, size=n)
     rec = tuple((int(x), int(y)) for x, y in receivers)
     tra = tuple((int(x), int(y)) for x, y in transmitters)
@@ -966,7 +1018,7 @@ def sample_gf_instance(config: TDOAConfig | str, p: int, rng: "np.random.Generat
     F = tuple(tuple((sqrt_mod((rx - sx) ** 2 + (ry - sy) ** 2, p) + o) % p for (sx, sy), o in zip(tra, offs))
               for rx, ry in rec)
     root = _gf_root(rec, tra, offs, p)
-    assert root is not None  # guaranteed by the s_3 acceptance test
+    assert root is not None  # guaranteed by the S acceptance test (S is invariant under translation)
     return Instance(config, p, F, rec, tra, offs, root)
 
 

@@ -39,6 +39,7 @@ __all__ = [
     "parse_msolve",
     "parse_polynomial",
     "read_system",
+    "decode_text",
     "format_polynomial",
     "to_msolve",
     "to_macaulay2",
@@ -637,10 +638,25 @@ def parse_msolve(text: str, source: str = "<string>") -> System:
     return System(variables, p, polys, lines=tuple(g[0].line for g in groups), source=source)
 
 
+def decode_text(data: bytes, source: str) -> str:
+    """UTF-8 text of a file's bytes (a UTF-8 byte-order mark is dropped); :class:`InputError` naming the
+    source for anything else (UTF-16, binary files)."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise InputError(f"{source}: UTF-16 text; save it as UTF-8 (msolve input is plain text)")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start}); "
+                         "msolve input is plain text, save it as UTF-8") from None
+    if "\x00" in text:
+        raise InputError(f"{source}: binary file (NUL byte at offset {text.index(chr(0))}); msolve input is plain text")
+    return text
+
+
 def read_system(path: "str | Path") -> System:
     """Read a system from a file in msolve's input format (see :func:`parse_msolve`)."""
     path = Path(path)
-    return parse_msolve(path.read_text(encoding="utf-8"), source=str(path))
+    return parse_msolve(decode_text(path.read_bytes(), str(path)), source=str(path))
 
 
 # -- writers -------------------------------------------------------------------------------------

@@ -4,7 +4,7 @@ and CSV / Markdown / LaTeX output with provenance.
 Data flow: :func:`plan_tables` decides which formulations to compute (one canonical representative
 per symmetry class, each on the smallest configuration that holds the receivers it uses),
 :func:`analysis.complexity.sweep` computes them, :func:`build_table2` / :func:`build_table3` turn the
-records into pandas tables beside the paper's numbers (read from ``tables/reference/paper_tables.csv``),
+records into pandas tables beside the paper's numbers (read from ``analysis/data/paper_tables.csv``),
 and :func:`write_outputs` writes ``tables/table2.*``, ``tables/table3.*``, ``tables/formulations.csv``
 and ``tables/provenance.json``. :func:`make_tables` does all of it (the ``tdoa-workbench tables``
 command and ``scripts/make_tables.py`` call it).
@@ -35,6 +35,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import datetime as _dt
+import hashlib
 import io
 import json
 import math
@@ -61,6 +62,8 @@ from .complexity import (
     sweep,
 )
 from .f4 import F4Options
+from .paths import DATA_DIR, HEADER_PREFIXES, default_output_dir, same_json_apart_from, write_if_changed
+from .paths import cache_dir as user_cache_dir
 from .formulations import Formulation, TDOAConfig, canonical_form, enumerate_formulations
 
 __all__ = [
@@ -83,8 +86,8 @@ __all__ = [
     "write_outputs",
 ]
 
-TABLES_DIR = repo_root() / "tables"
-REFERENCE_CSV = TABLES_DIR / "reference" / "paper_tables.csv"
+TABLES_DIR = default_output_dir()
+REFERENCE_CSV = DATA_DIR / "paper_tables.csv"
 TABLE3_ROWS = tuple(range(4, 10))   # m
 TABLE3_COLS = tuple(range(3, 7))    # n
 
@@ -98,7 +101,7 @@ PAPER_TABLE3: dict[tuple[int, int], str] = {
 }
 """Paper Table 3 as printed (m/n -> entry). X: solved in [kuang2013tdoa]; -: unsolved; u: under-
 determined; *: reducible to a solvable configuration. The numbers are cross-checked against
-``tables/reference/paper_tables.csv`` (the values used for comparisons come from that file)."""
+``analysis/data/paper_tables.csv`` (the values used for comparisons come from that file)."""
 
 PAPER_TABLE1: dict[tuple[int, int], str] = {
     (4, 3): "u", (4, 4): "u", (4, 5): "M", (4, 6): "-",
@@ -144,7 +147,7 @@ QUICK = Budget(focus=2, other=0, subset_limit=0, section32=False)
 
 
 def paper_reference(path: Path | str | None = None) -> pd.DataFrame:
-    """The transcribed paper numbers (``tables/reference/paper_tables.csv``) as a DataFrame of strings."""
+    """The transcribed paper numbers (``analysis/data/paper_tables.csv``) as a DataFrame of strings."""
     return pd.read_csv(path or REFERENCE_CSV, dtype=str, keep_default_na=False)
 
 
@@ -390,6 +393,38 @@ def plan_tables(budget: Budget = FULL, cells: Sequence[tuple[int, int]] | None =
     plans = tuple(plan_cell(m, n, budget) for m, n in cells)
     section32 = {k: tuple(v) for k, v in section32_formulations().items()} if budget.section32 else {}
     return TablePlan(tuple(f.label for f in table2_formulations()), plans, section32, budget)
+
+
+def _plan_fingerprint(budget: Budget, cells: Sequence[tuple[int, int]]) -> str:
+    """Key of a cached plan: the budget, the cells, the engine version and the source of the modules
+    that decide the plan (a changed enumeration or filter gives a new key)."""
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for name in ("tables.py", "formulations.py", "complexity.py"):
+        digest.update((here / name).read_bytes())
+    digest.update(json.dumps([dataclasses.asdict(budget), [list(c) for c in cells], ENGINE_VERSION]).encode())
+    return digest.hexdigest()[:20]
+
+
+def cached_plan(budget: Budget = FULL, cells: Sequence[tuple[int, int]] | None = None,
+                use_cache: bool = True) -> TablePlan:
+    """:func:`plan_tables`, stored as JSON in the user cache (``plans/``): enumerating and filtering the
+    formulations takes about a minute for the full budget, reading the plan milliseconds."""
+    cells = parse_cells(None) if cells is None else list(cells)
+    path = user_cache_dir("plans") / f"plan-{_plan_fingerprint(budget, cells)}.json"
+    if use_cache:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            return TablePlan(
+                tuple(data["table2"]),
+                tuple(CellPlan(**{**c, "candidates": tuple(c["candidates"]),
+                                  "skipped_subset_sizes": tuple(c["skipped_subset_sizes"])}) for c in data["cells"]),
+                {k: tuple(v) for k, v in data["section32"].items()}, Budget(**data["budget"]))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    plan = plan_tables(budget, cells)
+    write_if_changed(path, json.dumps(dataclasses.asdict(plan), indent=1, sort_keys=True))
+    return plan
 
 
 # --------------------------------------------------------------------------------------------------
@@ -669,9 +704,52 @@ def _last_uncached_run(previous: Path, provenance: dict, cached: int) -> dict | 
     return old.get("last_uncached_run")
 
 
+VOLATILE_PROVENANCE = ("date", "commit", "worktree_dirty", "versions", "machine", "timings", "jobs",
+                       "sweep_seconds_sum", "last_uncached_run")
+"""Keys of provenance.json that change from run to run without the results changing; a rerun that
+changes only these leaves provenance.json alone and writes them to provenance.timing.json (untracked)."""
+
+TIMING_COLUMNS = ("seconds",)
+
+
+def _strip_volatile(text: str, csv_file: bool) -> str:
+    """A table file without its provenance header (commit, date) and timing columns."""
+    if csv_file:
+        rows = list(csv.reader(io.StringIO(text)))
+        if not rows:
+            return ""
+        keep = [k for k, name in enumerate(rows[0]) if name not in TIMING_COLUMNS]
+        return "\n".join(",".join(r[k] for k in keep if k < len(r)) for r in rows)
+    out, drop = [], []
+    for line in text.splitlines():
+        if line.startswith(HEADER_PREFIXES):
+            continue
+        if line.startswith("|"):
+            cells = line.strip().strip("|").split("|")
+            if any(c.strip() in TIMING_COLUMNS for c in cells):
+                drop = [k for k, c in enumerate(cells) if c.strip() in TIMING_COLUMNS]
+            line = "|".join(c for k, c in enumerate(cells) if k not in drop)
+        else:
+            drop = []
+        out.append(line)
+    return "\n".join(out)
+
+
+def _same_results(name: str):
+    csv_file = name.endswith(".csv")
+    return lambda old, new: _strip_volatile(old, csv_file) == _strip_volatile(new, csv_file)
+
+
+_same_provenance = same_json_apart_from(VOLATILE_PROVENANCE)
+
+
 def write_outputs(out_dir: Path, table2: pd.DataFrame, table3: pd.DataFrame, section32: pd.DataFrame,
                   formulations: pd.DataFrame, provenance: dict) -> list[Path]:
-    """Write the tables (CSV, Markdown and LaTeX with a provenance header) and provenance.json."""
+    """Write the tables (CSV, Markdown and LaTeX with a provenance header) and provenance.json.
+
+    A file whose results are unchanged is left as it is (only its header or timings would differ), so a
+    rerun keeps a checkout clean; the run's own timings always go to provenance.timing.json.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     header = (f"generated by analysis.tables.make_tables ({provenance['mode']} run); commit "
               f"{provenance['commit'][:12] or 'unknown'}{' (dirty worktree)' if provenance['worktree_dirty'] else ''}, "
@@ -682,7 +760,7 @@ def write_outputs(out_dir: Path, table2: pd.DataFrame, table3: pd.DataFrame, sec
 
     def put(name: str, text: str) -> None:
         path = out_dir / name
-        path.write_text(text, encoding="utf-8")
+        write_if_changed(path, text, _same_results(name))
         written.append(path)
 
     t2_cols = [c for c in table2.columns if c != "seconds"] + ["seconds"]
@@ -710,8 +788,10 @@ def write_outputs(out_dir: Path, table2: pd.DataFrame, table3: pd.DataFrame, sec
         + _grid(table3, tex=True) + r"\end{table}" + "\n\n"
         + _tex_table(table3[["m", "n", "paper", "ours", "match", "ours_saturated", "formulation"]],
                      "Table 3 (reproduction), per cell: the formulation behind each number.", "tab:degree-cells"))
+    text = json.dumps(provenance, indent=2) + "\n"
     path = out_dir / "provenance.json"
-    path.write_text(json.dumps(provenance, indent=2) + "\n", encoding="utf-8")
+    write_if_changed(path, text, _same_provenance)
+    write_if_changed(out_dir / "provenance.timing.json", text)
     written.append(path)
     return written
 
@@ -775,10 +855,10 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     quick : small budget (:data:`QUICK`): Table 2 and two formulations per focus cell, no X/* cells,
         no Section 3.2 searches.
     jobs : worker processes for the sweep.
-    use_cache : read ``.cache/complexity`` (results are always written there).
+    use_cache : read the caches of results and plans (results are always written there).
     cells : restrict Table 3 to these cells (``"6/4,5/5"``).
     out_dir : where to write. Default: ``tables/`` for a full run over all cells; a partial run (quick
-        or a subset of cells) writes to ``.cache/tables-partial/`` so it never overwrites the full tables.
+        or a subset of cells) writes to the user cache's ``tables-partial/`` so it never overwrites the full tables.
     timeout, max_matrix_cells : per-formulation limits (wall-clock seconds, F4 matrix rows*cols).
     primes, seeds : instances per formulation.
     budget : override the budget.
@@ -791,17 +871,19 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     partial = quick or cells is not None or budget != FULL
     mode = "quick" if quick else ("partial" if partial else "full")
     if out_dir is None:
-        out_dir = repo_root() / ".cache" / "tables-partial" if partial else TABLES_DIR
+        out_dir = user_cache_dir("tables-partial") if partial else TABLES_DIR
     out_dir = Path(out_dir)
-    plan = plan_tables(budget, cell_list)
+    plan = cached_plan(budget, cell_list, use_cache)
     options = F4Options(max_matrix_cells=max_matrix_cells)
     from_cache: set[str] = set()
     results: dict[str, FormulationResult] = {}
     other_timeout = budget.other_timeout if timeout is None else min(timeout, budget.other_timeout)
+    phases = {"primary": "sweep 1/2: Table 2, numbered Table 3 cells, Section 3.2",
+              "secondary": "sweep 2/2: Table 3 cells marked X or *"}
     for part, limit in (("primary", timeout), ("secondary", other_timeout)):
         for r in sweep(plan.labels(part), primes=primes, seeds=seeds, options=options, jobs=jobs,
                        cache_dir=cache_dir, use_cache=use_cache, progress=progress, timeout=limit,
-                       on_result=lambda r, cached: from_cache.add(r.label) if cached else None):
+                       on_result=lambda r, cached: from_cache.add(r.label) if cached else None, phase=phases[part]):
             results[r.label] = r
     ref = paper_reference()
     table2 = build_table2({k: results[k] for k in plan.table2}, ref)
@@ -821,7 +903,9 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     provenance["timeout_seconds_x_star_cells"] = other_timeout
     provenance["table3_cells"] = [f"{m}/{n}" for m, n in cell_list]
     provenance["sweep_seconds_sum"] = round(sum(r.seconds for r in results.values()), 1)
-    provenance["last_uncached_run"] = _last_uncached_run(out_dir / "provenance.json", provenance, cached)
+    timing = out_dir / "provenance.timing.json"
+    provenance["last_uncached_run"] = _last_uncached_run(timing if timing.exists() else out_dir / "provenance.json",
+                                                         provenance, cached)
     paths = write_outputs(out_dir, table2, table3, section32, formulations, provenance)
     return TablesSummary(table2, table3, section32, formulations, paths, seconds, len(results) - cached, cached,
                          mode, statuses)

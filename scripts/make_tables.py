@@ -1,9 +1,9 @@
 """Reproduce Tables 2 and 3 of the paper (complexity |B| of TDOA formulations) and search beyond them.
 
-Computes (or reads from ``.cache/complexity/``) every formulation chosen by
+Computes (or reads from the user cache, ``analysis.paths.cache_dir('complexity')``) every formulation chosen by
 :func:`analysis.tables.plan_tables`, writes ``tables/table2.{csv,md,tex}``, ``tables/table3.{csv,md,tex}``,
 ``tables/section32.csv``, ``tables/formulations.csv`` and ``tables/provenance.json``, and prints every
-number beside the paper's. A quick run or a run over some cells writes to ``.cache/tables-partial/``
+number beside the paper's. A quick run or a run over some cells writes to the user cache's ``tables-partial/``
 unless --out-dir is given, so the full tables are never overwritten by a partial run.
 
 Usage: python scripts/make_tables.py [--quick] [--jobs 2] [--no-cache] [--cells 6/4,5/5]

@@ -1,6 +1,6 @@
 """Reproduce Table 4 of the paper: median log10 relative errors, ours vs random initialisation.
 
-Runs (or reads from ``.cache/experiments/``) the four rows 9r/3s rand, 9r/3s ours, 6r/4s rand,
+Runs (or reads from the user cache's ``experiments/``) the four rows 9r/3s rand, 9r/3s ours, 6r/4s rand,
 6r/4s ours on noiseless synthetic networks (paper Sec. 4.1), writes ``tables/table4.{csv,md,tex}``
 and the "table4" section of ``tables/experiments_provenance.json``, and prints every number beside
 the paper's. Without a working ``solvers.api`` the "ours" rows are written without numbers and the

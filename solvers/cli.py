@@ -24,8 +24,84 @@ import sys
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # F4 matrices are small: BLAS threads only add overhead
 
 
+def _set_numba_cache() -> None:
+    """numba's compiled kernels go to the user cache (by default numba writes next to the module, i.e. into
+    site-packages for an installed package); only before numba is imported, and never over a user's choice."""
+    from analysis.paths import cache_dir
+
+    if "numba" not in sys.modules and "NUMBA_CACHE_DIR" not in os.environ:
+        os.environ["NUMBA_CACHE_DIR"] = str(cache_dir("numba"))
+
+
+_set_numba_cache()
+
+
 class UserError(Exception):
     """An error caused by the input; printed as one line."""
+
+
+MAX_MEMORY_ENV = "TDOA_WORKBENCH_MAX_MEMORY"
+"""Environment variable with the default of ``--max-memory`` (e.g. ``4G``)."""
+
+BASIS_LIMIT = 10_000
+"""Default of ``--basis-limit``: the most standard monomials ``--basis`` lists."""
+
+
+def _nonnegative(option: str):
+    """An argparse type: an integer >= 0, with an error naming the option."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {value}")
+        return value
+
+    parse.__name__ = option
+    return parse
+
+
+def _memory_size(text: str) -> int:
+    """Bytes from ``8G``, ``512M``, ``1.5GB`` or a plain number of bytes (binary units)."""
+    units = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    t = text.strip().upper().removesuffix("IB").removesuffix("B")
+    unit = t[-1:] if t[-1:] in units else ""
+    try:
+        value = float(t[: len(t) - len(unit)]) * units[unit]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"memory size must look like 8G, 512M or 1000000, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"memory size must be positive, got {text!r}")
+    return int(value)
+
+
+def _default_max_memory() -> str:
+    from analysis.f4 import DEFAULT_MAX_MEMORY
+
+    return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
+
+
+def _f4_options(args: argparse.Namespace):
+    from analysis.f4 import F4Options
+
+    return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
+                     verbose=args.verbose)
+
+
+def _export(system, fmt: str, path: str) -> None:
+    """Write the system for another CAS; a path that cannot be written is a one-line user error."""
+    from analysis.io import WRITE_FORMATS, write_system
+
+    if fmt not in WRITE_FORMATS:
+        raise UserError(f"--export: unknown format {fmt!r}; valid: {', '.join(WRITE_FORMATS)}")
+    if os.path.isdir(path):
+        raise UserError(f"--export: {path} is a directory; give a file name, e.g. {os.path.join(path, 'system.' + fmt)}")
+    try:
+        write_system(system, path, fmt)
+    except OSError as e:
+        raise UserError(f"--export: cannot write {path}: {e.strerror}; give a file in an existing, writable directory") from None
 
 
 def _add_degree(sub: argparse._SubParsersAction) -> None:
@@ -47,7 +123,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="with --tdoa: equations, e.g. 'B2,C2-C6,minors', 'C*', 'A,B2,B3,C2-C6', 'M123_123,...', 'all'",
     )
-    p.add_argument("--seed", type=int, default=0, help="with --tdoa: seed of the consistent random instance")
+    p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
+                   help="with --tdoa: seed of the consistent random instance")
     p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H = h11*h22 - h12^2")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
@@ -57,9 +134,14 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
     p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
+    p.add_argument("--basis-limit", type=_nonnegative("--basis-limit"), default=BASIS_LIMIT, metavar="N",
+                   help=f"--basis lists at most N standard monomials (default {BASIS_LIMIT})")
     p.add_argument("--gb", action="store_true", help="also print the reduced Groebner basis (first prime)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--max-cells", type=int, default=400_000_000, help="cap on F4 matrix rows*cols")
+    p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=400_000_000,
+                   help="cap on F4 matrix rows*cols")
+    p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
+                   help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
     p.add_argument("--backend", default="numpy", help="linear algebra backend: numpy (fast) or python (reference)")
     p.add_argument("-v", "--verbose", action="store_true", help="per-round F4 statistics on stderr")
     p.set_defaults(func=cmd_degree)
@@ -67,8 +149,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
 
 def cmd_degree(args: argparse.Namespace) -> int:
     from analysis.degree import DEFAULT_PRIMES, analyse
-    from analysis.f4 import F4Options
-    from analysis.io import InputError, System, parse_msolve, parse_polynomial
+    from analysis.io import InputError, System, decode_text, parse_msolve, parse_polynomial
     from analysis.ring import check_prime, BadPrime
 
     if args.tdoa:
@@ -80,11 +161,11 @@ def cmd_degree(args: argparse.Namespace) -> int:
     if args.file is None:
         raise UserError("give a FILE in msolve format, or --tdoa CONFIG --equations SPEC")
     try:
-        text = sys.stdin.read() if args.file == "-" else open(args.file, encoding="utf-8").read()
+        data = sys.stdin.buffer.read() if args.file == "-" else open(args.file, "rb").read()
     except OSError as e:
         raise UserError(f"cannot read {args.file}: {e.strerror}") from None
     try:
-        system: System = parse_msolve(text, source=args.file)
+        system: System = parse_msolve(decode_text(data, "<stdin>" if args.file == "-" else args.file), source=args.file)
     except InputError as e:
         raise UserError(str(e)) from None
     try:
@@ -99,7 +180,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
         primes = (system.characteristic,)
     elif primes is None:
         primes = DEFAULT_PRIMES
-    options = F4Options(backend=args.backend, max_matrix_cells=args.max_cells, verbose=args.verbose)
+    options = _f4_options(args)
 
     def polys(p: int):
         try:
@@ -123,61 +204,107 @@ def cmd_degree(args: argparse.Namespace) -> int:
         sat = saturating_poly
 
     if args.export:
-        from analysis.io import write_system
+        _export(system, args.export[0], args.export[1])
+    report = analyse(polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
+    return _finish_report(report.as_dict(), report, args)
 
-        write_system(system, args.export[1], args.export[0])
-    report = analyse(polys, primes, options, saturate_by=sat)
-    out = report.as_dict()
-    if args.basis:
+
+def _finish_report(out: dict, report, args: argparse.Namespace, header: str | None = None) -> int:
+    """Print a degree report with the requested listings; a standard basis above --basis-limit is not
+    listed (its size is, and the exit status is 2)."""
+    too_many = args.basis and report.degree is not None and report.degree > args.basis_limit
+    if args.basis and not too_many:
         out["standard_basis"] = report.standard_basis()
     if args.gb:
         out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
+    if header and not args.json:
+        print(header)
     _print_report(out, args.json)
+    if too_many:
+        raise UserError(f"--basis: the standard basis has {report.degree} monomials, more than --basis-limit "
+                        f"{args.basis_limit}; give --basis-limit {report.degree} to list them all")
     return 0
 
 
 def _degree_tdoa(args: argparse.Namespace) -> int:
-    """Degree of one TDOA formulation on consistent random instances (known root checked per prime)."""
+    """Degree of one TDOA formulation on consistent random instances (known root checked per prime).
+
+    The rank of the Jacobian at the known root comes first (milliseconds): below the number of unknowns,
+    the root lies on a positive-dimensional solution set (generic smoothness, see
+    :mod:`analysis.complexity`) and that is the answer, without a Gröbner basis (unless --gb).
+    """
     from analysis import formulations as tf
+    from analysis.complexity import jacobian_rank
     from analysis.degree import DEFAULT_PRIMES, analyse
-    from analysis.f4 import F4Options
     from analysis.ring import BadPrime, Ring, check_prime
 
+    if args.equations is not None and not args.equations.strip():
+        raise UserError("--equations is empty; give e.g. 'C2-C6', 'B2,C2-C6,minors' or 'all'")
     try:
         config = tf.TDOAConfig.parse(args.tdoa)
         formulation = tf.Formulation(config, tf.parse_equations(config, args.equations or "all"))
         primes = tuple(check_prime(p) for p in args.prime) if args.prime else DEFAULT_PRIMES
     except (ValueError, BadPrime) as e:
         raise UserError(str(e)) from None
-    options = F4Options(backend=args.backend, max_matrix_cells=args.max_cells, verbose=args.verbose)
+    options = _f4_options(args)
     rings: dict[int, Ring] = {}
+    instances: dict[int, tuple] = {}
+
+    def equations(p: int):
+        if p not in instances:
+            instance = tf.sample_gf_instance(config, p, args.seed)
+            tf.check_root(formulation, instance)
+            instances[p] = (instance, tf.gf_equations(formulation, instance, p))
+        return instances[p]
 
     def polys(p: int):
-        instance = tf.sample_gf_instance(config, p, args.seed)
-        tf.check_root(formulation, instance)
         ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
-        return [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
+        return [ring.from_terms(eq) for eq in equations(p)[1]]
 
     def det_h(p: int):
         ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
         return ring.gen("h11") * ring.gen("h22") - ring.gen("h12") ** 2
 
+    header = f"formulation {formulation.label} (seed {args.seed})"
     if args.export:
-        from analysis.io import System, write_system
+        from analysis.io import System
 
         ring = Ring(config.unknowns, primes[0], args.order)
-        write_system(System.from_polys(ring, polys(primes[0])), args.export[1], args.export[0])
-    report = analyse(polys, primes, options, saturate_by=det_h if args.saturate_det_h else None)
+        _export(System.from_polys(ring, polys(primes[0])), args.export[0], args.export[1])
+    instance, eqs = equations(primes[0])
+    n = config.n_unknowns
+    rank = jacobian_rank(eqs, instance.root, primes[0])
+    if rank < n and not args.gb:
+        return _report_rank_deficient(formulation, args, rank, header)
+    method = "rabinowitsch" if args.gb or args.basis else "rank"
+    report = analyse(polys, primes, options, saturate_by=det_h if args.saturate_det_h else None, saturation=method)
     out = {"formulation": formulation.label, "seed": args.seed, **report.as_dict()}
     if args.saturate_det_h:
         out["saturated_by"] = "det H"
-    if args.basis:
-        out["standard_basis"] = report.standard_basis()
-    if args.gb:
-        out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
-    if not args.json:
-        print(f"formulation {formulation.label} (seed {args.seed})")
-    _print_report(out, args.json)
+    return _finish_report(out, report, args, header)
+
+
+def _report_rank_deficient(formulation, args: argparse.Namespace, rank: int, header: str) -> int:
+    """Report a formulation whose Jacobian at the known root has rank below the number of unknowns."""
+    n = formulation.config.n_unknowns
+    tangent = n - rank
+    # independent equations at a smooth point: a local complete intersection of dimension n - rank
+    exact = rank == formulation.n_equations
+    hint = (f"add equations: {rank} of the {formulation.n_equations} equations are independent at the known root, "
+            f"{n} unknowns need {n}")
+    out = {"formulation": formulation.label, "seed": args.seed, "degree": None,
+           "dimension": tangent if exact else None, "zero_dimensional": False, "tangent_dim": tangent,
+           "jacobian_rank": rank, "unknowns": n, "hint": hint}
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(header)
+    if exact:
+        print(f"positive-dimensional: dimension {tangent} at the known root (Jacobian rank {rank} < {n} unknowns)")
+    else:
+        print(f"positive-dimensional: the known root lies on a solution set of dimension 1 to {tangent} "
+              f"(Jacobian rank {rank} < {n} unknowns)")
+    print(f"{hint}; no Groebner basis computed (--gb computes one anyway)")
     return 0
 
 
@@ -188,7 +315,8 @@ def _print_report(out: dict, as_json: bool) -> None:
     if out["dimension"] == -1:
         print("inconsistent system (the ideal is the whole ring): degree 0")
     elif out["zero_dimensional"]:
-        print(f"degree {out['degree']}  (zero-dimensional)")
+        saturated = f", after saturating by {out['saturated_by']}" if out.get("saturated_by") else ""
+        print(f"degree {out['degree']}  (zero-dimensional{saturated})")
     else:
         print(f"positive-dimensional: dimension {out['dimension']} (no finite count of solutions)")
     print(f"primes {', '.join(map(str, out['primes']))}; Groebner basis: {out['gb_size']} elements; "
@@ -200,27 +328,56 @@ def _print_report(out: dict, as_json: bool) -> None:
                 print(f"  {s}")
 
 
-QUICK_DIR = "tables/quick"
-"""Where quick runs write, so that they never overwrite the full reproduction under tables/."""
+QUICK_DIR = "quick"
+"""Quick runs write to this subdirectory of the output directory, so that they never overwrite the full
+reproduction."""
+
+
+def _add_output_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", metavar="DIR",
+                   help="output directory (default: tables/ of the source checkout when run from one, else ./tables; "
+                   f"--quick writes to its {QUICK_DIR}/ subdirectory)")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="cache directory (default $TDOA_WORKBENCH_CACHE, else $XDG_CACHE_HOME/tdoa-workbench, "
+                   "else ~/.cache/tdoa-workbench)")
+
+
+def _output_dir(args: argparse.Namespace):
+    """The output directory of tables/reproduce; --cache-dir is put in the environment, so that worker
+    processes inherit it."""
+    from pathlib import Path
+
+    from analysis.paths import CACHE_ENV, default_output_dir
+
+    if args.cache_dir:
+        os.environ[CACHE_ENV] = str(Path(args.cache_dir).expanduser().resolve())
+        if "numba" not in sys.modules:
+            os.environ["NUMBA_CACHE_DIR"] = str(Path(os.environ[CACHE_ENV]) / "numba")
+    if args.out:
+        out = Path(args.out).expanduser()
+        if out.exists() and not out.is_dir():
+            raise UserError(f"--out {args.out} is a file; give a directory")
+        return out.resolve()
+    return default_output_dir() / QUICK_DIR if args.quick else default_output_dir()
 
 
 def _add_tables(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tables", help="reproduce Tables 2 and 3 (complexity sweep, cached and parallel)",
-                       description="Run the complexity sweep over TDOA formulations and write tables/table2.*, "
-                       "tables/table3.*, tables/section32.csv and tables/formulations.csv (--quick: a small budget, "
-                       f"written to {QUICK_DIR}/). Results are cached under .cache/complexity, so a rerun is instant "
-                       "and an interrupted sweep resumes.")
+                       description="Run the complexity sweep over TDOA formulations and write table2.*, table3.*, "
+                       "section32.csv and formulations.csv to the output directory (--out; --quick: a small budget, "
+                       f"written to its {QUICK_DIR}/ subdirectory). Results and the sweep plan are cached in the user "
+                       "cache directory, so a rerun takes seconds and an interrupted sweep resumes; files whose "
+                       "results did not change are not rewritten.")
     p.add_argument("--quick", action="store_true", help=f"Table 2 and two formulations per cell, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
-    p.add_argument("--no-cache", action="store_true", help="recompute instead of reading .cache/complexity")
+    p.add_argument("--no-cache", action="store_true", help="recompute instead of reading the cache")
+    _add_output_options(p)
     p.set_defaults(func=cmd_tables)
 
 
-def _run_tables(quick: bool, jobs: int, use_cache: bool = True) -> None:
-    from analysis.complexity import repo_root
+def _run_tables(quick: bool, jobs: int, out_dir, use_cache: bool = True) -> None:
     from analysis.tables import make_tables
 
-    out_dir = repo_root() / QUICK_DIR if quick else None
     summary = make_tables(quick=quick, jobs=jobs, use_cache=use_cache, out_dir=out_dir)
     print(summary.report())
 
@@ -228,7 +385,7 @@ def _run_tables(quick: bool, jobs: int, use_cache: bool = True) -> None:
 def cmd_tables(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise UserError("--jobs must be at least 1")
-    _run_tables(args.quick, args.jobs, use_cache=not args.no_cache)
+    _run_tables(args.quick, args.jobs, _output_dir(args), use_cache=not args.no_cache)
     return 0
 
 
@@ -320,7 +477,8 @@ def _add_template_check(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--action", help="action unknown (default: the first offset, else the first unknown)")
     p.add_argument("--basis", default="grevlex", help="quotient basis: grevlex or offsets (default grevlex)")
     p.add_argument("--prime", type=int, default=65521, help="prime (default 65521; a file of characteristic p uses p)")
-    p.add_argument("--seed", type=int, default=1, help="formulations: seed of the consistent GF(p) instance (default 1)")
+    p.add_argument("--seed", type=_nonnegative("--seed"), default=1,
+                   help="formulations: seed of the consistent GF(p) instance (default 1)")
     p.add_argument("--stop", action="store_true", help="stop at the first complete degree")
     p.set_defaults(func=cmd_template_check)
 
@@ -401,30 +559,40 @@ def cmd_template_check(args: argparse.Namespace) -> int:
 def _add_reproduce(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="the main job: reproduce Tables 2, 3, 4 and Figures 1, 2",
                        description="Regenerate the paper's Tables 2 and 3 (complexity sweep), Table 4 and "
-                       "Figures 1 and 2 (synthetic experiments, 1000 trials per row as in the paper) under tables/, "
-                       "with progress output and a final comparison with the paper. Cached: a rerun resumes where "
-                       f"the last one stopped. --quick: small sweep budget and 100 trials, written to {QUICK_DIR}/.")
+                       "Figures 1 and 2 (synthetic experiments, 1000 trials per row as in the paper) in the output "
+                       "directory (--out), with progress output and a final comparison with the paper. Cached: a rerun "
+                       "resumes where the last one stopped. --quick: small sweep budget and 100 trials, written to "
+                       f"the {QUICK_DIR}/ subdirectory.")
     p.add_argument("--quick", action="store_true", help=f"a few minutes: fewer formulations and trials, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    _add_output_options(p)
     p.set_defaults(func=cmd_reproduce)
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    from analysis.complexity import repo_root
-    from solvers.experiments import reproduce
-
     if args.jobs < 1:
         raise UserError("--jobs must be at least 1")
+    out = _output_dir(args)
+    from solvers.experiments import reproduce  # after _output_dir: its cache directory comes from the environment
+
     t0 = time.perf_counter()
     print("== Tables 2 and 3: complexity sweep ==", flush=True)
-    _run_tables(args.quick, args.jobs)
+    _run_tables(args.quick, args.jobs, out)
     print("== Table 4 and Figures 1, 2: synthetic experiments ==", flush=True)
-    out = repo_root() / (QUICK_DIR if args.quick else "tables")
     reproduce(quick=args.quick, jobs=args.jobs, tables_dir=out)
     print(f"reproduce: done in {time.perf_counter() - t0:.0f} s; outputs under {out}")
     return 0
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tdoa-workbench")
+    except PackageNotFoundError:  # pragma: no cover - running from a checkout without installing
+        return "unknown (not installed)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -432,6 +600,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tdoa-workbench",
         description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_degree(sub)
     _add_tables(sub)
@@ -441,27 +610,59 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    from analysis.degree import PrimeDisagreement
-    from analysis.linalg import MatrixTooLarge
-    from analysis.quotient import NotZeroDimensional
+def _user_error(e: Exception) -> tuple[str, int] | None:
+    """(one-line message, exit status) for an exception a user's input can cause, else None. Looks the
+    exception classes up only in modules already imported (none can be raised from the others), so
+    that a command does not import sympy just to report errors."""
+    def cls(module: str, name: str) -> type:
+        return getattr(sys.modules.get(module), name, ())
 
+    if isinstance(e, cls("analysis.degree", "PrimeDisagreement")):
+        return str(e), 3
+    if isinstance(e, cls("analysis.linalg", "MatrixTooLarge")):
+        return f"{e}; raise --max-memory / --max-cells if the machine allows, or give a smaller system", 2
+    if isinstance(e, cls("analysis.formulations", "InconsistentSample")):
+        return f"{e}; try another --seed", 2
+    if isinstance(e, (UserError, ValueError, OverflowError, cls("analysis.formulations", "SamplingFailed"))):
+        return str(e), 2  # ValueError covers InputError, BadPrime and NotZeroDimensional
+    if isinstance(e, MemoryError):
+        return "out of memory; lower --max-memory so that the computation stops before the machine's limit", 2
+    if isinstance(e, OSError):
+        return (f"{e.filename}: " if e.filename else "") + str(e.strerror or e), 2
+    return None
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run a subcommand; every error a user can cause becomes one line on stderr (exit 2, 3 when primes
+    disagree), never a traceback. Anything else is a bug and keeps its traceback."""
+    try:
+        status = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return status
+    except BrokenPipeError:
+        # the reader went away (e.g. | head): stop quietly, as a command killed by SIGPIPE would
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:
+        known = _user_error(e)
+        if known is None:
+            raise
+        message, status = known
+        print(f"tdoa-workbench {args.command}: error: {' '.join(message.split())}", file=sys.stderr)
+        return status
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    try:
-        return args.func(args)
-    except (UserError, MatrixTooLarge, NotZeroDimensional, ValueError, OverflowError) as e:
-        print(f"tdoa-workbench {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    except PrimeDisagreement as e:
-        print(f"tdoa-workbench {args.command}: error: {e}", file=sys.stderr)
-        return 3
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    return _run(args)
 
 
 if __name__ == "__main__":

@@ -62,6 +62,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.complexity import THREAD_VARIABLES, single_threaded_blas_env
+from analysis.paths import HEADER_PREFIXES, cache_dir, default_output_dir, same_json_apart_from, write_if_changed
+from analysis.progress import Progress
 from solvers.metrics import log10_error, offset_error, position_error
 from solvers.refine import random_initial, refine
 from solvers.synthetic import random_network
@@ -105,9 +107,10 @@ __all__ = [
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
-#: Per-batch CSV cache (git-ignored), keyed by every parameter that changes the numbers.
-CACHE_DIR = ROOT / ".cache" / "experiments"
-TABLES_DIR = ROOT / "tables"
+#: Per-batch CSV cache in the user cache directory (analysis.paths), keyed by every parameter that
+#: changes the numbers.
+CACHE_DIR = cache_dir("experiments")
+TABLES_DIR = default_output_dir()
 FIGURES_DIR = TABLES_DIR / "figures"
 PROVENANCE_PATH = TABLES_DIR / "experiments_provenance.json"
 
@@ -584,6 +587,27 @@ def _write_atomic(path: Path, text: str | bytes) -> None:
     os.replace(tmp, path)
 
 
+def _same_apart_from_header(old: str, new: str) -> bool:
+    """Equal once the provenance header lines (commit, date) are dropped."""
+    def body(text: str) -> list[str]:
+        return [line for line in text.splitlines() if not line.startswith(HEADER_PREFIXES)]
+
+    return body(old) == body(new)
+
+
+def _write_output(path: Path, content: str | bytes) -> bool:
+    """Write an artefact unless only its provenance header would change (a rerun keeps a checkout
+    clean); True when written."""
+    return write_if_changed(path, content, _same_apart_from_header)
+
+
+VOLATILE_PROVENANCE = ("updated", "date", "commit", "worktree_dirty", "versions", "machine", "threads", "wall_seconds",
+                       "load_average_at_end", "seconds", "jobs", "computed_now", "cache_hits",
+                       "compute_seconds_when_computed")
+"""Keys of experiments_provenance.json that change without the results changing (a rerun from the
+caches differs from the computing run only in these)."""
+
+
 def _frame(records: list[dict]) -> pd.DataFrame:
     frame = pd.DataFrame.from_records(records, columns=list(TRIAL_COLUMNS))
     return frame.astype({k: v for k, v in _DTYPES.items() if k in frame})
@@ -635,32 +659,12 @@ class WorkerPool:
         self.close()
 
 
-class _Progress:
-    """A tqdm bar on stderr when tqdm is installed, else one line per ~10 %."""
+class _Progress(Progress):
+    """One batch of trials: on a terminal it rewrites the phase's single progress line, otherwise it
+    prints one line when the batch is done."""
 
     def __init__(self, total: int, description: str, enabled: bool) -> None:
-        self.total, self.done, self.description, self.enabled = total, 0, description, enabled
-        self._bar = None
-        self._next_report = 0.1
-        if enabled:
-            try:
-                from tqdm import tqdm
-
-                self._bar = tqdm(total=total, desc=description, file=sys.stderr, unit="trial", leave=False)
-            except ImportError:
-                pass
-
-    def update(self, k: int) -> None:
-        self.done += k
-        if self._bar is not None:
-            self._bar.update(k)
-        elif self.enabled and self.done >= self._next_report * self.total:
-            print(f"{self.description}: {self.done}/{self.total}", file=sys.stderr, flush=True)
-            self._next_report += 0.1
-
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()
+        super().__init__(description, total, enabled, "trials", checkpoints=0)
 
 
 def run_trials(
@@ -693,7 +697,7 @@ def run_trials(
         Worker processes (spawned with one BLAS thread each); 1, or fewer than 5 chunks of
         trials, runs in this process.
     cache : bool
-        Read/write ``.cache/experiments/<config>-<init>-...-<hash>.csv`` (under the repo root),
+        Read/write ``<cache>/experiments/<config>-<init>-...-<hash>.csv`` (``analysis.paths.cache_dir``),
         keyed by all parameters, CACHE_VERSION and a fingerprint of the numeric code.
     progress : bool
         Progress bar on stderr.
@@ -983,7 +987,7 @@ def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict |
     directory.mkdir(parents=True, exist_ok=True)
     meta = meta or {}
     paths = {ext: directory / f"table4.{ext}" for ext in ("csv", "md", "tex")}
-    _write_atomic(paths["csv"], table.to_csv(index=False, float_format="%.6g"))
+    _write_output(paths["csv"], table.to_csv(index=False, float_format="%.6g"))
 
     headers = [label for _, label, _ in _DISPLAY]
     rows = _display_rows(table)
@@ -1002,7 +1006,7 @@ def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict |
     status = [f"{r['solver']} {r['init']}: {r['status']}" for _, r in table.iterrows() if r["status"] != "ok"]
     if status:
         md += ["", "Missing rows: " + "; ".join(status)]
-    _write_atomic(paths["md"], "\n".join(md) + "\n")
+    _write_output(paths["md"], "\n".join(md) + "\n")
 
     def tex_escape(text: str) -> str:
         return text.replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
@@ -1024,7 +1028,7 @@ def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict |
         cells = [f"{row[0]} {row[1]}"] + row[2 : len(tex_columns)]
         tex.append("    " + " & ".join(tex_escape(c) for c in cells) + r" \\")
     tex += [r"  \end{tabular}", r"\end{table}"]
-    _write_atomic(paths["tex"], "\n".join(tex) + "\n")
+    _write_output(paths["tex"], "\n".join(tex) + "\n")
     return paths
 
 
@@ -1042,18 +1046,31 @@ HIST_MAX = 10
 
 def _figure_metadata(title: str, description: str, meta: dict) -> tuple[dict, dict]:
     """Return (PNG metadata, PDF metadata) for matplotlib's savefig."""
-    source = f"tdoa-workbench solvers.experiments; {_provenance_line(meta)}"
+    # no commit or date here (they are in experiments_provenance.json): the same data gives the same bytes
+    source = "tdoa-workbench solvers.experiments; provenance in experiments_provenance.json"
     png = {"Title": title, "Description": description, "Source": source, "Software": f"matplotlib {_version('matplotlib')}"}
-    pdf = {"Title": title, "Subject": description, "Keywords": source, "Creator": "tdoa-workbench solvers.experiments"}
+    pdf = {"Title": title, "Subject": description, "Keywords": source, "Creator": "tdoa-workbench solvers.experiments",
+           "CreationDate": None}
     return png, pdf
 
 
-def _save(fig: object, stem: Path, title: str, description: str, meta: dict) -> list[Path]:
+def _save(fig: object, stem: Path, title: str, description: str, meta: dict, data_changed: bool = True) -> list[Path]:
+    """Write ``<stem>.png`` and ``<stem>.pdf``. Rendering takes seconds, so it is skipped when the
+    figure's data file did not change and both images are newer than this module (same data, same
+    code: same images)."""
     png_meta, pdf_meta = _figure_metadata(title, description, meta)
     stem.parent.mkdir(parents=True, exist_ok=True)
     png, pdf = stem.with_suffix(".png"), stem.with_suffix(".pdf")
-    fig.savefig(png, dpi=150, metadata=png_meta)  # type: ignore[attr-defined]
-    fig.savefig(pdf, metadata=pdf_meta)  # type: ignore[attr-defined]
+    code = Path(__file__).stat().st_mtime
+    if not data_changed and all(p.exists() and p.stat().st_mtime > code for p in (png, pdf)):
+        return [png, pdf]
+    import io
+
+    for path, kwargs in ((png, dict(dpi=150, metadata=png_meta)), (pdf, dict(metadata=pdf_meta))):
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format=path.suffix[1:], **kwargs)  # type: ignore[attr-defined]
+        if not _write_output(path, buffer.getvalue()):
+            os.utime(path)  # same bytes from the current code: mark the image as up to date
     return [png, pdf]
 
 
@@ -1123,10 +1140,10 @@ def plot_histograms(
     fig.suptitle(f"Relative error after Levenberg-Marquardt, noiseless data, {trials} trials per histogram\n"
                  f"(dashed: medians; errors outside 1e{edges[0]:.0f}..1e{edges[-1]:.0f} are drawn in the end bins)")
     title = "Fig. 1: log10 relative error histograms, ours vs random initialisation"
-    paths = _save(fig, Path(stem), title, "Paper Sec. 4.1 Fig. 1 reproduction", meta)
-    plt.close(fig)
     csv_path = Path(stem).with_suffix(".csv")
-    _write_atomic(csv_path, pd.DataFrame(count_rows).to_csv(index=False, float_format="%.6g"))
+    fresh = _write_output(csv_path, pd.DataFrame(count_rows).to_csv(index=False, float_format="%.6g"))
+    paths = _save(fig, Path(stem), title, "Paper Sec. 4.1 Fig. 1 reproduction", meta, fresh)
+    plt.close(fig)
     return paths + [csv_path]
 
 
@@ -1184,10 +1201,10 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
     fig.suptitle(f"Median relative error after Levenberg-Marquardt vs measurement noise\n"
                  f"({trials} trials per point; shaded: interquartile range of 'ours')")
     title = "Fig. 2: median relative error vs noise sigma"
-    paths = _save(fig, Path(stem), title, "Paper Sec. 4.2 Fig. 2 reproduction", meta)
-    plt.close(fig)
     csv_path = Path(stem).with_suffix(".csv")
-    _write_atomic(csv_path, data.to_csv(index=False, float_format="%.6g"))
+    fresh = _write_output(csv_path, data.to_csv(index=False, float_format="%.6g"))
+    paths = _save(fig, Path(stem), title, "Paper Sec. 4.2 Fig. 2 reproduction", meta, fresh)
+    plt.close(fig)
     return paths + [csv_path]
 
 
@@ -1243,9 +1260,11 @@ def _update_provenance(sections: dict[str, dict], path: Path = PROVENANCE_PATH) 
     regenerating one artefact leaves the record of the others intact.
     """
     record: dict = {}
-    if path.exists():
+    timing = path.with_name(path.stem + ".timing.json")  # the full record of the last run (untracked)
+    source = timing if timing.exists() else path
+    if source.exists():
         try:
-            record = json.loads(path.read_text())
+            record = json.loads(source.read_text())
         except json.JSONDecodeError:
             record = {}
     record.setdefault("artefacts", {}).update(sections)
@@ -1254,7 +1273,9 @@ def _update_provenance(sections: dict[str, dict], path: Path = PROVENANCE_PATH) 
         "Provenance of tables/table4.{csv,md,tex} and tables/figures/fig1_*, fig2_* "
         "(solvers.experiments); one section per artefact."
     )
-    _write_atomic(path, json.dumps(record, indent=2, default=str) + "\n")
+    text = json.dumps(record, indent=2, default=str) + "\n"
+    write_if_changed(path, text, same_json_apart_from(VOLATILE_PROVENANCE))
+    write_if_changed(path.with_name(path.stem + ".timing.json"), text)
 
 
 def _relative(paths: Iterable[Path | str]) -> list[str]:

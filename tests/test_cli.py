@@ -126,3 +126,33 @@ def test_template_check_on_a_system_file(capsys, tmp_path):
     g.write_text("x, y\n0\nx + y - 1\n")
     assert main(["template-check", str(g)]) == 2
     assert "not zero-dimensional" in capsys.readouterr().err
+
+
+def test_lex_order_goes_through_fglm(capsys):
+    """katsura-4 in lex: a shape basis (x4 of degree 16, every other variable linear), in milliseconds
+    (F4 directly in lex once outgrew 24 GB)."""
+    code, out, _ = run(capsys, "degree", str(EXAMPLE), "--order", "lex", "--gb", "--json")
+    report = json.loads(out)
+    assert code == 0 and report["degree"] == 16 and len(report["groebner_basis"]) == 5
+    assert report["groebner_basis"][0].startswith("x4^16 +")
+
+
+def test_saturate_det_h_by_action_matrix_rank(capsys):
+    """Table 2's 6r/3s (A+2B+5C): 181 as generated, 180 after saturating by det H."""
+    args = ("degree", "--tdoa", "6r3s", "--equations", "A,B2,B3,C2-C6", "--prime", "65521", "--json")
+    assert json.loads(run(capsys, *args, "--saturate-det-h")[1])["degree"] == 180
+
+
+@pytest.mark.parametrize("config, equations, rank, dimension", [
+    ("4r3s", "all", 6, 2), ("4r5s", "all", 8, None), ("6r4s", "C2-C6", 5, 4)])
+def test_underdetermined_formulation_is_reported_from_the_jacobian(capsys, config, equations, rank, dimension):
+    code, out, _ = run(capsys, "degree", "--tdoa", config, "--equations", equations, "--json")
+    report = json.loads(out)
+    assert code == 0 and report["jacobian_rank"] == rank and report["dimension"] == dimension
+    assert not report["zero_dimensional"] and "add equations" in report["hint"]
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert capsys.readouterr().out.startswith("tdoa-workbench ")

@@ -271,13 +271,24 @@ def test_table2_in_full():
         assert r.degree == paper[(c.A, c.B, c.C)], f.label
 
 
-def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path):
-    """A first run (nothing cached) must write the tables and provenance (regression: KeyError)."""
+def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path, monkeypatch):
+    """A first run (nothing cached) must write the tables and provenance (regression: KeyError); a rerun
+    reads the cached plan and results and rewrites nothing but the untracked timing record."""
     from analysis.tables import QUICK, make_tables
 
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "user-cache"))
     summary = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
                           cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
     assert summary.computed > 0
     provenance = json.loads((tmp_path / "out" / "provenance.json").read_text())
     assert provenance["last_uncached_run"]["formulations"] == summary.computed
     assert (tmp_path / "out" / "table3.csv").exists()
+    assert len(list((tmp_path / "user-cache" / "plans").glob("plan-*.json"))) == 1
+    files = sorted((tmp_path / "out").iterdir())
+    before = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in files}
+    again = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
+                        cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
+    assert again.computed == 0
+    after = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in sorted((tmp_path / "out").iterdir())}
+    changed = sorted(name for name in after if after[name] != before.get(name))
+    assert changed == ["provenance.timing.json"]

@@ -384,3 +384,22 @@ def test_matches_msolve(name, polys, tmp_path):
     ours = groebner(polys)
     assert len(ours.basis) == len(expected), f"{name}: {len(ours.basis)} elements, msolve {len(expected)}"
     assert set(ours.basis) == {g.monic() for g in expected}
+
+
+def test_exponents_up_to_the_parser_limit():
+    """The parser documents total degree 65535; exponents from 2^15 on need 32-bit divisibility fields."""
+    R = Ring(["x", "y"], 65521)
+    x, y = R.gens()
+    gb = groebner([x**32768 - 1, y - 1, x * y**2 - x])
+    assert degree(gb) == 32768
+    gb = groebner([x**65535 - 1, y - 1])
+    assert degree(gb) == 65535
+
+
+def test_memory_cap_stops_before_allocating():
+    """F4 directly in lex on katsura-4 swells (it once outgrew 24 GB); the memory estimate stops it."""
+    from analysis.systems import katsura
+
+    lex = katsura(4)[0].ring.with_order("lex")
+    with pytest.raises(MatrixTooLarge, match="MiB, above the memory cap of 100 MiB"):
+        groebner([lex.from_terms(f.terms()) for f in katsura(4)], F4Options(max_memory=100 << 20))

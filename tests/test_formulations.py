@@ -15,6 +15,7 @@ from analysis.formulations import (
     Formulation,
     InconsistentSample,
     Relabeling,
+    SamplingFailed,
     TDOAConfig,
     canonical_form,
     check_root,
@@ -337,6 +338,43 @@ def test_gf_sampler_residues_and_determinism(label):
     assert inst == sample_gf_instance(cfg, p, 42)
     assert inst != sample_gf_instance(cfg, p, np.random.default_rng(43))
     assert inst.data_array().shape == (cfg.m, cfg.n)
+
+
+@pytest.mark.parametrize("label", ["50r3s", "20r5s", "17r16s"])
+def test_gf_sampler_many_receivers(label):
+    """More than 16 receivers: transmitters first, receivers by rejection (seconds, not minutes); the
+    distances are residues, r_1 = 0 and the known root satisfies every C equation."""
+    cfg = TDOAConfig.parse(label)
+    t0 = time.perf_counter()
+    inst = sample_gf_instance(cfg, 65521, 0)
+    assert time.perf_counter() - t0 < 10
+    assert inst.receivers[0] == (0, 0) and len(inst.receivers) == cfg.m
+    for i, (rx, ry) in enumerate(inst.receivers):
+        for j, (sx, sy) in enumerate(inst.transmitters):
+            d2 = ((rx - sx) ** 2 + (ry - sy) ** 2) % 65521
+            assert is_quadratic_residue(d2, 65521)
+            assert (inst.F[i][j] - inst.offsets[j]) ** 2 % 65521 == d2
+    assert inst == sample_gf_instance(cfg, 65521, 0)
+    check_root(Formulation.from_spec(cfg, "A,B2,B3,C2-C9"), inst)
+
+
+def test_gf_sampler_many_receivers_is_generic():
+    """50r3s:C2-C9 on the receivers-last path has the degree of 9r3s:C2-C9 (Table 2: 75)."""
+    from analysis.degree import analyse
+    from analysis.ring import Ring
+
+    f = Formulation.from_spec("50r3s", "C2-C9")
+
+    def polys(p):
+        ring = Ring(f.unknowns, p)
+        return [ring.from_terms(t) for t in gf_equations(f, sample_gf_instance(f.config, p, 0))]
+
+    assert analyse(polys).degree == 75
+
+
+def test_gf_sampler_refuses_both_sides_large():
+    with pytest.raises(SamplingFailed, match="fewer receivers or transmitters"):
+        sample_gf_instance("17r17s", 65521, 0)
 
 
 def test_gf_root_matches_network():

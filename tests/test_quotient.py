@@ -23,8 +23,10 @@ from analysis.f4 import groebner
 from analysis.quotient import (
     NotZeroDimensional,
     action_matrix,
+    count_standard_monomials,
     degree,
     dimension,
+    fglm,
     is_zero_dimensional,
     normal_form,
     saturate,
@@ -321,3 +323,47 @@ def test_saturation_of_the_unit_ideal_and_by_a_unit():
     # saturating by a constant changes nothing
     polys = [x**2 - y, y**2 - x - ring.one()]
     assert saturate(polys, ring.one().scale(5)).basis == groebner(polys).basis
+
+
+@pytest.mark.parametrize("system, order", [(katsura(2), "lex"), (katsura(3), "lex"), (katsura(3), "block:2,2")])
+def test_fglm_equals_f4_in_the_target_order(system, order):
+    """FGLM from grevlex gives exactly the reduced basis F4 computes directly in the target order."""
+    gb = groebner(system)
+    target = gb.ring.with_order(order)
+    direct = groebner([target.from_terms(f.terms()) for f in system])
+    converted = fglm(gb, target)
+    assert [str(g) for g in converted.basis] == [str(g) for g in direct.basis]
+    assert degree(converted) == degree(gb)
+
+
+def test_fglm_lex_katsura4_shape_and_sympy():
+    """katsura-4 in lex (16 solutions): a shape basis, equal to sympy's lex basis mod p."""
+    system = katsura(4)
+    ring = system[0].ring
+    lex = fglm(groebner(system), ring.with_order("lex"))
+    assert len(lex.basis) == 5 and degree(lex) == 16
+    gens = sympy.symbols(ring.variables)
+    p = ring.prime
+
+    def expr(f: Poly):
+        return sum(c * sympy.prod(x**e for x, e in zip(gens, exps)) for exps, c in f.terms())
+
+    def normalised(poly: sympy.Poly) -> dict:
+        return {m: int(c) % p for m, c in poly.monic().as_dict().items()}
+
+    ref = sympy.groebner([expr(f) for f in system], *gens, order="lex", modulus=p)
+    ours = [normalised(sympy.Poly(expr(g), *gens, modulus=p)) for g in lex.basis]
+    theirs = [normalised(sympy.Poly(g, *gens, modulus=p)) for g in ref.exprs]
+    assert sorted(map(sorted, map(dict.items, ours))) == sorted(map(sorted, map(dict.items, theirs)))
+
+
+def test_count_standard_monomials_without_listing():
+    """The count agrees with the listing, and 2^40 solutions in 40 variables are counted at once."""
+    for system in (katsura(4), cyclic(5)):
+        gb = groebner(system)
+        assert count_standard_monomials(gb) == len(standard_monomials(gb))
+    ring = Ring([f"x{i}" for i in range(40)], 65521)
+    gb = groebner([x**2 - 1 for x in ring.gens()])
+    assert count_standard_monomials(gb) == 2**40
+    with pytest.raises(NotZeroDimensional):
+        count_standard_monomials(groebner([ring.gen(0) * ring.gen(1)]))
