@@ -440,7 +440,11 @@ def from_positions(m: int, n: int, variant: str = "receivers-orbits") -> Paramet
         return [int(v) for row in F for v in row], [int(v) for v in root]
 
     powers = tuple(2.0 if u in ("X", "Y") else 0.0 if u[:2] in ("xi", "et") else 1.0 for u in ps.unknowns)
-    return ParametricSystem(ps.label, tuple(ps.unknowns), tuple(ps.parameters),
-                            tuple(sympy.sstr(e) for e in ps.equations),
-                            nonzero=tuple(sympy.sstr(e) for e in ps.saturate_by),
-                            scale_powers=powers if variant == "receivers-orbits" else None, gf_sampler=sampler)
+    system = ParametricSystem(ps.label, tuple(ps.unknowns), tuple(ps.parameters),
+                              tuple(sympy.sstr(e) for e in ps.equations),
+                              nonzero=tuple(sympy.sstr(e) for e in ps.saturate_by),
+                              scale_powers=powers if variant == "receivers-orbits" else None, gf_sampler=sampler)
+    # the expressions exist already: parsing their text back (sympify) would take minutes
+    system.__dict__["exprs"] = tuple(sympy.expand(e) for e in ps.equations)
+    system.__dict__["nonzero_exprs"] = tuple(sympy.expand(e) for e in ps.saturate_by)
+    return system

@@ -43,7 +43,10 @@ def _module_for(label: str):
 
 #: Solvers by expected cost (paths or pencil size, measured in tables/solvers.csv): the first one
 #: whose configuration fits inside the network (m >= m_s and n >= n_s) is used.
-SOLVER_ORDER = ("6r4s", "9r3s", "8r3s", "7r3s", "6r3s", "5r4s")
+SOLVER_ORDER = ("6r4s", "9r3s", "8r3s", "7r3s", "6r3s", "5r4s", "4r5s")
+
+#: Solvers whose unknowns are receiver coordinates (analysis.positions variant), not (H, b, o).
+POSITIONS = {"4r5s": "receivers-orbits"}
 
 #: Configurations with as many measurements as degrees of freedom (2m + 3n - 3 = mn).
 MINIMAL = ((6, 3), (4, 5))
@@ -101,6 +104,22 @@ def solve_roots(F) -> np.ndarray:
     return roots[np.all(np.isfinite(roots), axis=1)]
 
 
+def _from_positions(F: np.ndarray, choice: SolverChoice, x: np.ndarray, tol: float = 1e-6) -> Calibration | None:
+    """A real calibration of the solver's block from a positions root (None for a complex network)."""
+    from analysis.positions import network_from_root, positions_system
+
+    system = positions_system(choice.m, choice.n, POSITIONS[choice.label])
+    block = F[: choice.m, : choice.n]
+    rec, tra, off = network_from_root(system, x, block)
+    parts = np.concatenate([rec.ravel(), tra.ravel(), off])
+    if not np.all(np.isfinite(parts)) or np.max(np.abs(parts.imag)) > tol * (1.0 + np.max(np.abs(parts))):
+        return None
+    rec, tra, off = rec.real, tra.real, off.real
+    if F.shape[0] > choice.m:
+        return None  # receivers beyond the block: a cheaper solver covers such networks
+    return Calibration(rec, tra, off, rms_residual(block, rec, tra, off))
+
+
 def _multilaterate(receivers: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float] | None:
     """Position and offset of one transmitter from its column of measurements (receivers in gauge).
 
@@ -156,7 +175,10 @@ def calibrate(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]
     ns = choice.n
     with np.errstate(all="ignore"):
         for x in roots:
-            cal = recover(F[:, :ns], x[:3], x[3:5], x[5 : 5 + ns])
+            if choice.label in POSITIONS:
+                cal = _from_positions(F, choice, x)
+            else:
+                cal = recover(F[:, :ns], x[:3], x[3:5], x[5 : 5 + ns])
             if cal is None:
                 continue
             cal = _extend(F, cal, ns)

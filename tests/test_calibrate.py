@@ -16,7 +16,7 @@ from solvers.synthetic import random_network, true_root
     (np.ones((6, 4, 1)), "2-D"),
     (np.ones((4, 4)), "too few"),
     (np.ones((5, 3)), "too few"),
-    (np.ones((4, 6)), "too few"),
+    (np.ones((3, 6)), "too few"),
     (np.ones((12, 2)), "too few"),
     (np.full((6, 4), np.nan), "NaN"),
     (np.full((6, 4), np.inf), "NaN or infinite"),
@@ -37,9 +37,11 @@ def test_dispatch():
     assert select_solver(6, 3).label == "6r3s"
     assert select_solver(5, 4).label == "5r4s"
     assert select_solver(5, 7).label == "5r4s"
+    assert select_solver(4, 5).label == "4r5s"
+    assert select_solver(4, 6).label == "4r5s"
 
 
-@pytest.mark.parametrize("m,n,seed", [(8, 3, 21), (7, 3, 22), (5, 4, 23), (5, 6, 24)])
+@pytest.mark.parametrize("m,n,seed", [(8, 3, 21), (7, 3, 22), (5, 4, 23), (5, 6, 24), (4, 6, 25)])
 def test_noiseless_calibration_of_the_new_cells(m, n, seed):
     net = random_network(m, n, np.random.default_rng(seed))
     best = calibrate(net.measurements())[0]
@@ -47,10 +49,11 @@ def test_noiseless_calibration_of_the_new_cells(m, n, seed):
     assert err.position < 1e-8 and err.offset < 1e-8, (m, n, seed, err)
 
 
-def test_minimal_6r3s_returns_every_exact_solution():
+@pytest.mark.parametrize("m,n", [(6, 3), (4, 5)])
+def test_minimal_data_returns_every_exact_solution(m, n):
     import warnings
 
-    net = random_network(6, 3, np.random.default_rng(5))
+    net = random_network(m, n, np.random.default_rng(5))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         cals = calibrate(net.measurements())
