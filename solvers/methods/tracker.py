@@ -31,6 +31,11 @@ from numba import njit
 __all__ = ["SystemStructure", "TrackerOptions", "evaluate", "segment_coefficients", "track", "warm_up"]
 
 
+#: Predictors: classical Runge-Kutta on the tangent field (three extra factorisations per step), or cubic
+#: Hermite extrapolation through the last two points and tangents (none; first step by RK4).
+PREDICTORS = ("rk4", "hermite")
+
+
 @dataclass(frozen=True)
 class TrackerOptions:
     """Step control. ``target``: wanted size of the first Newton correction relative to 1 + |x| (the
@@ -49,10 +54,16 @@ class TrackerOptions:
     max_steps: int = 600
     big: float = 1e8
     contract: float = 0.1
+    predictor: str = "rk4"
+
+    def __post_init__(self) -> None:
+        if self.predictor not in PREDICTORS:
+            raise ValueError(f"unknown predictor {self.predictor!r}; valid: {', '.join(PREDICTORS)}")
 
     def as_array(self) -> np.ndarray:
         return np.array([self.h0, self.hmin, self.hmax, self.target, self.accept, self.tol, self.newton,
-                         self.final_newton, self.max_steps, self.big, self.contract], dtype=np.float64)
+                         self.final_newton, self.max_steps, self.big, self.contract,
+                         PREDICTORS.index(self.predictor)], dtype=np.float64)
 
 
 #: Step control for retracking a path that stalled or jumped: smaller steps, stricter acceptance.
@@ -246,6 +257,7 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
     h0, hmin, hmax, target, accept, tol = opts[0], opts[1], opts[2], opts[3], opts[4], opts[5]
     newton, final_newton, max_steps, big = int(opts[6]), int(opts[7]), int(opts[8]), opts[9]
     contract = opts[10]
+    predictor = int(opts[11])
     N = x0.shape[0]
     T = teq.shape[0]
     W = 0
@@ -266,6 +278,10 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
     xt = np.empty(N, dtype=np.complex128)
     xp = np.empty(N, dtype=np.complex128)
     dx = np.empty(N, dtype=np.complex128)
+    xq = np.empty(N, dtype=np.complex128)
+    kq = np.empty(N, dtype=np.complex128)
+    hq = 1.0
+    have_prev = False
     for i in range(N):
         x[i] = x0[i]
     s = 0.0
@@ -286,9 +302,21 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
             break
         if h > 1.0 - s:
             h = 1.0 - s
-        # RK4 predictor: three more tangents (the first is carried over from the last step)
         ok = True
-        for stage in range(3):
+        hermite = predictor == 1 and have_prev
+        if hermite:
+            # cubic Hermite extrapolation through the last two points and tangents: no linear solve
+            tau = 1.0 + h / hq
+            t2 = tau * tau
+            t3 = t2 * tau
+            a0 = 2.0 * t3 - 3.0 * t2 + 1.0
+            b0 = (t3 - 2.0 * t2 + tau) * hq
+            a1 = -2.0 * t3 + 3.0 * t2
+            b1 = (t3 - t2) * hq
+            for i in range(N):
+                xp[i] = a0 * xq[i] + b0 * kq[i] + a1 * x[i] + b1 * k1[i]
+        # RK4 predictor: three more tangents (the first is carried over from the last step)
+        for stage in range(0 if hermite else 3):
             if stage == 0:
                 c = 0.5 * h
                 for i in range(N):
@@ -314,8 +342,9 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
         e0 = np.inf
         e = np.inf
         if ok:
-            for i in range(N):
-                xp[i] = x[i] + (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            if not hermite:
+                for i in range(N):
+                    xp[i] = x[i] + (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
             scale = 1.0 + _norm(xp)
             # Newton corrector; the last factorisation also gives the tangent at the new point
             for it in range(newton):
@@ -337,6 +366,11 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
                     break
         if ok and np.isfinite(e) and e0 < accept and (e < tol or e < contract * e0):
             for i in range(N):
+                xq[i] = x[i]
+                kq[i] = k1[i]
+            hq = s1 - s
+            have_prev = True
+            for i in range(N):
                 x[i] = xp[i]
                 k1[i] = -Hs[i]
             _lu_solve(J, piv, k1)
@@ -351,7 +385,7 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
             # local error ~ h^5: aim the next first correction at `target`
             f = 2.0
             if e0 > 0:
-                f = 0.8 * (target / e0) ** 0.2
+                f = 0.8 * (target / e0) ** (0.25 if hermite else 0.2)
             if f > 2.0:
                 f = 2.0
             if f < 0.5:
