@@ -868,9 +868,17 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
     sample_r, sample_t = np.zeros(m, bool), np.zeros(n, bool)
     sample_r[rows], sample_t[cols] = True, True
     out = []
+    block_mask = np.ones(block.shape, bool)
+    seen: list[np.ndarray] = []
     for k in keep:
         R, S, O = np.full((m, 2), np.nan), np.full((n, 2), np.nan), np.full(n, np.nan)
-        R[rows], S[cols], O[cols] = cands[k]
+        # A few least-squares steps on the block: on noisy data the solver's root satisfies a subset
+        # of the equations exactly, and its error grows when extended; the block optimum is better.
+        pol = robust_refine(block, block_mask, *cands[k], loss="linear", max_iter=4)
+        R[rows], S[cols], O[cols] = (pol.R, pol.S, pol.O) if np.all(np.isfinite(pol.R)) else cands[k]
+        if any(np.allclose(O[cols], o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())) for o in seen):
+            continue  # two roots polished into the same block solution
+        seen.append(O[cols].copy())
         R, S, O = _extend(F, mask, R, S, O, c, rng, sample_r, sample_t)
         score, ratio, _ = _score(_residual_matrix(F, R, S, O), mask, thr, floor)
         search.hypotheses += 1
@@ -889,7 +897,12 @@ def _hypotheses_from_random_starts(F, mask, thr, floor, opts, rng, search: _Sear
         R = np.where(rows[:, None], 0.5 * spread * rng.standard_normal((m, 2)), np.nan)
         S = np.where(cols[:, None], 0.5 * spread * rng.standard_normal((n, 2)), np.nan)
         O = centre - 0.5 * spread + 0.1 * spread * rng.standard_normal(n)
-        model = _local_optimisation(F, mask, _Model(R, S, O, np.inf, 0.0), thr, floor, opts, rng)
+        # Least squares first: a redescending loss far from any solution gives every entry the same
+        # tiny weight and stalls; near a basin, LO's robust loss then sheds the outliers.
+        ls = robust_refine(F, mask, R, S, O, loss="linear", max_iter=3 * opts.lo_iterations)
+        if not np.all(np.isfinite(ls.R[rows])):
+            continue
+        model = _local_optimisation(F, mask, _Model(ls.R, ls.S, ls.O, np.inf, 0.0), thr, floor, opts, rng)
         search.hypotheses += 1
         if np.isfinite(model.score):
             out.append(model)
