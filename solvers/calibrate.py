@@ -163,7 +163,7 @@ class CalibrationOptions:
     confidence: float = 0.99
     min_samples: int = 5
     max_samples: int = 200
-    candidates_per_sample: int = 3
+    candidates_per_sample: int = 2
     max_local_optimisations: int = 6
     lo_iterations: int = 15
     loss: Loss = "cauchy"
@@ -302,17 +302,6 @@ def _loss_rho(z: np.ndarray, loss: Loss) -> np.ndarray:
     return z
 
 
-def _node_scale(E: np.ndarray, c: float) -> np.ndarray:
-    """Per-node IRLS scale (rows of E): max(c, 3 x robust std of that node's residuals)."""
-    absE = np.abs(E)
-    absE[~np.isfinite(absE)] = np.inf
-    k = np.isfinite(absE).sum(axis=1)
-    srt = np.sort(absE, axis=1)
-    mid = srt[np.arange(len(k)), np.maximum(k - 1, 0) // 2]
-    mad = np.where(k > 0, mid, 0.0)
-    return np.maximum(c, 3.0 * _MAD_TO_SIGMA * mad)
-
-
 def _solve_batched(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
     """Solve the small systems A[k] x = b[k]; returns (x, solved) with NaN rows where A[k] is not
     finite or nearly singular (|det A| below rcond times the product of its row norms)."""
@@ -378,18 +367,25 @@ def _multilaterate(G, P, with_offset, X, c, rng, trials=24, steps=3):
         pick = np.argmin(cost, axis=0)
         X[start] = cand[pick, np.arange(len(start))]
     active = np.flatnonzero(able & np.isfinite(X[:, 0]))
+    ua = use[active]
+    G0 = np.where(ua, G[active], 0.0)
+    rows = np.arange(len(active))
+    median_index = (ua.sum(axis=1) - 1) // 2
     for _ in range(steps):
-        e, diff, dist = _node_residuals(X[active], G[active], P, with_offset)
-        scale = _node_scale(e, c)
-        w = np.where(use[active], _loss_weights((np.nan_to_num(e) / scale[:, None]) ** 2, "cauchy"), 0.0)
+        e, diff, dist = _node_residuals(X[active], G0, P, with_offset)
+        e = np.where(ua, e, 0.0)
+        # Per-node scale max(c, 3 x 1.4826 x median |e|): a badly started node is not frozen by c.
+        med = np.sort(np.where(ua, np.abs(e), np.inf), axis=1)[rows, median_index]
+        scale = np.maximum(c, 3.0 * _MAD_TO_SIGMA * np.where(np.isfinite(med), med, 0.0))
+        w = ua / (1.0 + (e / scale[:, None]) ** 2)  # Cauchy weights, 0 for unmeasured partners
         u = diff / np.maximum(dist, 1e-300)[..., None]
         J = np.concatenate([-u, -np.ones(dist.shape + (1,))], axis=2) if with_offset else -u
-        step, good = _solve_batched(np.einsum("nk,nki,nkj->nij", w, J, J), -np.einsum("nk,nki,nk->ni", w, J, np.nan_to_num(e)))
+        step, good = _solve_batched(np.einsum("nk,nki,nkj->nij", w, J, J), -np.einsum("nk,nki,nk->ni", w, J, e))
         X[active[good]] += step[good]
     return X
 
 
-def _place(F, mask, R, S, O, c, rng, receivers: bool, fresh=None, refine_all=True):
+def _place(F, mask, R, S, O, c, rng, receivers: bool, fresh=None, refine_all=True, trials=24):
     """Place receivers (receivers=True) or transmitters from their measured placed partners.
 
     fresh: bool mask of nodes placed from scratch (their current value is dropped); unplaced nodes
@@ -409,24 +405,30 @@ def _place(F, mask, R, S, O, c, rng, receivers: bool, fresh=None, refine_all=Tru
         X[fresh] = np.nan
     new = ~np.isfinite(X[:, 0])
     if refine_all:
-        X = _multilaterate(G, P, not receivers, X, c, rng)
+        X = _multilaterate(G, P, not receivers, X, c, rng, trials)
     elif new.any():
-        X[new] = _multilaterate(G[new], P, not receivers, X[new], c, rng)
+        X[new] = _multilaterate(G[new], P, not receivers, X[new], c, rng, trials)
     if receivers:
         return X, S, O
     return R, X[:, :2].copy(), X[:, 2].copy()
 
 
-def _extend(F, mask, R, S, O, c, rng, sample_r, sample_t):
-    """Extend a hypothesis on a sample block (sample_r x sample_t placed) to the whole network.
+def _extend(F, mask, R, S, O, c, rng, sample_r, best_ratio=None, trials=10):
+    """Extend a hypothesis on a sample block (sample_r placed with its transmitters) to the network.
 
     Receivers from the sample transmitters, transmitters from all receivers, receivers afresh from
-    all transmitters (the sample's only refined), then IRLS on all transmitters.
+    all transmitters (the sample's only refined), then IRLS on all transmitters. Early exit (the
+    T(d,d) idea of randomised RANSAC): after the first two passes, a hypothesis explaining fewer than
+    half as many measurements as the best one so far is returned partially placed (and scores badly).
+    `trials` minimal subsets per node: 10 leave a node with 10 % bad partners misplaced with
+    probability ~3e-5 (4-subsets; LMedS picks the clean one).
     """
-    R = _place(F, mask, R, S, O, c, rng, True, refine_all=False)[0]
-    S, O = _place(F, mask, R, S, O, c, rng, False, refine_all=False)[1:]
-    R = _place(F, mask, R, S, O, c, rng, True, fresh=~sample_r)[0]
-    S, O = _place(F, mask, R, S, O, c, rng, False)[1:]
+    R = _place(F, mask, R, S, O, c, rng, True, refine_all=False, trials=trials)[0]
+    S, O = _place(F, mask, R, S, O, c, rng, False, refine_all=False, trials=trials)[1:]
+    if best_ratio is not None and np.mean(_classify(_residual_matrix(F, R, S, O), mask, c)[mask]) < 0.5 * best_ratio:
+        return R, S, O
+    R = _place(F, mask, R, S, O, c, rng, True, fresh=~sample_r, trials=trials)[0]
+    S, O = _place(F, mask, R, S, O, c, rng, False, trials=trials)[1:]
     return R, S, O
 
 
@@ -740,14 +742,14 @@ class _Search:
 
 
 def _replace_weak(F, mask, R, S, O, t, rng):
-    """Re-place afresh the nodes that explain fewer than half of their measurements (at least the
+    """Re-place afresh the nodes that explain fewer than 3/4 of their measurements (at least the
     minimum); keep a new position only where it explains more measurements. Returns (R, S, O, changed)."""
     changed = False
     for receivers in (True, False):
         inl = _classify(_residual_matrix(F, R, S, O), mask, t)
         axis, minimum = (1, MIN_RECEIVER_MEASUREMENTS) if receivers else (0, MIN_TRANSMITTER_MEASUREMENTS)
         placed = np.isfinite(R[:, 0]) if receivers else np.isfinite(S[:, 0])
-        weak = placed & (inl.sum(axis=axis) < np.maximum(minimum, 0.5 * mask.sum(axis=axis)))
+        weak = placed & (inl.sum(axis=axis) < np.maximum(minimum, 0.75 * mask.sum(axis=axis)))
         if not weak.any():
             continue
         R2, S2, O2 = _place(F, mask, R, S, O, t, rng, receivers, fresh=weak, refine_all=False)
@@ -845,7 +847,8 @@ def _local_optimisation(F, mask, model: _Model, thr, floor, opts: CalibrationOpt
     return _Model(out.R, out.S, out.O, score, ratio, True, out.converged)
 
 
-def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floor, opts, rng, search: _Search):
+def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floor, opts, rng, search: _Search,
+                           best_ratio: float | None = None):
     """Candidates of one sub-block, extended to the network and scored.
 
     Only candidates whose block RMS is within 10x of the best one (or below the threshold) are
@@ -865,8 +868,8 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
     # Unknown sigma: a clean block's RMS is about 0.35 sigma (3 redundant entries of 24 or 27).
     c = thr if thr is not None else max(floor, 8.0 * best_rms)
     keep = [k for k in np.argsort(rms)[: opts.candidates_per_sample] if rms[k] <= max(10.0 * best_rms, c)]
-    sample_r, sample_t = np.zeros(m, bool), np.zeros(n, bool)
-    sample_r[rows], sample_t[cols] = True, True
+    sample_r = np.zeros(m, bool)
+    sample_r[rows] = True
     out = []
     block_mask = np.ones(block.shape, bool)
     seen: list[np.ndarray] = []
@@ -879,7 +882,7 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
         if any(np.allclose(O[cols], o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())) for o in seen):
             continue  # two roots polished into the same block solution
         seen.append(O[cols].copy())
-        R, S, O = _extend(F, mask, R, S, O, c, rng, sample_r, sample_t)
+        R, S, O = _extend(F, mask, R, S, O, c, rng, sample_r, best_ratio)
         score, ratio, _ = _score(_residual_matrix(F, R, S, O), mask, thr, floor)
         search.hypotheses += 1
         out.append(_Model(R, S, O, score, ratio))
@@ -931,7 +934,8 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers) -> tupl
             break
         solver, (rows, cols) = drawn
         search.solvers.add(solver.label)
-        for model in _hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search):
+        for model in _hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
+                                            best.inlier_ratio if best is not None else None):
             if best is not None and not model.score < best.score:
                 continue
             if search.local_optimisations < opts.max_local_optimisations:
@@ -967,7 +971,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers) -> tupl
 
 
 def _classify(E, mask, t):
-    return mask & (np.abs(np.nan_to_num(E, nan=np.inf)) <= t)
+    return mask & (np.abs(E) <= t)  # NaN (missing, unplaced) compares False
 
 
 def _principal_ratio(P: np.ndarray) -> float:
