@@ -64,6 +64,7 @@ def simulate_room(rng: np.random.Generator, mics: int, sources: int, rt60: float
     """One room: returns (F with NaN for missed detections, true Network in metres, emission times)."""
     import pyroomacoustics as pra
 
+    np.random.seed(int(rng.integers(2**31)))  # pyroomacoustics draws its microphone noise from numpy's global RNG
     absorption, max_order = pra.inverse_sabine(rt60, list(size) + [3.0])  # a 3 m height for Sabine's formula
     c = pra.constants.get("c")
     margin = 0.5

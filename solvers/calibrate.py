@@ -992,48 +992,67 @@ def _reflect_across_line(x: np.ndarray, P: np.ndarray) -> np.ndarray:
     return c + 2.0 * (v @ d) * d - v
 
 
+def _mirror_alternatives(F, inl, R, S, O) -> list[tuple[str, int, np.ndarray, float, float]]:
+    """For every placed node: its mirror image across the principal line of its inlier partners,
+    re-fitted to those measurements by Gauss-Newton (partners fixed).
+
+    Returns (kind "receiver"/"transmitter", index, alternative (x, y[, offset]), SSR of the
+    alternative, SSR of the current position) per node with enough partners (flip ambiguity).
+    """
+    out = []
+    for kind, X, partners in (("receiver", R, S), ("transmitter", np.column_stack([S, O]), R)):
+        with_offset = kind == "transmitter"
+        for k in np.flatnonzero(np.isfinite(X[:, 0])):
+            idx = np.flatnonzero(inl[:, k] if with_offset else inl[k])
+            if len(idx) < (3 if with_offset else 2):
+                continue
+            G = F[idx, k] if with_offset else F[k, idx] - O[idx]
+            P = partners[idx]
+            alt = X[k].copy()
+            alt[:2] = _reflect_across_line(X[k, :2], P)
+            for _ in range(8):
+                e, diff, dist = _node_residuals(alt, G, P, with_offset)
+                u = diff / np.maximum(dist, 1e-300)[:, None]
+                J = np.column_stack([-u, -np.ones(len(idx))]) if with_offset else -u
+                alt = alt + np.linalg.lstsq(J, -e, rcond=None)[0]
+            e_alt = _node_residuals(alt, G, P, with_offset)[0]
+            e_now = _node_residuals(X[k], G, P, with_offset)[0]
+            out.append((kind, int(k), alt, float(np.sum(e_alt**2)), float(np.sum(e_now**2))))
+    return out
+
+
 def _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor) -> list[str]:
     """Nodes whose mirror image across the line of their partners fits nearly as well."""
     out = []
     var = max(sigma, floor) ** 2
-    for i in np.flatnonzero(np.isfinite(R[:, 0])):
-        js = np.flatnonzero(inl[i])
-        if len(js) < 2:
-            continue
-        alt = _reflect_across_line(R[i], S[js])
-        for _ in range(8):
-            diff = alt - S[js]
-            dist = np.linalg.norm(diff, axis=1)
-            e = F[i, js] - O[js] - dist
-            J = -diff / np.maximum(dist, 1e-300)[:, None]
-            step = np.linalg.lstsq(J, -e, rcond=None)[0]
-            alt = alt + step
-        e_alt = F[i, js] - O[js] - np.linalg.norm(alt - S[js], axis=1)
-        e_best = F[i, js] - O[js] - np.linalg.norm(R[i] - S[js], axis=1)
-        delta = (np.sum(e_alt**2) - np.sum(e_best**2)) / var
-        apart = np.linalg.norm(alt - R[i]) > max(3.0 * np.nan_to_num(rstd[i], nan=0.0, posinf=0.0), 1e3 * floor)
+    for kind, k, alt, ssr_alt, ssr_now in _mirror_alternatives(F, inl, R, S, O):
+        X, std = (R, rstd) if kind == "receiver" else (S, tstd)
+        delta = (ssr_alt - ssr_now) / var
+        apart = np.linalg.norm(alt[:2] - X[k]) > max(3.0 * np.nan_to_num(std[k], nan=0.0, posinf=0.0), 1e3 * floor)
         if apart and delta < opts.ambiguity_chi2:
-            out.append(f"receiver {i + 1}: its mirror position ({alt[0]:.4g}, {alt[1]:.4g}) across the line of its "
-                       f"transmitters fits its measurements as well (cost +{max(delta, 0.0):.2g} sigma^2)")
-    for j in np.flatnonzero(np.isfinite(S[:, 0])):
-        is_ = np.flatnonzero(inl[:, j])
-        if len(is_) < 3:
-            continue
-        alt = np.append(_reflect_across_line(S[j], R[is_]), O[j])
-        for _ in range(8):
-            diff = R[is_] - alt[:2]
-            dist = np.linalg.norm(diff, axis=1)
-            e = F[is_, j] - alt[2] - dist
-            J = np.column_stack([diff / np.maximum(dist, 1e-300)[:, None], -np.ones(len(is_))])
-            alt = alt + np.linalg.lstsq(J, -e, rcond=None)[0]
-        e_alt = F[is_, j] - alt[2] - np.linalg.norm(R[is_] - alt[:2], axis=1)
-        e_best = F[is_, j] - O[j] - np.linalg.norm(R[is_] - S[j], axis=1)
-        delta = (np.sum(e_alt**2) - np.sum(e_best**2)) / var
-        apart = np.linalg.norm(alt[:2] - S[j]) > max(3.0 * np.nan_to_num(tstd[j], nan=0.0, posinf=0.0), 1e3 * floor)
-        if apart and delta < opts.ambiguity_chi2:
-            out.append(f"transmitter {j + 1}: its mirror position ({alt[0]:.4g}, {alt[1]:.4g}) across the line of its "
-                       f"receivers fits its measurements as well (cost +{max(delta, 0.0):.2g} sigma^2)")
+            partners = "transmitters" if kind == "receiver" else "receivers"
+            out.append(f"{kind} {k + 1}: its mirror position ({alt[0]:.4g}, {alt[1]:.4g}) across the line of its "
+                       f"{partners} fits its measurements as well (cost {delta:+.2g} sigma^2)")
     return out
+
+
+def _repair_flips(F, inl, R, S, O, sigma, floor):
+    """Move every node whose re-fitted mirror position explains its inliers better by > 1 sigma^2.
+
+    Returns (R, S, O, changed). A flipped node is a local minimum of the joint cost that the
+    refinement cannot leave (the other side is beyond a ridge); the mirror test finds the other side.
+    """
+    var = max(sigma, floor) ** 2
+    R, S, O = R.copy(), S.copy(), O.copy()
+    changed = False
+    for kind, k, alt, ssr_alt, ssr_now in _mirror_alternatives(F, inl, R, S, O):
+        if ssr_alt < ssr_now - var and np.all(np.isfinite(alt)):
+            changed = True
+            if kind == "receiver":
+                R[k] = alt
+            else:
+                S[k], O[k] = alt[:2], alt[2]
+    return R, S, O, changed
 
 
 def _distinct(a: _Model, b: _Model, tol: float) -> bool:
@@ -1135,6 +1154,9 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
 
     # Final refinement: robust LM, badly placed nodes afresh, least squares on the inliers until stable.
     fin = _polish(F, work, best.R, best.S, best.O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
+    R, S, O, flipped = _repair_flips(F, fin.inliers, fin.R, fin.S, fin.O, fin.sigma, floor)
+    if flipped:
+        fin = _polish(F, work, R, S, O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
     R, S, O, inl, sig, t, converged = fin.R, fin.S, fin.O, fin.inliers, fin.sigma, fin.threshold, fin.converged
     E = _residual_matrix(F, R, S, O)
     rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
