@@ -142,6 +142,38 @@ def minimal_rows(trials: int, seed: int) -> list[dict]:
     return out
 
 
+def markdown(rows: list[dict], minimal: list[dict]) -> str:
+    """tables/calibration.md: per sigma, success % (median seconds) per shape x (missing, outliers),
+    then outliers flagged and the noiseless minimal rows."""
+    out = []
+    cols = [(mi, ou) for mi in MISSING for ou in OUTLIERS]
+    key = {(r["shape"], float(r["sigma"]), float(r["missing"]), float(r["outliers"])): r for r in rows}
+    shapes = list(dict.fromkeys(r["shape"] for r in rows))
+    head = "| shape | " + " | ".join(f"{100 * mi:.0f} % / {100 * ou:.0f} %" for mi, ou in cols) + " |"
+    for sigma in SIGMAS:
+        out.append(f"\nsigma = {sigma:g}: success % (median s per call), columns missing / outliers\n")
+        out += [head, "|---|" + "---|" * len(cols)]
+        for shape in shapes:
+            cells = []
+            for mi, ou in cols:
+                r = key.get((shape, sigma, mi, ou))
+                cells.append(f"{100 * float(r['success']):.0f} ({float(r['median_seconds']):.2f})" if r else "")
+            out.append(f"| {shape} | " + " | ".join(cells) + " |")
+    flagged = [float(r["outliers_flagged"]) for r in rows if r["outliers_flagged"] not in ("", None)]
+    out.append(f"\nOutliers flagged over all cells with outliers: min {100 * min(flagged):.0f} %, median "
+               f"{100 * float(np.median(flagged)):.0f} %.\n")
+    out += ["| shape | method | trials | median log10 err | p90 log10 err | failures | median s |", "|---|---|---|---|---|---|---|"]
+    for r in minimal:
+        out.append(f"| {r['shape']} | {r['method']} | {r['trials']} | {r['median_log10_err']} | {r['p90_log10_err']} | "
+                   f"{r['failures']} | {r['median_seconds']} |")
+    return "\n".join(out) + "\n"
+
+
+def _read(path):
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
 def _write(path, rows):
     with open(path, "w", newline="") as handle:
         w = csv.DictWriter(handle, fieldnames=list(rows[0]))
@@ -155,11 +187,17 @@ def main(argv=None) -> int:
     ap.add_argument("--minimal-trials", type=int, default=100, help="trials of the noiseless 9r/3s and 6r/4s rows")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="5 trials per cell, 20 minimal trials, into tables/quick/")
+    ap.add_argument("--markdown-only", action="store_true", help="only rewrite calibration.md from the CSVs")
     args = ap.parse_args(argv)
     trials = 5 if args.quick else args.trials
     minimal_trials = 20 if args.quick else args.minimal_trials
     out_dir = os.path.join(ROOT, "tables", "quick") if args.quick else os.path.join(ROOT, "tables")
     os.makedirs(out_dir, exist_ok=True)
+    if args.markdown_only:
+        with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
+            handle.write(markdown(_read(os.path.join(out_dir, "calibration.csv")),
+                                  _read(os.path.join(out_dir, "calibration_minimal.csv"))))
+        return 0
 
     t_start = time.perf_counter()
     rows = []
@@ -192,10 +230,13 @@ def main(argv=None) -> int:
         "threads": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
+    with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
+        handle.write(markdown(_read(os.path.join(out_dir, "calibration.csv")), _read(os.path.join(out_dir, "calibration_minimal.csv"))))
     with open(os.path.join(out_dir, "calibration.meta.json"), "w") as handle:
         json.dump(meta, handle, indent=2)
         handle.write("\n")
-    print(f"wrote {out_dir}/calibration.csv, calibration_minimal.csv, calibration.meta.json in {meta['seconds']} s")
+    print(f"wrote {out_dir}/calibration.csv, calibration_minimal.csv, calibration.md, calibration.meta.json "
+          f"in {meta['seconds']} s")
     return 0
 
 

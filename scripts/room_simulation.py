@@ -14,6 +14,7 @@ best rigid alignment (solvers.metrics). Writes tables/room_simulation.csv and .m
 
 Needs the optional extra: pip install -e ".[audio]"  (pyroomacoustics).
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/room_simulation.py [--rooms 5] [--seed 0] [--rt60 0.3] [--snr 20]
+       [--name room_simulation]
 """
 from __future__ import annotations
 
@@ -64,7 +65,7 @@ def simulate_room(rng: np.random.Generator, mics: int, sources: int, rt60: float
     """One room: returns (F with NaN for missed detections, true Network in metres, emission times)."""
     import pyroomacoustics as pra
 
-    np.random.seed(int(rng.integers(2**31)))  # pyroomacoustics draws its microphone noise from numpy's global RNG
+    noise_seed = int(rng.integers(2**31))
     absorption, max_order = pra.inverse_sabine(rt60, list(size) + [3.0])  # a 3 m height for Sabine's formula
     c = pra.constants.get("c")
     margin = 0.5
@@ -78,6 +79,7 @@ def simulate_room(rng: np.random.Generator, mics: int, sources: int, rt60: float
     for j in range(sources):
         room.add_source(src_pos[j], signal=signals[j], delay=emit[j])
     room.add_microphone_array(pra.MicrophoneArray(mic_pos.T, FS))
+    pra.random.seed(noise_seed)  # the microphone noise comes from pyroomacoustics' own generator
     room.simulate()
     rec = room.mic_array.signals
     # The simulator starts a source at floor(delay * fs) samples, and its fractional-delay filter
@@ -135,6 +137,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rt60", type=float, default=0.3, help="reverberation time in seconds (default 0.3)")
     ap.add_argument("--snr", type=float, default=20.0, help="signal-to-noise ratio in dB at the microphones (default 20)")
     ap.add_argument("--min-peak", type=float, default=8.0, help="GCC-PHAT peak / RMS below which a pair is missing")
+    ap.add_argument("--name", default="room_simulation", help="output tables/NAME.csv and .md (default room_simulation)")
     args = ap.parse_args(argv)
     try:
         import pyroomacoustics  # noqa: F401
@@ -146,7 +149,7 @@ def main(argv=None) -> int:
         row = run(args.seed + k, args.mics, args.sources, args.rt60, args.snr, args.min_peak)
         rows.append(row)
         print(row, flush=True)
-    out = os.path.join(ROOT, "tables", "room_simulation")
+    out = os.path.join(ROOT, "tables", args.name)
     with open(out + ".csv", "w", newline="") as handle:
         w = csv.DictWriter(handle, fieldnames=list(rows[0]))
         w.writeheader()
