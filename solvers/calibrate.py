@@ -526,6 +526,7 @@ def _lm(x: np.ndarray, p: _Problem, loss: Loss, scale: float, max_iter: int):
     import scipy.linalg
 
     tol = 1e-12 if loss == "linear" else 1e-8
+    xtol = 1e-15 if loss == "linear" else 1e-8  # least squares: iterate to rounding (noiseless data)
     e, diff, dist = _entry_residuals(x, p)
 
     def cost_of(e):
@@ -551,7 +552,7 @@ def _lm(x: np.ndarray, p: _Problem, loss: Loss, scale: float, max_iter: int):
             e_new, diff_new, dist_new = _entry_residuals(x_new, p)
             cost_new = cost_of(e_new) if np.all(np.isfinite(e_new)) else np.inf
             if cost_new <= cost:
-                converged = bool(np.linalg.norm(step) <= tol * (np.linalg.norm(x) + tol) or cost - cost_new <= tol * cost)
+                converged = bool(np.linalg.norm(step) <= xtol * (np.linalg.norm(x) + xtol) or cost - cost_new <= tol * cost)
                 x, e, diff, dist, cost = x_new, e_new, diff_new, dist_new, cost_new
                 lam = max(lam / 5.0, 1e-12)
                 improved = True
@@ -599,6 +600,54 @@ def robust_refine(F, mask, R, S, O, *, loss: Loss = "soft_l1", scale: float = 1.
     return _Refined(R2, S2, O2, converged, its)
 
 
+def _gauge_covariance(F, use, R, S, O, sigma: float):
+    """(problem, x, covariance sigma^2 (J^T J)^+, null-space mask) on the entries `use` between placed
+    nodes, in the gauge-fixed parameterisation of `_problem`; None if the gauge cannot be fixed."""
+    placed_r = np.flatnonzero(np.isfinite(R[:, 0]))
+    placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
+    if len(placed_r) < 2 or len(placed_t) < 1:
+        return None
+    gauged = to_gauge(R[placed_r], S[placed_t])
+    if gauged is None:
+        return None
+    p = _problem(F, use, placed_r, placed_t)
+    x = _pack(gauged[0], gauged[1], O[placed_t])
+    _, diff, dist = _entry_residuals(x, p)
+    J = _dense_jacobian(p, diff, dist)
+    _, s, Vt = np.linalg.svd(J, full_matrices=True)
+    s_full = np.zeros(p.n_params)
+    s_full[: len(s)] = s
+    null = s_full <= 1e-10 * max(s_full[0] if s_full.size else 0.0, 1e-300)
+    inv = np.where(null, 0.0, 1.0 / np.where(null, 1.0, s_full) ** 2)
+    return p, x, sigma**2 * (Vt.T * inv) @ Vt, null, Vt
+
+
+def _readmit(F, work, inl, R, S, O, sigma: float, k: float) -> np.ndarray:
+    """Rejected entries that the fit predicts within k standard deviations of prediction.
+
+    For an entry left out of the fit the prediction error e has variance sigma^2 + j^T C j (C the
+    covariance of the parameters, j the entry's Jacobian row): a weakly determined node predicts
+    its own measurements poorly, and a plain |e| <= k sigma test rejects good data there.
+    """
+    out = np.zeros_like(inl)
+    cand = work & ~inl & np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :]
+    if not cand.any() or not inl.any():
+        return out
+    cov = _gauge_covariance(F, inl, R, S, O, sigma)
+    if cov is None:
+        return out
+    p, x, C, _, _ = cov
+    q = _problem(F, cand, p.rows, p.cols)
+    e, diff, dist = _entry_residuals(x, q)
+    v = _jacobian_values(diff, dist)
+    Cp = np.zeros((p.n_params + 1, p.n_params + 1))
+    Cp[:-1, :-1] = C
+    var = sigma**2 + np.einsum("ka,kab,kb->k", v, Cp[q.slots[:, :, None], q.slots[:, None, :]], v)
+    ok = np.abs(e) <= k * np.sqrt(var)
+    out[q.rows[q.ii[ok]], q.cols[q.jj[ok]]] = True
+    return out
+
+
 def estimate_covariance(F, use, R, S, O, sigma: float):
     """Gauge-fixed covariance sigma^2 (J^T J)^-1 on the entries `use`, reduced to per-node stds.
 
@@ -608,38 +657,22 @@ def estimate_covariance(F, use, R, S, O, sigma: float):
     """
     m, n = F.shape
     rstd, tstd, ostd = np.full(m, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-    placed_r = np.flatnonzero(np.isfinite(R[:, 0]))
-    placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
-    if len(placed_r) < 2 or len(placed_t) < 1:
+    cov = _gauge_covariance(F, use, R, S, O, sigma) if use.any() else None
+    if cov is None:
         return rstd, tstd, ostd, True
-    gauged = to_gauge(R[placed_r], S[placed_t])
-    if gauged is None:
-        return rstd, tstd, ostd, True
-    p = _problem(F, use, placed_r, placed_t)
-    x = _pack(gauged[0], gauged[1], O[placed_t])
-    _, diff, dist = _entry_residuals(x, p)
-    J = _dense_jacobian(p, diff, dist)
-    if J.shape[0] == 0:
-        var = np.full(p.n_params, np.inf)
-        deficient = True
-    else:
-        _, s, Vt = np.linalg.svd(J, full_matrices=True)
-        s_full = np.zeros(p.n_params)
-        s_full[: len(s)] = s
-        null = s_full <= 1e-10 * max(s_full[0], 1e-300)
-        deficient = bool(null.any())
-        inv = np.where(null, 0.0, 1.0 / np.where(null, 1.0, s_full) ** 2)
-        var = sigma**2 * np.einsum("kp,k->p", Vt**2, inv)
-        undetermined = np.linalg.norm(Vt[null], axis=0) > 1e-6 if deficient else np.zeros(p.n_params, bool)
-        var[undetermined] = np.inf
-    ma, na = len(placed_r), len(placed_t)
+    p, _, C, null, Vt = cov
+    var = np.diag(C).copy()
+    deficient = bool(null.any())
+    if deficient:
+        var[np.linalg.norm(Vt[null], axis=0) > 1e-6] = np.inf
+    ma, na = len(p.rows), len(p.cols)
     k0 = 1 + 2 * (ma - 2)
     vr = np.zeros((ma, 2))
     vr[1, 0] = var[0]
     vr[2:] = var[1:k0].reshape(ma - 2, 2)
-    rstd[placed_r] = np.sqrt(vr.sum(axis=1))
-    tstd[placed_t] = np.sqrt(var[k0 : k0 + 2 * na].reshape(na, 2).sum(axis=1))
-    ostd[placed_t] = np.sqrt(var[k0 + 2 * na :])
+    rstd[p.rows] = np.sqrt(vr.sum(axis=1))
+    tstd[p.cols] = np.sqrt(var[k0 : k0 + 2 * na].reshape(na, 2).sum(axis=1))
+    ostd[p.cols] = np.sqrt(var[k0 + 2 * na :])
     return rstd, tstd, ostd, deficient
 
 
@@ -1157,7 +1190,14 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
     R, S, O, flipped = _repair_flips(F, fin.inliers, fin.R, fin.S, fin.O, fin.sigma, floor)
     if flipped:
         fin = _polish(F, work, R, S, O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
-    R, S, O, inl, sig, t, converged = fin.R, fin.S, fin.O, fin.inliers, fin.sigma, fin.threshold, fin.converged
+    R, S, O, inl, sig, converged = fin.R, fin.S, fin.O, fin.inliers, fin.sigma, fin.converged
+    for _ in range(3):  # rejected measurements that a weakly determined node predicts that badly anyway
+        readmit = _readmit(F, work, inl, R, S, O, max(sig, floor / opts.threshold_sigmas), opts.threshold_sigmas)
+        if not readmit.any():
+            break
+        inl = inl | readmit
+        ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
+        R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
     E = _residual_matrix(F, R, S, O)
     rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
 
