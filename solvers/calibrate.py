@@ -636,14 +636,18 @@ def _readmit(F, work, inl, R, S, O, sigma: float, k: float) -> np.ndarray:
     cov = _gauge_covariance(F, inl, R, S, O, sigma)
     if cov is None:
         return out
-    p, x, C, _, _ = cov
+    p, x, C, null, _ = cov
+    if null.any():
+        return out
     q = _problem(F, cand, p.rows, p.cols)
     e, diff, dist = _entry_residuals(x, q)
     v = _jacobian_values(diff, dist)
     Cp = np.zeros((p.n_params + 1, p.n_params + 1))
     Cp[:-1, :-1] = C
     var = sigma**2 + np.einsum("ka,kab,kb->k", v, Cp[q.slots[:, :, None], q.slots[:, None, :]], v)
-    ok = np.abs(e) <= k * np.sqrt(var)
+    # Only with a full-rank fit (checked above: else the prediction variance is meaningless) and
+    # within 3k sigma (a node can be weak, but not arbitrarily wrong).
+    ok = (np.abs(e) <= k * np.sqrt(var)) & (np.abs(e) <= 3.0 * k * sigma)
     out[q.rows[q.ii[ok]], q.cols[q.jj[ok]]] = True
     return out
 
@@ -1264,6 +1268,11 @@ def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, sea
     if ratio < opts.collinear_ratio:
         out.append(f"transmitters are nearly collinear (spread ratio {ratio:.2g}): receivers have mirror "
                    "positions across their line that fit about as well")
+    n_in, rejected = int(inl.sum()), int((work & ~inl).sum())
+    redundancy = n_in - (2 * int(placed_r.sum()) + 3 * int(placed_t.sum()) - 3)
+    if rejected and redundancy <= 3 * rejected:
+        out.append(f"low redundancy: {n_in} inliers for {n_in - redundancy} unknowns with {rejected} measurements "
+                   "rejected; another choice of rejected measurements may fit as well")
     if deficient:
         out.append("the Jacobian on the inliers is rank-deficient: some coordinates are not determined by the data "
                    "(their std is inf)")
