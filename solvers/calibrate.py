@@ -26,8 +26,9 @@ measurements" (EUSIPCO 2021 and ICASSP 2020):
    hypothesis of similar cost, nodes with too few measurements, no redundancy); a refinement that
    did not converge or diverged is returned with status "unconverged", and a failure says why.
 
-Gauge of the result: the first placed receiver (receiver 1 unless it could not be placed) at the
-origin, the second on the positive x axis (paper Sec. 3); the remaining reflection is arbitrary.
+Gauge of the result: receiver 1 at the origin and receiver 2 on the positive x axis (paper Sec. 3),
+or, when one of them has fewer than 3 inlier measurements (not determined), the first two receivers
+that have them; the remaining reflection is arbitrary. Standard deviations refer to the same gauge.
 Minimal numbers of measurements: a receiver (2 unknowns) needs 3 measured transmitters to be unique
 (two ranges leave a mirror pair), a transmitter (position and offset, 3 unknowns) needs 4 measured
 receivers; one more of each is needed before an outlier among them can be detected.
@@ -190,7 +191,7 @@ class CalibrationResult:
         calibration; arrays are NaN; `message` says why)
     message : one line summarising the outcome
     receivers (m, 2), transmitters (n, 2), offsets (n,) : NaN for a node that could not be placed;
-        gauge: first placed receiver at 0, second on the positive x axis
+        gauge: receiver 1 at 0, receiver 2 on the positive x axis (or the first two determined receivers)
     inliers : (m, n) bool, False for missing or rejected measurements
     residuals : (m, n) F - o_j - |r_i - s_j| (NaN where missing or a node is unplaced)
     rms : RMS residual over the inliers
@@ -574,6 +575,19 @@ class _Refined:
     iterations: int
 
 
+def _gauge_order(R: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Placed receivers, the two gauge receivers first: the first two (by index) with at least
+    MIN_RECEIVER_MEASUREMENTS entries in `use` (else the first two placed), then the rest by index.
+
+    A gauge receiver whose own position the data do not fix would leave the whole network free to
+    rotate about it (a rank-deficient fit that wanders off).
+    """
+    placed = np.flatnonzero(np.isfinite(R[:, 0]))
+    good = placed[use[placed].sum(axis=1) >= MIN_RECEIVER_MEASUREMENTS]
+    first = list(good[:2]) if len(good) >= 2 else list(placed[:2])
+    return np.array(first + [i for i in placed if i not in first], dtype=int)
+
+
 def robust_refine(F, mask, R, S, O, *, loss: Loss = "soft_l1", scale: float = 1.0, max_iter: int = 100,
                   use: np.ndarray | None = None) -> _Refined:
     """Refine placed nodes on the measured entries `use` (default: all of `mask`) with a robust loss.
@@ -581,9 +595,9 @@ def robust_refine(F, mask, R, S, O, *, loss: Loss = "soft_l1", scale: float = 1.
     Unplaced nodes (NaN) stay NaN. Returns the refined arrays in the gauge (first placed receiver at
     the origin, second on the x axis), the convergence flag and the iteration count.
     """
-    placed_r = np.flatnonzero(np.isfinite(R[:, 0]))
-    placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
     use = mask if use is None else use
+    placed_r = _gauge_order(R, use)
+    placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
     if len(placed_r) < 2 or len(placed_t) < 1:
         return _Refined(R, S, O, False, 0)
     gauged = to_gauge(R[placed_r], S[placed_t])
@@ -603,7 +617,7 @@ def robust_refine(F, mask, R, S, O, *, loss: Loss = "soft_l1", scale: float = 1.
 def _gauge_covariance(F, use, R, S, O, sigma: float):
     """(problem, x, covariance sigma^2 (J^T J)^+, null-space mask) on the entries `use` between placed
     nodes, in the gauge-fixed parameterisation of `_problem`; None if the gauge cannot be fixed."""
-    placed_r = np.flatnonzero(np.isfinite(R[:, 0]))
+    placed_r = _gauge_order(R, use)
     placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
     if len(placed_r) < 2 or len(placed_t) < 1:
         return None
@@ -1202,19 +1216,25 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         inl = inl | readmit
         ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
         R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
+    R, S, O, inl, dropped, ls = _drop_undetermined(F, work, R, S, O, inl, opts.max_iterations)
+    warnings += dropped
+    if ls is not None:
+        converged = ls.converged
     E = _residual_matrix(F, R, S, O)
     rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
 
-    # Gauge of the report: first placed receiver at 0, second on +x.
+    # Gauge of the report: receiver 1 at 0 and receiver 2 on +x, or the first two receivers with
+    # enough inliers (see _gauge_order); the covariance uses the same gauge.
     placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
-    gauged = to_gauge(R[placed_r], S[placed_t]) if placed_r.sum() >= 2 else None
+    order = _gauge_order(R, inl)
+    gauged = to_gauge(R[order], S[placed_t]) if len(order) >= 2 else None
     if gauged is not None:
-        R[placed_r], S[placed_t] = gauged
+        R[order], S[placed_t] = gauged
 
     sig_cov = max(sig, floor / opts.threshold_sigmas)
     rstd, tstd, ostd, deficient = estimate_covariance(F, inl, R, S, O, sig_cov)
     warnings += _flags(F, work, inl, R, S, O, sig_cov, rstd, tstd, opts, floor, deficient, search, best,
-                       sigma, rms)
+                       sigma, rms, already=tuple(warnings))
 
     status: Status = "ok"
     reasons = []
@@ -1242,24 +1262,42 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
     )
 
 
-def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, search, best, sigma_given, rms):
+def _drop_undetermined(F, work, R, S, O, inl, max_iter):
+    """Unplace nodes with fewer inlier measurements than they need (3 / 4), repeatedly, and refit the
+    rest by least squares on the inliers. A node the data do not fix would otherwise be reported at an
+    arbitrary place and keep the refinement from converging. Returns (R, S, O, inl, warnings, fit)."""
+    R, S, O, inl = R.copy(), S.copy(), O.copy(), inl.copy()
+    out = []
+    while True:
+        weak_r = np.isfinite(R[:, 0]) & (inl.sum(axis=1) < MIN_RECEIVER_MEASUREMENTS)
+        weak_t = np.isfinite(S[:, 0]) & (inl.sum(axis=0) < MIN_TRANSMITTER_MEASUREMENTS)
+        if not (weak_r.any() or weak_t.any()):
+            break
+        for i in np.flatnonzero(weak_r):
+            out.append(f"receiver {i + 1}: only {int(inl[i].sum())} of its {int(work[i].sum())} measurements are "
+                       f"inliers (needs {MIN_RECEIVER_MEASUREMENTS}); not placed")
+        for j in np.flatnonzero(weak_t):
+            out.append(f"transmitter {j + 1}: only {int(inl[:, j].sum())} of its {int(work[:, j].sum())} measurements "
+                       f"are inliers (needs {MIN_TRANSMITTER_MEASUREMENTS}); not placed")
+        R[weak_r], S[weak_t], O[weak_t] = np.nan, np.nan, np.nan
+        inl[weak_r], inl[:, weak_t] = False, False
+    if not out:
+        return R, S, O, inl, out, None
+    ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=max_iter, use=inl)
+    return ls.R, ls.S, ls.O, inl, out, ls
+
+
+def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, search, best, sigma_given, rms,
+           already=()):
     """Warnings for what the data cannot decide (see CalibrationResult.warnings)."""
     out = []
     placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
-    for i in np.flatnonzero(placed_r):
-        k = int(inl[i].sum())
-        if k < MIN_RECEIVER_MEASUREMENTS:
-            out.append(f"receiver {i + 1}: only {k} inlier measurements (needs {MIN_RECEIVER_MEASUREMENTS}); "
-                       "its position is not determined")
-    for j in np.flatnonzero(placed_t):
-        k = int(inl[:, j].sum())
-        if k < MIN_TRANSMITTER_MEASUREMENTS:
-            out.append(f"transmitter {j + 1}: only {k} inlier measurements (needs {MIN_TRANSMITTER_MEASUREMENTS}); "
-                       "its position and offset are not determined")
     for i in np.flatnonzero(~placed_r & work.any(axis=1)):
-        out.append(f"receiver {i + 1}: could not be placed from its measurements")
+        if not any(w.startswith(f"receiver {i + 1}: ") for w in already):
+            out.append(f"receiver {i + 1}: could not be placed from its measurements")
     for j in np.flatnonzero(~placed_t & work.any(axis=0)):
-        out.append(f"transmitter {j + 1}: could not be placed from its measurements")
+        if not any(w.startswith(f"transmitter {j + 1}: ") for w in already):
+            out.append(f"transmitter {j + 1}: could not be placed from its measurements")
     ratio = _principal_ratio(R)
     if ratio < opts.collinear_ratio:
         out.append(f"receivers are nearly collinear (spread ratio {ratio:.2g}): transmitters have mirror "
@@ -1268,7 +1306,7 @@ def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, sea
     if ratio < opts.collinear_ratio:
         out.append(f"transmitters are nearly collinear (spread ratio {ratio:.2g}): receivers have mirror "
                    "positions across their line that fit about as well")
-    n_in, rejected = int(inl.sum()), int((work & ~inl).sum())
+    n_in, rejected = int(inl.sum()), int((work & ~inl & placed_r[:, None] & placed_t[None, :]).sum())
     redundancy = n_in - (2 * int(placed_r.sum()) + 3 * int(placed_t.sum()) - 3)
     if rejected and redundancy <= 3 * rejected:
         out.append(f"low redundancy: {n_in} inliers for {n_in - redundancy} unknowns with {rejected} measurements "
