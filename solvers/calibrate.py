@@ -1216,6 +1216,7 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         inl = inl | readmit
         ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
         R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
+    R, S, O, inl, converged = _refit_with_moderate_rejects(F, work, R, S, O, inl, sig, floor, opts, converged)
     R, S, O, inl, dropped, ls = _drop_undetermined(F, work, R, S, O, inl, opts.max_iterations)
     warnings += dropped
     if ls is not None:
@@ -1260,6 +1261,26 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         solver="+".join(sorted(search.solvers)), samples=search.samples, hypotheses=search.hypotheses,
         seconds=time.perf_counter() - t0, seed=seed,
     )
+
+
+def _refit_with_moderate_rejects(F, work, R, S, O, inl, sigma, floor, opts, converged):
+    """Refit with the rejected entries within 3k sigma added back; keep the refit if it keeps every
+    inlier and gains some (at the threshold k sigma).
+
+    The robust stage can settle a weakly determined node where a few good measurements look like
+    outliers, and least squares without them never comes back (a self-consistent split).
+    """
+    t = max(opts.threshold_sigmas * sigma, floor)
+    E = _residual_matrix(F, R, S, O)
+    cand = work & ~inl & (np.abs(E) <= 3.0 * t)
+    if not cand.any():
+        return R, S, O, inl, converged
+    fit = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl | cand)
+    new = _classify(_residual_matrix(F, fit.R, fit.S, fit.O), work, t)
+    if (new | ~inl).all() and new.sum() > inl.sum():
+        fit = robust_refine(F, work, fit.R, fit.S, fit.O, loss="linear", max_iter=opts.max_iterations, use=new)
+        return fit.R, fit.S, fit.O, new, fit.converged
+    return R, S, O, inl, converged
 
 
 def _drop_undetermined(F, work, R, S, O, inl, max_iter):

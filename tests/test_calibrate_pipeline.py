@@ -12,7 +12,7 @@ from solvers.calibrate import (
     estimate_covariance,
     robust_refine,
 )
-from solvers.metrics import calibration_errors
+from solvers.metrics import align_rigid, calibration_errors
 from solvers.recovery import to_gauge
 from solvers.refine import jacobian, pack
 from solvers.synthetic import random_network
@@ -158,3 +158,16 @@ def test_malformed_input_raises():
         calibrate(np.full((6, 4), np.inf))
     with pytest.raises(ValueError, match="sigma"):
         calibrate(np.ones((6, 4)), sigma=-1.0)
+
+
+def test_a_node_whose_measurements_are_mostly_gross_errors_is_reported_unplaced():
+    net, F, _ = corrupted(12, 10, seed=14, sigma=1e-3)
+    F[2, :8] += np.linspace(3.0, 10.0, 8)  # receiver 3 keeps 2 good measurements: not determined
+    res = calibrate(F, sigma=1e-3, seed=0)
+    assert res.ok and np.isnan(res.receivers[2]).all()
+    assert any(w.startswith("receiver 3: only") and "not placed" in w for w in res.warnings), res.warnings
+    keep = np.ones(12, bool)
+    keep[2] = False
+    X = np.vstack([res.receivers[keep], res.transmitters])
+    Y = np.vstack([net.receivers[keep], net.transmitters])
+    assert np.abs(align_rigid(X, Y).apply(X) - Y).max() < 0.02
