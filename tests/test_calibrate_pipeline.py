@@ -171,3 +171,16 @@ def test_a_node_whose_measurements_are_mostly_gross_errors_is_reported_unplaced(
     X = np.vstack([res.receivers[keep], res.transmitters])
     Y = np.vstack([net.receivers[keep], net.transmitters])
     assert np.abs(align_rigid(X, Y).apply(X) - Y).max() < 0.02
+
+
+def test_corrupt_measurements_keeps_enough_per_node_and_marks_its_outliers():
+    from solvers.synthetic import corrupt_measurements
+
+    net = random_network(8, 5, np.random.default_rng(15))
+    F0 = net.measurements()
+    F, bad = corrupt_measurements(F0, np.random.default_rng(16), missing=0.3, outliers=0.1)
+    measured = np.isfinite(F)
+    assert measured.sum(axis=1).min() >= 3 and measured.sum(axis=0).min() >= 4
+    assert bad.sum() == round(0.1 * measured.sum()) and not (bad & ~measured).any()
+    assert np.array_equal(F[measured & ~bad], F0[measured & ~bad]) and (F[bad] != F0[bad]).all()
+    assert F[bad].min() >= np.nanmin(F0) and F[bad].max() <= np.nanmax(F0)
