@@ -9,6 +9,7 @@ generate   regenerate a numeric solver (spec over GF(p) -> solvers/generated/) a
 template-check  how many action-matrix relations single elimination templates of a formulation or of
            a system file reach over GF(p), per multiplier family and degree (solvers.feasibility)
 reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
+calibrate  calibrate a network from a CSV of measurements (gaps, outliers; solvers.calibrate)
 
 Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
 stderr with exit status 2; a disagreement between primes exits with status 3.
@@ -595,6 +596,72 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+def _add_calibrate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate", help="calibrate a network from a CSV of TDOA measurements (missing entries, outliers)",
+        description="Calibrate receivers, transmitters and transmitter offsets from MEAS.csv: one row per receiver, "
+        "one column per transmitter, f_ij = |r_i - s_j| + o_j; an empty cell or NaN is a missing measurement; an "
+        "optional header row and column name the nodes. LO-RANSAC over the minimal solvers, extension and robust "
+        "refinement (solvers.calibrate). Exit status 0 when the calibration converged (read the warnings), 1 when "
+        "it did not or failed, 2 for a malformed file or option.")
+    p.add_argument("file", metavar="MEAS.csv", help="measurement matrix (CSV)")
+    p.add_argument("--sigma", type=float, help="noise standard deviation of the measurements (default: estimated)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random sampling (default 0)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.add_argument("--out", metavar="FILE.json", help="also write the JSON result to FILE.json")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red) to FILE.png")
+    p.set_defaults(func=cmd_calibrate)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from solvers.calibrate import calibrate
+    from solvers.calibrate_io import MeasurementFileError, plot_calibration, read_measurements, report_dict, write_json
+
+    if args.sigma is not None and not args.sigma >= 0:
+        raise UserError(f"--sigma must be >= 0, got {args.sigma}")
+    try:
+        meas = read_measurements(args.file)
+    except MeasurementFileError as e:
+        raise UserError(str(e)) from None
+    result = calibrate(meas.F, sigma=args.sigma, seed=args.seed)
+    report = report_dict(result, meas)
+    if args.out:
+        try:
+            write_json(report, args.out)
+        except OSError as e:
+            raise UserError(f"cannot write {args.out}: {e.strerror}") from None
+    if args.plot:
+        if result.status == "failed":
+            print(f"no plot: {result.message}", file=sys.stderr)
+        else:
+            try:
+                plot_calibration(result, args.plot, meas)
+            except OSError as e:
+                raise UserError(f"cannot write {args.plot}: {e.strerror}") from None
+    if args.json:
+        print(json.dumps(report))
+    else:
+        _print_calibration(result, meas)
+    return 0 if result.ok else 1
+
+
+def _print_calibration(result, meas) -> None:
+    print(result.message)
+    if result.status != "failed":
+        print(f"sigma {result.sigma:.3g} ({'estimated' if result.sigma_estimated else 'given'}); "
+              f"hypotheses from {result.solver}: {result.samples} samples, {result.hypotheses} hypotheses, "
+              f"{result.seconds:.2f} s")
+        print(f"{'node':<12} {'x':>12} {'y':>12} {'offset':>12} {'std':>10}")
+        for k, name in enumerate(meas.receivers):
+            x, y = result.receivers[k]
+            print(f"{'r ' + name:<12} {x:12.5g} {y:12.5g} {'':>12} {result.receiver_std[k]:10.3g}")
+        for k, name in enumerate(meas.transmitters):
+            x, y = result.transmitters[k]
+            print(f"{'s ' + name:<12} {x:12.5g} {y:12.5g} {result.offsets[k]:12.5g} {result.transmitter_std[k]:10.3g}")
+    for w in result.warnings:
+        print(f"warning: {w}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tdoa-workbench",
@@ -607,6 +674,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_generate(sub)
     _add_template_check(sub)
     _add_reproduce(sub)
+    _add_calibrate(sub)
     return parser
 
 

@@ -18,6 +18,7 @@ import numpy as np
 __all__ = [
     "DegenerateNetworkError",
     "Network",
+    "corrupt_measurements",
     "random_network",
     "true_root",
 ]
@@ -185,3 +186,43 @@ def true_root(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     H = 0.5 * (H + H.T)
     b = -0.5 * S_inv @ s1
     return H, b, network.offsets.copy()
+
+
+def corrupt_measurements(
+    F: np.ndarray,
+    rng: np.random.Generator,
+    missing: float = 0.0,
+    outliers: float = 0.0,
+    min_per_receiver: int = 3,
+    min_per_transmitter: int = 4,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return (F with gaps and gross errors, outlier mask) for robustness experiments.
+
+    Missing: round(missing * m * n) entries set to NaN, drawn at random among those whose removal
+    leaves every receiver at least `min_per_receiver` and every transmitter at least
+    `min_per_transmitter` measurements (fewer if that is impossible). Outliers: round(outliers * N)
+    of the N remaining measured entries replaced by a value uniform in [min F, max F] (the data
+    range). Draws: the missing entries' order, then the outliers' positions, then their values.
+
+    Reference: Larsson et al. (EUSIPCO 2021) evaluate with uniform outliers and random gaps.
+    """
+    F = np.array(F, dtype=float)
+    m, n = F.shape
+    lo, hi = float(np.nanmin(F)), float(np.nanmax(F))
+    rows, cols = np.isfinite(F).sum(axis=1), np.isfinite(F).sum(axis=0)
+    want = int(round(missing * m * n))
+    for k in rng.permutation(m * n):
+        if want == 0:
+            break
+        i, j = divmod(int(k), n)
+        if np.isfinite(F[i, j]) and rows[i] > min_per_receiver and cols[j] > min_per_transmitter:
+            F[i, j] = np.nan
+            rows[i] -= 1
+            cols[j] -= 1
+            want -= 1
+    measured = np.flatnonzero(np.isfinite(F))
+    bad = rng.choice(measured, int(round(outliers * measured.size)), replace=False)
+    F.flat[bad] = rng.uniform(lo, hi, bad.size)
+    mask = np.zeros(m * n, bool)
+    mask[bad] = True
+    return F, mask.reshape(m, n)

@@ -1,0 +1,186 @@
+"""solvers.calibrate: missing data, outliers, flags, covariance, determinism (small seeded networks)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import solvers
+from solvers.calibrate import (
+    CalibrationOptions,
+    available_solvers,
+    calibrate,
+    estimate_covariance,
+    robust_refine,
+)
+from solvers.metrics import align_rigid, calibration_errors
+from solvers.recovery import to_gauge
+from solvers.refine import jacobian, pack
+from solvers.synthetic import random_network
+
+
+def corrupted(m, n, seed, sigma=0.0, missing=0.0, outliers=0):
+    """A random network, its measurements with NaN gaps and `outliers` gross errors (their mask)."""
+    rng = np.random.default_rng(seed)
+    net = random_network(m, n, rng)
+    F = net.measurements(sigma, rng) if sigma else net.measurements()
+    idx = rng.permutation(m * n)
+    bad = np.zeros(m * n, bool)
+    bad[idx[:outliers]] = True
+    F.flat[idx[:outliers]] = rng.uniform(F.min(), F.max(), outliers)
+    gaps = idx[outliers : outliers + int(round(missing * m * n))]
+    F.flat[gaps] = np.nan
+    return net, F, bad.reshape(m, n)
+
+
+def test_package_exports_the_user_function():
+    assert solvers.calibrate is calibrate and callable(solvers.calibrate)
+    labels = [s.label for s in available_solvers()]
+    assert labels[0] == "6r4s" and "9r3s" in labels  # cheapest first
+
+
+@pytest.mark.parametrize("m,n,seed", [(6, 4, 11), (9, 3, 12)])
+def test_noiseless_minimal_configurations_as_exact_as_the_solvers(m, n, seed):
+    net = random_network(m, n, np.random.default_rng(seed))
+    res = calibrate(net.measurements())
+    err = calibration_errors(res, net)
+    assert res.ok and err.position < 1e-9 and err.offset < 1e-8, (seed, err)
+    assert res.inliers.all() and res.rms < 1e-9
+    assert res.receivers[0].tolist() == [0.0, 0.0] and res.receivers[1, 1] == 0.0 and res.receivers[1, 0] > 0
+
+
+def test_missing_entries_recover_the_truth_on_noiseless_data():
+    net, F, _ = corrupted(10, 9, seed=3, missing=0.2)
+    res = calibrate(F)
+    err = calibration_errors(res, net)
+    assert res.ok and err.position < 1e-8 and err.offset < 1e-8, err
+    assert (res.inliers == np.isfinite(F)).all()  # missing entries are never inliers, all others are
+
+
+def test_outliers_are_flagged_and_do_not_bias_the_answer():
+    net, F, bad = corrupted(12, 10, seed=4, sigma=1e-3, missing=0.1, outliers=6)
+    res = calibrate(F, sigma=1e-3, seed=1)
+    assert res.ok
+    assert not res.inliers[bad].any()  # every gross error rejected
+    false_rejects = np.isfinite(F) & ~bad & ~res.inliers
+    assert false_rejects.sum() <= 2
+    assert calibration_errors(res, net).position < 1e-3
+    assert res.rms < 2e-3 and res.sigma == 1e-3 and not res.sigma_estimated
+
+
+def test_sigma_is_estimated_when_not_given():
+    net, F, bad = corrupted(12, 10, seed=5, sigma=1e-2, outliers=4)
+    res = calibrate(F, seed=2)
+    assert res.sigma_estimated and 0.5e-2 < res.sigma < 2e-2
+    assert not res.inliers[bad].any()
+    assert calibration_errors(res, net).position < 1e-2
+
+
+def test_determinism_under_a_seed():
+    _, F, _ = corrupted(12, 10, seed=6, sigma=1e-2, missing=0.2, outliers=5)
+    a, b = calibrate(F, sigma=1e-2, seed=7), calibrate(F, sigma=1e-2, seed=7)
+    assert np.array_equal(a.receivers, b.receivers) and np.array_equal(a.offsets, b.offsets)
+    assert np.array_equal(a.inliers, b.inliers) and a.warnings == b.warnings and a.samples == b.samples
+
+
+def test_collinear_receivers_are_warned_about_with_their_mirror_ambiguity():
+    rng = np.random.default_rng(3)
+    net = random_network(8, 5, rng)
+    receivers = np.column_stack([np.linspace(-10, 10, 8), 2.0 * np.linspace(-10, 10, 8) + 1.0])
+    F = np.linalg.norm(receivers[:, None] - net.transmitters[None], axis=2) + net.offsets
+    res = calibrate(F)
+    assert res.status != "ok" or any("receivers are nearly collinear" in w for w in res.warnings), res.warnings
+    assert any("collinear" in w or "mirror" in w for w in res.warnings)
+
+
+def test_too_few_measurements_fail_with_a_reason():
+    F = np.full((5, 4), np.nan)
+    F[:, 0] = 1.0
+    res = calibrate(F)
+    assert res.status == "failed" and "too few measurements" in res.message
+    assert np.isnan(res.receivers).all() and not res.inliers.any()
+
+
+def test_a_node_with_too_few_measurements_is_not_placed_and_warned_about():
+    net, F, _ = corrupted(10, 8, seed=8)
+    F[4, 2:] = np.nan  # receiver 5 keeps 2 measurements: a mirror pair, not a position
+    res = calibrate(F)
+    assert np.isnan(res.receivers[4]).all()
+    assert any(w.startswith("receiver 5: only 2") for w in res.warnings)
+    ok = np.ones(10, bool)
+    ok[4] = False
+    assert res.ok and np.allclose(np.isfinite(res.receivers[:, 0]), ok)
+
+
+def test_an_unconverged_refinement_is_flagged():
+    _, F, _ = corrupted(10, 8, seed=9, sigma=1e-2)
+    res = calibrate(F, sigma=1e-2, options=CalibrationOptions(max_iterations=1, lo_iterations=1))
+    assert res.status == "unconverged" and "did not converge" in res.warnings[0]
+
+
+def test_robust_refinement_ignores_a_gross_error():
+    net, F, _ = corrupted(8, 6, seed=10)
+    F[2, 3] += 5.0
+    mask = np.isfinite(F)
+    R, S = to_gauge(net.receivers, net.transmitters)
+    out = robust_refine(F, mask, R + 0.01, S - 0.01, net.offsets + 0.01, loss="cauchy", scale=1e-3)
+    e = F - out.O - np.linalg.norm(out.R[:, None] - out.S[None], axis=2)
+    # Cauchy still pulls with weight ~ (scale / 5)^2: the fit moves by ~1e-8, not by the error's 5.
+    assert abs(e[2, 3] - 5.0) < 1e-5 and np.abs(np.delete(e.ravel(), 2 * 6 + 3)).max() < 1e-6
+
+
+def test_covariance_is_sigma2_inverse_normal_matrix_of_the_refine_jacobian():
+    net = random_network(7, 5, np.random.default_rng(12))
+    F = net.measurements()
+    R, S = to_gauge(net.receivers, net.transmitters)
+    rstd, tstd, ostd, deficient = estimate_covariance(F, np.isfinite(F), R, S, net.offsets, 0.1)
+    J = jacobian(pack(R, S, net.offsets), F)  # solvers.refine, same gauge and parameter order
+    var = np.diag(0.01 * np.linalg.inv(J.T @ J))
+    k0 = 1 + 2 * (7 - 2)
+    assert not deficient and rstd[0] == 0.0
+    assert np.isclose(rstd[1], np.sqrt(var[0]))
+    assert np.allclose(rstd[2:], np.sqrt(var[1:k0].reshape(-1, 2).sum(axis=1)))
+    assert np.allclose(tstd, np.sqrt(var[k0 : k0 + 10].reshape(-1, 2).sum(axis=1)))
+    assert np.allclose(ostd, np.sqrt(var[k0 + 10 :]))
+
+
+def test_json_ready_dictionary():
+    net, F, _ = corrupted(8, 6, seed=13, missing=0.1)
+    d = calibrate(F).to_dict()
+    for key in ("receivers", "transmitters", "offsets", "inliers", "rms", "warnings", "status", "receiver_std"):
+        assert key in d
+    assert len(d["inliers"]) == 8 and isinstance(d["inliers"][0][0], bool)
+
+
+def test_malformed_input_raises():
+    with pytest.raises(ValueError, match="2-D"):
+        calibrate(np.ones(5))
+    with pytest.raises(ValueError, match="infinite"):
+        calibrate(np.full((6, 4), np.inf))
+    with pytest.raises(ValueError, match="sigma"):
+        calibrate(np.ones((6, 4)), sigma=-1.0)
+
+
+def test_a_node_whose_measurements_are_mostly_gross_errors_is_reported_unplaced():
+    net, F, _ = corrupted(12, 10, seed=14, sigma=1e-3)
+    F[2, :8] += np.linspace(3.0, 10.0, 8)  # receiver 3 keeps 2 good measurements: not determined
+    res = calibrate(F, sigma=1e-3, seed=0)
+    assert res.ok and np.isnan(res.receivers[2]).all()
+    assert any(w.startswith("receiver 3: only") and "not placed" in w for w in res.warnings), res.warnings
+    keep = np.ones(12, bool)
+    keep[2] = False
+    X = np.vstack([res.receivers[keep], res.transmitters])
+    Y = np.vstack([net.receivers[keep], net.transmitters])
+    assert np.abs(align_rigid(X, Y).apply(X) - Y).max() < 0.02
+
+
+def test_corrupt_measurements_keeps_enough_per_node_and_marks_its_outliers():
+    from solvers.synthetic import corrupt_measurements
+
+    net = random_network(8, 5, np.random.default_rng(15))
+    F0 = net.measurements()
+    F, bad = corrupt_measurements(F0, np.random.default_rng(16), missing=0.3, outliers=0.1)
+    measured = np.isfinite(F)
+    assert measured.sum(axis=1).min() >= 3 and measured.sum(axis=0).min() >= 4
+    assert bad.sum() == round(0.1 * measured.sum()) and not (bad & ~measured).any()
+    assert np.array_equal(F[measured & ~bad], F0[measured & ~bad]) and (F[bad] != F0[bad]).all()
+    assert F[bad].min() >= np.nanmin(F0) and F[bad].max() <= np.nanmax(F0)
