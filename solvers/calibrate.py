@@ -91,7 +91,7 @@ class MinimalSolver:
         F_sub (m, n) -> list of candidate (receivers (m, 2), transmitters (n, 2), offsets (n,)),
         real and geometrically valid, any order.
     cost_ms : float
-        Typical time per call, used to try the cheapest solver first.
+        Relative cost per call (the pencil 1, a homotopy its number of paths), to try the cheapest first.
     """
 
     label: str
@@ -106,11 +106,16 @@ def _solver_via_api(m: int, n: int) -> Callable[[np.ndarray], list[Hypothesis]]:
 
     from . import api
 
+    choice = api.select_solver(m, n)
+
     def solve(F_sub: np.ndarray) -> list[Hypothesis]:
         out: list[Hypothesis] = []
         with np.errstate(all="ignore"):
             for x in api.solve_roots(F_sub):
-                cal = recover(F_sub, x[:3], x[3:5], x[5 : 5 + n])
+                if choice.label in api.POSITIONS:
+                    cal = api._from_positions(F_sub, choice, x)
+                else:
+                    cal = recover(F_sub, x[:3], x[3:5], x[5 : 5 + n])
                 if cal is not None:
                     out.append((cal.receivers, cal.transmitters, cal.offsets))
         return out
@@ -122,15 +127,18 @@ def _solver_via_api(m: int, n: int) -> Callable[[np.ndarray], list[Hypothesis]]:
 def available_solvers() -> tuple[MinimalSolver, ...]:
     """The minimal solvers hypotheses are drawn from, cheapest first.
 
-    Today: the 6r/4s curve pencil (~1 ms) and the 9r/3s homotopy (~90 ms) from solvers/generated,
-    through solvers.api. A new solver is one more entry (or point this at the solver registry).
+    Every generated solver of solvers.api (:data:`solvers.api.SOLVER_ORDER`): the 6r/4s curve pencil
+    (~1 ms) and the homotopy solvers, whose cost grows with their number of paths (9r/3s 75 ... 4r/5s
+    344; tables/solvers.csv).
     """
     from . import api
 
     solvers = []
-    for label, m, n, cost in (("6r4s", 6, 4, 1.0), ("9r3s", 9, 3, 90.0)):
+    for label, m, n in api._available():
+        module = api._module_for(label)
         if api.select_solver(m, n).label != label:  # the api must dispatch this block shape to it
             raise RuntimeError(f"solvers.api dispatches a {m}x{n} block to {api.select_solver(m, n).label}, not {label}")
+        cost = 1.0 if getattr(module, "METHOD", "") != "homotopy" else float(module.PATHS)
         solvers.append(MinimalSolver(label, m, n, _solver_via_api(m, n), cost))
     return tuple(sorted(solvers, key=lambda s: s.cost_ms))
 
