@@ -49,6 +49,19 @@ START_TOL = 1e-8
 START_DIGITS = 11
 
 
+#: Size of the detour (relative to |q0|) for paths that stall even with tight step control.
+DETOUR = 0.5
+
+
+def _detour_direction(P: int) -> np.ndarray:
+    """A fixed complex direction in parameter space (seeded: the solver stays deterministic)."""
+    rng = np.random.default_rng(12345)
+    return (rng.normal(size=P) + 1j * rng.normal(size=P)) / np.sqrt(2.0)
+
+
+#: Newton steps on the target system's directly evaluated coefficients after tracking.
+FINAL_NEWTON = 2
+
 #: Paths of an instance are retracked with tight step control only when at most this fraction failed.
 RETRACK_FRACTION = 0.2
 
@@ -210,9 +223,26 @@ class HomotopySolver:
                 redo[b] = False  # most paths fail: degenerate data (e.g. coincident nodes), not path jumping
         bi, ki = np.nonzero(redo)
         if len(bi):
-            xr, _ = self.track(self.q0[None], q, self.x0[ki], bi, tracker.TIGHT)
+            xr, st = self.track(self.q0[None], q, self.x0[ki], bi, tracker.TIGHT)
             x[bi, ki] = xr
-        return x
+            # still stalled: the segment passes too close to a singular point; go around it through a
+            # fixed complex midpoint (two segments), which changes the path but not its endpoint's root
+            again = st[:, 0] == 1
+            if again.any():
+                bj, kj = bi[again], ki[again]
+                qm = self.q0 + DETOUR * np.sqrt(np.mean(np.abs(self.q0) ** 2)) * _detour_direction(len(self.q0))
+                xm, _ = self.track(self.q0[None], qm[None], self.x0[kj], None, tracker.TIGHT)
+                good = np.all(np.isfinite(xm), axis=1)
+                if good.any():
+                    xe, _ = self.track(qm[None], q, xm[good], bj[good], tracker.TIGHT)
+                    x[bj[good], kj[good]] = xe
+        # polish on the target's own coefficients: the tracker's are interpolated along the segment,
+        # with rounding errors relative to their size on the whole circle |s| = 1
+        flat = x.reshape(B * K, -1)
+        ok = np.all(np.isfinite(flat), axis=1)
+        if ok.any():
+            flat[ok] = self.newton(flat[ok], q, steps=FINAL_NEWTON, inst=inst[ok])
+        return flat.reshape(B, K, -1)
 
 
 def _duplicated(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
