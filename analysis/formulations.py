@@ -446,6 +446,11 @@ def _symbols(prefix: str, m: int, n: int, first: int = 1) -> list[list[sympy.Sym
     return [[sympy.Symbol(f"{prefix}{i}_{j}") for j in range(1, n + 1)] for i in range(first, m + 1)]
 
 
+def definition_order(symbols) -> list:
+    """The factored data symbols of :func:`factored_equations` in dependency order: e, p (from f), then c."""
+    return sorted(symbols, key=lambda s: ("epc".index(s.name[0]), tuple(int(v) for v in s.name[1:].split("_"))))
+
+
 def factored_equations(formulation: Formulation) -> tuple[list[sympy.Poly], dict[sympy.Symbol, sympy.Expr]]:
     """The equations as polynomials in the unknowns whose coefficients are expressions in the factored
     data symbols, and the definitions of those symbols in terms of f<i>_<j>.

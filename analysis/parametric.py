@@ -380,15 +380,13 @@ def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSys
     drops them; without it the count is the paper's |B| as generated (Tables 2-3). The
     sampler draws consistent networks over GF(p) (analysis.formulations.sample_gf_instance).
     """
-    from .formulations import as_formulation, data_symbols, factored_equations, sample_gf_instance
+    from .formulations import as_formulation, data_symbols, definition_order, factored_equations, sample_gf_instance
 
     formulation = as_formulation(formulation)
     config = formulation.config
     polys, defs = factored_equations(formulation)
     params = tuple(s.name for row in data_symbols(config) for s in row)
-    # definitions in dependency order: e, p (from f), then c (from e, p)
-    order = sorted(defs, key=lambda s: ("epc".index(s.name[0]), tuple(int(v) for v in s.name[1:].split("_"))))
-    definitions = tuple((s.name, sympy.sstr(defs[s])) for s in order)
+    definitions = tuple((s.name, sympy.sstr(defs[s])) for s in definition_order(defs))
     powers = tuple(-2.0 if u.startswith("h") else 0.0 if u.startswith("b") else 1.0 for u in config.unknowns)
 
     def sampler(p: int, seed: int) -> GFSample:

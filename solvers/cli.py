@@ -431,7 +431,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
     target = args.target.replace("/", "") if ":" not in args.target and not os.path.exists(args.target) else args.target
     try:
-        if target in PENCILS and target not in gen.SOLVERS:
+        if target in PENCILS:
             stats = generate_pencil(target)
             print(f"{stats.formulation}: {stats.method}, {stats.degree} roots certified over GF(p), pencil "
                   f"{stats.size[0]} x {stats.size[1]}; {stats.seconds:.1f} s -> {stats.module}")

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import sympy
 
-from analysis.formulations import Formulation, factored_equations
+from analysis.formulations import Formulation, definition_order, factored_equations
 
 from .template import METHODS, SPEC_FORMAT, STAGED_FORMAT, TemplateOptions, build_spec, dump_spec, load_spec, spec_sha256
 
@@ -156,7 +156,7 @@ def _coefficient_body(spec: dict) -> str:
     for s in list(needed):
         if s.name.startswith("c"):
             needed |= defs[s].free_symbols & set(defs)
-    order = sorted(needed, key=lambda s: ("epc".index(s.name[0]), _index_key(s.name)))
+    order = definition_order(needed)
     for s in order:
         lines.append(f"    {s} = {_print(defs[s])}")
     tmp = sympy.numbered_symbols("t")
@@ -168,10 +168,6 @@ def _coefficient_body(spec: dict) -> str:
         lines.append(f"        {_print(expr)},")
     lines.append("    )")
     return "\n".join(lines)
-
-
-def _index_key(name: str) -> tuple[int, ...]:
-    return tuple(int(x) for x in name[1:].split("_"))
 
 
 _FLOAT_RE = re.compile(r"(?<![\w.])(\d+)/(\d+)")

@@ -111,8 +111,6 @@ class TemplateOptions:
     seed: seed of the GF(p) instance (printed in errors); the degree is confirmed on seed + 1.
     actions: staged templates only: candidate action variables (None: every unknown).
     chart_angle: curve-pencil only: the chart nu -> (lambda, mu) = nu (cos a, sin a) + (-sin a, cos a).
-    monodromy_seed: homotopy only: seed of the complex start instance and of the monodromy loops.
-    max_loops: homotopy only: monodromy loops before giving up.
     verify_trials: seeded real networks on which a built solver must find the known root.
     """
 
@@ -120,8 +118,6 @@ class TemplateOptions:
     seed: int = 1
     actions: tuple[str, ...] | None = None
     chart_angle: float = 0.3
-    monodromy_seed: int = 2
-    max_loops: int = 60
     verify_trials: int = 20
 
 

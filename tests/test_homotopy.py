@@ -199,8 +199,9 @@ def test_known_root_among_candidates(name):
 
     module = _module(name[:-5])
     m, n = module.CONFIG
+    positions = "positions" in module.SYSTEM
     errs = []
-    for seed in range(3):
+    for seed in range(3 if positions else 10):  # the 4r/5s solver takes seconds per instance
         if "positions" in module.SYSTEM:
             F, x = sample_real_positions(m, n, seed, module.SYSTEM.split("positions-")[1])
         else:
@@ -211,4 +212,8 @@ def test_known_root_among_candidates(name):
         errs.append(np.nanmin(np.linalg.norm(roots - x, axis=1)) / np.linalg.norm(x))
     # raw endpoints (no polishing); the degree-10 positions equations are ill-conditioned near
     # nearly collinear receivers (calibrate's refinement polishes on the range equations)
-    assert max(errs) < (1e-7 if "positions" in module.SYSTEM else 1e-9), errs
+    errs = np.array(errs)
+    if positions:
+        assert errs.max() < 1e-7, errs
+    else:  # as the earlier 9r3s tests: every seed to 1e-9, median below 1e-11
+        assert errs.max() < 1e-9 and np.median(np.log10(errs)) < -11, errs

@@ -260,13 +260,7 @@ def _duplicated(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
 
 
 def _has_duplicates(x: np.ndarray, tol: float = 1e-6) -> bool:
-    finite = x[np.all(np.isfinite(x), axis=1)]
-    if len(finite) < 2:
-        return False
-    d = np.linalg.norm(finite[:, None, :] - finite[None, :, :], axis=2)
-    d[np.arange(len(d)), np.arange(len(d))] = np.inf
-    scale = 1.0 + np.linalg.norm(finite, axis=1)
-    return bool(np.any(d < tol * scale[:, None]))
+    return bool(_duplicated(x, tol).any())
 
 
 # --------------------------------------------------------------------------------------------------

@@ -243,7 +243,7 @@ def _norm(v):
 
 
 @njit(cache=True, nogil=True)
-def _eval(x, s, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, W, sc, C, dC, pw, mon, dmon, H, J, Hs):
+def _eval(x, s, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, sc, C, dC, pw, mon, dmon, H, J, Hs):
     """Evaluate at (x, s), recomputing the term coefficients only when s changed (sc[0] caches s)."""
     if s != sc[0]:
         _coefficients_at(s, G, tdeg, C, dC)
@@ -260,7 +260,6 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
     predictor = int(opts[11])
     N = x0.shape[0]
     T = teq.shape[0]
-    W = 0
     sc = np.full(1, np.nan)
     C = np.empty(T, dtype=np.complex128)
     dC = np.empty(T, dtype=np.complex128)
@@ -289,7 +288,7 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
     steps = 0
     rejected = 0
     status = 1
-    _eval(x, s, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, W, sc, C, dC, pw, mon, dmon, H, J, Hs)
+    _eval(x, s, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, sc, C, dC, pw, mon, dmon, H, J, Hs)
     have_tangent = _lu(J, piv)
     if have_tangent:
         for i in range(N):
@@ -328,7 +327,7 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
                 c = h
                 for i in range(N):
                     xt[i] = x[i] + c * k3[i]
-            _eval(xt, s + c, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, W, sc, C, dC, pw, mon, dmon, H, J, Hs)
+            _eval(xt, s + c, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, sc, C, dC, pw, mon, dmon, H, J, Hs)
             if not _lu(J, piv):
                 ok = False
                 break
@@ -348,7 +347,7 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
             scale = 1.0 + _norm(xp)
             # Newton corrector; the last factorisation also gives the tangent at the new point
             for it in range(newton):
-                _eval(xp, s1, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, W, sc, C, dC, pw, mon, dmon, H, J, Hs)
+                _eval(xp, s1, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, sc, C, dC, pw, mon, dmon, H, J, Hs)
                 if not _lu(J, piv):
                     e = np.inf
                     break
@@ -401,7 +400,7 @@ def _track_one(x0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, opts, x, stats)
                 break
     if status == 0:
         for it in range(final_newton):
-            _eval(x, 1.0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, W, sc, C, dC, pw, mon, dmon, H, J, Hs)
+            _eval(x, 1.0, G, tdeg, teq, tmon, mptr, mvar, mexp, maxexp, sc, C, dC, pw, mon, dmon, H, J, Hs)
             if not _lu(J, piv):
                 break
             for i in range(N):
