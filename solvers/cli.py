@@ -429,7 +429,17 @@ def cmd_generate(args: argparse.Namespace) -> int:
     def progress(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
-    target = args.target.replace("/", "") if ":" not in args.target and not os.path.exists(args.target) else args.target
+    target = args.target
+    committed = ", ".join(sorted(set(gen.SOLVERS) | set(PENCILS)))
+    if ":" not in target and not os.path.exists(target):
+        label = target.replace("/", "")
+        if label in PENCILS or label in gen.SOLVERS:
+            target = label
+        elif re.fullmatch(r"\d+r/?\d+s", target):
+            raise UserError(f"no committed solver for {target}; committed: {committed}; otherwise give --out DIR "
+                            "and a formulation label such as 7r3s:B2,B3,C2-C7")
+        else:
+            raise UserError(f"{target}: no such file (and not a configuration or formulation label)")
     try:
         if target in PENCILS:
             stats = generate_pencil(target)
@@ -441,7 +451,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
             return 0
         if not args.out:
             raise UserError(f"{args.target}: give --out DIR for a formulation or a system file "
-                            f"(committed configurations: {', '.join(sorted(set(gen.SOLVERS) | set(PENCILS)))})")
+                            f"(committed configurations: {committed})")
         if os.path.exists(target):
             system = parse(_read_text(target), os.path.basename(target))
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
