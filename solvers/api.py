@@ -43,7 +43,7 @@ def _module_for(label: str):
 
 #: Solvers by expected cost (paths or pencil size, measured in tables/solvers.csv): the first one
 #: whose configuration fits inside the network (m >= m_s and n >= n_s) is used.
-SOLVER_ORDER = ("6r4s", "9r3s", "8r3s", "7r3s", "6r3s", "5r4s", "4r5s")
+SOLVER_ORDER = ("6r4s", "9r3s", "8r3s", "7r3s", "6r3s", "5r5s", "5r4s", "4r5s")
 
 #: Solvers whose unknowns are receiver coordinates (analysis.positions variant), not (H, b, o).
 POSITIONS = {"4r5s": "receivers-orbits"}

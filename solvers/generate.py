@@ -39,6 +39,7 @@ SOLVERS = {
     "7r3s": "7r3s:B2,B3,C2-C7",
     "6r3s": "6r3s:A,B2,B3,C2-C6",
     "5r4s": "5r4s:A,B2,B3,C2-C5,minors",
+    "5r5s": "5r5s:B2,B3,C2-C5,minors",
     "4r5s": "4r5s:positions-receivers-orbits",
 }
 
@@ -47,9 +48,7 @@ POSITIONS = {"4r5s": "receivers-orbits"}
 
 #: Over-determined formulations (dependent rank-2 minors): keep this many leading equations and replace
 #: the minors by random integer combinations (analysis.parametric.square); counted on one seed.
-#: (5r5s:B2,B3,C2-C5,minors squared this way has 710 roots, and monodromy reached only 709 of them in
-#: 48 and 78 loops: no 5r5s solver; 5r/5s networks use the 5r4s solver on a sub-block.)
-SQUARED = {"5r4s": 7}
+SQUARED = {"5r4s": 7, "5r5s": 6}
 
 
 def solver_system(label: str) -> ParametricSystem:

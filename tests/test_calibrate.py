@@ -36,7 +36,8 @@ def test_dispatch():
     assert select_solver(7, 3).label == "7r3s"
     assert select_solver(6, 3).label == "6r3s"
     assert select_solver(5, 4).label == "5r4s"
-    assert select_solver(5, 7).label == "5r4s"
+    assert select_solver(5, 5).label == "5r5s"
+    assert select_solver(5, 7).label == "5r5s"
     assert select_solver(4, 5).label == "4r5s"
     assert select_solver(4, 6).label == "4r5s"
 

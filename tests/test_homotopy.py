@@ -149,6 +149,34 @@ def test_monodromy_that_cannot_reach_the_count_is_an_error():
         hm.build(system, 5, options=hm.HomotopyOptions(seed=3, verify_trials=0, stall_loops=3))
 
 
+def test_excluded_locus_is_relative_to_the_condition_not_to_the_point():
+    # det H = h11 h22 - h12^2: zero when it cancels, not merely when H is small next to the offsets
+    system = parse("unknowns: h11, h12, h22, o\nparameters: a\nnonzero: h11*h22 - h12**2\nequations:\n"
+                   "h11 - a\nh12 - a\nh22 - a\no - a\n", "deth")
+    mask = hm._excluded(system, np.array([1.0]))
+    x = np.array([[1e-4, 5e-4, -2.6e-3, 130.0],   # genuine root of the 5r/5s start system's kind
+                  [1e-4, 2e-4, 4e-4, 130.0],      # det H = 0 exactly (h12^2 = h11 h22)
+                  [3.0, 1.0, 2.0, 0.0]])
+    assert mask(x).tolist() == [False, True, False]
+
+
+@pytest.mark.parametrize("index", [52, 65])
+def test_every_path_of_a_failing_instance_takes_the_same_detour(index):
+    # seeded networks 52 and 65 of bench_solvers (seed 0): the direct segment passes so close to a
+    # singular point that one path stalls even with tight steps while another takes its root; routes
+    # through a midpoint permute the endpoints, so all paths of the instance must take the same one
+    from solvers.synthetic import random_network, true_root
+
+    module = importlib.import_module("solvers.generated.tdoa_6r3s_homotopy180")
+    rng = np.random.default_rng(0)
+    net = [random_network(6, 3, rng) for _ in range(index + 1)][index]
+    H, b, o = true_root(net)
+    x = np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
+    roots = module.solve(net.measurements())
+    assert np.all(np.isfinite(roots)) and not hm._has_duplicates(roots)
+    assert np.min(np.linalg.norm(roots - x, axis=1)) / np.linalg.norm(x) < 1e-9
+
+
 def test_non_square_system_is_refused():
     system = parse("unknowns: x, y\nparameters: a\nequations:\nx - a\n", "thin")
     with pytest.raises(hm.HomotopyError, match="square"):

@@ -53,10 +53,14 @@ START_DIGITS = 11
 DETOUR = 0.5
 
 
-def _detour_direction(P: int) -> np.ndarray:
-    """A fixed complex direction in parameter space (seeded: the solver stays deterministic)."""
-    rng = np.random.default_rng(12345)
+def _detour_direction(P: int, k: int = 0) -> np.ndarray:
+    """The k-th fixed complex direction in parameter space (seeded: the solver stays deterministic)."""
+    rng = np.random.default_rng(12345 + k)
     return (rng.normal(size=P) + 1j * rng.normal(size=P)) / np.sqrt(2.0)
+
+
+#: Detours (different fixed midpoints) tried in turn for paths that still stall or coincide.
+DETOURS = 6
 
 
 #: Newton steps on the target system's directly evaluated coefficients after tracking.
@@ -208,37 +212,65 @@ class HomotopySolver:
         G = self.segment(q0, q1)
         return tracker.track(self.structure, G, x0, inst, options or self.options)
 
+    def _route(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Track the complete root set xa (K, N) of qa to every target q (B, P) along straight segments.
+
+        Paths that stall or end on the same root as another path (path jumping) are retracked with
+        tight step control on the same segments (when few of an instance's paths failed: many
+        failures mean degenerate data, e.g. coincident nodes). Returns endpoints (B, K, N) and the
+        mask of instances whose endpoints are complete (all finite and distinct).
+        """
+        B, K = len(q), len(xa)
+        inst = np.repeat(np.arange(B), K)
+        x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), inst)
+        x = x.reshape(B, K, -1)
+        redo = stats[:, 0].reshape(B, K) == 1
+        for b in range(B):
+            redo[b] |= _duplicated(x[b])
+            if redo[b].sum() > max(8, RETRACK_FRACTION * K):
+                redo[b] = False  # most paths fail: degenerate data, not path jumping
+        bi, ki = np.nonzero(redo)
+        if len(bi):
+            xr, _ = self.track(qa[None], q, xa[ki], bi, tracker.TIGHT)
+            x[bi, ki] = xr
+        complete = np.array([np.all(np.isfinite(x[b])) and not _duplicated(x[b]).any() for b in range(B)])
+        return x, complete
+
+    def _midpoint(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The k-th fixed complex detour point and its complete root set (cached), or None."""
+        cache = self.__dict__.setdefault("_midpoints", {})
+        if k not in cache:
+            qm = self.q0 + DETOUR * np.sqrt(np.mean(np.abs(self.q0) ** 2)) * _detour_direction(len(self.q0), k)
+            xm, complete = self._route(self.q0, self.x0, qm[None])
+            cache[k] = (qm, xm[0]) if complete[0] else None
+        return cache[k]
+
     def roots(self, q: np.ndarray) -> np.ndarray:
         """Candidate roots (B, K, N) for target parameters q (B, P); NaN rows for lost paths."""
         q = np.atleast_2d(np.asarray(q, dtype=complex))
         B, K = len(q), self.n_paths
-        inst = np.repeat(np.arange(B), K)
-        x, stats = self.track(self.q0[None], q, np.tile(self.x0, (B, 1)), inst)
-        x = x.reshape(B, K, -1)
-        status = stats[:, 0].reshape(B, K)
-        redo = (status == 1)
-        for b in range(B):
-            redo[b] |= _duplicated(x[b])
-            if redo[b].sum() > max(8, RETRACK_FRACTION * K):
-                redo[b] = False  # most paths fail: degenerate data (e.g. coincident nodes), not path jumping
-        bi, ki = np.nonzero(redo)
-        if len(bi):
-            xr, st = self.track(self.q0[None], q, self.x0[ki], bi, tracker.TIGHT)
-            x[bi, ki] = xr
-            # still stalled: the segment passes too close to a singular point; go around it through a
-            # fixed complex midpoint (two segments), which changes the path but not its endpoint's root
-            again = st[:, 0] == 1
-            if again.any():
-                bj, kj = bi[again], ki[again]
-                qm = self.q0 + DETOUR * np.sqrt(np.mean(np.abs(self.q0) ** 2)) * _detour_direction(len(self.q0))
-                xm, _ = self.track(self.q0[None], qm[None], self.x0[kj], None, tracker.TIGHT)
-                good = np.all(np.isfinite(xm), axis=1)
-                if good.any():
-                    xe, _ = self.track(qm[None], q, xm[good], bj[good], tracker.TIGHT)
-                    x[bj[good], kj[good]] = xe
+        x, complete = self._route(self.q0, self.x0, q)
+        # an instance whose segment passes too close to a singular point even for tight steps: track
+        # every root along another route, through a fixed complex midpoint (two segments). All paths
+        # of the instance take the same route: a different route permutes the endpoints (monodromy),
+        # so endpoints of different routes must not be mixed.
+        bad = np.flatnonzero(~complete)
+        degenerate = np.array([np.sum(~np.all(np.isfinite(x[b]), axis=1) | _duplicated(x[b])) > max(8, RETRACK_FRACTION * K)
+                               for b in bad], dtype=bool)
+        bad = bad[~degenerate]
+        for k in range(DETOURS):
+            if not len(bad):
+                break
+            mid = self._midpoint(k)
+            if mid is None:
+                continue
+            xk, ok = self._route(*mid, q[bad])
+            x[bad[ok]] = xk[ok]
+            bad = bad[~ok]
         # polish on the target's own coefficients: the tracker's are interpolated along the segment,
         # with rounding errors relative to their size on the whole circle |s| = 1
         flat = x.reshape(B * K, -1)
+        inst = np.repeat(np.arange(B), K)
         ok = np.all(np.isfinite(flat), axis=1)
         if ok.any():
             flat[ok] = self.newton(flat[ok], q, steps=FINAL_NEWTON, inst=inst[ok])
@@ -349,20 +381,29 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
 
 
 def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
-    """Mask of points where a non-vanishing condition is (numerically) zero at parameters q0, or None."""
+    """Mask of points where a non-vanishing condition is (numerically) zero at parameters q0, or None.
+
+    A condition counts as zero when its value is below 1e-8 times the sum of its terms' moduli (it
+    cancels to rounding level). A threshold relative to |x| would also exclude genuine roots whose
+    condition is small only because its variables are (5r/5s: det H ~ 1e-8 with H ~ 1e-4 and offsets
+    ~ 100 at a root that the GF(p) saturation keeps).
+    """
     if not system.nonzero:
         return None
     import sympy
 
     args = system.x_symbols + system.q_symbols
-    funcs = [sympy.lambdify(args, g, "numpy") for g in system.nonzero_exprs]
-    degs = [sympy.Poly(g, *system.x_symbols).total_degree() for g in system.nonzero_exprs]
+    conditions = []
+    for g in system.nonzero_exprs:
+        terms = sympy.Add.make_args(sympy.expand(g))
+        conditions.append([sympy.lambdify(args, t, "numpy") for t in terms])
 
     def mask(x: np.ndarray) -> np.ndarray:
-        scale = 1.0 + np.linalg.norm(x, axis=1)
         out = np.zeros(len(x), dtype=bool)
-        for f, d in zip(funcs, degs):
-            out |= np.abs(f(*x.T, *q0)) < 1e-8 * scale ** d
+        for terms in conditions:
+            values = [np.broadcast_to(t(*x.T, *q0), (len(x),)) for t in terms]
+            size = np.sum([np.abs(v) for v in values], axis=0)
+            out |= np.abs(np.sum(values, axis=0)) <= 1e-8 * size
         return out
 
     return mask
