@@ -33,7 +33,6 @@ measurements (the local minimum a perfect initialisation reaches; ~1e-15 without
 noiseless threshold is ``failure_threshold`` = 1e-6). Medians are taken over all trials; a trial
 without an estimate counts as an infinite error.
 
-
 Reference: paper Sec. 4.1 (clean data, Table 4, Fig. 1) and Sec. 4.2 (noisy data, Fig. 2).
 """
 from __future__ import annotations
