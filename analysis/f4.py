@@ -8,7 +8,7 @@ Every step works on arrays: the basis elements live in a term pool of packed mon
 (:class:`analysis.ring.MonomialCodes`), so symbolic preprocessing, matrix assembly and the pair update
 are numpy operations over all rows, monomials and pairs of a round at once. :func:`select_pairs`,
 :func:`_symbolic_preprocessing`, :func:`split_pivots` and :func:`_build_matrix` give the same steps on
-Python rows and keys, for callers that record an F4 run step by step (``solvers.template``).
+Python rows and keys, for callers that record an F4 run step by step (``solvers.methods.staged``).
 
 Reference: J.-C. Faugère, "A new efficient algorithm for computing Gröbner bases (F4)", JPAA 1999;
 R. Gebauer and H. M. Möller, "On an installation of Buchberger's algorithm", JSC 1988.
@@ -503,7 +503,7 @@ def _pair_rows(
 
 
 # ----------------------------------------------------------------------------------------------
-# the F4 steps on Python rows, for callers that record them (solvers.template)
+# the F4 steps on Python rows, for callers that record them (solvers.methods.staged)
 # ----------------------------------------------------------------------------------------------
 def select_pairs(state: _State) -> tuple[int, list, list[tuple[int, int]]]:
     """Pop the pairs of minimal lcm degree; return (degree, pairs, sorted rows (multiplier key, index))."""

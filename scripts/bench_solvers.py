@@ -42,7 +42,7 @@ from solvers import generate as gen  # noqa: E402
 from solvers.api import SOLVER_ORDER, _module_for  # noqa: E402
 from solvers.codegen import SOLVERS  # noqa: E402
 from solvers.synthetic import random_network, true_root  # noqa: E402
-from solvers.template import build_spec  # noqa: E402
+from solvers.methods.spec import build_spec  # noqa: E402
 
 FAIL_TOL = 1e-6
 #: Rounds of single-solve timing; the best round's median is reported (as bench_engine's best of 3).

@@ -2,7 +2,8 @@
 
 The module text is one template with named holes (:data:`MODULE_TEMPLATE`) filled by small emit
 functions: the header (do-not-edit notice, spec file name and sha256), constants, and the coefficient
-function. The numerics live in :mod:`solvers.runtime`; the generated file stays small.
+function. The numerics live in :mod:`solvers.runtime` and the method's module in :mod:`solvers.methods`;
+the generated file stays small.
 
 Coefficients are emitted in factored form: the equations are rebuilt symbolically (:func:`factored_equations`)
 in terms of the differences and sums of measurements against receiver 1, e_ij = f_ij - f_1j and
@@ -27,7 +28,7 @@ import sympy
 
 from analysis.formulations import Formulation, definition_order, factored_equations
 
-from .template import METHODS, SPEC_FORMAT, STAGED_FORMAT, TemplateOptions, build_spec, dump_spec, load_spec, spec_sha256
+from .methods.spec import METHODS, SPEC_FORMAT, STAGED_FORMAT, TemplateOptions, build_spec, dump_spec, load_spec, spec_sha256
 
 __all__ = ["GENERATED_DIR", "MODULE_TEMPLATE", "POLISH_ITERATIONS", "SOLVERS", "GenerationStats", "emit_all",
            "emit_module", "factored_equations", "generate", "generated_specs", "module_name", "scale_powers",
@@ -268,7 +269,7 @@ def generate(config_label: str, options: TemplateOptions = TemplateOptions(), di
     """Build the spec of a configuration's solver and write its spec and module.
 
     config_label: ``"6r4s"`` or ``"9r3s"`` (see :data:`SOLVERS`); method: one of
-    :data:`solvers.template.METHODS` (default: the formulation's, see :func:`solvers.template.solver_method`).
+    :data:`solvers.methods.spec.METHODS` (default: the formulation's, see :func:`solvers.methods.spec.solver_method`).
     Older files of the same configuration are removed.
     """
     if config_label not in SOLVERS:

@@ -25,7 +25,7 @@ import numpy as np
 from analysis.parametric import ParametricSystem, from_formulation, from_positions, square
 
 from .methods import homotopy
-from .template import dump_spec, spec_sha256
+from .methods.spec import dump_spec, spec_sha256
 
 __all__ = ["GENERATED_DIR", "SOLVERS", "Generated", "emit_homotopy_module", "generate", "generate_system",
            "homotopy_module_name"]

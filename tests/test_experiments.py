@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from solvers import experiments as ex
+from solvers.experiments import batches
 from solvers.recovery import Calibration
 from solvers.refine import random_initial
 from solvers.synthetic import random_network
@@ -25,7 +26,7 @@ REFERENCE_CSV = Path("/work/shared/reference/paper_accuracy.csv")
 @pytest.fixture(autouse=True)
 def _private_cache(tmp_path, monkeypatch):
     """Never read or pollute the repository's cache from the tests."""
-    monkeypatch.setattr(ex, "CACHE_DIR", tmp_path / "cache")
+    monkeypatch.setattr(batches, "CACHE_DIR", tmp_path / "cache")
 
 
 def _seeded_network(config, seed, sigma=0.0):
@@ -171,7 +172,7 @@ def test_cache_hit_on_rerun(monkeypatch, tmp_path):
     def no_work(task):
         raise AssertionError("cache miss: trials were recomputed")
 
-    monkeypatch.setattr(ex, "_run_chunk", no_work)
+    monkeypatch.setattr(batches, "_run_chunk", no_work)
     second = ex.run_trials("6r4s", "random", 3, sigma=1e-3, seed=11, jobs=1, progress=False)
     pd.testing.assert_frame_equal(first, second)
     assert first.attrs["batch"]["status"] == "computed" and second.attrs["batch"]["status"] == "cache hit"

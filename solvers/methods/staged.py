@@ -1,17 +1,11 @@
-"""Solver construction over GF(p): the plain-text specs from which numeric solvers are generated.
+"""Action-matrix elimination template (``staged``, the fallback): offline build and online replay.
 
-This module owns step 1 of solver generation: on consistent random instances over GF(p) it fixes the
-number of roots of a formulation (the size of the standard monomial basis of its grevlex Gröbner basis,
-:func:`gf_degree`) and builds a JSON spec that :mod:`solvers.codegen` turns into a module and
-:mod:`solvers.runtime` executes. Three kinds of spec:
-
-* ``curve-pencil`` (6r4s: B2, C2-C6, the ten 3 x 3 minors): the minors make the offsets a rational
-  curve, parametrised linearly by the kernel of [c | alpha | beta]; on it the roots are the eigenvalues
-  of an 11 x 11 quartic matrix polynomial (:class:`solvers.runtime.CurvePencilSolver`). The spec holds
-  the chart and the number of spurious eigenvalues to drop, both checked here on seeded real data.
-* ``homotopy`` (9r3s: C2-C9 and every other square formulation): built by :mod:`solvers.generate`
-  with the general parameter homotopy of :mod:`solvers.methods.homotopy`.
-* ``staged`` (fallback, :func:`build_template`): the trace of F4 over GF(p) replayed in floating point.
+Offline (:func:`build`): F4 over GF(p) is run once with every step recorded (pair selection,
+symbolic preprocessing, pivots), pruned to the steps the action matrix of the chosen action
+variable needs, and checked exactly against the Gröbner basis's normal forms; the result is a
+``staged`` spec. Online (:class:`StagedSolver`): the recorded steps replayed in floating point on
+the data's coefficients, then the eigenvectors of the action matrix. :func:`macaulay_reducible_rank`
+is the diagnostic behind the choice of the other methods:
 
 Why not one elimination template (Kukelova et al. 2008; Larsson et al. 2017). The C equations are
 linear in (H, b) with offset-dependent coefficients, so their top-degree forms vanish on the whole
@@ -37,7 +31,7 @@ tables/template_evidence_9r3s.csv, via :mod:`solvers.feasibility`; action o1):
 * expanding the F4 trace into multiples of the input equations (needed(g) = union of t' needed(g'))
   gives 777760 rows for 6r4s; tracking exact cofactors instead still gives 176222 rows, of degree up
   to 11;
-* the staged replay (:func:`build_template`) is exact over GF(p), but in floating point its ~10
+* the staged replay (:func:`build`) is exact over GF(p), but in floating point its ~10
   chained eliminations, with pivots fixed by the trace, multiply the coefficients' rounding errors by
   more than 1e10; even replayed in 3000-bit arithmetic on exact rational coefficients, the grevlex
   action matrix of 6r4s has eigenvector condition numbers up to 5e10, and on a 9r3s instance the
@@ -48,11 +42,9 @@ fallback; the generated solvers use the other two kinds.
 """
 from __future__ import annotations
 
-import hashlib
 import itertools
-import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -71,74 +63,13 @@ from analysis.linalg import get_backend
 from analysis.quotient import normal_form, standard_monomials
 from analysis.ring import Poly, Ring
 
-__all__ = [
-    "SPEC_FORMAT",
-    "STAGED_FORMAT",
-    "METHODS",
-    "TemplateError",
-    "TemplateOptions",
-    "TemplateResult",
-    "build_pencil_spec",
-    "build_spec",
-    "build_template",
-    "dump_spec",
-    "gf_degree",
-    "load_spec",
-    "macaulay_reducible_rank",
-    "monodromy",
-    "solver_method",
-    "spec_sha256",
-    "term_structure",
-]
+from .spec import STAGED_FORMAT, TemplateError, TemplateOptions, TemplateResult, spec_header
 
-#: Format of the curve-pencil and homotopy specs.
-SPEC_FORMAT = "tdoa-solver/2"
-#: Format of the staged F4-trace templates (fallback).
-STAGED_FORMAT = "tdoa-staged-template/1"
-#: Solver construction methods.
-METHODS = ("curve-pencil", "homotopy", "staged")
-
-
-class TemplateError(RuntimeError):
-    """The template could not be built or failed its check on the GF(p) instance."""
-
-
-@dataclass(frozen=True)
-class TemplateOptions:
-    """Options of solver construction.
-
-    prime: characteristic of the GF(p) instances (< 2^16 so that every product is exact in float64).
-    seed: seed of the GF(p) instance (printed in errors); the degree is confirmed on seed + 1.
-    actions: staged templates only: candidate action variables (None: every unknown).
-    chart_angle: curve-pencil only: the chart nu -> (lambda, mu) = nu (cos a, sin a) + (-sin a, cos a).
-    verify_trials: seeded real networks on which a built solver must find the known root.
-    """
-
-    prime: int = 65521
-    seed: int = 1
-    actions: tuple[str, ...] | None = None
-    chart_angle: float = 0.3
-    verify_trials: int = 20
-
-
-@dataclass(frozen=True)
-class TemplateResult:
-    """A built template: the JSON-ready spec and generation statistics."""
-
-    spec: dict
-    seconds: float
-    candidates: tuple[dict, ...] = field(default=())
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """Size of the numeric core: final template (staged), companion pencil, or (paths, unknowns)."""
-        if self.spec.get("kind", "staged") == "staged":
-            return tuple(self.spec["final"]["shape"])
-        return tuple(self.spec["size"])
+__all__ = ["StagedSolver", "build", "macaulay_reducible_rank"]
 
 
 # --------------------------------------------------------------------------------------------------
-# GF(p) run with recording
+# offline: GF(p) run with recording
 # --------------------------------------------------------------------------------------------------
 
 
@@ -316,7 +247,7 @@ def _template_cost(cand: dict) -> int:
     return cost
 
 
-def build_template(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
+def build(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
     """Build the staged elimination template of a formulation (see the module docstring).
 
     Parameters
@@ -399,15 +330,7 @@ def _to_spec(formulation: Formulation, ring: Ring, options: TemplateOptions, bas
 
     final = cand["final"]
     spec = {
-        "format": STAGED_FORMAT,
-        "kind": "staged",
-        "formulation": formulation.label,
-        "equations": list(formulation.equations),
-        "unknowns": list(formulation.unknowns),
-        "order": "grevlex",
-        "prime": options.prime,
-        "seed": options.seed,
-        "degree": len(basis),
+        **spec_header(formulation, options, "staged", len(basis), STAGED_FORMAT),
         "action": cand["action"],
         "monomials": [list(ring.exps(k)) for k in table],
         "basis": [idx[k] for k in basis],
@@ -425,203 +348,6 @@ def _to_spec(formulation: Formulation, ring: Ring, options: TemplateOptions, bas
         },
     }
     return spec
-
-
-# --------------------------------------------------------------------------------------------------
-# shared pieces of the curve-pencil and homotopy specs
-# --------------------------------------------------------------------------------------------------
-
-
-def gf_degree(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> int:
-    """Number of roots (with multiplicity) over GF(p): |standard monomial basis| of the grevlex basis.
-
-    Computed on the instances with seeds ``options.seed`` and ``options.seed + 1``; raises
-    :class:`TemplateError` if they disagree or if the known root of an instance is not a root.
-    """
-    formulation = as_formulation(formulation)
-    p = options.prime
-    ring = Ring(formulation.unknowns, p, "grevlex")
-    degrees = []
-    for seed in (options.seed, options.seed + 1):
-        instance = sample_gf_instance(formulation.config, p, seed)
-        polys = [ring.from_terms(e) for e in gf_equations(formulation, instance)]
-        if any(f.evaluate(instance.root) for f in polys):
-            raise TemplateError(f"the known root of the GF({p}) instance (seed {seed}) is not a root")
-        degrees.append(len(standard_monomials(groebner(polys, F4Options()))))
-    if degrees[0] != degrees[1]:
-        raise TemplateError(f"GF({p}) instances with seeds {options.seed}, {options.seed + 1} give "
-                            f"different degrees {degrees}")
-    return degrees[0]
-
-
-def term_structure(formulation: Formulation | str) -> tuple[list[list[int]], list[list[int]]]:
-    """(monomial table, per equation the indices of its terms) of a formulation's symbolic equations.
-
-    Terms are the exponents with a nonzero coefficient polynomial in the data, in decreasing grevlex
-    order; the table lists the monomials by (degree, grevlex). This is the layout of the coefficient
-    vector emitted by :mod:`solvers.codegen` (used for polishing and residuals).
-    """
-    formulation = as_formulation(formulation)
-    ring = Ring(formulation.unknowns, 65521, "grevlex")
-    symbolic = coefficient_expressions(formulation, "ring")
-    per_eq = [sorted((e for e, c in eq.items() if c), key=ring.key, reverse=True) for eq in symbolic]
-    table = sorted({e for eq in per_eq for e in eq}, key=lambda e: (sum(e), ring.key(e)))
-    idx = {e: i for i, e in enumerate(table)}
-    return [list(e) for e in table], [[idx[e] for e in eq] for eq in per_eq]
-
-
-def solver_method(formulation: Formulation | str) -> str:
-    """The construction used for a formulation: ``curve-pencil``, ``homotopy`` or ``staged``."""
-    formulation = as_formulation(formulation)
-    config, eqs = formulation.config, tuple(formulation.equations)
-    c_eqs = tuple(f"C{i}" for i in range(2, config.m + 1))
-    minors = tuple(e for e in eqs if e.startswith("M"))
-    if (config.m == 6 and config.n == 4 and set(eqs) == {"B2", *c_eqs, *minors} and len(minors) == 10):
-        return "curve-pencil"
-    if config.n == 3 and all(e.startswith("C") for e in eqs) and len(eqs) == len(formulation.unknowns):
-        return "homotopy"
-    return "staged"
-
-
-def build_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions(),
-               method: str | None = None) -> TemplateResult:
-    """Build the spec of a formulation's solver by ``method`` (default :func:`solver_method`)."""
-    formulation = as_formulation(formulation)
-    method = method or solver_method(formulation)
-    if method == "curve-pencil":
-        return build_pencil_spec(formulation, options)
-    if method == "homotopy":
-        raise TemplateError(f"{formulation.label}: homotopy solvers are built by solvers.generate "
-                            "(tdoa-workbench generate)")
-    if method == "staged":
-        return build_template(formulation, options)
-    raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
-
-
-def _common_spec(formulation: Formulation, options: TemplateOptions, kind: str, degree: int) -> dict:
-    monomials, inputs = term_structure(formulation)
-    return {
-        "format": SPEC_FORMAT,
-        "kind": kind,
-        "formulation": formulation.label,
-        "equations": list(formulation.equations),
-        "unknowns": list(formulation.unknowns),
-        "order": "grevlex",
-        "prime": options.prime,
-        "seed": options.seed,
-        "degree": degree,
-        "monomials": monomials,
-        "inputs": inputs,
-    }
-
-
-def _real_trials(formulation: Formulation, trials: int) -> tuple[np.ndarray, np.ndarray]:
-    """Seeded noiseless networks (seeds 0..trials-1): normalised data and the root in that frame."""
-    from .runtime import data_scale
-    from .synthetic import random_network, true_root
-
-    m, n = formulation.config.m, formulation.config.n
-    F, X = [], []
-    for seed in range(trials):
-        net = random_network(m, n, np.random.default_rng(seed))
-        H, b, o = true_root(net)
-        F.append(net.measurements())
-        X.append(np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o]))
-    F, X = np.array(F), np.array(X)
-    s = data_scale(F)
-    powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
-    return F / s[:, None, None], X / s[:, None] ** powers
-
-
-def _found(roots: np.ndarray, truth: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    err = np.nanmin(np.linalg.norm(roots - truth[:, None, :], axis=2), axis=1) / np.linalg.norm(truth, axis=1)
-    return err < tol
-
-
-# --------------------------------------------------------------------------------------------------
-# curve-pencil (6r4s)
-# --------------------------------------------------------------------------------------------------
-
-
-def build_pencil_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions()) -> TemplateResult:
-    """Spec of the rank-2-curve pencil solver (:class:`solvers.runtime.CurvePencilSolver`).
-
-    Checks: the GF(p) degree is 22; on ``options.verify_trials`` seeded real networks the
-    column-degree pencil (37 x 37, :data:`solvers.runtime.PENCIL_COLUMN_DEGREES`) has exactly 7
-    eigenvalues with beta ~ 0 (a gap of three orders of magnitude to the next) and eight with sigma ~ 0
-    (o_1 = infinity), and the remaining 22 contain the known root.
-    """
-    t0 = time.perf_counter()
-    formulation = as_formulation(formulation)
-    if solver_method(formulation) != "curve-pencil":
-        raise TemplateError(f"{formulation.label}: the curve pencil needs 6r4s with B2, C2-C6 and the 10 minors")
-    from scipy.linalg import eigvals
-
-    from .runtime import PENCIL_COLUMN_DEGREES, CurvePencilSolver
-
-    degree = gf_degree(formulation, options)
-    size = sum(PENCIL_COLUMN_DEGREES)
-    det_degree = degree + 8  # sigma^8: the C rows degenerate where o_1 = infinity
-    spec = _common_spec(formulation, options, "curve-pencil", degree)
-    spec["size"] = [size, size]
-    spec["pencil"] = {"chart_angle": options.chart_angle, "matrix": [11, 11], "polynomial_degree": 4,
-                      "linearisation": "column-degree", "column_degrees": list(PENCIL_COLUMN_DEGREES),
-                      "drop_infinite": size - det_degree, "drop_sigma": det_degree - degree}
-    solver = CurvePencilSolver(spec)
-    F, X = _real_trials(formulation, options.verify_trials)
-    K, _ = solver.matrix_polynomial(F)
-    for i in range(len(F)):
-        tops = K[i][list(PENCIL_COLUMN_DEGREES), :, range(11)]
-        if np.min(np.max(np.abs(tops), axis=1)) < 1e-8 * np.max(np.abs(K[i])):
-            raise TemplateError(f"trial {i}: a column of K is below its stated degree {PENCIL_COLUMN_DEGREES}")
-        al, be = eigvals(*solver.linearisation.pencil(K[i]), homogeneous_eigvals=True)
-        ratio = np.sort(np.abs(be) / np.maximum(np.abs(al), 1e-300))
-        k = spec["pencil"]["drop_infinite"]
-        # Jordan chains at infinity: those eigenvalues come out near sqrt(eps), hence a gap of 1e3
-        if not (ratio[k - 1] < 1e-3 * ratio[k]):
-            raise TemplateError(f"trial {i}: expected {k} infinite eigenvalues, beta/alpha ratios {ratio[:k + 2]}")
-    found = _found(solver.roots(F), X)
-    if found.mean() < 0.9:
-        raise TemplateError(f"the pencil finds the known root in only {found.sum()}/{len(found)} seeded networks")
-    return TemplateResult(spec, time.perf_counter() - t0, ({"method": "curve-pencil", "degree": degree,
-                                                            "verified": int(found.sum()), "trials": len(found)},))
-
-
-# --------------------------------------------------------------------------------------------------
-# JSON I/O (byte-stable)
-# --------------------------------------------------------------------------------------------------
-
-
-def dump_spec(spec: dict) -> str:
-    """Byte-stable JSON text: one top-level key per line, inner lists compact."""
-    lines = ["{"]
-    keys = list(spec)
-    for i, k in enumerate(keys):
-        sep = "," if i < len(keys) - 1 else ""
-        value = spec[k]
-        if isinstance(value, list) and value and isinstance(value[0], (list, dict)):
-            lines.append(f"  {json.dumps(k)}: [")
-            for j, item in enumerate(value):
-                s2 = "," if j < len(value) - 1 else ""
-                lines.append(f"    {json.dumps(item, separators=(',', ':'))}{s2}")
-            lines.append(f"  ]{sep}")
-        else:
-            lines.append(f"  {json.dumps(k)}: {json.dumps(value, separators=(',', ':'))}{sep}")
-    lines.append("}")
-    return "\n".join(lines) + "\n"
-
-
-def load_spec(text: str) -> dict:
-    """Parse a spec; raises :class:`TemplateError` for an unknown format."""
-    spec = json.loads(text)
-    if spec.get("format") not in (SPEC_FORMAT, STAGED_FORMAT):
-        raise TemplateError(f"unknown template spec format {spec.get('format')!r}; "
-                            f"expected {SPEC_FORMAT} or {STAGED_FORMAT}")
-    return spec
-
-
-def spec_sha256(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
 # --------------------------------------------------------------------------------------------------
@@ -713,3 +439,171 @@ def _sparse_eliminate(rows: list[dict], n_exc: int, p: int) -> list[dict]:
                     colrows[cc].discard(i)
         colrows[c] = set()
     return [rows[i] for i in sorted(alive) if rows[i]]
+
+
+# --------------------------------------------------------------------------------------------------
+# online: numeric replay of the staged template
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Step:
+    nrows: int
+    ncols: int
+    fill_row: np.ndarray
+    fill_col: np.ndarray
+    fill_src: np.ndarray
+    pivots: np.ndarray
+    reduce: np.ndarray
+    pivot_cols: np.ndarray
+    free_cols: np.ndarray
+    lead_in_free: np.ndarray
+    new_row: np.ndarray
+    new_col: np.ndarray
+    new_dst: np.ndarray
+
+
+class StagedSolver:
+    """Numeric replay of a staged elimination template spec (see :func:`build`).
+
+    Kept as the fallback: in floating point the ~10 chained eliminations with pivots fixed by the
+    GF(p) trace amplify the rounding of the coefficients without bound (tables/solvers.csv history).
+    """
+
+    def __init__(self, spec: dict):
+        self.spec = spec
+        self.unknowns = tuple(spec["unknowns"])
+        self.nvars = len(self.unknowns)
+        mons = [tuple(m) for m in spec["monomials"]]
+        self._mons = mons
+        polys = spec["polys"]
+        lengths = np.array([len(s) for s in polys], dtype=np.int64)
+        self._offsets = np.concatenate([[0], np.cumsum(lengths)])
+        self.table_size = int(self._offsets[-1])
+        self.n_inputs = len(spec["inputs"])
+        self.n_input_coeffs = int(self._offsets[self.n_inputs])
+
+        def add(a: int, b: int) -> tuple:
+            return tuple(x + y for x, y in zip(mons[a], mons[b]))
+
+        def fill(rows, columns):
+            pos = {mons[c]: j for j, c in enumerate(columns)}
+            fr, fc, fs = [], [], []
+            for r, (pid, shift) in enumerate(rows):
+                off = int(self._offsets[pid])
+                for k, m in enumerate(polys[pid]):
+                    fr.append(r)
+                    fc.append(pos[add(m, shift)])
+                    fs.append(off + k)
+            return (np.array(fr, dtype=np.intp), np.array(fc, dtype=np.intp), np.array(fs, dtype=np.intp))
+
+        self.steps: list[_Step] = []
+        for st in spec["steps"]:
+            fr, fc, fs = fill(st["rows"], st["columns"])
+            ncols = len(st["columns"])
+            pivots = np.array(st["pivots"], dtype=np.intp)
+            pcols = (np.array([fc[np.flatnonzero(fr == r)].min() for r in pivots], dtype=np.intp)
+                     if len(pivots) else np.zeros(0, np.intp))
+            free = np.setdiff1d(np.arange(ncols), pcols)
+            free_pos = {int(c): i for i, c in enumerate(free)}
+            leads = [free_pos[nw[1]] for nw in st["new"]]
+            nr, nc, nd = [], [], []
+            for hh, (pid, _, support) in enumerate(st["new"]):
+                off = int(self._offsets[pid])
+                for k, c in enumerate(support):
+                    nr.append(hh)
+                    nc.append(free_pos[c])
+                    nd.append(off + k)
+            self.steps.append(_Step(len(st["rows"]), ncols, fr, fc, fs, pivots,
+                                    np.array(st["reduce"], dtype=np.intp), pcols, free,
+                                    np.array(leads, dtype=np.intp), np.array(nr, dtype=np.intp),
+                                    np.array(nc, dtype=np.intp), np.array(nd, dtype=np.intp)))
+        final = spec["final"]
+        self._final_fill = fill(final["rows"], final["columns"])
+        self._final_shape = (len(final["rows"]), len(final["columns"]))
+        self._n_lead = final["n_lead"]
+        basis = spec["basis"]
+        self.basis_size = len(basis)
+        bpos = {mons[b]: j for j, b in enumerate(basis)}
+        self._std_cols = np.array([bpos[mons[c]] for c in final["columns"][self._n_lead:]], dtype=np.intp)
+        target_row = {mons[m]: t for m, t in zip(final["target_monomials"], final["targets"])}
+        a = self.unknowns.index(spec["action"])
+        unit = tuple(int(i == a) for i in range(self.nvars))
+        ur, uc, rr, rt = [], [], [], []
+        for j, b in enumerate(basis):
+            m = tuple(x + y for x, y in zip(mons[b], unit))
+            if m in bpos:
+                ur.append(j)
+                uc.append(bpos[m])
+            else:
+                rr.append(j)
+                rt.append(target_row[m])
+        self._unit = (np.array(ur, dtype=np.intp), np.array(uc, dtype=np.intp))
+        self._red = (np.array(rr, dtype=np.intp), np.array(rt, dtype=np.intp))
+        zero = (0,) * self.nvars
+        if zero not in bpos:
+            raise ValueError("the standard monomial basis must contain 1")
+        self._one = bpos[zero]
+        self._read_basis, self._read_target = [], []
+        for i in range(self.nvars):
+            m = tuple(int(k == i) for k in range(self.nvars))
+            if m in bpos:
+                self._read_basis.append((i, bpos[m]))
+            else:
+                self._read_target.append((i, target_row[m]))
+
+    def _action_matrices(self, coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        batch = coeffs.shape[0]
+        V = np.zeros((batch, self.table_size))
+        V[:, : self.n_input_coeffs] = coeffs
+        for st in self.steps:
+            A = np.zeros((batch, st.nrows, st.ncols))
+            A[:, st.fill_row, st.fill_col] = V[:, st.fill_src]
+            Q = A[:, st.reduce]
+            if len(st.pivots):
+                P = A[:, st.pivots]
+                X = np.linalg.solve(np.swapaxes(P[:, :, st.pivot_cols], 1, 2),
+                                    np.swapaxes(Q[:, :, st.pivot_cols], 1, 2))
+                Qf = Q[:, :, st.free_cols] - np.swapaxes(X, 1, 2) @ P[:, :, st.free_cols]
+            else:
+                Qf = Q
+            q, r = np.linalg.qr(Qf[:, :, st.lead_in_free])
+            H = np.linalg.solve(r, np.swapaxes(q, 1, 2) @ Qf)
+            V[:, st.new_dst] = H[:, st.new_row, st.new_col]
+        fr, fc, fs = self._final_fill
+        A = np.zeros((batch,) + self._final_shape)
+        A[:, fr, fc] = V[:, fs]
+        n = self._n_lead
+        Y = np.linalg.solve(A[:, :, :n], A[:, :, n:])
+        M = np.zeros((batch, self.basis_size, self.basis_size))
+        M[:, self._unit[0], self._unit[1]] = 1.0
+        rr, rt = self._red
+        block = np.zeros((batch, len(rr), self.basis_size))
+        block[:, :, self._std_cols] = -Y[:, rt]
+        M[:, rr] = block
+        return M, Y
+
+    def roots_from_coefficients(self, coeffs: np.ndarray) -> np.ndarray:
+        """Candidate roots (batch, |B|, nvars) from input coefficients (batch, n_input_coeffs)."""
+        with np.errstate(all="ignore"):
+            try:
+                M, Y = self._action_matrices(coeffs)
+            except np.linalg.LinAlgError:
+                if coeffs.shape[0] > 1:
+                    return np.concatenate([self.roots_from_coefficients(coeffs[i : i + 1])
+                                           for i in range(coeffs.shape[0])])
+                return np.full((1, self.basis_size, self.nvars), np.nan + 0j)
+            bad = ~np.all(np.isfinite(M), axis=(1, 2))
+            M[bad] = 0.0
+            _, vecs = np.linalg.eig(M)
+            one = vecs[:, self._one, :]
+            out = np.empty((coeffs.shape[0], self.basis_size, self.nvars), dtype=complex)
+            for i, j in self._read_basis:
+                out[:, :, i] = vecs[:, j, :] / one
+            for i, t in self._read_target:
+                nf = np.zeros((coeffs.shape[0], self.basis_size))
+                nf[:, self._std_cols] = -Y[:, t]
+                out[:, :, i] = np.einsum("bk,bks->bs", nf, vecs) / one
+            out[bad] = np.nan
+        return out
+

@@ -1,4 +1,4 @@
-"""Tests for solvers.template: root counts over GF(p), the solver specs and their plain-text form."""
+"""Tests for the GF(p)-built methods (solvers.methods.spec, pencil, staged): root counts, specs, plain text."""
 from __future__ import annotations
 
 import json
@@ -9,16 +9,14 @@ import pytest
 
 from analysis.formulations import Formulation, gf_equations, sample_gf_instance
 from solvers.codegen import GENERATED_DIR, SOLVERS, generated_specs, module_name
-from solvers.template import (
+from solvers.methods import pencil, staged
+from solvers.methods.spec import (
     SPEC_FORMAT,
     TemplateError,
     TemplateOptions,
-    build_pencil_spec,
-    build_template,
     dump_spec,
     gf_degree,
     load_spec,
-    macaulay_reducible_rank,
     solver_method,
     term_structure,
 )
@@ -32,7 +30,7 @@ def _committed(label: str) -> dict:
 
 @pytest.fixture(scope="module")
 def built_6r4s():
-    return build_pencil_spec(SOLVERS["6r4s"])
+    return pencil.build(SOLVERS["6r4s"])
 
 
 def test_methods_of_the_paper_solvers():
@@ -75,17 +73,17 @@ def test_load_spec_rejects_other_formats():
 
 def test_pencil_rejects_other_formulations():
     with pytest.raises(TemplateError, match="curve pencil"):
-        build_pencil_spec("6r4s:B2,C2-C6,M123_123,M124_123,M125_123")
+        pencil.build("6r4s:B2,C2-C6,M123_123,M124_123,M125_123")
 
 
 def test_staged_fallback_still_builds_an_exact_template():
-    # the fallback path: its final step is checked against GF(p) normal forms inside build_template
-    result = build_template(SOLVERS["6r4s"], TemplateOptions(actions=("o4",)))
+    # the fallback path: its final step is checked against GF(p) normal forms inside staged.build
+    result = staged.build(SOLVERS["6r4s"], TemplateOptions(actions=("o4",)))
     assert result.spec["kind"] == "staged" and len(result.spec["basis"]) == 22
     assert json.loads(dump_spec(result.spec)) == result.spec
 
 
 def test_single_macaulay_template_is_not_enough_at_low_degree():
     # one of the reasons for the pencil / homotopy: at degree 5 the Macaulay matrix reduces only part of R
-    rows, rank, need = macaulay_reducible_rank(SOLVERS["6r4s"], 5, "o4")
+    rows, rank, need = staged.macaulay_reducible_rank(SOLVERS["6r4s"], 5, "o4")
     assert rows == 835 and need == 15 and rank < need

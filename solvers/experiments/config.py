@@ -1,0 +1,71 @@
+"""The setup shared by every experiment artefact: configurations, initialisations, seeds and paths.
+
+Owns the paper's two configurations (9r/3s, 6r/4s) and their spellings, the two initialisations
+("random" = "rand", "solver" = "ours"), the default seed and worker count, the output paths
+(``tables/``, ``tables/figures``, the provenance record) and :func:`write_output`, which writes an
+artefact only when more than its provenance header changed.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from analysis.paths import HEADER_PREFIXES, default_output_dir, write_if_changed
+
+#: Repository root (paths in provenance records are relative to it).
+ROOT = Path(__file__).resolve().parents[2]
+TABLES_DIR = default_output_dir()
+FIGURES_DIR = TABLES_DIR / "figures"
+PROVENANCE_PATH = TABLES_DIR / "experiments_provenance.json"
+
+#: The paper's two solvers, in Table 4 order: configuration key -> (m receivers, n transmitters).
+CONFIGS: dict[str, tuple[int, int]] = {"9r3s": (9, 3), "6r4s": (6, 4)}
+
+Init = Literal["random", "solver"]
+#: Initialisations in Table 4 row order ("rand" before "ours").
+INITS: tuple[str, ...] = ("random", "solver")
+INIT_LABEL = {"random": "rand", "solver": "ours"}
+
+#: Base seed of every batch (trial t uses DEFAULT_SEED + t).
+DEFAULT_SEED = 0
+DEFAULT_JOBS = 2
+
+
+def config_shape(config: str) -> tuple[int, int]:
+    """Return (m, n) of a configuration written "9r3s" or "9r/3s"; raise ValueError otherwise."""
+    key = config.replace("/", "").strip().lower()
+    if key not in CONFIGS:
+        raise ValueError(f"unknown configuration {config!r}; valid: {', '.join(CONFIGS)}")
+    return CONFIGS[key]
+
+
+def config_key(config: str) -> str:
+    config_shape(config)
+    return config.replace("/", "").strip().lower()
+
+
+def config_label(config: str) -> str:
+    """Return the paper's spelling of a configuration, e.g. "9r/3s"."""
+    m, n = config_shape(config)
+    return f"{m}r/{n}s"
+
+
+def check_init(init: str) -> str:
+    if init not in INITS:
+        raise ValueError(f"unknown initialisation {init!r}; valid: {', '.join(INITS)}")
+    return init
+
+
+def _same_apart_from_header(old: str, new: str) -> bool:
+    """Equal once the provenance header lines (commit, date) are dropped."""
+    def body(text: str) -> list[str]:
+        return [line for line in text.splitlines() if not line.startswith(HEADER_PREFIXES)]
+
+    return body(old) == body(new)
+
+
+def write_output(path: Path, content: str | bytes) -> bool:
+    """Write an artefact unless only its provenance header would change (a rerun keeps a checkout
+    clean); True when written."""
+    return write_if_changed(path, content, _same_apart_from_header)
+

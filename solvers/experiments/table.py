@@ -1,0 +1,228 @@
+"""Table 4 of the paper: its rows from trial batches, the paper's values beside, and its writers.
+
+Owns the table (`table4`, `TABLE4_COLUMNS`, `PAPER_TABLE4`), its CSV/Markdown/LaTeX files
+(`write_table4`) and the text comparing every number with the paper (`comparison_report`).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .config import CONFIGS, INIT_LABEL, INITS, TABLES_DIR, config_label, write_output
+from .summary import summarise, summarise_noise_text
+
+#: Paper Table 4: median log10 relative (position, offset) error, 1000 noiseless trials.
+#: Transcribed in /work/shared/reference/paper_accuracy.csv (checked by the tests).
+PAPER_TABLE4: dict[tuple[str, str], tuple[float, float]] = {
+    ("9r3s", "random"): (0.31, 1.63),
+    ("9r3s", "solver"): (-15.0, -14.0),
+    ("6r4s", "random"): (0.55, 1.93),
+    ("6r4s", "solver"): (-15.0, -14.0),
+}
+
+#: Columns of Table 4 (`table4`); "paper_*" are the paper's values beside ours.
+TABLE4_COLUMNS: tuple[str, ...] = (
+    "solver",
+    "init",
+    "trials",
+    "median_log10_position_error",
+    "paper_median_log10_position_error",
+    "median_log10_offset_error",
+    "paper_median_log10_offset_error",
+    "failure_rate",
+    "median_runtime_ms",
+    "median_solver_ms",
+    "median_lm_ms",
+    "median_lm_iterations",
+    "median_log10_residual",
+    "median_real_roots",
+    "median_roots",
+    "median_real_candidates",
+    "median_log10_initial_position_error",
+    "median_log10_initial_offset_error",
+    "status",
+)
+
+
+def table4(frames: dict[tuple[str, str], pd.DataFrame | str]) -> pd.DataFrame:
+    """Build Table 4 (rows 9r/3s rand, 9r/3s ours, 6r/4s rand, 6r/4s ours) with the paper beside.
+
+    Parameters
+    ----------
+    frames : {(config, init): per-trial DataFrame of noiseless trials, or a string saying why the
+        row is missing (e.g. the solver is unavailable); missing rows get NaN numbers and that
+        string as status}
+
+    Returns
+    -------
+    DataFrame with columns `TABLE4_COLUMNS`; init is "rand" or "ours" as in the paper.
+
+    Reference: paper Sec. 4.1, Table 4.
+    """
+    rows = []
+    for config in CONFIGS:
+        for init in INITS:
+            paper_position, paper_offset = PAPER_TABLE4[(config, init)]
+            row = dict.fromkeys(TABLE4_COLUMNS, float("nan"))
+            row.update(
+                solver=config_label(config), init=INIT_LABEL[init], trials=0,
+                paper_median_log10_position_error=paper_position,
+                paper_median_log10_offset_error=paper_offset,
+            )
+            value = frames.get((config, init), "not run")
+            if isinstance(value, str):
+                row["status"] = value
+            else:
+                summary = summarise(value)
+                if len(summary) != 1:
+                    raise ValueError(f"Table 4 needs one noise level per row, got {len(summary)} for {config} {init}")
+                s = summary.iloc[0]
+                row.update({k: s[k] for k in TABLE4_COLUMNS if k in s.index and k not in ("solver", "init")})
+                row["trials"] = int(s["trials"])
+                row["status"] = "ok"
+            rows.append(row)
+    return pd.DataFrame(rows, columns=list(TABLE4_COLUMNS))
+
+
+def _fmt(value: object, digits: int = 2) -> str:
+    if isinstance(value, str):
+        return value
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, float) and math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return f"{float(value):.{digits}f}"
+
+
+_DISPLAY = (
+    ("solver", "Solver", 0),
+    ("init", "Init", 0),
+    ("median_log10_position_error", "Position log10 (ours)", 2),
+    ("paper_median_log10_position_error", "Position log10 (paper)", 2),
+    ("median_log10_offset_error", "Offset log10 (ours)", 2),
+    ("paper_median_log10_offset_error", "Offset log10 (paper)", 2),
+    ("failure_rate", "Failure rate", 3),
+    ("median_runtime_ms", "Median runtime (ms)", 1),
+    ("median_solver_ms", "Solver (ms)", 2),
+    ("median_lm_ms", "LM (ms)", 1),
+    ("median_lm_iterations", "LM iterations", 0),
+    ("median_log10_residual", "Residual log10", 1),
+    ("median_real_roots", "Real roots", 0),
+    ("median_real_candidates", "Valid candidates", 0),
+    ("trials", "Trials", 0),
+)
+
+
+def _num(value: object) -> str:
+    """Counts and medians of counts: 3, 3.5, or n/a."""
+    return f"{value:g}" if isinstance(value, (int, float)) and not math.isnan(value) else "n/a"
+
+
+def _display_rows(table: pd.DataFrame) -> list[list[str]]:
+    out = []
+    for _, row in table.iterrows():
+        cells = []
+        for column, _, digits in _DISPLAY:
+            value = row[column]
+            if column in ("median_lm_iterations", "median_real_roots", "median_real_candidates") and isinstance(value, float) and not math.isnan(value):
+                cells.append(f"{value:g}")
+            else:
+                cells.append(_fmt(value, digits))
+        out.append(cells)
+    return out
+
+
+def _provenance_line(meta: dict) -> str:
+    dirty = " (dirty worktree)" if meta.get("worktree_dirty") else ""
+    return (
+        f"commit {str(meta.get('commit', 'unknown'))[:12]}{dirty}, {meta.get('date', '')}, "
+        f"{meta.get('mode', '')} run, seeds {meta.get('seeds', '')}, numpy {meta.get('versions', {}).get('numpy', '')}, "
+        f"scipy {meta.get('versions', {}).get('scipy', '')}"
+    )
+
+
+def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict | None = None) -> dict[str, Path]:
+    """Write Table 4 as CSV (all columns), Markdown and LaTeX (paper columns beside ours).
+
+    The Markdown and LaTeX files start with a provenance line (commit, date, seeds, versions); the
+    full record is ``experiments_provenance.json``. Returns {"csv"|"md"|"tex": path}.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    meta = meta or {}
+    paths = {ext: directory / f"table4.{ext}" for ext in ("csv", "md", "tex")}
+    write_output(paths["csv"], table.to_csv(index=False, float_format="%.6g"))
+
+    headers = [label for _, label, _ in _DISPLAY]
+    rows = _display_rows(table)
+    notes = [
+        "Median log10 relative errors over noiseless trials (paper Sec. 4.1, Table 4); paper values beside ours.",
+        "Position error: after the best rigid alignment, ||X_est - X_true||_F / ||X_true - centroid||_F over all "
+        "receivers and transmitters. Offset error: ||o_est - o_true|| / ||o_true||.",
+        "A trial fails when there is no candidate or an error exceeds 1e-6; runtimes are per trial "
+        "(solver + LM over the refined candidates, this machine, Python).",
+    ]
+    md = [f"<!-- generated by solvers.experiments.write_table4; {_provenance_line(meta)} -->", ""]
+    md += ["**Table 4 (reproduction).** " + " ".join(notes), ""]
+    md.append("| " + " | ".join(headers) + " |")
+    md.append("|" + "|".join("---" if i < 2 else "---:" for i in range(len(headers))) + "|")
+    md += ["| " + " | ".join(r) + " |" for r in rows]
+    status = [f"{r['solver']} {r['init']}: {r['status']}" for _, r in table.iterrows() if r["status"] != "ok"]
+    if status:
+        md += ["", "Missing rows: " + "; ".join(status)]
+    write_output(paths["md"], "\n".join(md) + "\n")
+
+    def tex_escape(text: str) -> str:
+        return text.replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
+
+    tex_columns = _DISPLAY[:8]
+    tex = [f"% generated by solvers.experiments.write_table4; {tex_escape(_provenance_line(meta))}"]
+    tex += [
+        r"\begin{table}[tbh]",
+        r"  \centering",
+        r"  \caption{Median relative errors ($\log_{10}$), ours (reproduction) beside the paper, failure rate "
+        r"and median runtime; noiseless data.}",
+        r"  \label{tab:medianErrReproduction}",
+        r"  \begin{tabular}{l|rr|rr|rr}",
+        r"    Solver & \multicolumn{2}{c|}{Position error ($\log_{10}$)} & \multicolumn{2}{c|}{Offset error ($\log_{10}$)}"
+        r" & Failure & Runtime \\",
+        r"    & ours & paper & ours & paper & rate & (ms) \\\hline\hline",
+    ]
+    for row in rows:
+        cells = [f"{row[0]} {row[1]}"] + row[2 : len(tex_columns)]
+        tex.append("    " + " & ".join(tex_escape(c) for c in cells) + r" \\")
+    tex += [r"  \end{tabular}", r"\end{table}"]
+    write_output(paths["tex"], "\n".join(tex) + "\n")
+    return paths
+
+
+def comparison_report(table: pd.DataFrame, noise: pd.DataFrame | None = None, trials: int | None = None) -> str:
+    """Return the text comparing every Table 4 number with the paper (and the noise medians)."""
+    trials_text = f"{trials} noiseless trials per row" if trials else "noiseless trials"
+    lines = [f"Table 4 reproduction ({trials_text}) vs paper, median log10 relative error:"]
+    lines.append(
+        f"  {'row':<12} {'position ours':>13} {'paper':>6} {'diff':>6}   {'offset ours':>11} {'paper':>6} "
+        f"{'diff':>6}   {'failures':>8} {'runtime ms':>10} {'real roots':>10} {'valid cands':>11}"
+    )
+    for _, r in table.iterrows():
+        name = f"{r['solver']} {r['init']}"
+        if r["status"] != "ok":
+            lines.append(f"  {name:<12} no numbers: {r['status']}")
+            continue
+        dp = r["median_log10_position_error"] - r["paper_median_log10_position_error"]
+        do = r["median_log10_offset_error"] - r["paper_median_log10_offset_error"]
+        lines.append(
+            f"  {name:<12} {r['median_log10_position_error']:>13.2f} {r['paper_median_log10_position_error']:>6.2f} "
+            f"{dp:>+6.2f}   {r['median_log10_offset_error']:>11.2f} {r['paper_median_log10_offset_error']:>6.2f} "
+            f"{do:>+6.2f}   {100 * r['failure_rate']:>7.1f}% {r['median_runtime_ms']:>10.1f} "
+            f"{_num(r['median_real_roots']):>10} {_num(r['median_real_candidates']):>11}"
+        )
+    if noise is not None and not noise.empty:
+        lines.append(summarise_noise_text(noise))
+    return "\n".join(lines)
+
