@@ -4,7 +4,7 @@
 builds one for any square :class:`analysis.parametric.ParametricSystem` (e.g. read from a text file by
 :func:`analysis.parametric.parse`). Methods:
 
-* ``pencil`` (6r4s): the eigenvalue construction of :mod:`solvers.template` (curve pencil);
+* ``pencil`` (6r4s): the eigenvalue construction of :mod:`solvers.methods.pencil` (curve pencil);
 * ``homotopy``: parameter homotopy (:mod:`solvers.methods.homotopy`), the general method: every
   square system with a certified root count gets one.
 

@@ -46,7 +46,7 @@ BAD = [
     (["degree", "--tdoa", "6r4s", "--equations", "C2,"], "empty token"),
     (["degree", "--tdoa", "3r3s"], "m (receivers) must be >= 4"),
     (["tables", "--jobs", "0"], "--jobs must be at least 1"),
-    (["generate", "5r5s"], "give --out DIR"),
+    (["generate", "5r6s"], "give --out DIR"),
     (["template-check", "nonsense"], "neither a file nor a formulation"),
     (["template-check", "9r3s:C2-C9", "--seed", "-3"], "argument --seed"),
 ]
