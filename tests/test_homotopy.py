@@ -156,8 +156,9 @@ def test_excluded_locus_is_relative_to_the_condition_not_to_the_point():
     mask = hm._excluded(system, np.array([1.0]))
     x = np.array([[1e-4, 5e-4, -2.6e-3, 130.0],   # genuine root of the 5r/5s start system's kind
                   [1e-4, 2e-4, 4e-4, 130.0],      # det H = 0 exactly (h12^2 = h11 h22)
+                  [1e-12, -2e-12, 3e-12, 130.0],  # H = 0 to rounding (a spurious root of 5r/4s's squared system)
                   [3.0, 1.0, 2.0, 0.0]])
-    assert mask(x).tolist() == [False, True, False]
+    assert mask(x).tolist() == [False, True, True, False]
 
 
 @pytest.mark.parametrize("index", [52, 65])

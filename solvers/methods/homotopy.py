@@ -383,10 +383,11 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
 def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
     """Mask of points where a non-vanishing condition is (numerically) zero at parameters q0, or None.
 
-    A condition counts as zero when its value is below 1e-8 times the sum of its terms' moduli (it
-    cancels to rounding level). A threshold relative to |x| would also exclude genuine roots whose
-    condition is small only because its variables are (5r/5s: det H ~ 1e-8 with H ~ 1e-4 and offsets
-    ~ 100 at a root that the GF(p) saturation keeps).
+    A condition of degree d counts as zero when it cancels to rounding level (its value below 1e-8
+    times the sum of its terms' moduli) or when all its terms are at noise level for the point's size
+    (their sum below (1e-8 (1 + |x|))^d, e.g. H = 0 computed as 1e-12). A single threshold relative to
+    |x| would also exclude genuine roots whose condition is small only because its variables are
+    (5r/5s: det H ~ 1e-8 with H ~ 1e-4 and offsets ~ 100, a root the GF(p) saturation keeps).
     """
     if not system.nonzero:
         return None
@@ -396,14 +397,16 @@ def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray]
     conditions = []
     for g in system.nonzero_exprs:
         terms = sympy.Add.make_args(sympy.expand(g))
-        conditions.append([sympy.lambdify(args, t, "numpy") for t in terms])
+        degree = sympy.Poly(g, *system.x_symbols).total_degree()
+        conditions.append(([sympy.lambdify(args, t, "numpy") for t in terms], degree))
 
     def mask(x: np.ndarray) -> np.ndarray:
+        noise = 1e-8 * (1.0 + np.linalg.norm(x, axis=1))
         out = np.zeros(len(x), dtype=bool)
-        for terms in conditions:
+        for terms, degree in conditions:
             values = [np.broadcast_to(t(*x.T, *q0), (len(x),)) for t in terms]
             size = np.sum([np.abs(v) for v in values], axis=0)
-            out |= np.abs(np.sum(values, axis=0)) <= 1e-8 * size
+            out |= (np.abs(np.sum(values, axis=0)) <= 1e-8 * size) | (size <= noise ** degree)
         return out
 
     return mask
