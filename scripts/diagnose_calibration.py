@@ -5,9 +5,10 @@ trial (not a success by the benchmark's definition) is put in the first class th
 
   d  unidentifiable: a node has fewer true inliers than it needs (a receiver < 3, a transmitter < 4: its
      position has several exact solutions and only the reference, started at the truth, picks the right
-     one), or the returned calibration has a robust (MSAC, 3 sigma) cost on all measured entries at most
-     that of the reference (least squares from the ground truth on the true inliers) + 1 sigma^2: the
-     data prefer (or cannot tell apart) a wrong answer, so no method can be expected to succeed
+     one), or the network has fewer true inliers than unknowns, or the returned calibration has a
+     robust (MSAC, 3 sigma) cost on all measured entries at most that of the reference (least squares
+     from the ground truth on the true inliers) + 1 sigma^2: the data prefer (or cannot tell apart) a
+     wrong answer, so no method can be expected to succeed
   a  no hypothesis at all
   b  hypotheses, but none within 5 % relative position error of the truth
   c  the right basin was found (a hypothesis within 5 %), but the wrong inlier set / local minimum won
@@ -58,7 +59,10 @@ def _msac(F, R, S, O, t) -> float:
 def classify(m, n, sigma, missing, outliers, seed, options=None) -> tuple[str, dict]:
     """(class, details) of one benchmark trial; class "ok" for a success."""
     recorded: list = []
-    originals = {name: getattr(cal, name) for name in ("_hypotheses_from_block", "_hypotheses_from_subnetwork")}
+    # (_hypotheses_from_random_starts: the generator before sub-networks, to classify older commits)
+    originals = {name: getattr(cal, name) for name in
+                 ("_hypotheses_from_block", "_hypotheses_from_subnetwork", "_hypotheses_from_random_starts")
+                 if hasattr(cal, name)}
 
     def recording(fn):
         def wrapper(*args, **kwargs):
@@ -89,7 +93,8 @@ def classify(m, n, sigma, missing, outliers, seed, options=None) -> tuple[str, d
         return "ok", details
     good = np.isfinite(F) & ~bad
     details["underdetermined"] = int((good.sum(axis=1) < cal.MIN_RECEIVER_MEASUREMENTS).sum()
-                                     + (good.sum(axis=0) < cal.MIN_TRANSMITTER_MEASUREMENTS).sum())
+                                     + (good.sum(axis=0) < cal.MIN_TRANSMITTER_MEASUREMENTS).sum()
+                                     + (good.sum() < 2 * m + 3 * n - 3))
     if details["underdetermined"] or cost_res <= cost_ref + sigma**2:
         return "d", details
     if not recorded:

@@ -20,7 +20,8 @@ measurements" (EUSIPCO 2021 and ICASSP 2020):
    measured entries, or by the median squared residual (LMedS) when sigma is unknown.
 3. **LO-RANSAC** (`_local_optimisation`): each new best hypothesis is refined with a robust loss on
    all measured entries and then by least squares on its inliers; the number of samples adapts to the
-   inlier ratio w as log(1 - confidence) / log(1 - w^k), k the sample's number of entries.
+   inlier ratio w as log(1 - confidence) / log(1 - w^k), k the sample's number of entries. In a small
+   network searched by sub-networks, the best few hypotheses that lost before LO get it afterwards.
 4. **Refinement** (`_robust_lm`): iteratively reweighted Levenberg-Marquardt (soft-L1, Huber or
    Cauchy loss, scale from sigma) with a sparse Jacobian, then least squares on the inliers,
    re-classifying until the inlier set is stable.
@@ -180,6 +181,8 @@ class CalibrationOptions:
         adapts like the block samples, assuming a clean sub-network converges from one start in
         `subnetwork_convergence` of the cases
     subnetwork_max_params, subnetwork_convergence : see subnetwork_samples
+    runners_up : in a small network searched by sub-networks, this many of the best hypotheses that
+        did not beat the best one before local optimisation get it afterwards
     collinear_ratio : warn when the smaller/larger principal spread of receivers or transmitters is below
     ambiguity_chi2 : an alternative (mirror) position or hypothesis whose cost exceeds the best one by
         less than this many sigma^2 is reported as ambiguous
@@ -201,6 +204,7 @@ class CalibrationOptions:
     subnetwork_samples: int = 120
     subnetwork_max_params: int = 40
     subnetwork_convergence: float = 0.3
+    runners_up: int = 4
     collinear_ratio: float = 0.05
     ambiguity_chi2: float = 9.0
 
@@ -822,6 +826,7 @@ class _Search:
     local_optimisations: int = 0
     solvers: set = field(default_factory=set)
     others: list = field(default_factory=list)  # distinct refined models (alternatives)
+    runners_up: list = field(default_factory=list)  # unrefined models that did not beat the best
 
 
 def _replace_weak(F, mask, R, S, O, t, rng):
@@ -1106,6 +1111,8 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers) -> tupl
         changed = False
         for model in models:
             if best is not None and not _better(model, best, floor):
+                if not model.refined and np.isfinite(model.score):
+                    search.runners_up = sorted(search.runners_up + [model], key=lambda x: x.score)[: opts.runners_up]
                 continue
             if search.local_optimisations < opts.max_local_optimisations:
                 search.local_optimisations += 1
@@ -1177,6 +1184,15 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers) -> tupl
                                              best.inlier_ratio if best is not None else None,
                                              best if guided else None)):
             needed_sub = _needed(best.inlier_ratio, k, opts.confidence, opts.subnetwork_convergence)
+    # The runners-up get their local optimisation too: with low redundancy a hypothesis in the right
+    # basin, pulled off by a gross error, can score worse than a wrong one before LO and better after.
+    for model in search.runners_up:
+        lo = _local_optimisation(F, mask, model, thr, floor, opts, rng)
+        search.local_optimisations += 1
+        if best is None or _better(lo, best, floor):
+            if best is not None and best.refined:
+                search.others.append(best)
+            best = lo
     return best, search
 
 
