@@ -58,18 +58,31 @@ class _Arrays:
         self.receivers, self.transmitters, self.offsets = R, S, O
 
 
-def trial(m, n, sigma, missing, outliers, seed):
+def trial_data(m, n, sigma, missing, outliers, seed):
+    """(network, F, outlier mask, reference fit) of one trial; the reference is least squares from the
+    ground truth on the true inliers (the best these data allow)."""
     rng = np.random.default_rng(seed)
     net = random_network(m, n, rng)
     F, bad = corrupt_measurements(net.measurements(sigma, rng), rng, missing, outliers)
     good = np.isfinite(F) & ~bad
-    # Reference: least squares from the ground truth on the true inliers (the best these data allow).
     ref_fit = robust_refine(F, good, *to_gauge(net.receivers, net.transmitters), net.offsets.copy(), loss="linear")
+    return net, F, bad, ref_fit
+
+
+def judge(res, net, ref_fit):
+    """(success, errors of res or None, errors of the reference) by the benchmark's definition."""
     ref = calibration_errors(_Arrays(ref_fit.R, ref_fit.S, ref_fit.O), net)
-    res = calibrate(F, sigma=sigma, seed=seed)
     placed = np.isfinite(res.receivers).all() and np.isfinite(res.transmitters).all()
     err = calibration_errors(res, net) if placed else None
     success = bool(err is not None and err.position <= 3 * ref.position + ABS_TOL and err.offset <= 3 * ref.offset + ABS_TOL)
+    return success, err, ref
+
+
+def trial(m, n, sigma, missing, outliers, seed):
+    net, F, bad, ref_fit = trial_data(m, n, sigma, missing, outliers, seed)
+    good = np.isfinite(F) & ~bad
+    res = calibrate(F, sigma=sigma, seed=seed)
+    success, err, ref = judge(res, net, ref_fit)
     return {
         "success": success,
         "pos": err.position if err else np.inf,

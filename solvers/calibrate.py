@@ -7,16 +7,21 @@ measurements" (EUSIPCO 2021 and ICASSP 2020):
 
 1. **Hypotheses** (`available_solvers`, `_sample_block`): fully measured sub-blocks of F, sampled at
    random (randomised greedy search for a biclique, so that gaps do not defeat the sampling), are
-   handed to the project's minimal solvers, cheapest first; every real candidate is a hypothesis.
-   When no fully measured block exists, hypotheses come from random starting points instead (and a
-   warning says so).
+   handed to the project's minimal solvers, cheapest first (the homotopy solvers, 0.1-0.4 s per
+   call, a few samples each; the slowest not at all); the real candidates are hypotheses.
+   When the blocks run out before the adaptive count is reached in a small network (few fully
+   measured blocks, each holding a gross error: gaps and low redundancy), or none exists, hypotheses
+   also come from sub-networks (`_sample_subnetwork`: nodes left out at random, or the nodes of the
+   best hypothesis's rejected measurements; gaps allowed) solved by least squares from a random start
+   or from the best hypothesis (`_hypotheses_from_subnetwork`).
 2. **Extension and scoring** (`_extend`, `_score`): every other receiver and transmitter is placed by
    batched robust multilateration (linear initialisation, then iteratively reweighted Gauss-Newton);
    the hypothesis is scored MSAC-style (truncated quadratic at `threshold_sigmas` x sigma) over all
    measured entries, or by the median squared residual (LMedS) when sigma is unknown.
 3. **LO-RANSAC** (`_local_optimisation`): each new best hypothesis is refined with a robust loss on
    all measured entries and then by least squares on its inliers; the number of samples adapts to the
-   inlier ratio w as log(1 - confidence) / log(1 - w^k), k the sample's number of entries.
+   inlier ratio w as log(1 - confidence) / log(1 - w^k), k the sample's number of entries. In a small
+   network searched by sub-networks, the best few hypotheses that lost before LO get it afterwards.
 4. **Refinement** (`_robust_lm`): iteratively reweighted Levenberg-Marquardt (soft-L1, Huber or
    Cauchy loss, scale from sigma) with a sparse Jacobian, then least squares on the inliers,
    re-classifying until the inlier set is stable.
@@ -155,14 +160,29 @@ class CalibrationOptions:
     threshold_sigmas : inlier threshold in units of sigma (MSAC truncation and final classification)
     confidence : RANSAC stops when an all-inlier sample was drawn with this probability
     min_samples, max_samples : bounds on the number of sub-blocks handed to the solvers
-    candidates_per_sample : hypotheses extended per sample (those with the smallest block residual)
+    candidates_per_sample : hypotheses extended per sample (those with the smallest block residual); a
+        minimal solver's roots all fit their block exactly, so up to `minimal_candidates` of them are
+        extended instead
+    minimal_candidates : roots of a minimal solver (6r/3s, 4r/5s) extended per sample
+    expensive_samples : samples per solver costlier than `expensive_cost` (a homotopy costs 0.1-4 s per
+        call; tables/solvers.csv), so that they supplement the cheap ones without dominating the time
+    expensive_cost : MinimalSolver.cost_ms above which a solver counts as expensive
+    max_solver_cost : solvers costlier than this are not used (4r/5s and 5r/4s: 0.6-4.4 s per call, and
+        sub-networks find what they would)
     max_local_optimisations : LO runs (each new best hypothesis gets one, up to this many)
     lo_iterations : LM iterations per LO run
     loss : robust loss of the refinement ("cauchy", "soft_l1", "huber"; "linear" = plain LS). Cauchy is
         redescending: a gross error stops pulling. With soft-L1 or Huber its pull stays constant and
         drags a weakly constrained transmitter along its range/offset valley (seen in the benchmark).
     max_iterations : LM iterations of the final refinement
-    random_starts : hypotheses from random starting points when no fully measured block exists
+    subnetwork_samples : most hypotheses from sub-networks (random subsets of the nodes, gaps allowed)
+        solved by least squares from a random start; drawn for networks with at most
+        `subnetwork_max_params` unknowns, or when too few fully measured blocks exist. The number
+        adapts like the block samples, assuming a clean sub-network converges from one start in
+        `subnetwork_convergence` of the cases
+    subnetwork_max_params, subnetwork_convergence : see subnetwork_samples
+    runners_up : in a small network searched by sub-networks, this many of the best hypotheses that
+        did not beat the best one before local optimisation get it afterwards
     collinear_ratio : warn when the smaller/larger principal spread of receivers or transmitters is below
     ambiguity_chi2 : an alternative (mirror) position or hypothesis whose cost exceeds the best one by
         less than this many sigma^2 is reported as ambiguous
@@ -173,11 +193,18 @@ class CalibrationOptions:
     min_samples: int = 5
     max_samples: int = 200
     candidates_per_sample: int = 2
+    minimal_candidates: int = 12
+    expensive_samples: int = 3
+    expensive_cost: float = 100.0
+    max_solver_cost: float = 200.0
     max_local_optimisations: int = 6
     lo_iterations: int = 15
     loss: Loss = "cauchy"
     max_iterations: int = 100
-    random_starts: int = 30
+    subnetwork_samples: int = 120
+    subnetwork_max_params: int = 40
+    subnetwork_convergence: float = 0.3
+    runners_up: int = 4
     collinear_ratio: float = 0.05
     ambiguity_chi2: float = 9.0
 
@@ -208,7 +235,8 @@ class CalibrationResult:
     receiver_std, transmitter_std, offset_std : per-node standard deviations from the gauge-fixed
         covariance sigma^2 (J^T J)^-1 (position std = sqrt(var_x + var_y); inf if not determined)
     warnings : what the data cannot decide, one sentence each
-    solver : labels of the minimal solvers that produced hypotheses ("random-starts" without blocks)
+    solver : labels of the minimal solvers that produced hypotheses ("subnetworks": least squares on
+        sub-networks from random starts)
     samples, hypotheses : sub-blocks solved and hypotheses scored
     seconds : wall time
     seed : the seed of the sampling
@@ -798,6 +826,7 @@ class _Search:
     local_optimisations: int = 0
     solvers: set = field(default_factory=set)
     others: list = field(default_factory=list)  # distinct refined models (alternatives)
+    runners_up: list = field(default_factory=list)  # unrefined models that did not beat the best
 
 
 def _replace_weak(F, mask, R, S, O, t, rng):
@@ -911,9 +940,9 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
     """Candidates of one sub-block, extended to the network and scored.
 
     Only candidates whose block RMS is within 10x of the best one (or below the threshold) are
-    extended, at most `candidates_per_sample` of them.
+    extended, at most `candidates_per_sample` of them; a minimal solver's roots all fit the block
+    exactly (RMS cannot rank them), so up to `minimal_candidates` of those.
     """
-    m, n = F.shape
     block = F[np.ix_(rows, cols)]
     cands = solver.solve(block)
     search.samples += 1
@@ -926,18 +955,28 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
         return []
     # Unknown sigma: a clean block's RMS is about 0.35 sigma (3 redundant entries of 24 or 27).
     c = thr if thr is not None else max(floor, 8.0 * best_rms)
-    keep = [k for k in np.argsort(rms)[: opts.candidates_per_sample] if rms[k] <= max(10.0 * best_rms, c)]
+    minimal = solver.m * solver.n == 2 * solver.m + 3 * solver.n - 3
+    per_sample = opts.minimal_candidates if minimal else opts.candidates_per_sample
+    keep = [k for k in np.argsort(rms)[:per_sample] if rms[k] <= max(10.0 * best_rms, c)]
+    return _extended_hypotheses(F, mask, [cands[k] for k in keep], rows, cols, c, thr, floor, rng, search, best_ratio)
+
+
+def _extended_hypotheses(F, mask, cands, rows, cols, c, thr, floor, rng, search: _Search, best_ratio):
+    """Block solutions (R_b, S_b, O_b on rows x cols) polished on the block's measured entries,
+    deduplicated, extended to the network (`_extend`) and scored."""
+    m, n = F.shape
+    block = F[np.ix_(rows, cols)]
     sample_r = np.zeros(m, bool)
     sample_r[rows] = True
     out = []
-    block_mask = np.ones(block.shape, bool)
+    block_mask = np.isfinite(block)
     seen: list[np.ndarray] = []
-    for k in keep:
+    for cand in cands:
         R, S, O = np.full((m, 2), np.nan), np.full((n, 2), np.nan), np.full(n, np.nan)
         # A few least-squares steps on the block: on noisy data the solver's root satisfies a subset
         # of the equations exactly, and its error grows when extended; the block optimum is better.
-        pol = robust_refine(block, block_mask, *cands[k], loss="linear", max_iter=4)
-        R[rows], S[cols], O[cols] = (pol.R, pol.S, pol.O) if np.all(np.isfinite(pol.R)) else cands[k]
+        pol = robust_refine(block, block_mask, *cand, loss="linear", max_iter=4)
+        R[rows], S[cols], O[cols] = (pol.R, pol.S, pol.O) if np.all(np.isfinite(pol.R)) else cand
         if any(np.allclose(O[cols], o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())) for o in seen):
             continue  # two roots polished into the same block solution
         seen.append(O[cols].copy())
@@ -948,40 +987,154 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
     return out
 
 
-def _hypotheses_from_random_starts(F, mask, thr, floor, opts, rng, search: _Search):
-    """Hypotheses without a usable fully measured block: random starts scaled to the data, polished."""
-    m, n = F.shape
-    rows, cols = mask.any(axis=1), mask.any(axis=0)
-    spread = float(np.percentile(F[mask], 90) - np.percentile(F[mask], 10)) or 1.0
-    centre = np.array([np.median(F[mask[:, j], j]) if cols[j] else np.nan for j in range(n)])
-    out = []
-    for _ in range(opts.random_starts):
-        R = np.where(rows[:, None], 0.5 * spread * rng.standard_normal((m, 2)), np.nan)
-        S = np.where(cols[:, None], 0.5 * spread * rng.standard_normal((n, 2)), np.nan)
-        O = centre - 0.5 * spread + 0.1 * spread * rng.standard_normal(n)
-        # Least squares first: a redescending loss far from any solution gives every entry the same
-        # tiny weight and stalls; near a basin, LO's robust loss then sheds the outliers.
-        ls = robust_refine(F, mask, R, S, O, loss="linear", max_iter=3 * opts.lo_iterations)
-        if not np.all(np.isfinite(ls.R[rows])):
+def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | None, suspicious: np.ndarray | None = None,
+                       redundancy: int = 2, attempts: int = 20):
+    """A random sub-network (gaps allowed) that determines its nodes with little redundancy.
+
+    Unguided (suspicious None or empty): nodes are left out one at a time in random order as long
+    as the rest keeps at least `redundancy` (or, drawn at random, one more) measured entries more
+    than unknowns, so that the sub-network holds as few measurements (and gross errors) as can
+    still expose one. Guided: for up to 3 of the `suspicious` entries (an (k, 2) array of
+    (receiver, transmitter), e.g. the current best's rejected measurements) the receiver or the
+    transmitter is left out, at random. Nodes left with too few measurements among the rest are
+    pruned (`_prune`) in both cases. Returns (rows, cols) as index arrays when the sub-network is
+    valid and not in `tried` (None: repeats allowed), else None.
+    Leaving nodes out, not entries, is what lets a sub-network avoid a node's gross error when no
+    fully measured block does (low-redundancy networks with gaps).
+    """
+    m, n = mask.shape
+
+    def pruned(rows, cols):
+        keep_r, keep_c = _prune(mask & rows[:, None] & cols[None, :])
+        keep_r &= rows
+        keep_c &= cols
+        sub = mask & keep_r[:, None] & keep_c[None, :]
+        ok = keep_r.sum() >= 3 and keep_c.sum() >= 3
+        return keep_r, keep_c, int(sub.sum()) - (2 * int(keep_r.sum()) + 3 * int(keep_c.sum()) - 3) if ok else -1
+
+    for _ in range(attempts):
+        rows, cols = np.ones(m, bool), np.ones(n, bool)
+        if suspicious is not None and len(suspicious):
+            pick = suspicious[rng.permutation(len(suspicious))[: int(rng.integers(1, min(3, len(suspicious)) + 1))]]
+            by_row = rng.random(len(pick)) < 0.5
+            rows[pick[by_row, 0]] = False
+            cols[pick[~by_row, 1]] = False
+            rows, cols, spare = pruned(rows, cols)
+        else:
+            target = redundancy + int(rng.integers(0, 2))
+            rows, cols, spare = pruned(rows, cols)
+            for node in rng.permutation(m + n):
+                r2, c2 = rows.copy(), cols.copy()
+                if node < m:
+                    r2[node] = False
+                else:
+                    c2[node - m] = False
+                r2, c2, spare2 = pruned(r2, c2)
+                if spare2 >= target:
+                    rows, cols, spare = r2, c2, spare2
+        if spare < redundancy:
             continue
-        model = _local_optimisation(F, mask, _Model(ls.R, ls.S, ls.O, np.inf, 0.0), thr, floor, opts, rng)
-        search.hypotheses += 1
-        if np.isfinite(model.score):
-            out.append(model)
-    return out
+        key = ("subnetwork", tuple(np.flatnonzero(rows).tolist()), tuple(np.flatnonzero(cols).tolist()))
+        if tried is not None and key in tried:
+            continue
+        if tried is not None:
+            tried.add(key)
+        return np.flatnonzero(rows), np.flatnonzero(cols)
+    return None
+
+
+def _random_start(F, mask, rows, cols, rng):
+    """Receivers, transmitters and offsets of rows x cols drawn at the scale of the data."""
+    spread = float(np.percentile(F[mask], 90) - np.percentile(F[mask], 10)) or 1.0
+    sub = F[np.ix_(rows, cols)]
+    centre = np.array([np.median(v[np.isfinite(v)]) for v in sub.T])
+    return (0.5 * spread * rng.standard_normal((len(rows), 2)), 0.5 * spread * rng.standard_normal((len(cols), 2)),
+            centre - 0.5 * spread + 0.1 * spread * rng.standard_normal(len(cols)))
+
+
+def _hypotheses_from_subnetwork(F, mask, rows, cols, thr, floor, opts, rng, search: _Search, best_ratio,
+                                start: _Model | None = None):
+    """Least squares on a sub-network's measured entries, extended and scored.
+
+    The multi-start local optimisation of a non-minimal sample: it needs no fully measured block
+    and costs milliseconds for a small network. It starts from `start` (the current best, whose
+    gross errors the sub-network may leave out) where that places every node of the sub-network,
+    else from a random start. A fit whose RMS on its own entries exceeds the threshold (a gross
+    error inside, or a local minimum) is not extended.
+    """
+    block = F[np.ix_(rows, cols)]
+    sub_mask = np.isfinite(block)
+    search.samples += 1
+    x0 = None
+    if start is not None:
+        x0 = start.R[rows], start.S[cols], start.O[cols]
+        if not all(np.isfinite(a).all() for a in x0):
+            x0 = None
+    # Least squares first: a redescending loss far from any solution gives every entry the same tiny
+    # weight and stalls; near a basin, the LO step's robust loss then sheds the outliers.
+    ls = robust_refine(block, sub_mask, *(x0 or _random_start(F, mask, rows, cols, rng)), loss="linear",
+                       max_iter=3 * opts.lo_iterations)
+    if not np.all(np.isfinite(ls.R)):
+        return []
+    rms = float(np.sqrt(np.mean(_residual_matrix(block, ls.R, ls.S, ls.O)[sub_mask] ** 2)))
+    if thr is not None and not rms <= thr:
+        return []
+    c = thr if thr is not None else max(floor, 8.0 * rms)
+    return _extended_hypotheses(F, mask, [(ls.R, ls.S, ls.O)], rows, cols, c, thr, floor, rng, search, best_ratio)
+
+
+def _better(a: _Model, b: _Model, floor: float) -> bool:
+    """Whether model a beats b: a lower score, or (a tie within floor^2, as LMedS gives on noiseless
+    data when more than half of the entries fit two models exactly) a higher inlier ratio."""
+    if abs(a.score - b.score) <= floor * floor:
+        return a.inlier_ratio > b.inlier_ratio
+    return a.score < b.score
+
+
+def _needed(w: float, k: int, confidence: float, success: float = 1.0) -> float:
+    """Samples for an all-inlier sample of k entries (and a `success`ful solve) with this confidence."""
+    p = success * w**k
+    if p >= 1.0:
+        return 0.0
+    return math.log(1.0 - confidence) / math.log1p(-p) if p > 0 else math.inf
 
 
 def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers) -> tuple[_Model | None, _Search]:
-    """LO-RANSAC over the minimal solvers on fully measured sub-blocks (see module docstring)."""
+    """LO-RANSAC over the minimal solvers on fully measured sub-blocks, then over sub-networks solved
+    by least squares from random starts (see module docstring)."""
     search = _Search()
     best: _Model | None = None
-    needed = opts.max_samples
+
+    def offer(models) -> bool:
+        """Keep the best model (LO on each new best, up to the budget); True when the best changed."""
+        nonlocal best
+        changed = False
+        for model in models:
+            if best is not None and not _better(model, best, floor):
+                if not model.refined and np.isfinite(model.score):
+                    search.runners_up = sorted(search.runners_up + [model], key=lambda x: x.score)[: opts.runners_up]
+                continue
+            if search.local_optimisations < opts.max_local_optimisations:
+                search.local_optimisations += 1
+                lo = _local_optimisation(F, mask, model, thr, floor, opts, rng)
+                if lo.score <= model.score:
+                    model = lo
+            if best is not None and best.refined:
+                search.others.append(best)
+            best, changed = model, True
+        return changed
+
+    needed = math.inf
     tried: set = set()
     exhausted: set = set()
-    while search.samples < max(needed, opts.min_samples) and search.samples < opts.max_samples:
+    drawn_by: dict[str, int] = {}
+    # min_samples guards against trusting one lucky sample, unless a hypothesis explains every entry.
+    while search.samples < (max(needed, opts.min_samples) if needed > 0 else 0) and search.samples < opts.max_samples:
         drawn = None
         for solver in solvers:
-            if solver.label in exhausted:
+            if solver.label in exhausted or solver.cost_ms > opts.max_solver_cost:
+                continue
+            if solver.cost_ms > opts.expensive_cost and drawn_by.get(solver.label, 0) >= opts.expensive_samples:
                 continue
             block = _sample_block(mask, solver.m, solver.n, rng, tried)
             if block is None:
@@ -993,35 +1146,59 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers) -> tupl
             break
         solver, (rows, cols) = drawn
         search.solvers.add(solver.label)
-        for model in _hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
-                                            best.inlier_ratio if best is not None else None):
-            if best is not None and not model.score < best.score:
+        drawn_by[solver.label] = drawn_by.get(solver.label, 0) + 1
+        if offer(_hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
+                                        best.inlier_ratio if best is not None else None)):
+            needed = _needed(best.inlier_ratio, solver.m * solver.n, opts.confidence)
+
+    confident = best is not None and (needed == 0 or search.samples >= max(needed, opts.min_samples))
+    small = _n_params_mask(mask) <= opts.subnetwork_max_params
+    if confident or (best is not None and not small and search.samples >= opts.min_samples):
+        return best, search
+    # Sub-networks: the blocks ran out before the adaptive count was reached in a small network (few
+    # fully measured blocks, low redundancy), or there were too few blocks at all.
+    search.solvers.add("subnetworks")
+    search.local_optimisations = min(search.local_optimisations, opts.max_local_optimisations // 2)
+    k = max(int(mask.sum() * 0.75), 1)  # entries of a typical sub-network
+    needed_sub = _needed(best.inlier_ratio, k, opts.confidence, opts.subnetwork_convergence) if best else math.inf
+    drawn_sub = 0
+    while drawn_sub < min(needed_sub, opts.subnetwork_samples):
+        # Every other draw is guided by the best model so far: it leaves out the node of one of its
+        # rejected measurements and starts from it (a best model with a gross error inside is often
+        # in the right basin but pulled off it).
+        guided = best is not None and drawn_sub % 2 == 1
+        suspicious = None
+        if guided:
+            _, _, t = _score(_residual_matrix(F, best.R, best.S, best.O), mask, thr, floor)
+            suspicious = np.argwhere(mask & ~_classify(_residual_matrix(F, best.R, best.S, best.O), mask, t))
+        # Unguided draws may repeat a sub-network: each gets a new random start.
+        block = _sample_subnetwork(mask, rng, tried if guided else None, suspicious)
+        if block is None:
+            if guided:
+                drawn_sub += 1
                 continue
-            if search.local_optimisations < opts.max_local_optimisations:
-                search.local_optimisations += 1
-                lo = _local_optimisation(F, mask, model, thr, floor, opts, rng)
-                if lo.score <= model.score:
-                    model = lo
+            # No redundant sub-network (e.g. as many measurements as unknowns): random starts on all.
+            block = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        drawn_sub += 1
+        if offer(_hypotheses_from_subnetwork(F, mask, *block, thr, floor, opts, rng, search,
+                                             best.inlier_ratio if best is not None else None,
+                                             best if guided else None)):
+            needed_sub = _needed(best.inlier_ratio, k, opts.confidence, opts.subnetwork_convergence)
+    # The runners-up get their local optimisation too: with low redundancy a hypothesis in the right
+    # basin, pulled off by a gross error, can score worse than a wrong one before LO and better after.
+    for model in search.runners_up:
+        lo = _local_optimisation(F, mask, model, thr, floor, opts, rng)
+        search.local_optimisations += 1
+        if best is None or _better(lo, best, floor):
             if best is not None and best.refined:
                 search.others.append(best)
-            best = model
-            w = best.inlier_ratio
-            k = solver.m * solver.n
-            if w >= 1.0:
-                needed = 0
-            elif w ** k > 0:
-                needed = min(opts.max_samples, math.ceil(math.log(1 - opts.confidence) / math.log1p(-(w ** k))))
-    if best is None or (search.samples < opts.min_samples and best.inlier_ratio < 0.9):
-        # No (or too few) fully measured blocks to sample: random starts as well.
-        search.solvers.add("random-starts")
-        for model in _hypotheses_from_random_starts(F, mask, thr, floor, opts, rng, search):
-            if best is None or model.score < best.score:
-                if best is not None:
-                    search.others.append(best)
-                best = model
-            else:
-                search.others.append(model)
+            best = lo
     return best, search
+
+
+def _n_params_mask(mask: np.ndarray) -> int:
+    """Unknowns 2m + 3n - 3 of the nodes that have measurements."""
+    return 2 * int(mask.any(axis=1).sum()) + 3 * int(mask.any(axis=0).sum()) - 3
 
 
 # --------------------------------------------------------------------------------------------------
@@ -1208,7 +1385,7 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
 
     best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers())
     if best is None:
-        return _failed(F, "no hypothesis: every minimal-solver sample and random start failed (degenerate geometry?)",
+        return _failed(F, "no hypothesis: every minimal-solver sample and sub-network fit failed (degenerate geometry?)",
                        t0, seed, search, warnings)
 
     # Final refinement: robust LM, badly placed nodes afresh, least squares on the inliers until stable.
