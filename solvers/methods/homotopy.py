@@ -236,11 +236,15 @@ class HomotopySolver:
         complete = np.array([np.all(np.isfinite(x[b])) and not _duplicated(x[b]).any() for b in range(B)])
         return x, complete
 
+    def _detour_point(self, k: int) -> np.ndarray:
+        """The k-th fixed complex detour point in parameter space."""
+        return self.q0 + DETOUR * np.sqrt(np.mean(np.abs(self.q0) ** 2)) * _detour_direction(len(self.q0), k)
+
     def _midpoint(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """The k-th fixed complex detour point and its complete root set (cached), or None."""
+        """The k-th detour point and its complete root set (computed on first need, then cached), or None."""
         cache = self.__dict__.setdefault("_midpoints", {})
         if k not in cache:
-            qm = self.q0 + DETOUR * np.sqrt(np.mean(np.abs(self.q0) ** 2)) * _detour_direction(len(self.q0), k)
+            qm = self._detour_point(k)
             xm, complete = self._route(self.q0, self.x0, qm[None])
             cache[k] = (qm, xm[0]) if complete[0] else None
         return cache[k]
@@ -254,19 +258,45 @@ class HomotopySolver:
         # every root along another route, through a fixed complex midpoint (two segments). All paths
         # of the instance take the same route: a different route permutes the endpoints (monodromy),
         # so endpoints of different routes must not be mixed.
-        bad = np.flatnonzero(~complete)
-        degenerate = np.array([np.sum(~np.all(np.isfinite(x[b]), axis=1) | _duplicated(x[b])) > max(8, RETRACK_FRACTION * K)
-                               for b in bad], dtype=bool)
-        bad = bad[~degenerate]
+        bad = [b for b in np.flatnonzero(~complete) if np.sum(_unresolved(x[b])) <= max(8, RETRACK_FRACTION * K)]
+        # paths that still stall even with tight steps: the segment passes too close to a singular
+        # point. Each such path alone goes around it through a fixed complex midpoint (two segments);
+        # K distinct finite endpoints are all K roots whatever route each path took. But a route
+        # through a midpoint permutes the endpoints (monodromy): an endpoint that lands on a root
+        # another path already holds means that path jumped (or took this one's root); then every
+        # path of the instance takes the same midpoint route, whose endpoints are consistent.
+        jumped = {b for b in bad if _duplicated(x[b]).any()}
         for k in range(DETOURS):
-            if not len(bad):
+            rows = np.zeros((B, K), dtype=bool)
+            for b in bad:
+                if b not in jumped:
+                    rows[b] = ~np.all(np.isfinite(x[b]), axis=1)
+            if not rows.any():
+                break
+            bj, kj = np.nonzero(rows)
+            qm = self._detour_point(k)
+            xm, _ = self.track(self.q0[None], qm[None], self.x0[kj], None, tracker.TIGHT)
+            good = np.flatnonzero(np.all(np.isfinite(xm), axis=1))
+            if not len(good):
+                continue
+            xe, _ = self.track(qm[None], q, xm[good], bj[good], tracker.TIGHT)
+            for b, i, xi in zip(bj[good], kj[good], xe):
+                if np.all(np.isfinite(xi)):
+                    if _duplicated(np.vstack([x[b], xi[None]]))[-1]:
+                        jumped.add(b)
+                    else:
+                        x[b, i] = xi
+        jumped = np.array(sorted(jumped), dtype=np.int64)
+        for k in range(DETOURS):
+            if not len(jumped):
                 break
             mid = self._midpoint(k)
             if mid is None:
                 continue
-            xk, ok = self._route(*mid, q[bad])
-            x[bad[ok]] = xk[ok]
-            bad = bad[~ok]
+            xk, ok = self._route(*mid, q[jumped])
+            better = np.array([np.sum(_unresolved(xk[j])) < np.sum(_unresolved(x[b])) for j, b in enumerate(jumped)], dtype=bool)
+            x[jumped[better]] = xk[better]
+            jumped = jumped[~ok]
         # polish on the target's own coefficients: the tracker's are interpolated along the segment,
         # with rounding errors relative to their size on the whole circle |s| = 1
         flat = x.reshape(B * K, -1)
@@ -275,6 +305,11 @@ class HomotopySolver:
         if ok.any():
             flat[ok] = self.newton(flat[ok], q, steps=FINAL_NEWTON, inst=inst[ok])
         return flat.reshape(B, K, -1)
+
+
+def _unresolved(x: np.ndarray) -> np.ndarray:
+    """Mask of the endpoints (K, n) of one instance that were lost (NaN) or coincide with another."""
+    return ~np.all(np.isfinite(x), axis=1) | _duplicated(x)
 
 
 def _duplicated(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
