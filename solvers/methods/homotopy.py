@@ -212,7 +212,7 @@ class HomotopySolver:
         G = self.segment(q0, q1)
         return tracker.track(self.structure, G, x0, inst, options or self.options)
 
-    def _route(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def _route(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Track the complete root set xa (K, N) of qa to every target q (B, P) along straight segments.
 
         Paths that stall or end on the same root as another path (path jumping) are retracked with
@@ -227,13 +227,13 @@ class HomotopySolver:
         redo = stats[:, 0].reshape(B, K) == 1
         for b in range(B):
             redo[b] |= _duplicated(x[b])
-            if redo[b].sum() > max(8, RETRACK_FRACTION * K):
-                redo[b] = False  # most paths fail: degenerate data, not path jumping
+            if _degenerate(redo[b]):
+                redo[b] = False
         bi, ki = np.nonzero(redo)
         if len(bi):
             xr, _ = self.track(qa[None], q, xa[ki], bi, tracker.TIGHT)
             x[bi, ki] = xr
-        complete = np.array([np.all(np.isfinite(x[b])) and not _duplicated(x[b]).any() for b in range(B)])
+        complete = np.array([not _unresolved(x[b]).any() for b in range(B)])
         return x, complete
 
     def _detour_point(self, k: int) -> np.ndarray:
@@ -254,11 +254,7 @@ class HomotopySolver:
         q = np.atleast_2d(np.asarray(q, dtype=complex))
         B, K = len(q), self.n_paths
         x, complete = self._route(self.q0, self.x0, q)
-        # an instance whose segment passes too close to a singular point even for tight steps: track
-        # every root along another route, through a fixed complex midpoint (two segments). All paths
-        # of the instance take the same route: a different route permutes the endpoints (monodromy),
-        # so endpoints of different routes must not be mixed.
-        bad = [b for b in np.flatnonzero(~complete) if np.sum(_unresolved(x[b])) <= max(8, RETRACK_FRACTION * K)]
+        bad = [b for b in np.flatnonzero(~complete) if not _degenerate(_unresolved(x[b]))]
         # paths that still stall even with tight steps: the segment passes too close to a singular
         # point. Each such path alone goes around it through a fixed complex midpoint (two segments);
         # K distinct finite endpoints are all K roots whatever route each path took. But a route
@@ -305,6 +301,12 @@ class HomotopySolver:
         if ok.any():
             flat[ok] = self.newton(flat[ok], q, steps=FINAL_NEWTON, inst=inst[ok])
         return flat.reshape(B, K, -1)
+
+
+def _degenerate(failed: np.ndarray) -> bool:
+    """Whether too many of an instance's K paths failed (mask (K,)) for retracking to be worth it:
+    degenerate data (e.g. coincident nodes), not path jumping."""
+    return int(failed.sum()) > max(8, RETRACK_FRACTION * len(failed))
 
 
 def _unresolved(x: np.ndarray) -> np.ndarray:
@@ -390,7 +392,7 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
             xs = solver.newton(xs, q0[None], steps=3)
             # keep converged roots off the excluded locus (non-vanishing conditions)
             step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
-            keep = step < 1e-8
+            keep = step < START_TOL
             if excluded is not None:
                 keep &= ~excluded(xs)
             xs = xs[keep]
@@ -431,17 +433,17 @@ def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray]
     args = system.x_symbols + system.q_symbols
     conditions = []
     for g in system.nonzero_exprs:
-        terms = sympy.Add.make_args(sympy.expand(g))
-        degree = sympy.Poly(g, *system.x_symbols).total_degree()
-        conditions.append(([sympy.lambdify(args, t, "numpy") for t in terms], degree))
+        poly = sympy.Poly(g, *system.x_symbols)  # terms: one per monomial in x, coefficients in q
+        terms = [c * sympy.Mul(*(v**e for v, e in zip(system.x_symbols, mon))) for mon, c in poly.terms()]
+        conditions.append((sympy.lambdify(args, terms, "numpy"), poly.total_degree()))
 
     def mask(x: np.ndarray) -> np.ndarray:
         noise = 1e-8 * (1.0 + np.linalg.norm(x, axis=1))
         out = np.zeros(len(x), dtype=bool)
         for terms, degree in conditions:
-            values = [np.broadcast_to(t(*x.T, *q0), (len(x),)) for t in terms]
-            size = np.sum([np.abs(v) for v in values], axis=0)
-            out |= (np.abs(np.sum(values, axis=0)) <= 1e-8 * size) | (size <= noise ** degree)
+            values = np.array([np.broadcast_to(v, (len(x),)) for v in terms(*x.T, *q0)])
+            size = np.abs(values).sum(axis=0)
+            out |= (np.abs(values.sum(axis=0)) <= 1e-8 * size) | (size <= noise ** degree)
         return out
 
     return mask
