@@ -406,11 +406,13 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
         "generate", help="build a numeric solver: a Table 3 configuration, any formulation, or your own system",
         description="Certify the root count over GF(p) (two primes, two seeds), build the solver and write "
         "<name>.json (spec) and <name>.py (module with solve(F)). TARGET is a committed configuration "
-        "(6r4s: eigenvalue pencil; 9r3s, 8r3s, 7r3s, 6r3s: parameter homotopy; written to solvers/generated/), "
+        "(6r4s: eigenvalue pencil; 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s: parameter homotopy; written to "
+        "solvers/generated/; 4r6s is solved by the 4r5s solver, the sixth transmitter filtering), "
         "a TDOA formulation label such as 7r3s:B2,B3,C2-C7, or a FILE with a parametric system (lines "
         "'unknowns: x, y', 'parameters: a, b', optional 'nonzero: x', then 'equations:' and one polynomial per "
         "line); formulations and files need --out DIR.")
-    p.add_argument("target", help="configuration (6r4s, 9r3s, 8r3s, 7r3s, 6r3s), formulation label or system FILE")
+    p.add_argument("target", help="configuration (6r4s, 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s, 4r6s), "
+                   "formulation label or system FILE")
     p.add_argument("--out", metavar="DIR", help="output directory (required for formulations and files)")
     p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")
     p.set_defaults(func=cmd_generate)
@@ -422,6 +424,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from solvers.codegen import SOLVERS as PENCILS
     from solvers.codegen import generate as generate_pencil
     from solvers.methods.homotopy import HomotopyError
+    from solvers.subsystem import SUBSYSTEMS
 
     if args.seed < 0:
         raise UserError(f"--seed must be a non-negative integer, got {args.seed}")
@@ -430,9 +433,14 @@ def cmd_generate(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     target = args.target
-    committed = ", ".join(sorted(set(gen.SOLVERS) | set(PENCILS)))
+    committed = ", ".join(sorted(set(gen.SOLVERS) | set(PENCILS) | set(SUBSYSTEMS)))
     if ":" not in target and not os.path.exists(target):
         label = target.replace("/", "")
+        if label in SUBSYSTEMS:
+            base = SUBSYSTEMS[label][0]
+            print(f"{label} is solved by the {base} solver on its first transmitters, the others filtering the "
+                  f"candidates (solvers.subsystem); regenerating {base}", file=sys.stderr)
+            label = base
         if label in PENCILS or label in gen.SOLVERS:
             target = label
         elif re.fullmatch(r"\d+r/?\d+s", target):

@@ -1,0 +1,113 @@
+"""Over-determined configurations solved on a square sub-configuration, the extra nodes filtering.
+
+4r/6s: every square subsystem of the 4r/6s positions equations has the 344 roots of the minimal 4r/5s
+problem, and only the true network satisfies all six transmitters' equations (1 solution over GF(p),
+two primes: tables/NOTES.md). So the 4r/5s solver runs on the first five transmitters and the sixth
+filters its 344 candidates: with the receivers of a candidate (gauge r_1 = 0), the four range
+equations (f_i6 - o_6)^2 = |r_i - s_6|^2 minus the first are three linear equations in (s_6, o_6);
+their solution must also satisfy the first equation. Complex candidates are filtered the same way
+(bilinear, not Hermitian, products), so the filter is a polynomial condition, not a real-only one.
+
+:class:`SubsystemSolver` has the attributes of a generated solver module that the benchmark and the
+CLI read (``CONFIG``, ``SYSTEM``, ``METHOD``, ``DEGREE``, ``PATHS``, ``UNKNOWNS``, ``solve``,
+``solve_batch``); its ``DEGREE`` is the count of the over-determined system (1), its ``PATHS`` the
+base solver's.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["SUBSYSTEMS", "FILTER_TOL", "SubsystemSolver", "extra_transmitter_residuals", "receivers_from_orbits"]
+
+#: Over-determined label -> (square base label, roots of the over-determined system). The count is
+#: established by analysis.positions (tests/test_positions.py::test_4r6s_full_system_keeps_only_the_true_network_two_primes).
+SUBSYSTEMS = {"4r6s": ("4r5s", 1)}
+
+#: Largest relative residual of an extra transmitter's equation for a candidate to be kept.
+FILTER_TOL = 1e-6
+
+
+def receivers_from_orbits(x: np.ndarray) -> np.ndarray:
+    """Receivers (..., 4, 2) in the gauge r_1 = 0, r_2 = (x2, 0) from 4r/5s roots (..., 5) in the
+    sign-group invariants (X, Y, xi3, xi4, eta4); principal square roots pick one orbit member (the
+    other members are reflections, which no range equation can tell apart)."""
+    x = np.asarray(x, dtype=complex)
+    x2, y3 = np.sqrt(x[..., 0]), np.sqrt(x[..., 1])
+    zero = np.zeros_like(x2)
+    rec = np.stack([np.stack([zero, zero], -1), np.stack([x2, zero], -1), np.stack([x[..., 2] * x2, y3], -1),
+                    np.stack([x[..., 3] * x2, x[..., 4] * y3], -1)], axis=-2)
+    return rec
+
+
+def extra_transmitter_residuals(receivers: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Relative residual of one transmitter's range equations for candidate receivers (..., m, 2).
+
+    f (m,): the transmitter's measurements. (s, o) from the m - 1 differences of the range equations
+    (least squares when m > 4); the residual is that of the first equation, (f_1 - o)^2 - s.s (r_1 = 0),
+    relative to f_1^2 + |s|^2. NaN where the linear system is singular or the candidate is not finite.
+    """
+    R = np.asarray(receivers, dtype=complex)
+    f = np.asarray(f, dtype=float)
+    A = np.concatenate([2.0 * R[..., 1:, :], np.broadcast_to(-2.0 * (f[1:] - f[0])[:, None], R.shape[:-2] + (len(f) - 1, 1))], axis=-1)
+    rhs = np.einsum("...ij,...ij->...i", R[..., 1:, :], R[..., 1:, :]) - f[1:] ** 2 + f[0] ** 2
+    out = np.full(R.shape[:-2], np.nan)
+    ok = np.all(np.isfinite(A.reshape(A.shape[:-2] + (-1,))), axis=-1) & np.all(np.isfinite(rhs), axis=-1)
+    with np.errstate(all="ignore"):
+        At, bt = A[ok], rhs[ok]
+        sol = np.linalg.solve(np.conj(np.swapaxes(At, -1, -2)) @ At, (np.conj(np.swapaxes(At, -1, -2)) @ bt[..., None]))[..., 0]
+        s, o = sol[..., :2], sol[..., 2]
+        first = (f[0] - o) ** 2 - np.einsum("...i,...i->...", s, s)
+        out[ok] = np.abs(first) / (f[0] ** 2 + np.einsum("...i,...i->...", np.abs(s), np.abs(s)))
+    return out
+
+
+class SubsystemSolver:
+    """The solver of an over-determined configuration (:data:`SUBSYSTEMS`): its base solver on the
+    first transmitters, candidates kept only when every further transmitter's equations hold."""
+
+    def __init__(self, label: str):
+        if label not in SUBSYSTEMS:
+            raise ValueError(f"unknown over-determined configuration {label!r}; valid: {', '.join(SUBSYSTEMS)}")
+        from .api import _module_for
+
+        base_label, degree = SUBSYSTEMS[label]
+        self.base = _module_for(base_label)
+        self.label = label
+        self.CONFIG = tuple(int(v) for v in label[:-1].split("r"))
+        self.SYSTEM = f"{label}: {self.base.SYSTEM.split(':', 1)[1]} on transmitters 1-{self.base.CONFIG[1]}, filtered by the rest"
+        self.METHOD = self.base.METHOD
+        self.DEGREE = degree
+        self.PATHS = self.base.PATHS
+        self.UNKNOWNS = self.base.UNKNOWNS
+        if "receivers-orbits" not in self.base.SYSTEM:
+            raise ValueError(f"{label}: the filter reads receivers from the 4r/5s orbit invariants, not {self.base.SYSTEM}")
+
+    def solve_batch(self, F) -> np.ndarray:
+        """Candidate roots (..., PATHS, N) of the base solver on the first transmitters; NaN rows for
+        candidates that a further transmitter rejects."""
+        F = np.asarray(F, dtype=float)
+        if F.shape[-2:] != self.CONFIG:
+            raise ValueError(f"data of shape {F.shape} given; the solver needs (..., {self.CONFIG[0]}, {self.CONFIG[1]})")
+        nb = self.base.CONFIG[1]
+        roots = np.array(self.base.solve_batch(F[..., :nb]))
+        rec = receivers_from_orbits(roots)
+        keep = np.ones(roots.shape[:-1], dtype=bool)
+        for idx in np.ndindex(F.shape[:-2]):
+            for j in range(nb, F.shape[-1]):
+                with np.errstate(all="ignore"):
+                    keep[idx] &= extra_transmitter_residuals(rec[idx], F[idx][:, j]) < FILTER_TOL
+        roots[~keep] = np.nan
+        return roots
+
+    def solve(self, F) -> np.ndarray:
+        return self.solve_batch(np.asarray(F)[None])[0]
+
+
+def module_for(label: str):
+    """A generated solver module, or the :class:`SubsystemSolver` of an over-determined configuration."""
+    if label in SUBSYSTEMS:
+        return SubsystemSolver(label)
+    from .api import _module_for
+
+    return _module_for(label)
+
