@@ -13,6 +13,12 @@ eigen-solution of the pencil; homotopy endpoints, which include Newton steps on 
 for the solver output (default Gauss-Newton polishing on the input equations; no LM, no recovery).
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers.py [--trials 1000] [--seed 0] [--no-generate]
+       [--solvers 9r3s 6r3s ...] [--merge]
+
+``--merge`` replaces only the rows of the solvers run in the existing table (a file lock serialises
+concurrent runs, e.g. the fast solvers on 1000 trials beside the slow ones on 100); with
+``--no-generate`` a row keeps its previous generation time. The provenance of every row (commit,
+date, trials, timing calls, where its generation time comes from) is in the meta file's ``rows``.
 """
 from __future__ import annotations
 
@@ -24,6 +30,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import csv  # noqa: E402
 import datetime  # noqa: E402
+import fcntl  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import subprocess  # noqa: E402
@@ -49,6 +56,8 @@ FAIL_TOL = 1e-6
 #: Rounds of single-solve timing; the best round's median is reported (as bench_engine's best of 3).
 SINGLE_ROUNDS = 3
 REAL_TOL = 1e-6
+#: Every benchmarked solver, in the table's row order: the dispatch order, then subsystem solvers.
+DEFAULT_SOLVERS = list(SOLVER_ORDER) + list(SUBSYSTEMS)
 
 
 def _truth(module, net) -> np.ndarray:
@@ -165,25 +174,56 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--single-calls", type=int, default=100, help="solve() calls per timing round")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-generate", action="store_true", help="skip timing a fresh template search")
-    parser.add_argument("--solvers", nargs="*", default=list(SOLVER_ORDER) + list(SUBSYSTEMS))
+    parser.add_argument("--solvers", nargs="*", default=DEFAULT_SOLVERS)
     parser.add_argument("--out", default=os.path.join(ROOT, "tables", "solvers.csv"))
+    parser.add_argument("--merge", action="store_true", help="replace only these solvers' rows in --out")
     args = parser.parse_args(argv)
+    unknown = sorted(set(args.solvers) - set(DEFAULT_SOLVERS))
+    if unknown:
+        parser.error(f"unknown solvers {', '.join(unknown)}; valid: {', '.join(DEFAULT_SOLVERS)}")
+    commit, dirty = _git("rev-parse", "--short", "HEAD"), bool(_git("status", "--porcelain", "--untracked-files=no"))
     rows = []
     for label in args.solvers:
         row = bench(label, args.trials, args.seed, not args.no_generate, args.single_calls)
         rows.append(row)
         print(", ".join(f"{k}={v}" for k, v in row.items()), flush=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    meta_path = os.path.splitext(args.out)[0] + ".meta.json"
+    with open(meta_path + ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # concurrent --merge runs write one after the other
+        _write(args, rows, meta_path, commit, dirty)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> None:
+    old_rows, old_meta = {}, {}
+    if args.merge and os.path.exists(args.out):
+        with open(args.out, newline="", encoding="utf-8") as fh:
+            old_rows = {r["solver"]: r for r in csv.DictReader(fh)}
+        if os.path.exists(meta_path):
+            with open(meta_path, encoding="utf-8") as fh:
+                old_meta = json.load(fh)
+    provenance = old_meta.get("rows") if isinstance(old_meta.get("rows"), dict) else {}
+    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    for row in rows:
+        label = row["solver"]
+        generation = "not timed" if args.no_generate else "this run"
+        if args.no_generate and label in old_rows and old_rows[label].get("generation_s") not in ("", "nan"):
+            row["generation_s"] = float(old_rows[label]["generation_s"])
+            generation = "kept from the previous row (" + provenance.get(label, {}).get("commit", "earlier run") + ")"
+        provenance[label] = {"commit": commit + ("+dirty" if dirty else ""), "date": date, "trials": args.trials,
+                             "single_calls": args.single_calls, "seed": args.seed, "generation_s": generation}
+        old_rows[label] = row
+    order = {label: k for k, label in enumerate(DEFAULT_SOLVERS)}
+    merged = sorted(old_rows.values(), key=lambda r: order.get(r["solver"], len(order)))
     with open(args.out, "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows(merged)
     meta = {
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "commit": _git("rev-parse", "HEAD"),
-        "worktree_dirty": bool(_git("status", "--porcelain")),
-        "trials": args.trials,
-        "seed": args.seed,
+        "date": date,
+        "rows": {label: provenance[label] for label in (r["solver"] for r in merged) if label in provenance},
         "networks": "solvers.synthetic.random_network: positions N(0, 10^2), offsets N(0, 1), noiseless",
         "error": "log10 of min over candidates ||x - x_true|| / ||x_true||, x = (h11, h12, h22, b1, b2, o), "
                  "or for 4r5s the receivers in sign-group invariants (X, Y, xi3, xi4, eta4)",
@@ -202,11 +242,9 @@ def main(argv: list[str] | None = None) -> int:
         "threads": {k: os.environ.get(k, "") for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
-    with open(os.path.splitext(args.out)[0] + ".meta.json", "w", encoding="utf-8") as fh:
+    with open(meta_path, "w", encoding="utf-8") as fh:
         json.dump(meta, fh, indent=2)
         fh.write("\n")
-    print(f"wrote {args.out}")
-    return 0
 
 
 if __name__ == "__main__":
