@@ -3,8 +3,8 @@
 Per solver: construction method and the size of its numeric core (companion pencil, or homotopy paths x
 unknowns), the number of roots |B| (GF(p) degree), generation time (a fresh build into a temporary
 directory, not timed in tests), the first call in this process (loading the compiled tracker from its
-on-disk cache) apart, median runtime of one solve (best of three rounds), its ratio to numpy's ``eig`` of a
-|B| x |B| complex matrix timed in the same process, time per path, batched throughput, and, on N seeded
+on-disk cache) apart, median runtime of one solve (best of three rounds), its ratio to numpy's ``eig`` of an
+eig_n x eig_n complex matrix timed in the same process (eig_n = |B|; a pencil solver's own pencil size), time per path, batched throughput, and, on N seeded
 noiseless networks (positions
 N(0, 10^2), offsets N(0, 1), via solvers.synthetic.random_network): median / 90th / 99th percentile of the
 log10 relative error of the best candidate against the true root (H, b, o), the failure fraction (no
@@ -130,9 +130,11 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int)
             module.solve(F[k])
             single.append(time.perf_counter() - t0)
         medians.append(float(np.median(single)))
-    # the eigen step of a |B|-root action-matrix solver; an over-determined configuration solved on a
-    # square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
-    eig = min(_eig_ms(module.PATHS if label in SUBSYSTEMS else module.DEGREE, rng) for _ in range(SINGLE_ROUNDS))
+    # the eigen step of a |B|-root action-matrix solver; a pencil solver's own eigen step is its pencil's
+    # size (6r4s: 37 x 37 for |B| = 22, the issue's "eig37"); an over-determined configuration solved on
+    # a square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
+    eig_n = module.PATHS if label in SUBSYSTEMS else (module.DEGREE if homotopy else module.SIZE[0])
+    eig = min(_eig_ms(eig_n, rng) for _ in range(SINGLE_ROUNDS))
     t0 = time.perf_counter()
     polished = module.solve_batch(F)
     batch_s = (time.perf_counter() - t0) / trials
@@ -148,6 +150,7 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int)
         "generation_s": round(gen_s, 2),
         "first_call_ms": round(first_ms, 1),
         "single_ms": round(single_ms, 3),
+        "eig_n": eig_n,
         "eig_ms": round(eig, 3),
         "x_eig": round(single_ms / eig, 2),
         "us_per_path": round(1e3 * single_ms / paths, 1) if paths else "",
@@ -217,8 +220,11 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
         old_rows[label] = row
     order = {label: k for k, label in enumerate(DEFAULT_SOLVERS)}
     merged = sorted(old_rows.values(), key=lambda r: order.get(r["solver"], len(order)))
+    for row in merged:
+        if "eig_n" not in row:  # rows of runs before the eig_n column: they compared with |B| (4r6s: paths)
+            row["eig_n"] = row["size"].split("x")[0] if row["solver"] in SUBSYSTEMS else row["basis_size"]
     with open(args.out, "w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]), restval="", extrasaction="ignore")
         writer.writeheader()
         writer.writerows(merged)
     meta = {
@@ -230,8 +236,9 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
         "failure": f"no candidate within {FAIL_TOL} relative error",
         "raw": "polish=0: eigen-solutions of the 6r4s pencil; homotopy endpoints (tracking ends with "
                "Newton steps on the target system; no polishing); solver_*: the module's default polishing",
-        "eig": "numpy.linalg.eig of a |B| x |B| complex normal matrix, median of 30, best of 3 rounds, same process "
-               "(4r6s, |B| = 1, solved on its 4r5s subsystem: the subsystem's 344)",
+        "eig": "numpy.linalg.eig of an eig_n x eig_n complex normal matrix, median of 30, best of 3 rounds, same "
+               "process; eig_n = |B| for homotopy solvers, the pencil size for the 6r4s pencil (37, its own eigen "
+               "step), the subsystem's |B| for 4r6s (|B| = 1, solved on its 4r5s subsystem: 344)",
         "subsystems": "4r6s: the 4r5s solver on transmitters 1-5, candidates kept when transmitter 6's range "
                       "equations hold (solvers.subsystem); mean_real counts the kept real candidates",
         "real": f"finite candidates with max |imag| <= {REAL_TOL} max |x|",

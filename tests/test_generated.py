@@ -126,3 +126,28 @@ def test_polynomial_system_jacobian_matches_finite_differences():
         fm, _ = system.residual_jacobian(x - dx, C, jacobian=False)
         np.testing.assert_allclose(J[..., v], (fp - fm) / (2 * eps), rtol=1e-6, atol=1e-8)
     assert isinstance(system, PolySystem)
+
+
+def test_solver_table_covers_every_committed_solver():
+    """tables/solvers.csv (scripts/bench_solvers.py) has one row per committed solver, consistent with
+    the modules (roots, size, method), and solvers.meta.json the provenance of every row."""
+    import csv
+
+    from solvers.api import SOLVER_ORDER
+    from solvers.subsystem import SUBSYSTEMS, module_for
+
+    tables = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tables")
+    with open(os.path.join(tables, "solvers.csv"), newline="", encoding="utf-8") as fh:
+        rows = {r["solver"]: r for r in csv.DictReader(fh)}
+    with open(os.path.join(tables, "solvers.meta.json"), encoding="utf-8") as fh:
+        provenance = json.load(fh)["rows"]
+    labels = list(SOLVER_ORDER) + list(SUBSYSTEMS)
+    assert list(rows) == labels, "stale: run scripts/bench_solvers.py"
+    for label in labels:
+        module, row = module_for(label), rows[label]
+        assert int(row["basis_size"]) == module.DEGREE and row["method"] == module.METHOD, label
+        paths = getattr(module, "PATHS", None) if module.METHOD == "homotopy" else None
+        expected = f"{paths}x{len(module.UNKNOWNS)}" if paths else f"{module.SIZE[0]}x{module.SIZE[1]}"
+        assert row["size"] == expected, label
+        assert int(row["trials"]) >= 100 and row["eig_n"], label
+        assert provenance[label]["commit"] and int(provenance[label]["trials"]) == int(row["trials"]), label
