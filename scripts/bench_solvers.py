@@ -252,6 +252,31 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
     with open(meta_path, "w", encoding="utf-8") as fh:
         json.dump(meta, fh, indent=2)
         fh.write("\n")
+    with open(os.path.splitext(args.out)[0] + ".md", "w", encoding="utf-8") as fh:
+        fh.write(markdown(merged))
+
+
+def _label(solver: str) -> str:
+    m, n = solver[:-1].split("r")
+    return f"{m}r/{n}s"
+
+
+def markdown(rows: list[dict]) -> str:
+    """The table of the README (tables/solvers.md): one line per solver."""
+    out = ["| solver | method | roots (paths) | trials | raw median / p90 log10 error | failures | ms single (x eig of n) "
+           "| us per path | generation s |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        method = {"curve-pencil": f"eigenvalue pencil {r['size'].replace('x', ' x ')}"}.get(r["method"], "parameter homotopy")
+        if r["solver"] in SUBSYSTEMS:
+            method += f" ({SUBSYSTEMS[r['solver']][0]} + filter)"
+        paths = r["size"].split("x")[0] if r["method"] == "homotopy" else "-"
+        gen = "-" if r["generation_s"] in ("", "nan") or r["generation_s"] != r["generation_s"] else f"{float(r['generation_s']):.1f}"
+        upp = f"{float(r['us_per_path']):.0f}" if r["us_per_path"] not in ("", None) else "-"
+        out.append(f"| {_label(r['solver'])} | {method} | {r['basis_size']} ({paths}) | {r['trials']} | "
+                   f"{float(r['raw_median_log10_err']):.2f} / {float(r['raw_p90_log10_err']):.2f} | "
+                   f"{100 * float(r['raw_failure_fraction']):.1f} % | {float(r['single_ms']):.1f} "
+                   f"({float(r['x_eig']):.1f}x eig{r['eig_n']}) | {upp} | {gen} |")
+    return "\n".join(out) + "\n"
 
 
 if __name__ == "__main__":

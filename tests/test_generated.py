@@ -151,3 +151,11 @@ def test_solver_table_covers_every_committed_solver():
         assert row["size"] == expected, label
         assert int(row["trials"]) >= 100 and row["eig_n"], label
         assert provenance[label]["commit"] and int(provenance[label]["trials"]) == int(row["trials"]), label
+    # the README's table is tables/solvers.md, written from the same rows
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_solvers", os.path.join(os.path.dirname(tables), "scripts", "bench_solvers.py"))
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    with open(os.path.join(tables, "solvers.md"), encoding="utf-8") as fh:
+        assert fh.read() == bench.markdown(list(rows.values())), "stale: run scripts/bench_solvers.py"

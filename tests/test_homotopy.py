@@ -3,6 +3,7 @@ committed homotopy solvers (fresh emission, complete start systems, known roots 
 from __future__ import annotations
 
 import importlib
+import json
 import os
 
 import numpy as np
@@ -178,6 +179,51 @@ def test_every_path_of_a_failing_instance_takes_the_same_detour(index):
     assert np.min(np.linalg.norm(roots - x, axis=1)) / np.linalg.norm(x) < 1e-9
 
 
+@pytest.mark.parametrize("name", [n for n in HOMOTOPY_SPECS if _spec(n)[1].get("full_system")])
+def test_tracked_roots_are_exactly_the_full_systems(name):
+    from analysis.parametric import from_formulation
+    from solvers.generate import SOLVERS
+
+    _, spec = _spec(name)
+    label = spec["name"].split("_")[1]
+    full = from_formulation(SOLVERS[label], saturate_det_h=True)
+    assert full.name == spec["full_system"]["system"] and len(full.equations) == spec["full_system"]["equations"]
+    module = _module(name[:-5])
+    all_roots = hm.HomotopySolver({k: v for k, v in spec.items() if k != "full_system"}, module.coefficients)
+    res = hm.system_residuals(full, all_roots.x0, all_roots.q0)
+    tracked = np.zeros(len(res), dtype=bool)
+    tracked[spec["full_system"]["tracked"]] = True
+    assert res[tracked].max() < hm.FULL_TOL and res[~tracked].min() > hm.FULL_GAP
+
+
+def test_squared_system_tracks_only_the_full_systems_roots(tmp_path):
+    # x^2 = a, (y - x)(y + x - b) = 0 has 4 roots in two families (y = x, y = b - x); the full system
+    # (x = y too) has the 2 of the first: paths from them stay in it, so only they are tracked. The
+    # start holds a root of each family (monodromy cannot cross from one to the other)
+    import importlib.util
+
+    from solvers.generate import generate_system
+
+    square_ = parse("unknowns: x, y\nparameters: a, b\nequations:\nx^2 - a\ny^2 - a + b*x - b*y\n", "square")
+    full = parse("unknowns: x, y\nparameters: a, b\nequations:\nx^2 - a\ny^2 - a + b*x - b*y\nx - y\n", "full")
+    def start(rng):
+        a, b = 2.0 + 1.0j, -0.5 + 0.3j
+        return np.array([a, b]), np.array([[np.sqrt(a), np.sqrt(a)], [np.sqrt(a), b - np.sqrt(a)]])
+
+    result = generate_system(square_, "toy", str(tmp_path), start=start, full=full)
+    assert result.degree == 4 and result.paths == 2 and result.report["tracked"] == "2 of 4"
+    spec = json.loads((tmp_path / (result.name + ".json")).read_text())
+    assert spec["full_system"]["degree"] == 2 and len(spec["start_roots"]) == 4
+    mod_spec = importlib.util.spec_from_file_location("toy_solver", tmp_path / (result.name + ".py"))
+    module = importlib.util.module_from_spec(mod_spec)
+    mod_spec.loader.exec_module(module)
+    roots = module.solve(np.array([4.0, 1.0]))
+    assert module.PATHS == 2 and roots.shape == (2, 2)
+    assert np.allclose(sorted(roots[:, 0].real), [-2, 2]) and np.allclose(roots[:, 0], roots[:, 1])
+    with pytest.raises(hm.HomotopyError, match="differ"):
+        generate_system(square_, "t", str(tmp_path), full=parse("unknowns: x, z\nparameters: a, b\nequations:\nx - a\nz - b\n", "other"))
+
+
 def test_non_square_system_is_refused():
     system = parse("unknowns: x, y\nparameters: a\nequations:\nx - a\n", "thin")
     with pytest.raises(hm.HomotopyError, match="square"):
@@ -210,9 +256,15 @@ def test_start_system_is_complete(name):
     module = _module(name[:-5])
     solver = module.solver()
     # as many distinct roots as certified over GF(p), each a root of the start instance to rounding
-    assert spec["paths"] == spec["degree"] == spec["certified"]["degree"]
+    assert len(spec["start_roots"]) == spec["certified"]["degree"]
     assert len(spec["certified"]["primes"]) == 2
-    assert solver.x0.shape == (spec["degree"], len(spec["unknowns"]))
+    full = spec.get("full_system")
+    if full:  # a squared system: the tracked roots are the full system's, certified on two primes x two seeds
+        assert spec["paths"] == spec["degree"] == full["degree"] == len(full["tracked"]) < spec["certified"]["degree"]
+        assert len(full["primes"]) == 2 and len(full["seeds"]) == 2
+    else:
+        assert spec["paths"] == spec["degree"] == spec["certified"]["degree"]
+    assert solver.x0.shape == (spec["paths"], len(spec["unknowns"]))
     # a Newton step no longer moves them (to the build's tolerance)
     step = solver.newton(solver.x0, solver.q0[None]) - solver.x0
     tol = 1e-7 if "positions" in spec["system"] else 1e-9  # Newton noise ~ eps x condition; degree-10 positions equations are ill-conditioned
