@@ -252,8 +252,29 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
     with open(meta_path, "w", encoding="utf-8") as fh:
         json.dump(meta, fh, indent=2)
         fh.write("\n")
+    table = markdown(merged)
     with open(os.path.splitext(args.out)[0] + ".md", "w", encoding="utf-8") as fh:
-        fh.write(markdown(merged))
+        fh.write(table)
+    if os.path.abspath(args.out) == os.path.join(ROOT, "tables", "solvers.csv"):
+        _update_readme(table)
+
+
+README_MARKERS = ("<!-- solvers.md -->\n", "<!-- /solvers.md -->\n")
+
+
+def _update_readme(table: str) -> None:
+    """Put the table between the README's markers (the README shows tables/solvers.md verbatim)."""
+    path = os.path.join(ROOT, "README.md")
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    start, end = README_MARKERS
+    if start not in text or end not in text:
+        print(f"README.md has no {start.strip()} ... {end.strip()} markers; table not copied", file=sys.stderr)
+        return
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(head + start + table + end + tail)
 
 
 def _label(solver: str) -> str:

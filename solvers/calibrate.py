@@ -143,7 +143,11 @@ def available_solvers() -> tuple[MinimalSolver, ...]:
         module = api._module_for(label)
         if api.select_solver(m, n).label != label:  # the api must dispatch this block shape to it
             raise RuntimeError(f"solvers.api dispatches a {m}x{n} block to {api.select_solver(m, n).label}, not {label}")
-        cost = 1.0 if getattr(module, "METHOD", "") != "homotopy" else float(module.PATHS)
+        # a homotopy's cost grows with its paths; a squared system (5r/4s, 5r/5s) counts all its start
+        # roots: it tracks only the full system's (152, 64), but its paths cost 5-8x the others' (5r/5s
+        # 9.4 ms per path, 9r/3s 1.2 ms; tables/solvers.csv), and drawing 5r/5s blocks made 8r/5s
+        # 10 % missing / 5 % outliers slower and no better (10 trials: 6/10 at 24 s against 7/10 at 9 s)
+        cost = 1.0 if getattr(module, "METHOD", "") != "homotopy" else float(getattr(module, "START_ROOTS", module.PATHS))
         solvers.append(MinimalSolver(label, m, n, _solver_via_api(m, n), cost))
     return tuple(sorted(solvers, key=lambda s: s.cost_ms))
 
@@ -167,8 +171,8 @@ class CalibrationOptions:
     expensive_samples : samples per solver costlier than `expensive_cost` (a homotopy costs 0.1-4 s per
         call; tables/solvers.csv), so that they supplement the cheap ones without dominating the time
     expensive_cost : MinimalSolver.cost_ms above which a solver counts as expensive
-    max_solver_cost : solvers costlier than this are not used (4r/5s and 5r/4s: 0.6-4.4 s per call, and
-        sub-networks find what they would)
+    max_solver_cost : solvers costlier than this are not used (4r/5s, 344 paths, ~4 s per call; the
+        squared 5r/4s and 5r/5s, see `available_solvers`: sub-networks find what they would)
     max_local_optimisations : LO runs (each new best hypothesis gets one, up to this many)
     lo_iterations : LM iterations per LO run
     loss : robust loss of the refinement ("cauchy", "soft_l1", "huber"; "linear" = plain LS). Cauchy is

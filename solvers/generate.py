@@ -188,6 +188,7 @@ PARAMETERS = {nparams}
 METHOD = "homotopy"
 DEGREE = {degree}
 PATHS = {paths}
+START_ROOTS = {start_roots}
 SCALE_POWERS = {scale_powers}
 SPEC_FILE = "{spec_file}"
 SPEC_SHA256 = "{spec_sha}"
@@ -230,7 +231,7 @@ def emit_homotopy_module(spec_text: str, spec_file: str, source: str) -> str:
         pshape=", ".join(map(str, pshape)), pshape_tuple=repr(pshape), config=repr(tuple(config)) if config else "None",
         unknowns=repr(tuple(spec["unknowns"])), nparams=len(spec["parameters"]), degree=spec["degree"],
         scale_powers=repr(tuple(spec["scale_powers"])) if spec.get("scale_powers") else "None",
-        coefficient_source=source, tracked_note=_tracked_note(spec))
+        coefficient_source=source, tracked_note=_tracked_note(spec), start_roots=len(spec["start_roots"]))
 
 
 def _tracked_note(spec: dict) -> str:

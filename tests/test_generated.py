@@ -158,4 +158,7 @@ def test_solver_table_covers_every_committed_solver():
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     with open(os.path.join(tables, "solvers.md"), encoding="utf-8") as fh:
-        assert fh.read() == bench.markdown(list(rows.values())), "stale: run scripts/bench_solvers.py"
+        table = fh.read()
+    assert table == bench.markdown(list(rows.values())), "stale: run scripts/bench_solvers.py"
+    with open(os.path.join(os.path.dirname(tables), "README.md"), encoding="utf-8") as fh:
+        assert "".join(bench.README_MARKERS[:1]) + table + bench.README_MARKERS[1] in fh.read(), "README table is stale"

@@ -24,6 +24,7 @@ PARAMETERS = 20
 METHOD = "homotopy"
 DEGREE = 152
 PATHS = 152
+START_ROOTS = 300
 SCALE_POWERS = (-2.0, -2.0, -2.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0)
 SPEC_FILE = "tdoa_5r4s_homotopy152.json"
 SPEC_SHA256 = "2a1f3d8548abfb1d5a3454e8abea3c92dd8bcb16f05d71f783b51e35d0c45d49"

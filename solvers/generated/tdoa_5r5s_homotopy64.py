@@ -24,6 +24,7 @@ PARAMETERS = 25
 METHOD = "homotopy"
 DEGREE = 64
 PATHS = 64
+START_ROOTS = 710
 SCALE_POWERS = (-2.0, -2.0, -2.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 SPEC_FILE = "tdoa_5r5s_homotopy64.json"
 SPEC_SHA256 = "32acc7d40beabf9b951fee516b68d5a79c33166b283ff20dbbecceaa82b06a4b"

@@ -22,6 +22,7 @@ PARAMETERS = 21
 METHOD = "homotopy"
 DEGREE = 144
 PATHS = 144
+START_ROOTS = 144
 SCALE_POWERS = (-2.0, -2.0, -2.0, 0.0, 0.0, 1.0, 1.0, 1.0)
 SPEC_FILE = "tdoa_7r3s_homotopy144.json"
 SPEC_SHA256 = "5d1c3bd9ad5416a608946dd8401f7d9ee5458a91ac4cf8e529d13d6e9a0ecc41"

@@ -22,6 +22,7 @@ PARAMETERS = 24
 METHOD = "homotopy"
 DEGREE = 116
 PATHS = 116
+START_ROOTS = 116
 SCALE_POWERS = (-2.0, -2.0, -2.0, 0.0, 0.0, 1.0, 1.0, 1.0)
 SPEC_FILE = "tdoa_8r3s_homotopy116.json"
 SPEC_SHA256 = "732bb61fcc13efca05a841026edb1d125b6d5a7a4de6f4fe884eeaa5054c9c9f"
