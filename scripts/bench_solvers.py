@@ -212,6 +212,8 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
     for row in rows:
         label = row["solver"]
         generation = "not timed" if args.no_generate else "this run"
+        if label in SUBSYSTEMS:
+            generation = f"none of its own (its base {SUBSYSTEMS[label][0]} is generated)"
         if args.no_generate and label in old_rows and old_rows[label].get("generation_s") not in ("", "nan"):
             row["generation_s"] = float(old_rows[label]["generation_s"])
             generation = "kept from the previous row (" + provenance.get(label, {}).get("commit", "earlier run") + ")"
