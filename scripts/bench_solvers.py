@@ -212,14 +212,15 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
     for row in rows:
         label = row["solver"]
         generation = "not timed" if args.no_generate else "this run"
-        if label in SUBSYSTEMS:
-            generation = f"none of its own (its base {SUBSYSTEMS[label][0]} is generated)"
         if args.no_generate and label in old_rows and old_rows[label].get("generation_s") not in ("", "nan"):
             row["generation_s"] = float(old_rows[label]["generation_s"])
             generation = "kept from the previous row (" + provenance.get(label, {}).get("commit", "earlier run") + ")"
         provenance[label] = {"commit": commit + ("+dirty" if dirty else ""), "date": date, "trials": args.trials,
                              "single_calls": args.single_calls, "seed": args.seed, "generation_s": generation}
         old_rows[label] = row
+    for label in SUBSYSTEMS:
+        if label in provenance:
+            provenance[label]["generation_s"] = f"none of its own (its base {SUBSYSTEMS[label][0]} is generated)"
     order = {label: k for k, label in enumerate(DEFAULT_SOLVERS)}
     merged = sorted(old_rows.values(), key=lambda r: order.get(r["solver"], len(order)))
     for row in merged:
