@@ -223,9 +223,6 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
             provenance[label]["generation_s"] = f"none of its own (its base {SUBSYSTEMS[label][0]} is generated)"
     order = {label: k for k, label in enumerate(DEFAULT_SOLVERS)}
     merged = sorted(old_rows.values(), key=lambda r: order.get(r["solver"], len(order)))
-    for row in merged:
-        if "eig_n" not in row:  # rows of runs before the eig_n column: they compared with |B| (4r6s: paths)
-            row["eig_n"] = row["size"].split("x")[0] if row["solver"] in SUBSYSTEMS else row["basis_size"]
     with open(args.out, "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]), restval="", extrasaction="ignore")
         writer.writeheader()

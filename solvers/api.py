@@ -120,14 +120,25 @@ def _from_positions(F: np.ndarray, choice: SolverChoice, x: np.ndarray, tol: flo
     return Calibration(rec, tra, off, rms_residual(block, rec, tra, off))
 
 
-def _multilaterate(receivers: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """Position and offset of one transmitter from its column of measurements (receivers in gauge).
+def multilateration_system(receivers: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A (..., m-1, 3), rhs (..., m-1)) of one transmitter's linearised range equations in (s, o).
 
     (f_i - o)^2 = |r_i - s|^2 minus the same for receiver 1 (r_1 = 0) is linear in (s, o):
-    2 r_i.s - 2 (f_i - f_1) o = |r_i|^2 - f_i^2 + f_1^2, i = 2..m; solved by least squares.
+    2 r_i.s - 2 (f_i - f_1) o = |r_i|^2 - f_i^2 + f_1^2, i = 2..m. Receivers (..., m, 2) in the gauge,
+    real or complex (bilinear products, no conjugation); f (m,) the transmitter's measurements.
     """
-    A = np.column_stack([2.0 * receivers[1:], -2.0 * (f[1:] - f[0])])
-    rhs = np.einsum("ij,ij->i", receivers[1:], receivers[1:]) - f[1:] ** 2 + f[0] ** 2
+    R = np.asarray(receivers)
+    f = np.asarray(f, dtype=float)
+    delta = np.broadcast_to(-2.0 * (f[1:] - f[0])[:, None], R.shape[:-2] + (len(f) - 1, 1))
+    A = np.concatenate([2.0 * R[..., 1:, :], delta], axis=-1)
+    rhs = np.einsum("...ij,...ij->...i", R[..., 1:, :], R[..., 1:, :]) - f[1:] ** 2 + f[0] ** 2
+    return A, rhs
+
+
+def _multilaterate(receivers: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Position and offset of one transmitter from its column of measurements (receivers in gauge),
+    by least squares on :func:`multilateration_system`."""
+    A, rhs = multilateration_system(receivers, f)
     sol, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=1e-12)
     if rank < 3 or not np.all(np.isfinite(sol)):
         return None

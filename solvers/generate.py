@@ -16,6 +16,7 @@ only the start roots that satisfy it are tracked (5r/5s: 64 of the squared syste
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -272,6 +273,10 @@ def generate_system(system: ParametricSystem, name: str, directory: str = GENERA
     tracked (:func:`solvers.methods.homotopy.full_system_roots`): 5r/5s tracks 64 of 710 paths.
     """
     t0 = time.perf_counter()
+    if not system.is_square:
+        raise homotopy.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
+                                     f"{len(system.unknowns)} unknowns: a homotopy solver needs a square system")
+    system.check_parameters_occur()
     full_report = None
     if full is not None:
         if tuple(full.unknowns) != tuple(system.unknowns) or tuple(full.parameters) != tuple(system.parameters):
@@ -282,10 +287,6 @@ def generate_system(system: ParametricSystem, name: str, directory: str = GENERA
         if not full_report.zero_dimensional or full_report.degree == 0:
             raise homotopy.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
                                          f"(dimension {full_report.dimension}, degree {full_report.degree})")
-    if not system.is_square:
-        raise homotopy.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
-                                     f"{len(system.unknowns)} unknowns: a homotopy solver needs a square system")
-    system.check_parameters_occur()
     if progress:
         progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(seeds)} seed(s))")
     report = system.degree(seeds=seeds)
@@ -293,21 +294,23 @@ def generate_system(system: ParametricSystem, name: str, directory: str = GENERA
         raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
     if report.degree == 0:
         raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
-    spec, source, build = homotopy.build(system, report.degree, start, trials, options, progress)
+    # a squared system is verified once, on the paths it will track (below), not on all its roots
+    build_options = dataclasses.replace(options, verify_trials=0) if full is not None else options
+    spec, source, build = homotopy.build(system, report.degree, start, trials, build_options, progress)
     spec = {"name": name, **spec, "paths": len(spec["start_roots"]),
             "certified": {"primes": list(report.primes), "seeds": list(seeds), "degree": report.degree,
                           "saturated_by": list(system.nonzero)},
             "config": list(config) if config else None,
             "scale_powers": list(system.scale_powers) if system.scale_powers else None}
     if full_report is not None:
-        tracked = homotopy.full_system_roots(full, spec, homotopy.load_coefficients(source), full_report.degree)
+        coefficients = homotopy.load_coefficients(source)
+        tracked = homotopy.full_system_roots(full, spec, coefficients, full_report.degree)
         spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
                                "primes": list(full_report.primes), "seeds": [0, 1], "tracked": tracked}
         spec["degree"] = spec["paths"] = full_report.degree
         build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
-        if trials is not None and options.verify_trials:  # the tracked subset on the same seeded instances
-            build["verified_tracked"] = homotopy.verify(full.name, spec, homotopy.load_coefficients(source), trials,
-                                                        options.verify_trials)
+        if trials is not None and options.verify_trials:
+            build["verified"] = homotopy.verify(full.name, spec, coefficients, trials, options.verify_trials)
     os.makedirs(directory, exist_ok=True)
     _remove_stale(name, homotopy_module_name(spec), directory)
     py_path = _write(spec, source, directory)

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .api import _module_for, multilateration_system
+
 __all__ = ["SUBSYSTEMS", "FILTER_TOL", "SubsystemSolver", "extra_transmitter_residuals", "receivers_from_orbits"]
 
 #: Over-determined label -> (square base label, roots of the over-determined system). The count is
@@ -43,21 +45,19 @@ def extra_transmitter_residuals(receivers: np.ndarray, f: np.ndarray) -> np.ndar
     """Relative residual of one transmitter's range equations for candidate receivers (..., m, 2).
 
     f (m,): the transmitter's measurements. (s, o) from the m - 1 differences of the range equations
-    (least squares when m > 4); the residual is that of the first equation, (f_1 - o)^2 - s.s (r_1 = 0),
-    relative to f_1^2 + |s|^2. NaN where the linear system is singular or the candidate is not finite.
+    (:func:`solvers.api.multilateration_system`; least squares when m > 4); the residual is that of the
+    first equation, (f_1 - o)^2 - s.s (r_1 = 0), relative to f_1^2 + |s|^2. NaN where the candidate is
+    not finite.
     """
-    R = np.asarray(receivers, dtype=complex)
-    f = np.asarray(f, dtype=float)
-    A = np.concatenate([2.0 * R[..., 1:, :], np.broadcast_to(-2.0 * (f[1:] - f[0])[:, None], R.shape[:-2] + (len(f) - 1, 1))], axis=-1)
-    rhs = np.einsum("...ij,...ij->...i", R[..., 1:, :], R[..., 1:, :]) - f[1:] ** 2 + f[0] ** 2
-    out = np.full(R.shape[:-2], np.nan)
-    ok = np.all(np.isfinite(A.reshape(A.shape[:-2] + (-1,))), axis=-1) & np.all(np.isfinite(rhs), axis=-1)
+    A, rhs = multilateration_system(np.asarray(receivers, dtype=complex), f)
+    f0 = float(np.asarray(f, dtype=float)[0])
+    out = np.full(A.shape[:-2], np.nan)
+    ok = np.all(np.isfinite(A), axis=(-2, -1)) & np.all(np.isfinite(rhs), axis=-1)
     with np.errstate(all="ignore"):
-        At, bt = A[ok], rhs[ok]
-        sol = np.linalg.solve(np.conj(np.swapaxes(At, -1, -2)) @ At, (np.conj(np.swapaxes(At, -1, -2)) @ bt[..., None]))[..., 0]
+        sol = (np.linalg.pinv(A[ok]) @ rhs[ok][..., None])[..., 0]
         s, o = sol[..., :2], sol[..., 2]
-        first = (f[0] - o) ** 2 - np.einsum("...i,...i->...", s, s)
-        out[ok] = np.abs(first) / (f[0] ** 2 + np.einsum("...i,...i->...", np.abs(s), np.abs(s)))
+        first = (f0 - o) ** 2 - np.einsum("...i,...i->...", s, s)
+        out[ok] = np.abs(first) / (f0**2 + np.einsum("...i,...i->...", np.abs(s), np.abs(s)))
     return out
 
 
@@ -68,8 +68,6 @@ class SubsystemSolver:
     def __init__(self, label: str):
         if label not in SUBSYSTEMS:
             raise ValueError(f"unknown over-determined configuration {label!r}; valid: {', '.join(SUBSYSTEMS)}")
-        from .api import _module_for
-
         base_label, degree = SUBSYSTEMS[label]
         self.base = _module_for(base_label)
         self.label = label
@@ -105,9 +103,5 @@ class SubsystemSolver:
 
 def module_for(label: str):
     """A generated solver module, or the :class:`SubsystemSolver` of an over-determined configuration."""
-    if label in SUBSYSTEMS:
-        return SubsystemSolver(label)
-    from .api import _module_for
-
-    return _module_for(label)
+    return SubsystemSolver(label) if label in SUBSYSTEMS else _module_for(label)
 
