@@ -239,8 +239,9 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
         "eig": "numpy.linalg.eig of an eig_n x eig_n complex normal matrix, median of 30, best of 3 rounds, same "
                "process; eig_n = |B| for homotopy solvers, the pencil size for the 6r4s pencil (37, its own eigen "
                "step), the subsystem's |B| for 4r6s (|B| = 1, solved on its 4r5s subsystem: 344)",
-        "subsystems": "4r6s: the 4r5s solver on transmitters 1-5, candidates kept when transmitter 6's range "
-                      "equations hold (solvers.subsystem); mean_real counts the kept real candidates",
+        "subsystems": "4r6s: the 4r5s solver on transmitters 1-5 (where no candidate passes, the next 5-subset), "
+                      "candidates kept when the other transmitter's range equations hold, then polished on all "
+                      "measurements (solvers.subsystem); mean_real counts the kept real candidates",
         "real": f"finite candidates with max |imag| <= {REAL_TOL} max |x|",
         "timing": f"single: best of {SINGLE_ROUNDS} medians of --single-calls solve() calls each; first_call_ms "
                   "apart (first solve in the process: spec, compiled tracker loaded from numba's disk cache); "

@@ -3,7 +3,7 @@
 4r/6s: every square subsystem of the 4r/6s positions equations has the 344 roots of the minimal 4r/5s
 problem, and only the true network satisfies all six transmitters' equations (1 solution over GF(p),
 two primes: tables/NOTES.md). So the 4r/5s solver runs on the first five transmitters and the sixth
-filters its 344 candidates: with the receivers of a candidate (gauge r_1 = 0), the four range
+filters its 344 candidates (when none passes, on the next five-transmitter subset): with the receivers of a candidate (gauge r_1 = 0), the four range
 equations (f_i6 - o_6)^2 = |r_i - s_6|^2 minus the first are three linear equations in (s_6, o_6);
 their solution must also satisfy the first equation. Complex candidates are filtered the same way
 (bilinear, not Hermitian, products), so the filter is a polynomial condition, not a real-only one.
@@ -15,11 +15,15 @@ base solver's.
 """
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from .api import _module_for, multilateration_system
+from .refine import jacobian, pack, residuals, unpack
 
-__all__ = ["SUBSYSTEMS", "FILTER_TOL", "SubsystemSolver", "extra_transmitter_residuals", "receivers_from_orbits"]
+__all__ = ["SUBSYSTEMS", "FILTER_TOL", "SubsystemSolver", "extra_transmitter_residuals", "orbits_from_receivers",
+           "polish_on_all", "receivers_from_orbits"]
 
 #: Over-determined label -> (square base label, roots of the over-determined system). The count is
 #: established by analysis.positions (tests/test_positions.py::test_4r6s_full_system_keeps_only_the_true_network_two_primes).
@@ -27,6 +31,10 @@ SUBSYSTEMS = {"4r6s": ("4r5s", 1)}
 
 #: Largest relative residual of an extra transmitter's equation for a candidate to be kept.
 FILTER_TOL = 1e-6
+#: Gauss-Newton steps of :func:`polish_on_all` (each on all m x n measurements).
+POLISH_STEPS = 4
+#: A kept candidate is polished when its imaginary part is below this, relative to its size.
+REAL_TOL = 1e-6
 
 
 def receivers_from_orbits(x: np.ndarray) -> np.ndarray:
@@ -39,6 +47,41 @@ def receivers_from_orbits(x: np.ndarray) -> np.ndarray:
     rec = np.stack([np.stack([zero, zero], -1), np.stack([x2, zero], -1), np.stack([x[..., 2] * x2, y3], -1),
                     np.stack([x[..., 3] * x2, x[..., 4] * y3], -1)], axis=-2)
     return rec
+
+
+def orbits_from_receivers(rec: np.ndarray) -> np.ndarray:
+    """The 4r/5s unknowns (X, Y, xi3, xi4, eta4) of receivers (4, 2) in the gauge r_1 = 0, r_2 = (x2, 0)
+    (the inverse of :func:`receivers_from_orbits`)."""
+    x2, x3, y3, x4, y4 = rec[1, 0], rec[2, 0], rec[2, 1], rec[3, 0], rec[3, 1]
+    return np.array([x2 * x2, y3 * y3, x3 / x2, x4 / x2, y4 / y3])
+
+
+def polish_on_all(root: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """A real 4r/5s candidate polished on all measurements F (4, n): receivers from the candidate,
+    each transmitter's position and offset by multilateration, then :data:`POLISH_STEPS` Gauss-Newton
+    steps on e_ij = F_ij - o_j - |r_i - s_j| (solvers.refine's residuals and Jacobian). Returns the
+    polished candidate, or the candidate unchanged when the steps do not lower the residual or it is
+    not real."""
+    root = np.asarray(root)
+    if not np.all(np.isfinite(root)) or np.max(np.abs(root.imag)) > REAL_TOL * np.max(np.abs(root)):
+        return root
+    rec = receivers_from_orbits(root.real).real
+    sol = np.stack([np.linalg.pinv(A) @ rhs for A, rhs in (multilateration_system(rec, f) for f in F.T)])
+    x = pack(rec, sol[:, :2], sol[:, 2])
+    best = np.linalg.norm(residuals(x, F))
+    start = best
+    for _ in range(POLISH_STEPS):
+        with np.errstate(all="ignore"):
+            step = np.linalg.lstsq(jacobian(x, F), -residuals(x, F), rcond=None)[0]
+        trial = x + step
+        norm = np.linalg.norm(residuals(trial, F))
+        if not norm < best:
+            break
+        x, best = trial, norm
+    if not best < start:
+        return root
+    polished = orbits_from_receivers(unpack(x, *F.shape)[0])
+    return polished.astype(root.dtype)
 
 
 def extra_transmitter_residuals(receivers: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -63,7 +106,8 @@ def extra_transmitter_residuals(receivers: np.ndarray, f: np.ndarray) -> np.ndar
 
 class SubsystemSolver:
     """The solver of an over-determined configuration (:data:`SUBSYSTEMS`): its base solver on the
-    first transmitters, candidates kept only when every further transmitter's equations hold."""
+    first transmitters (then on the other subsets while no candidate passes), candidates kept only when
+    every further transmitter's equations hold."""
 
     def __init__(self, label: str):
         if label not in SUBSYSTEMS:
@@ -72,7 +116,7 @@ class SubsystemSolver:
         self.base = _module_for(base_label)
         self.label = label
         self.CONFIG = tuple(int(v) for v in label[:-1].split("r"))
-        self.SYSTEM = f"{label}: {self.base.SYSTEM.split(':', 1)[1]} on transmitters 1-{self.base.CONFIG[1]}, filtered by the rest"
+        self.SYSTEM = f"{label}: {self.base.SYSTEM.split(':', 1)[1]} on {self.base.CONFIG[1]} transmitters (1-{self.base.CONFIG[1]} first), filtered by the rest"
         self.METHOD = self.base.METHOD
         self.DEGREE = degree
         self.PATHS = self.base.PATHS
@@ -80,21 +124,50 @@ class SubsystemSolver:
         if "receivers-orbits" not in self.base.SYSTEM:
             raise ValueError(f"{label}: the filter reads receivers from the 4r/5s orbit invariants, not {self.base.SYSTEM}")
 
+    def subsets(self) -> list[tuple[int, ...]]:
+        """The transmitter subsets the base solver is tried on, in order: first transmitters 1..n_base,
+        then the other n_base-subsets in lexicographic order (:meth:`solve_batch`)."""
+        return list(itertools.combinations(range(self.CONFIG[1]), self.base.CONFIG[1]))
+
     def solve_batch(self, F) -> np.ndarray:
-        """Candidate roots (..., PATHS, N) of the base solver on the first transmitters; NaN rows for
-        candidates that a further transmitter rejects."""
+        """Candidate roots (..., PATHS, N) of the base solver on a subset of the transmitters; NaN rows
+        for candidates that a transmitter outside the subset rejects.
+
+        The first subset is transmitters 1..n_base; an instance where no candidate passes (the base
+        solver lost the true root's path, or ended it too far off for the filter) is solved again on
+        the next subset (:meth:`subsets`), until one passes or all were tried. The roots describe the
+        receivers only, so every subset's candidates are in the same unknowns.
+        """
         F = np.asarray(F, dtype=float)
         if F.shape[-2:] != self.CONFIG:
             raise ValueError(f"data of shape {F.shape} given; the solver needs (..., {self.CONFIG[0]}, {self.CONFIG[1]})")
-        nb = self.base.CONFIG[1]
-        roots = np.array(self.base.solve_batch(F[..., :nb]))
+        flat = F.reshape((-1,) + self.CONFIG)
+        out = None
+        todo = np.arange(len(flat))
+        for subset in self.subsets():
+            roots = self._filtered(flat[todo], subset)
+            if out is None:
+                out = roots
+            else:
+                out[todo] = roots
+            todo = todo[~np.any(np.all(np.isfinite(roots), axis=-1), axis=-1)]
+            if not len(todo):
+                break
+        return out.reshape(F.shape[:-2] + out.shape[-2:])
+
+    def _filtered(self, F: np.ndarray, subset: tuple[int, ...]) -> np.ndarray:
+        """The base solver's candidates (k, PATHS, N) on these transmitters of F (k, m, n), NaN rows for
+        those that a further transmitter rejects."""
+        roots = np.array(self.base.solve_batch(F[..., list(subset)]))
         rec = receivers_from_orbits(roots)
         keep = np.ones(roots.shape[:-1], dtype=bool)
-        for idx in np.ndindex(F.shape[:-2]):
-            for j in range(nb, F.shape[-1]):
+        for k in range(len(F)):
+            for j in sorted(set(range(F.shape[-1])) - set(subset)):
                 with np.errstate(all="ignore"):
-                    keep[idx] &= extra_transmitter_residuals(rec[idx], F[idx][:, j]) < FILTER_TOL
+                    keep[k] &= extra_transmitter_residuals(rec[k], F[k][:, j]) < FILTER_TOL
         roots[~keep] = np.nan
+        for k, i in zip(*np.nonzero(keep)):
+            roots[k, i] = polish_on_all(roots[k, i], F[k])
         return roots
 
     def solve(self, F) -> np.ndarray:
