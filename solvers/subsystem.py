@@ -136,7 +136,10 @@ class SubsystemSolver:
         The first subset is transmitters 1..n_base; an instance where no candidate passes (the base
         solver lost the true root's path, or ended it too far off for the filter) is solved again on
         the next subset (:meth:`subsets`), until one passes or all were tried. The roots describe the
-        receivers only, so every subset's candidates are in the same unknowns.
+        receivers only, so every subset's candidates are in the same unknowns. The filter is for exact
+        data (relative tolerance :data:`FILTER_TOL`): on noisy data every subset is tried and nothing
+        passes; measured networks go through :func:`solvers.api.calibrate`, which solves 4 x 6 data
+        with the 4r/5s solver and refines on all measurements.
         """
         F = np.asarray(F, dtype=float)
         if F.shape[-2:] != self.CONFIG:
