@@ -27,7 +27,7 @@ import numpy as np
 
 from analysis.parametric import ParametricSystem, from_formulation, from_positions, square
 
-from .methods import homotopy
+from .methods import homotopy, tracker
 from .methods.spec import dump_spec, spec_sha256
 
 __all__ = ["GENERATED_DIR", "SOLVERS", "Generated", "emit_homotopy_module", "generate", "generate_system",
@@ -308,6 +308,7 @@ def generate_system(system: ParametricSystem, name: str, directory: str = GENERA
         spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
                                "primes": list(full_report.primes), "seeds": [0, 1], "tracked": tracked}
         spec["degree"] = spec["paths"] = full_report.degree
+        spec["tracker"] = dict(tracker.FAMILY)  # a jump to another family is invisible to the duplicate test
         build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
         if trials is not None and options.verify_trials:
             build["verified"] = homotopy.verify(full.name, spec, coefficients, trials, options.verify_trials)
