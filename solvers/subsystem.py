@@ -80,8 +80,9 @@ def polish_on_all(root: np.ndarray, F: np.ndarray) -> np.ndarray:
         x, best = trial, norm
     if not best < start:
         return root
-    polished = orbits_from_receivers(unpack(x, *F.shape)[0])
-    return polished.astype(root.dtype)
+    with np.errstate(all="ignore"):
+        polished = orbits_from_receivers(unpack(x, *F.shape)[0])
+    return polished.astype(root.dtype) if np.all(np.isfinite(polished)) else root
 
 
 def extra_transmitter_residuals(receivers: np.ndarray, f: np.ndarray) -> np.ndarray:

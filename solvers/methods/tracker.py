@@ -70,8 +70,9 @@ class TrackerOptions:
 #: tracked, :func:`solvers.methods.homotopy.full_system_roots`): a path that jumps to a root of another
 #: family ends on a root no other tracked path holds, which the duplicate test cannot see, so its steps
 #: are smaller and a step is accepted only on a smaller first Newton correction. 5r/5s on the 17 of 1000
-#: seeded networks where the default missed the true root: 15 of 17 paths jumped with the default,
-#: 3 of 17 with these, for 8 % more steps (scripts/bench_solvers.py rows; tables/NOTES.md).
+#: seeded networks where the default missed the true root (its path is among the tracked ones: tracked
+#: back from the true root with TIGHT, it ends on a tracked start root): one plain track with the
+#: default misses it on 15 of the 17, with these on 3, for 8 % more steps (tables/NOTES.md).
 FAMILY = {"target": 3e-3, "accept": 3e-2}
 
 #: Step control for retracking a path that stalled or jumped: smaller steps, stricter acceptance.
