@@ -18,7 +18,8 @@ Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers.py [--trials 1000] [-
 ``--merge`` replaces only the rows of the solvers run in the existing table (a file lock serialises
 concurrent runs, e.g. the fast solvers on 1000 trials beside the slow ones on 100); with
 ``--no-generate`` a row keeps its previous generation time. The provenance of every row (commit,
-date, trials, timing calls, where its generation time comes from) is in the meta file's ``rows``.
+date, trials, timing calls, where its generation time comes from, and the indices of the failed
+networks in the seeded sequence, to diagnose them without a rerun) is in the meta file's ``rows``.
 """
 from __future__ import annotations
 
@@ -84,10 +85,16 @@ def _eig_ms(k: int, rng: np.random.Generator, rounds: int = 30) -> float:
     return 1e3 * float(np.median(times))
 
 
+def _errors(roots: np.ndarray, truths: np.ndarray) -> np.ndarray:
+    """Relative error of the best candidate per network (inf where there is none)."""
+    with np.errstate(all="ignore"):
+        err = np.nanmin(np.linalg.norm(roots - truths[:, None, :], axis=2), axis=1) / np.linalg.norm(truths, axis=1)
+    return np.where(np.isfinite(err), err, np.inf)
+
+
 def _accuracy(roots: np.ndarray, truths: np.ndarray) -> dict:
     """Best-candidate log10 relative errors, failures and real-candidate counts for a batch."""
-    err = np.nanmin(np.linalg.norm(roots - truths[:, None, :], axis=2), axis=1) / np.linalg.norm(truths, axis=1)
-    err = np.where(np.isfinite(err), err, np.inf)
+    err = _errors(roots, truths)
     log = np.log10(np.maximum(err, 1e-17))
     finite = np.all(np.isfinite(roots), axis=2)
     scale = np.max(np.abs(np.where(finite[..., None], roots, 0)), axis=2)
@@ -161,6 +168,8 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int)
     for prefix, roots in (("raw", raw), ("solver", polished)):
         for key, value in _accuracy(roots, truths).items():
             row[f"{prefix}_{key}"] = round(value, 4)
+    # not a CSV column: the meta file's row provenance lists them, to diagnose without a rerun
+    row["failed_networks"] = [int(k) for k in np.flatnonzero(_errors(polished, truths) > FAIL_TOL)]
     return row
 
 
@@ -216,7 +225,8 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
             row["generation_s"] = float(old_rows[label]["generation_s"])
             generation = "kept from the previous row (" + provenance.get(label, {}).get("commit", "earlier run") + ")"
         provenance[label] = {"commit": commit + ("+dirty" if dirty else ""), "date": date, "trials": args.trials,
-                             "single_calls": args.single_calls, "seed": args.seed, "generation_s": generation}
+                             "single_calls": args.single_calls, "seed": args.seed, "generation_s": generation,
+                             "failed_networks": row.pop("failed_networks")}
         old_rows[label] = row
     for label in SUBSYSTEMS:
         if label in provenance:
