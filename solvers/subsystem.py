@@ -3,7 +3,8 @@
 4r/6s: every square subsystem of the 4r/6s positions equations has the 344 roots of the minimal 4r/5s
 problem, and only the true network satisfies all six transmitters' equations (1 solution over GF(p),
 two primes: tables/NOTES.md). So the 4r/5s solver runs on the first five transmitters and the sixth
-filters its 344 candidates (when none passes, on the next five-transmitter subset): with the receivers of a candidate (gauge r_1 = 0), the four range
+filters its 344 candidates (when none passes, on the next five-transmitter subset):
+with the receivers of a candidate (gauge r_1 = 0), the four range
 equations (f_i6 - o_6)^2 = |r_i - s_6|^2 minus the first are three linear equations in (s_6, o_6);
 their solution must also satisfy the first equation. Complex candidates are filtered the same way
 (bilinear, not Hermitian, products), so the filter is a polynomial condition, not a real-only one.
@@ -19,8 +20,8 @@ import itertools
 
 import numpy as np
 
-from .api import _module_for, multilateration_system
-from .refine import jacobian, pack, residuals, unpack
+from .api import _module_for, _multilaterate, multilateration_system
+from .refine import refine
 
 __all__ = ["SUBSYSTEMS", "FILTER_TOL", "SubsystemSolver", "extra_transmitter_residuals", "orbits_from_receivers",
            "polish_on_all", "receivers_from_orbits"]
@@ -31,8 +32,8 @@ SUBSYSTEMS = {"4r6s": ("4r5s", 1)}
 
 #: Largest relative residual of an extra transmitter's equation for a candidate to be kept.
 FILTER_TOL = 1e-6
-#: Gauss-Newton steps of :func:`polish_on_all` (each on all m x n measurements).
-POLISH_STEPS = 4
+#: Residual evaluations of :func:`polish_on_all`'s Levenberg-Marquardt refinement on all measurements.
+POLISH_EVALUATIONS = 20
 #: A kept candidate is polished when its imaginary part is below this, relative to its size.
 REAL_TOL = 1e-6
 
@@ -57,31 +58,23 @@ def orbits_from_receivers(rec: np.ndarray) -> np.ndarray:
 
 
 def polish_on_all(root: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """A real 4r/5s candidate polished on all measurements F (4, n): receivers from the candidate,
-    each transmitter's position and offset by multilateration, then :data:`POLISH_STEPS` Gauss-Newton
-    steps on e_ij = F_ij - o_j - |r_i - s_j| (solvers.refine's residuals and Jacobian). Returns the
-    polished candidate, or the candidate unchanged when the steps do not lower the residual or it is
-    not real."""
+    """A real 4r/5s candidate polished on all measurements F (4, n): receivers from the candidate, each
+    transmitter by :func:`solvers.api._multilaterate`, then :func:`solvers.refine.refine` (at most
+    :data:`POLISH_EVALUATIONS` residual evaluations). Returns the polished candidate, or the candidate
+    unchanged when it is not real, a transmitter cannot be placed, or the residual does not drop."""
     root = np.asarray(root)
     if not np.all(np.isfinite(root)) or np.max(np.abs(root.imag)) > REAL_TOL * np.max(np.abs(root)):
         return root
     rec = receivers_from_orbits(root.real).real
-    sol = np.stack([np.linalg.pinv(A) @ rhs for A, rhs in (multilateration_system(rec, f) for f in F.T)])
-    x = pack(rec, sol[:, :2], sol[:, 2])
-    best = np.linalg.norm(residuals(x, F))
-    start = best
-    for _ in range(POLISH_STEPS):
-        with np.errstate(all="ignore"):
-            step = np.linalg.lstsq(jacobian(x, F), -residuals(x, F), rcond=None)[0]
-        trial = x + step
-        norm = np.linalg.norm(residuals(trial, F))
-        if not norm < best:
-            break
-        x, best = trial, norm
-    if not best < start:
+    placed = [_multilaterate(rec, f) for f in F.T]
+    if any(p is None for p in placed):
+        return root
+    result = refine((rec, np.array([p[0] for p in placed]), np.array([p[1] for p in placed])), F,
+                    max_iter=POLISH_EVALUATIONS)
+    if not result.calibration.residual < result.initial_residual:
         return root
     with np.errstate(all="ignore"):
-        polished = orbits_from_receivers(unpack(x, *F.shape)[0])
+        polished = orbits_from_receivers(result.calibration.receivers)
     return polished.astype(root.dtype) if np.all(np.isfinite(polished)) else root
 
 
@@ -146,17 +139,13 @@ class SubsystemSolver:
         if F.shape[-2:] != self.CONFIG:
             raise ValueError(f"data of shape {F.shape} given; the solver needs (..., {self.CONFIG[0]}, {self.CONFIG[1]})")
         flat = F.reshape((-1,) + self.CONFIG)
-        out = None
-        todo = np.arange(len(flat))
-        for subset in self.subsets():
-            roots = self._filtered(flat[todo], subset)
-            if out is None:
-                out = roots
-            else:
-                out[todo] = roots
-            todo = todo[~np.any(np.all(np.isfinite(roots), axis=-1), axis=-1)]
+        subsets = iter(self.subsets())
+        out = self._filtered(flat, next(subsets))
+        for subset in subsets:
+            todo = np.flatnonzero(~np.any(np.all(np.isfinite(out), axis=-1), axis=-1))
             if not len(todo):
                 break
+            out[todo] = self._filtered(flat[todo], subset)
         return out.reshape(F.shape[:-2] + out.shape[-2:])
 
     def _filtered(self, F: np.ndarray, subset: tuple[int, ...]) -> np.ndarray:
