@@ -13,7 +13,7 @@ eigen-solution of the pencil; homotopy endpoints, which include Newton steps on 
 for the solver output (default Gauss-Newton polishing on the input equations; no LM, no recovery).
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers.py [--trials 1000] [--seed 0] [--no-generate]
-       [--solvers 9r3s 6r3s ...] [--merge]
+       [--solvers 9r3s 6r3s ...] [--merge] [--jobs N]
 
 ``--merge`` replaces only the rows of the solvers run in the existing table (a file lock serialises
 concurrent runs, e.g. the fast solvers on 1000 trials beside the slow ones on 100); with
@@ -108,7 +108,31 @@ def _accuracy(roots: np.ndarray, truths: np.ndarray) -> dict:
     }
 
 
-def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int) -> dict:
+def _solve_chunk(label: str, F: np.ndarray) -> tuple[np.ndarray, float]:
+    """solve_batch on a chunk of the trials in a worker process; roots and the seconds it took."""
+    module = module_for(label)
+    t0 = time.perf_counter()
+    roots = module.solve_batch(F)
+    return roots, time.perf_counter() - t0
+
+
+def _solve_all(label: str, module, F: np.ndarray, jobs: int) -> tuple[np.ndarray, float]:
+    """Roots of every trial and the seconds of solve_batch summed over the processes (one thread each):
+    with ``jobs`` > 1 the trials are split into contiguous chunks solved in parallel, after the timing."""
+    if jobs <= 1:
+        t0 = time.perf_counter()
+        roots = module.solve_batch(F)
+        return roots, time.perf_counter() - t0
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    chunks = [c for c in np.array_split(F, 8 * jobs) if len(c)]  # several per process: chunks differ in cost
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
+        parts = list(pool.map(_solve_chunk, [label] * len(chunks), chunks))
+    return np.concatenate([p[0] for p in parts]), float(sum(p[1] for p in parts))
+
+
+def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int, jobs: int = 1) -> dict:
     module = module_for(label)
     homotopy = module.METHOD == "homotopy"
     m, n = module.CONFIG
@@ -142,9 +166,8 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int)
     # a square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
     eig_n = module.PATHS if label in SUBSYSTEMS else (module.DEGREE if homotopy else module.SIZE[0])
     eig = min(_eig_ms(eig_n, rng) for _ in range(SINGLE_ROUNDS))
-    t0 = time.perf_counter()
-    polished = module.solve_batch(F)
-    batch_s = (time.perf_counter() - t0) / trials
+    polished, batch_s = _solve_all(label, module, F, jobs)
+    batch_s /= trials
     raw = polished if homotopy else module.solve_batch(F, polish=0)
     paths = module.PATHS if homotopy else None
     single_ms = 1e3 * min(medians)
@@ -189,14 +212,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--solvers", nargs="*", default=DEFAULT_SOLVERS)
     parser.add_argument("--out", default=os.path.join(ROOT, "tables", "solvers.csv"))
     parser.add_argument("--merge", action="store_true", help="replace only these solvers' rows in --out")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="processes for the accuracy run on all trials (after the single-solve timing; "
+                             "batch time is then the sum over processes, per instance on one thread)")
     args = parser.parse_args(argv)
     unknown = sorted(set(args.solvers) - set(DEFAULT_SOLVERS))
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
     if unknown:
         parser.error(f"unknown solvers {', '.join(unknown)}; valid: {', '.join(DEFAULT_SOLVERS)}")
     commit, dirty = _git("rev-parse", "--short", "HEAD"), bool(_git("status", "--porcelain", "--untracked-files=no"))
     rows = []
     for label in args.solvers:
-        row = bench(label, args.trials, args.seed, not args.no_generate, args.single_calls)
+        row = bench(label, args.trials, args.seed, not args.no_generate, args.single_calls, args.jobs)
         rows.append(row)
         print(", ".join(f"{k}={v}" for k, v in row.items()), flush=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
@@ -226,6 +254,7 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
             generation = "kept from the previous row (" + provenance.get(label, {}).get("commit", "earlier run") + ")"
         provenance[label] = {"commit": commit + ("+dirty" if dirty else ""), "date": date, "trials": args.trials,
                              "single_calls": args.single_calls, "seed": args.seed, "generation_s": generation,
+                             "jobs": args.jobs,
                              "failed_networks": row.pop("failed_networks")}
         old_rows[label] = row
     for label in SUBSYSTEMS:
@@ -255,7 +284,8 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
         "real": f"finite candidates with max |imag| <= {REAL_TOL} max |x|",
         "timing": f"single: best of {SINGLE_ROUNDS} medians of --single-calls solve() calls each; first_call_ms "
                   "apart (first solve in the process: spec, compiled tracker loaded from numba's disk cache); "
-                  "batch: solve_batch on all trials / trials",
+                  "batch: solve_batch on all trials / trials (with jobs > 1: the trials split into chunks "
+                  "solved in parallel processes, their solve_batch seconds summed)",
         "versions": {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__},
         "threads": {k: os.environ.get(k, "") for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
