@@ -65,6 +65,12 @@ def _detour_direction(P: int, k: int = 0) -> np.ndarray:
 #: Detours (different fixed midpoints) tried in turn for paths that still stall or coincide.
 DETOURS = 6
 
+#: Midpoint routes whose endpoints are pooled for an instance still short of its distinct roots. Almost
+#: every 4r/5s instance is short (5-40 of its 344 paths stall near roots that go to infinity), so each
+#: route costs it about a third more time: on its 9 seeded networks (of the first 1000) whose true root
+#: was lost and 4 others, one route found all 9 true roots at 4.2-10.8 s per instance, two at 6.1-15.6 s.
+POOLED_MIDPOINTS = 1
+
 
 #: Newton steps on the target system's directly evaluated coefficients after tracking.
 FINAL_NEWTON = 2
@@ -265,10 +271,12 @@ class HomotopySolver:
         # paths that still stall even with tight steps: the segment passes too close to a singular
         # point. Each such path alone goes around it through a fixed complex midpoint (two segments);
         # K distinct finite endpoints are all K roots whatever route each path took.
+        jumped = {b for b in bad if _duplicated(x[b]).any()}
         for k in range(DETOURS):
             rows = np.zeros((B, K), dtype=bool)
             for b in bad:
-                rows[b] = ~np.all(np.isfinite(x[b]), axis=1)
+                if b not in jumped:
+                    rows[b] = ~np.all(np.isfinite(x[b]), axis=1)
             if not rows.any():
                 break
             bj, kj = np.nonzero(rows)
@@ -279,27 +287,30 @@ class HomotopySolver:
                 continue
             xe, _ = self.track(qm[None], q, xm[good], bj[good], tracker.TIGHT)
             for b, i, xi in zip(bj[good], kj[good], xe):
-                if np.all(np.isfinite(xi)) and not _duplicated(np.vstack([x[b], xi[None]]))[-1]:
-                    x[b, i] = xi
-        # A route through a midpoint permutes the endpoints (monodromy), so a detoured path may land on
-        # a root another path holds, and the root the lost path led to is reached, on that route, from
-        # another start root. Instances still short of K distinct roots send every path through a
-        # midpoint (q0 -> qm -> q, the roots at qm computed once and cached) and pool the distinct
-        # endpoints of all routes, until K distinct roots are known (4r/5s: 23 of 1000 seeded networks
-        # missed the true root before, a root the direct segment passes near infinity on the way to).
-        # Endpoints are compared after the final Newton steps: two unconverged endpoints of one
-        # ill-conditioned root (4r/5s: |x| ~ 5e4 in the scaled unknowns) can differ by more than the
-        # duplicate test's tolerance before them and coincide after.
+                if np.all(np.isfinite(xi)):
+                    if _duplicated(np.vstack([x[b], xi[None]]))[-1]:
+                        jumped.add(b)
+                    else:
+                        x[b, i] = xi
+        # A route through a midpoint permutes the endpoints (monodromy): a detoured path that lands on a
+        # root another path holds means one of the two jumped, and the root they missed is reached, on
+        # that route, from another start root. Instances still short of K distinct roots send every path
+        # through a midpoint (q0 -> qm -> q; the roots at qm computed once and cached, complete or not)
+        # and pool the distinct endpoints of both routes, compared after Newton steps on the target (two
+        # unconverged endpoints of one ill-conditioned root, |x| ~ 5e4 in 4r/5s's scaled unknowns, can
+        # differ by more than the duplicate test's tolerance before them and coincide after).
         left = np.array([b for b in bad if _unresolved(x[b]).any()], dtype=np.int64)
         if len(left):
             x[left] = self._polish(x[left], q[left])
-        for k in range(DETOURS):
+        for k in range(POOLED_MIDPOINTS):
             if not len(left):
                 break
             qm, xm = self._midpoint(k)
             if not len(xm):
                 continue
-            xk = self._polish(self._route(qm, xm, q[left])[0], q[left])
+            L, M = len(left), len(xm)
+            xk, _ = self.track(qm[None], q[left], np.tile(xm, (L, 1)), np.repeat(np.arange(L), M))
+            xk = self._polish(xk.reshape(L, M, -1), q[left])
             for j, b in enumerate(left):
                 x[b] = _pool(x[b], xk[j])
             left = left[[bool(_unresolved(x[b]).any()) for b in left]]
