@@ -65,10 +65,11 @@ def _detour_direction(P: int, k: int = 0) -> np.ndarray:
 #: Detours (different fixed midpoints) tried in turn for paths that still stall or coincide.
 DETOURS = 6
 
-#: Midpoint routes whose endpoints are pooled for an instance still short of its distinct roots. Almost
-#: every 4r/5s instance is short (5-40 of its 344 paths stall near roots that go to infinity), so each
-#: route costs it about a third more time: on its 9 seeded networks (of the first 1000) whose true root
-#: was lost and 4 others, one route found all 9 true roots at 4.2-10.8 s per instance, two at 6.1-15.6 s.
+#: Midpoint routes whose endpoints are pooled for an instance still short of its distinct roots after
+#: the detours (no midpoint root set is complete, or none resolved it). Almost every 4r/5s instance is
+#: short (5-40 of its 344 paths stall near roots that go to infinity), so each route costs it about a
+#: third more time: on its 9 seeded networks (of the first 1000) whose true root was lost and 4 others,
+#: one route found all 9 true roots at 4.2-10.8 s per instance, two at 6.1-15.6 s.
 POOLED_MIDPOINTS = 1
 
 
@@ -252,14 +253,14 @@ class HomotopySolver:
         """The k-th fixed complex detour point in parameter space."""
         return self.q0 + DETOUR * np.sqrt(np.mean(np.abs(self.q0) ** 2)) * _detour_direction(len(self.q0), k)
 
-    def _midpoint(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """The k-th detour point and the distinct roots the paths from q0 reach there (computed on first
-        need, then cached; not always all of them: 4r/5s loses a few paths on every such segment)."""
+    def _midpoint(self, k: int) -> tuple[np.ndarray, np.ndarray, bool]:
+        """The k-th detour point, the distinct roots the paths from q0 reach there and whether they are
+        all of them (computed on first need, then cached; 4r/5s loses a few paths on every such segment)."""
         cache = self.__dict__.setdefault("_midpoints", {})
         if k not in cache:
             qm = self._detour_point(k)
-            xm, _ = self._route(self.q0, self.x0, qm[None])
-            cache[k] = (qm, _distinct(xm[0]))
+            xm, complete = self._route(self.q0, self.x0, qm[None])
+            cache[k] = (qm, _distinct(xm[0]), bool(complete[0]))
         return cache[k]
 
     def roots(self, q: np.ndarray) -> np.ndarray:
@@ -292,20 +293,34 @@ class HomotopySolver:
                         jumped.add(b)
                     else:
                         x[b, i] = xi
-        # A route through a midpoint permutes the endpoints (monodromy): a detoured path that lands on a
-        # root another path holds means one of the two jumped, and the root they missed is reached, on
-        # that route, from another start root. Instances still short of K distinct roots send every path
-        # through a midpoint (q0 -> qm -> q; the roots at qm computed once and cached, complete or not)
-        # and pool the distinct endpoints of both routes, compared after Newton steps on the target (two
-        # unconverged endpoints of one ill-conditioned root, |x| ~ 5e4 in 4r/5s's scaled unknowns, can
-        # differ by more than the duplicate test's tolerance before them and coincide after).
+        # A route through a midpoint permutes the endpoints (monodromy): an endpoint that lands on a root
+        # another path already holds means that path jumped (or took this one's root); then every path
+        # of the instance takes the same midpoint route, whose endpoints are consistent, where the
+        # midpoint's root set is complete.
+        jumped = np.array(sorted(jumped), dtype=np.int64)
+        for k in range(DETOURS):
+            if not len(jumped):
+                break
+            qm, xm, complete_m = self._midpoint(k)
+            if not complete_m:
+                continue
+            xk, ok = self._route(qm, xm, q[jumped])
+            better = np.array([np.sum(_unresolved(xk[j])) < np.sum(_unresolved(x[b])) for j, b in enumerate(jumped)], dtype=bool)
+            x[jumped[better]] = xk[better]
+            jumped = jumped[~ok]
+        # Where no midpoint's root set is complete (4r/5s: 5-40 of its 344 paths stall near roots that go
+        # to infinity, on every segment), an instance still short of K distinct roots sends every path
+        # through a midpoint anyway and pools the distinct endpoints of both routes, compared after
+        # Newton steps on the target (two unconverged endpoints of one ill-conditioned root, |x| ~ 5e4
+        # in 4r/5s's scaled unknowns, can differ by more than the duplicate test's tolerance before
+        # them and coincide after).
         left = np.array([b for b in bad if _unresolved(x[b]).any()], dtype=np.int64)
         if len(left):
             x[left] = self._polish(x[left], q[left])
         for k in range(POOLED_MIDPOINTS):
             if not len(left):
                 break
-            qm, xm = self._midpoint(k)
+            qm, xm, _ = self._midpoint(k)
             if not len(xm):
                 continue
             L, M = len(left), len(xm)
