@@ -109,20 +109,18 @@ def _accuracy(roots: np.ndarray, truths: np.ndarray) -> dict:
 
 
 def _solve_chunk(label: str, F: np.ndarray) -> tuple[np.ndarray, float]:
-    """solve_batch on a chunk of the trials in a worker process; roots and the seconds it took."""
+    """solve_batch on (a chunk of) the trials; roots and the seconds it took."""
     module = module_for(label)
     t0 = time.perf_counter()
     roots = module.solve_batch(F)
     return roots, time.perf_counter() - t0
 
 
-def _solve_all(label: str, module, F: np.ndarray, jobs: int) -> tuple[np.ndarray, float]:
+def _solve_all(label: str, F: np.ndarray, jobs: int) -> tuple[np.ndarray, float]:
     """Roots of every trial and the seconds of solve_batch summed over the processes (one thread each):
     with ``jobs`` > 1 the trials are split into contiguous chunks solved in parallel, after the timing."""
     if jobs <= 1:
-        t0 = time.perf_counter()
-        roots = module.solve_batch(F)
-        return roots, time.perf_counter() - t0
+        return _solve_chunk(label, F)
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -166,7 +164,7 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
     # a square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
     eig_n = module.PATHS if label in SUBSYSTEMS else (module.DEGREE if homotopy else module.SIZE[0])
     eig = min(_eig_ms(eig_n, rng) for _ in range(SINGLE_ROUNDS))
-    polished, batch_s = _solve_all(label, module, F, jobs)
+    polished, batch_s = _solve_all(label, F, jobs)
     batch_s /= trials
     raw = polished if homotopy else module.solve_batch(F, polish=0)
     paths = module.PATHS if homotopy else None
