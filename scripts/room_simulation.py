@@ -32,7 +32,7 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from solvers.calibrate import calibrate  # noqa: E402
+from solvers.calibration import calibrate  # noqa: E402
 from solvers.metrics import align_rigid  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
 

@@ -4,6 +4,6 @@
 the module's other names are imported from ``solvers.calibrate`` (e.g. ``from solvers.calibrate
 import CalibrationOptions``).
 """
-from .calibrate import CalibrationOptions, CalibrationResult, calibrate
+from .calibration import CalibrationOptions, CalibrationResult, calibrate
 
 __all__ = ["CalibrationOptions", "CalibrationResult", "calibrate"]

@@ -632,7 +632,7 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from solvers.calibrate import calibrate
+    from solvers.calibration import calibrate
     from solvers.calibrate_io import MeasurementFileError, plot_calibration, read_measurements, report_dict, write_json
 
     if args.sigma is not None and not args.sigma >= 0:

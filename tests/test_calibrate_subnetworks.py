@@ -6,15 +6,10 @@ import itertools
 import numpy as np
 import pytest
 
-from solvers.calibrate import (
-    MIN_RECEIVER_MEASUREMENTS,
-    MIN_TRANSMITTER_MEASUREMENTS,
-    _better,
-    _Model,
-    _sample_subnetwork,
-    calibrate,
-    robust_refine,
-)
+from solvers.calibration import calibrate, robust_refine
+from solvers.calibration.adjustment import MIN_RECEIVER_MEASUREMENTS, MIN_TRANSMITTER_MEASUREMENTS
+from solvers.calibration.sampling import _better, _sample_subnetwork
+from solvers.calibration.scoring import _Model
 from solvers.metrics import calibration_errors
 from solvers.recovery import to_gauge
 from solvers.synthetic import corrupt_measurements, random_network
@@ -88,6 +83,8 @@ def test_a_small_gapped_network_without_a_clean_block_is_calibrated(seed):
 
     best_possible = calibration_errors(Ref, net)
     err = calibration_errors(res, net)
-    assert res.ok and "subnetworks" in res.solver
+    # 35 inliers for 28 unknowns: the geometry leaves two entries without redundancy (uncontrolled)
+    assert res.status in ("ok", "uncontrolled") and "subnetworks" in res.solver
+    assert (res.uncontrolled == (res.redundancy < 0.01)).all()
     assert err.position <= 3 * best_possible.position and err.offset <= 3 * best_possible.offset, (err, best_possible)
     assert not res.inliers[bad].any()

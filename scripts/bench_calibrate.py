@@ -1,0 +1,253 @@
+"""Benchmark solvers.calibrate: is the default call (sigma estimated) never confidently wrong?
+
+Writes tables/calibration.csv, tables/calibration.md and tables/calibration.meta.json.
+
+Grid: cells 9r/3s, 7r/3s, 6r/4s, 5r/5s, 8r/5s, 10r/8s, 20r/10s, 12r/20s x noise sigma 1e-4, 1e-3, 1e-2
+(the scene is 10 across: positions uniform in [-5, 5]^2, offsets uniform in [-2, 2]) x condition
+clean / 5 % gross errors / 30 % missing x sigma given / estimated; `--networks` networks a cell (the
+same networks for both calls). Scale rows: 100r/100s and 200r/150s, 20 % missing, sigma 1e-2, clean.
+Gaps and gross errors: solvers.synthetic.corrupt_measurements (gross errors uniform in the data range;
+gaps keep >= 3 measurements per receiver and >= 4 per transmitter, so a small network gets fewer).
+
+Columns per (cell, sigma, condition, mode):
+  kept          share of the true inliers kept as inliers
+  gross_rejected share of the gross errors rejected (empty without gross errors)
+  placed        share of networks with every node placed
+  err_ratio_med, err_ratio_p95   median / p95 position error (relative, after rigid alignment) over
+                the same quantile of the sigma-given call on the same networks
+  sigma_ratio   median estimated sigma / true sigma; sigma_within2: share within a factor 2
+  over3std      share of placed nodes whose position error (in the result's gauge) exceeds 3 reported
+                standard deviations (a 2-D normal: between 1e-4 and 0.27 %)
+  ok_over5std   share of networks with status "ok" and a node farther than 5 reported std from the truth
+  status counts (ok / uncontrolled / partial / inconsistent / ambiguous / unconverged / failed)
+  sec_med, sec_p95   seconds per call
+
+Usage: python scripts/bench_calibrate.py [--networks 200] [--jobs 2] [--quick] [--only 9r3s,8r5s]
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import datetime  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import numpy as np  # noqa: E402
+
+from solvers.calibration import STATUSES, calibrate  # noqa: E402
+from solvers.metrics import calibration_errors  # noqa: E402
+from solvers.recovery import to_gauge  # noqa: E402
+from solvers.synthetic import Network, corrupt_measurements  # noqa: E402
+
+CELLS = ((9, 3), (7, 3), (6, 4), (5, 5), (8, 5), (10, 8), (20, 10), (12, 20))
+SIGMAS = (1e-4, 1e-3, 1e-2)
+CONDITIONS = {"clean": (0.0, 0.0), "gross 5%": (0.0, 0.05), "missing 30%": (0.3, 0.0)}
+SCALE = ((100, 100), (200, 150))
+SCALE_CONDITION = ("missing 20%", 0.2, 0.0)
+
+
+def network(m, n, sigma, missing, gross, seed):
+    """(network, F, gross-error mask) of one seeded trial."""
+    rng = np.random.default_rng(seed)
+    net = Network(rng.uniform(-5, 5, (m, 2)), rng.uniform(-5, 5, (n, 2)), rng.uniform(-2, 2, n))
+    F, bad = corrupt_measurements(net.measurements(sigma, rng), rng, missing, gross)
+    return net, F, bad
+
+
+def node_z(res, net) -> np.ndarray:
+    """|position error| / reported std of every placed node, in the result's gauge (truth moved into
+    it; the reflection the gauge leaves free is the one that fits better)."""
+    if res.gauge is None:
+        return np.array([])
+    i0, i1 = res.gauge
+    order = [i0, i1] + [i for i in range(net.m) if i not in (i0, i1)]
+    gt = to_gauge(net.receivers[order], net.transmitters)
+    if gt is None:
+        return np.array([])
+    Rt = np.empty_like(net.receivers)
+    Rt[order] = gt[0]
+    St = gt[1]
+    est = np.vstack([res.receivers, res.transmitters])
+    std = np.concatenate([res.receiver_std, res.transmitter_std])
+    best = None
+    for flip in (1.0, -1.0):
+        tru = np.vstack([Rt, St]) * np.array([1.0, flip])
+        err = np.linalg.norm(est - tru, axis=1)
+        if best is None or np.nansum(err) < np.nansum(best):
+            best = err
+    ok = np.isfinite(best) & np.isfinite(std)
+    fixed = ok & (std == 0)  # the gauge receiver at the origin: error 0 by construction
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = best[ok & ~fixed] / std[ok & ~fixed]
+    return z
+
+
+def one_call(net, F, bad, sigma_true, given: bool, seed: int) -> dict:
+    res = calibrate(F, sigma=sigma_true if given else None, seed=seed)
+    good = np.isfinite(F) & ~bad
+    placed = bool(np.isfinite(res.receivers).all() and np.isfinite(res.transmitters).all())
+    err = calibration_errors(res, net).position if placed else np.inf
+    z = node_z(res, net)
+    return {
+        "kept": int((res.inliers & good).sum()), "good": int(good.sum()),
+        "rejected_bad": int((~res.inliers & bad).sum()), "bad": int(bad.sum()),
+        "placed": placed, "err": float(err), "sigma_ratio": float(res.sigma / sigma_true),
+        "nodes": int(len(z)), "over3": int((z > 3).sum()), "over5": int((z > 5).sum()),
+        "status": res.status, "seconds": float(res.seconds),
+    }
+
+
+def trial(args) -> dict:
+    (m, n), sigma, cond, missing, gross, seed = args
+    net, F, bad = network(m, n, sigma, missing, gross, seed)
+    return {"given": one_call(net, F, bad, sigma, True, seed), "estimated": one_call(net, F, bad, sigma, False, seed)}
+
+
+def summarise(cell: str, sigma: float, cond: str, mode: str, trials: list[dict]) -> dict:
+    rows = [t[mode] for t in trials]
+    ref = np.array([t["given"]["err"] for t in trials])
+    err = np.array([r["err"] for r in rows])
+    bad = sum(r["bad"] for r in rows)
+    ratio = np.array([r["sigma_ratio"] for r in rows])
+    nodes = sum(r["nodes"] for r in rows)
+    sec = np.array([r["seconds"] for r in rows])
+
+    def q(a, p):
+        a = a[np.isfinite(a)]
+        return float(np.percentile(a, p)) if a.size else np.inf
+
+    out = {
+        "cell": cell, "sigma": f"{sigma:g}", "condition": cond, "sigma_mode": mode, "networks": len(rows),
+        "kept": round(sum(r["kept"] for r in rows) / max(sum(r["good"] for r in rows), 1), 4),
+        "gross_rejected": round(sum(r["rejected_bad"] for r in rows) / bad, 4) if bad else "",
+        "placed": round(float(np.mean([r["placed"] for r in rows])), 3),
+        "err_ratio_med": round(float(np.median(err)) / max(float(np.median(ref)), 1e-300), 3)
+        if np.isfinite(np.median(err)) else "inf",
+        "err_ratio_p95": round(q(err, 95) / max(q(ref, 95), 1e-300), 3),
+        "sigma_ratio": round(float(np.median(ratio)), 3),
+        "sigma_within2": round(float(np.mean((ratio >= 0.5) & (ratio <= 2.0))), 3),
+        "over3std": round(sum(r["over3"] for r in rows) / max(nodes, 1), 4),
+        "ok_over5std": round(float(np.mean([r["status"] == "ok" and r["over5"] > 0 for r in rows])), 4),
+    }
+    for s in STATUSES[::-1]:
+        out[s] = sum(r["status"] == s for r in rows)
+    out["sec_med"] = round(float(np.median(sec)), 3)
+    out["sec_p95"] = round(float(np.percentile(sec, 95)), 3)
+    return out
+
+
+def markdown(rows: list[dict]) -> str:
+    cols = ["cell", "sigma", "condition", "sigma_mode", "networks", "kept", "gross_rejected", "placed",
+            "err_ratio_med", "err_ratio_p95", "sigma_ratio", "sigma_within2", "over3std", "ok_over5std",
+            *STATUSES[::-1], "sec_med", "sec_p95"]
+    out = ["# calibrate: sigma given and estimated (scripts/bench_calibrate.py)", "",
+           "Columns: see the script's docstring. err_ratio: position error over the sigma-given call's on the "
+           "same networks; over3std: share of nodes with error > 3 reported std; ok_over5std: share of networks "
+           "reported \"ok\" with a node > 5 std off.", "",
+           "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for r in rows:
+        out.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--networks", type=int, default=200, help="networks per cell (default 200)")
+    ap.add_argument("--scale-networks", type=int, default=3, help="networks per scale row (default 3)")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", help="comma-separated cells, e.g. 9r3s,8r5s (default all; 'scale' for the scale rows)")
+    ap.add_argument("--quick", action="store_true", help="10 networks a cell, 1 per scale row, into tables/quick/")
+    ap.add_argument("--out", help="output directory (default tables/, or tables/quick/ with --quick)")
+    args = ap.parse_args(argv)
+    networks = 10 if args.quick else args.networks
+    scale_networks = 1 if args.quick else args.scale_networks
+    out_dir = args.out or os.path.join(ROOT, "tables", "quick" if args.quick else "")
+    os.makedirs(out_dir, exist_ok=True)
+    only = set(args.only.split(",")) if args.only else None
+
+    jobs = []
+    for (m, n) in CELLS:
+        if only and f"{m}r{n}s" not in only:
+            continue
+        for sigma in SIGMAS:
+            for cond, (missing, gross) in CONDITIONS.items():
+                jobs.append(((m, n), sigma, cond, missing, gross, networks))
+    if not only or "scale" in only:
+        for (m, n) in SCALE:
+            jobs.append(((m, n), 1e-2, SCALE_CONDITION[0], SCALE_CONDITION[1], SCALE_CONDITION[2], scale_networks))
+
+    t_start = time.perf_counter()
+    rows = []
+    with ProcessPoolExecutor(max_workers=args.jobs) if args.jobs > 1 else _Serial() as pool:
+        for shape, sigma, cond, missing, gross, count in jobs:
+            t0 = time.perf_counter()
+            tasks = [(shape, sigma, cond, missing, gross, args.seed + 1000 * k + 7) for k in range(count)]
+            trials = list(pool.map(trial, tasks))
+            cell = f"{shape[0]}r/{shape[1]}s"
+            for mode in ("given", "estimated"):
+                row = summarise(cell, sigma, cond, mode, trials)
+                rows.append(row)
+                print(f"{cell:>9} sigma {sigma:<6g} {cond:<11} {mode:<9} kept {row['kept']:.4f} gross "
+                      f"{row['gross_rejected']!s:<6} placed {row['placed']:.2f} err x{row['err_ratio_med']} sigma "
+                      f"x{row['sigma_ratio']} >3std {row['over3std']:.4f} ok>5std {row['ok_over5std']:.3f} ok "
+                      f"{row['ok']} unc {row['uncontrolled']} inc {row['inconsistent']} amb {row['ambiguous']} "
+                      f"part {row['partial']} {row['sec_med']:.2f}s/{row['sec_p95']:.2f}s", file=sys.stderr, flush=True)
+            print(f"  ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+
+    with open(os.path.join(out_dir, "calibration.csv"), "w", newline="") as handle:
+        w = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
+        handle.write(markdown(rows))
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    dirty = bool(subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True, text=True).stdout.strip())
+    meta = {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "commit": commit, "worktree_dirty": dirty, "networks_per_cell": networks, "scale_networks": scale_networks,
+        "seed": args.seed, "seconds": round(time.perf_counter() - t_start, 1), "jobs": args.jobs,
+        "networks": "positions uniform in [-5, 5]^2, offsets uniform in [-2, 2], Gaussian noise sigma; network k of "
+                    "a cell uses numpy.random.default_rng(seed + 1000 k + 7)",
+        "corruption": "solvers.synthetic.corrupt_measurements (gaps keep >= 3 per receiver, >= 4 per transmitter; "
+                      "gross errors uniform in [min F, max F])",
+        "calls": "solvers.calibrate(F, sigma=true sigma or None, seed=network seed), default options",
+        "versions": {"python": platform.python_version(), "numpy": np.__version__},
+        "threads": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+    }
+    with open(os.path.join(out_dir, "calibration.meta.json"), "w") as handle:
+        json.dump(meta, handle, indent=2)
+        handle.write("\n")
+    print(f"wrote {out_dir}/calibration.csv, calibration.md, calibration.meta.json in {meta['seconds']} s",
+          file=sys.stderr)
+    return 0
+
+
+class _Serial:
+    """The executor interface, run in this process (--jobs 1)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def map(self, fn, items):
+        return map(fn, items)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,457 @@
+"""Least-squares adjustment of a TDOA network and the statistics that say whether to trust it.
+
+This module owns the one least-squares engine of the calibration pipeline and what geodetic network
+adjustment reports for every fit (Baarda, "A testing procedure for use in geodetic networks", 1968;
+Teunissen, "Testing theory", 2006; open-source adjustment software such as JAG3D):
+
+* the fit itself (`robust_refine`): (iteratively reweighted) Levenberg-Marquardt on the measured
+  entries e_ij = F_ij - o_j - |r_i - s_j| in the gauge r_1 = 0, r_2 on the x axis, with the normal
+  matrix accumulated from the 5 non-zeros of each Jacobian row;
+* `adjustment_statistics`: the normal matrix N = J^T J and its (pseudo-)inverse, the a-posteriori
+  variance factor from the residuals of a fit with positive redundancy (SSR / (entries - unknowns)),
+  the global test of the model (SSR / sigma^2 against chi^2 with that many degrees of freedom, when
+  sigma is given), every entry's redundancy number r_k = 1 - j_k^T N^-1 j_k (its share of the total
+  redundancy: near 0, an error there cannot be seen), Baarda's w-test (sigma given) or the externally
+  studentised residual (sigma estimated without the tested entry: a t-test), the minimal detectable
+  bias (internal reliability), its largest effect on a node (external reliability), and the
+  gauge-fixed covariance sigma^2 N^-1 reduced to per-node standard deviations.
+
+The normal matrix is (2m + 3n - 3)^2 and is inverted once per fit; nothing here forms the dense
+Jacobian of all entries (a 200 x 150 network has 24,000 entries and 847 unknowns).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..recovery import to_gauge
+
+__all__ = [
+    "AdjustmentStatistics",
+    "Refined",
+    "adjustment_statistics",
+    "critical_value",
+    "estimate_covariance",
+    "robust_refine",
+]
+
+Loss = Literal["soft_l1", "huber", "cauchy", "linear"]
+
+#: Measurements a node needs to be determined (receiver: 2 unknowns; transmitter: 2 + offset).
+MIN_RECEIVER_MEASUREMENTS = 3
+MIN_TRANSMITTER_MEASUREMENTS = 4
+
+
+# --------------------------------------------------------------------------------------------------
+# The problem: measured entries between placed nodes, gauge-fixed parameters
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Problem:
+    """The measured entries between placed nodes, in a gauge-fixed parameterisation.
+
+    rows, cols: placed receivers / transmitters (global indices); local receiver 0 is fixed at the
+    origin and local receiver 1 on the x axis; parameters as in solvers.refine.pack:
+    [r_1x, r_2x, r_2y, ..., s_0x, s_0y, ..., o_0, ...] (local indices). slots[k] holds the parameter
+    columns of entry k's derivatives by (r_x, r_y, s_x, s_y, o); n_params marks a fixed coordinate.
+    """
+
+    F: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    ii: np.ndarray  # local receiver index per entry
+    jj: np.ndarray  # local transmitter index per entry
+    slots: np.ndarray  # (k, 5)
+
+    @property
+    def n_params(self) -> int:
+        return 2 * len(self.rows) + 3 * len(self.cols) - 3
+
+    @property
+    def receiver_slots(self) -> np.ndarray:
+        """(len(rows), 2) parameter columns of each local receiver's x, y (n_params = fixed)."""
+        return self.slots_of(True)
+
+    def slots_of(self, receivers: bool) -> np.ndarray:
+        ma, na, u = len(self.rows), len(self.cols), self.n_params
+        k0 = 1 + 2 * (ma - 2)
+        if receivers:
+            out = np.full((ma, 2), u)
+            if ma > 1:
+                out[1, 0] = 0
+            out[2:] = 1 + np.arange(2 * (ma - 2)).reshape(ma - 2, 2)
+            return out
+        j = np.arange(na)
+        return np.stack([k0 + 2 * j, k0 + 2 * j + 1, k0 + 2 * na + j], axis=1)
+
+
+def make_problem(F: np.ndarray, use: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> Problem:
+    ma, na = len(rows), len(cols)
+    n_params = 2 * ma + 3 * na - 3
+    ii, jj = np.nonzero(use[np.ix_(rows, cols)])
+    k0 = 1 + 2 * (ma - 2)
+    rx = np.where(ii == 0, n_params, np.where(ii == 1, 0, 1 + 2 * (ii - 2)))
+    ry = np.where(ii >= 2, 2 + 2 * (ii - 2), n_params)
+    slots = np.stack([rx, ry, k0 + 2 * jj, k0 + 2 * jj + 1, k0 + 2 * na + jj], axis=1)
+    return Problem(F[np.ix_(rows, cols)], rows, cols, ii, jj, slots)
+
+
+def unpack(x: np.ndarray, p: Problem):
+    from ..refine import unpack as _unpack  # the same parameter layout as solvers.refine
+
+    return _unpack(x, len(p.rows), len(p.cols))
+
+
+def pack(R, S, O) -> np.ndarray:
+    from ..refine import pack as _pack
+
+    return _pack(R, S, O)
+
+
+def entry_residuals(x: np.ndarray, p: Problem):
+    """(e, r_i - s_j, |r_i - s_j|) of the problem's entries at parameters x."""
+    R, S, O = unpack(x, p)
+    diff = R[p.ii] - S[p.jj]
+    dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    return p.F[p.ii, p.jj] - O[p.jj] - dist, diff, dist
+
+
+def jacobian_values(diff: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(k, 5) derivatives of e_k by (r_x, r_y, s_x, s_y, o) of its receiver and transmitter."""
+    u = diff / np.maximum(dist, 1e-300)[:, None]
+    return np.column_stack([-u, u, -np.ones(len(dist))])
+
+
+def dense_jacobian(p: Problem, diff: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """The (k, n_params) Jacobian (tests and small problems only)."""
+    J = np.zeros((len(dist), p.n_params + 1))
+    np.add.at(J, (np.arange(len(dist))[:, None], p.slots), jacobian_values(diff, dist))
+    return J[:, :-1]
+
+
+def normal_equations(p: Problem, diff, dist, w, e) -> tuple[np.ndarray, np.ndarray]:
+    """J^T W J and J^T W e, accumulated from the 5 non-zeros per row (no sparse matrices)."""
+    v = jacobian_values(diff, dist)
+    size = p.n_params + 1
+    idx = (p.slots[:, :, None] * size + p.slots[:, None, :]).ravel()
+    A = np.bincount(idx, (w[:, None, None] * v[:, :, None] * v[:, None, :]).ravel(), minlength=size * size)
+    g = np.bincount(p.slots.ravel(), ((w * e)[:, None] * v).ravel(), minlength=size)
+    return A.reshape(size, size)[:-1, :-1], g[:-1]
+
+
+# --------------------------------------------------------------------------------------------------
+# Robust losses and the Levenberg-Marquardt loop
+# --------------------------------------------------------------------------------------------------
+
+
+def loss_weights(z: np.ndarray, loss: Loss) -> np.ndarray:
+    """IRLS weights rho'(z) for z = (e / c)^2 (scipy's loss conventions)."""
+    if loss == "soft_l1":
+        return 1.0 / np.sqrt(1.0 + z)
+    if loss == "huber":
+        return np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0)))
+    if loss == "cauchy":
+        return 1.0 / (1.0 + z)
+    return np.ones_like(z)
+
+
+def loss_rho(z: np.ndarray, loss: Loss) -> np.ndarray:
+    """rho(z) with rho(z) ~ z near 0 (scipy's conventions); cost = c^2 / 2 * sum rho."""
+    if loss == "soft_l1":
+        return 2.0 * (np.sqrt(1.0 + z) - 1.0)
+    if loss == "huber":
+        return np.where(z <= 1.0, z, 2.0 * np.sqrt(np.maximum(z, 1.0)) - 1.0)
+    if loss == "cauchy":
+        return np.log1p(z)
+    return z
+
+
+def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max_iter: int):
+    """Iteratively reweighted Levenberg-Marquardt for sum rho((e/scale)^2); returns (x, converged, its).
+
+    The gradient J^T W e is exact for the robust cost (W = rho'); the Hessian is the IRLS one, so a
+    robust loss converges linearly and gets looser tolerances (it only warm-starts least squares).
+    Why not scipy.optimize.least_squares: its sparse trust-region path forms J (24,000 x 847 for a
+    200 x 150 network) and factors it by LSMR each iteration; the normal matrix here is accumulated
+    from 5 non-zeros per row and factored densely (847^2), which is what these problems need.
+    """
+    import scipy.linalg
+
+    tol = 1e-12 if loss == "linear" else 1e-8
+    xtol = 1e-15 if loss == "linear" else 1e-8  # least squares: iterate to rounding (noiseless data)
+    e, diff, dist = entry_residuals(x, p)
+
+    def cost_of(e):
+        return float(np.sum(loss_rho((e / scale) ** 2, loss)))
+
+    cost = cost_of(e)
+    lam = 1e-3
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):
+        A, g = normal_equations(p, diff, dist, loss_weights((e / scale) ** 2, loss), e)
+        diag = np.diag(A).copy()
+        floor = 1e-12 * max(diag.max(initial=0.0), 1e-300)
+        improved = False
+        while lam < 1e12:
+            M = A + lam * np.diag(np.maximum(diag, floor))
+            try:
+                step = scipy.linalg.cho_solve(scipy.linalg.cho_factor(M, check_finite=False), -g, check_finite=False)
+            except (np.linalg.LinAlgError, ValueError):
+                lam *= 10.0
+                continue
+            x_new = x + step
+            e_new, diff_new, dist_new = entry_residuals(x_new, p)
+            cost_new = cost_of(e_new) if np.all(np.isfinite(e_new)) else np.inf
+            if cost_new <= cost:
+                converged = bool(np.linalg.norm(step) <= xtol * (np.linalg.norm(x) + xtol) or cost - cost_new <= tol * cost)
+                x, e, diff, dist, cost = x_new, e_new, diff_new, dist_new, cost_new
+                lam = max(lam / 5.0, 1e-12)
+                improved = True
+                break
+            lam *= 4.0
+        if not improved:
+            converged = True  # no descent left at this precision: a (local) minimum
+        if converged:
+            break
+    return x, converged, it
+
+
+@dataclass(frozen=True)
+class Refined:
+    R: np.ndarray
+    S: np.ndarray
+    O: np.ndarray
+    converged: bool
+    iterations: int
+
+
+def gauge_order(R: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Placed receivers, the two gauge receivers first: the first two (by index) with at least
+    MIN_RECEIVER_MEASUREMENTS entries in `use` (else the first two placed), then the rest by index.
+
+    A gauge receiver whose own position the data do not fix would leave the whole network free to
+    rotate about it (a rank-deficient fit that wanders off).
+    """
+    placed = np.flatnonzero(np.isfinite(R[:, 0]))
+    good = placed[use[placed].sum(axis=1) >= MIN_RECEIVER_MEASUREMENTS]
+    first = list(good[:2]) if len(good) >= 2 else list(placed[:2])
+    return np.array(first + [i for i in placed if i not in first], dtype=int)
+
+
+def _gauged_problem(F, use, R, S, O):
+    """(problem, x) on the entries `use` between placed nodes, or None if the gauge cannot be fixed."""
+    placed_r = gauge_order(R, use)
+    placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
+    if len(placed_r) < 2 or len(placed_t) < 1:
+        return None
+    gauged = to_gauge(R[placed_r], S[placed_t])
+    if gauged is None:
+        return None
+    p = make_problem(F, use, placed_r, placed_t)
+    return p, pack(gauged[0], gauged[1], O[placed_t])
+
+
+def _scatter(p: Problem, x: np.ndarray, shape_r, shape_t):
+    Rl, Sl, Ol = unpack(x, p)
+    R2, S2, O2 = np.full(shape_r, np.nan), np.full(shape_t, np.nan), np.full(shape_t[0], np.nan)
+    R2[p.rows], S2[p.cols], O2[p.cols] = Rl, Sl, Ol
+    return R2, S2, O2
+
+
+def robust_refine(F, mask, R, S, O, *, loss: Loss = "soft_l1", scale: float = 1.0, max_iter: int = 100,
+                  use: np.ndarray | None = None) -> Refined:
+    """Refine placed nodes on the measured entries `use` (default: all of `mask`) with a robust loss.
+
+    Unplaced nodes (NaN) stay NaN. Returns the refined arrays in the gauge (first placed receiver at
+    the origin, second on the x axis), the convergence flag and the iteration count.
+    """
+    use = mask if use is None else use
+    gp = _gauged_problem(F, use, R, S, O)
+    if gp is None or len(gp[0].ii) == 0:
+        return Refined(R, S, O, False, 0)
+    p, x0 = gp
+    x, converged, its = levenberg_marquardt(x0, p, loss, scale, max_iter)
+    return Refined(*_scatter(p, x, R.shape, S.shape), converged, its)
+
+
+# --------------------------------------------------------------------------------------------------
+# Statistics of a least-squares fit
+# --------------------------------------------------------------------------------------------------
+
+
+def critical_value(alpha: float, dof: float | None = None) -> float:
+    """Two-sided critical value of a standard normal (dof None) or Student t test at level alpha."""
+    from scipy import stats
+
+    if dof is None or not np.isfinite(dof):
+        return float(stats.norm.isf(alpha / 2.0))
+    return float(stats.t.isf(alpha / 2.0, max(dof, 1e-9)))
+
+
+def _pseudo_inverse(N: np.ndarray, rtol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+    """(N^+, null) of a symmetric positive semi-definite N by its eigendecomposition; null marks the
+    parameters touched by an eigenvector of relative eigenvalue below rtol (not determined)."""
+    if N.size == 0:
+        return N.copy(), np.zeros(0, bool)
+    lam, V = np.linalg.eigh(N)
+    top = max(float(lam[-1]), 1e-300)
+    small = lam <= rtol * top
+    inv = np.where(small, 0.0, 1.0 / np.where(small, 1.0, lam))
+    Ninv = (V * inv) @ V.T
+    null = np.zeros(N.shape[0], bool)
+    if small.any():
+        null = np.linalg.norm(V[:, small], axis=1) > 1e-6
+    return Ninv, null
+
+
+@dataclass(frozen=True, eq=False)
+class AdjustmentStatistics:
+    """What a least-squares fit on `use` supports (see the module docstring).
+
+    entries : (k, 2) global (receiver, transmitter) of every entry of the fit
+    residuals : (k,) e = F - o - |r - s| at the fit
+    redundancy : (k,) redundancy numbers r_k in [0, 1]; their sum is the degrees of freedom
+    dof : entries - unknowns (redundancy of the fit); 0 or less: nothing can be tested
+    ssr : sum of squared residuals
+    sigma_prior : the given noise level, or None
+    sigma_post : a-posteriori noise level sqrt(ssr / dof) (NaN when dof <= 0)
+    sigma : the level the tests and covariance use (sigma_prior if given, else sigma_post)
+    global_statistic, global_critical, global_passed : ssr / sigma_prior^2 against the chi^2(dof)
+        quantile at the global level (None when sigma is estimated: the test needs a prior)
+    w : (k,) test statistic of each entry: Baarda's w = e / (sigma sqrt(r)) when sigma is given,
+        else the externally studentised residual (sigma from the fit without that entry, t(dof - 1))
+    mdb : (k,) minimal detectable bias sigma delta0 / sqrt(r) (inf where r ~ 0)
+    null : (n_params,) parameters not determined (rank-deficient fit)
+    Ninv : (n_params + 1)^2 pseudo-inverse of N, padded with a zero row/column for fixed coordinates
+    problem, x : the fit's problem and parameters
+    """
+
+    entries: np.ndarray
+    residuals: np.ndarray
+    redundancy: np.ndarray
+    dof: int
+    ssr: float
+    sigma_prior: float | None
+    sigma_post: float
+    sigma: float
+    global_statistic: float | None
+    global_critical: float | None
+    global_passed: bool | None
+    w: np.ndarray
+    mdb: np.ndarray
+    null: np.ndarray
+    Ninv: np.ndarray
+    problem: Problem
+    x: np.ndarray
+
+    @property
+    def deficient(self) -> bool:
+        return bool(self.null.any())
+
+    def hat(self, p: Problem, x: np.ndarray | None = None):
+        """(e, j^T N^-1 j) of the entries of another problem `p` on the same nodes (prediction)."""
+        e, diff, dist = entry_residuals(self.x if x is None else x, p)
+        v = jacobian_values(diff, dist)
+        h = np.einsum("ka,kab,kb->k", v, self.Ninv[p.slots[:, :, None], p.slots[:, None, :]], v)
+        return e, h
+
+    def node_std(self, m: int, n: int):
+        """(receiver_std (m,), transmitter_std (n,), offset_std (n,)): sqrt(var_x + var_y), the offset's
+        std; inf for a coordinate in the null space, NaN for a node not in the fit."""
+        var = self.sigma**2 * np.diag(self.Ninv)[:-1].copy()
+        var[self.null] = np.inf
+        var = np.append(var, 0.0)  # fixed gauge coordinates
+        p = self.problem
+        rstd, tstd, ostd = np.full(m, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+        rs, ts = p.slots_of(True), p.slots_of(False)
+        rstd[p.rows] = np.sqrt(var[rs].sum(axis=1))
+        tstd[p.cols] = np.sqrt(var[ts[:, :2]].sum(axis=1))
+        ostd[p.cols] = np.sqrt(var[ts[:, 2]])
+        return rstd, tstd, ostd
+
+    def external_reliability(self, m: int, n: int, chunk: int = 2048):
+        """(receiver (m,), transmitter (n,)): the largest shift of a node's position that an
+        undetected error of one entry's minimal detectable bias causes (N^-1 j_k mdb_k; NaN off the fit).
+        Entries with infinite MDB (no redundancy) are left out: they are reported as uncontrolled."""
+        p = self.problem
+        _, diff, dist = entry_residuals(self.x, p)
+        v = jacobian_values(diff, dist)
+        rs, ts = p.slots_of(True), p.slots_of(False)[:, :2]
+        node_slots = np.vstack([rs, ts])  # (nodes, 2)
+        best = np.zeros(len(node_slots))
+        finite = np.flatnonzero(np.isfinite(self.mdb))
+        for start in range(0, len(finite), chunk):
+            k = finite[start : start + chunk]
+            # shift of every parameter: N^-1[:, slots_k] v_k mdb_k  -> (n_params + 1, len(k))
+            shift = np.einsum("pkc,kc->pk", self.Ninv[:, p.slots[k]], v[k] * self.mdb[k, None])
+            disp = np.hypot(shift[node_slots[:, 0]], shift[node_slots[:, 1]])  # (nodes, len(k))
+            best = np.maximum(best, disp.max(axis=1))
+        rel_r, rel_t = np.full(m, np.nan), np.full(n, np.nan)
+        rel_r[p.rows] = best[: len(rs)]
+        rel_t[p.cols] = best[len(rs) :]
+        return rel_r, rel_t
+
+
+def adjustment_statistics(F, use, R, S, O, sigma_prior: float | None, *, alpha: float = 0.001,
+                          power: float = 0.8, alpha_global: float = 0.01) -> AdjustmentStatistics | None:
+    """Statistics of the least-squares fit (R, S, O) on the entries `use` (see AdjustmentStatistics).
+
+    alpha: level of each entry's test (Baarda's alpha_0); power: the probability of detecting a bias
+    of the MDB; alpha_global: level of the global test of the model. None if the gauge cannot be fixed.
+    """
+    from scipy import stats
+
+    gp = _gauged_problem(F, use, R, S, O)
+    if gp is None or len(gp[0].ii) == 0:
+        return None
+    p, x = gp
+    e, diff, dist = entry_residuals(x, p)
+    N, _ = normal_equations(p, diff, dist, np.ones(len(e)), e)
+    Ninv, null = _pseudo_inverse(N)
+    Ninv_p = np.zeros((p.n_params + 1, p.n_params + 1))
+    Ninv_p[:-1, :-1] = Ninv
+    v = jacobian_values(diff, dist)
+    h = np.einsum("ka,kab,kb->k", v, Ninv_p[p.slots[:, :, None], p.slots[:, None, :]], v)
+    r = np.clip(1.0 - h, 0.0, 1.0)
+    k = len(e)
+    rank = p.n_params - int(null.sum())
+    dof = k - rank
+    ssr = float(np.sum(e * e))
+    sigma_post = math.sqrt(ssr / dof) if dof > 0 else math.nan
+    sigma = sigma_prior if sigma_prior is not None else sigma_post
+    tiny = 1e-12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if sigma_prior is not None:
+            w = np.where(r > tiny, e / (sigma_prior * np.sqrt(r)), 0.0)
+            g_stat = ssr / sigma_prior**2
+            g_crit = float(stats.chi2.isf(alpha_global, dof)) if dof > 0 else math.inf
+            g_pass = bool(g_stat <= g_crit) if dof > 0 else None
+        else:
+            # externally studentised: sigma from the fit without entry k (its own share removed)
+            s2 = (ssr - np.where(r > tiny, e * e / np.maximum(r, tiny), 0.0)) / max(dof - 1, 1)
+            w = np.where((r > tiny) & (s2 > 0) & (dof > 1), e / np.sqrt(np.maximum(s2, 1e-300) * r), 0.0)
+            g_stat = g_crit = g_pass = None
+        delta0 = float(stats.norm.isf(alpha / 2.0) + stats.norm.ppf(power))
+        mdb = np.where(r > tiny, sigma * delta0 / np.sqrt(r), np.inf) if np.isfinite(sigma) else np.full(k, np.inf)
+    entries = np.column_stack([p.rows[p.ii], p.cols[p.jj]])
+    return AdjustmentStatistics(entries, e, r, int(dof), ssr, sigma_prior, sigma_post, float(sigma), g_stat, g_crit,
+                                g_pass, w, mdb, null, Ninv_p, p, x)
+
+
+def estimate_covariance(F, use, R, S, O, sigma: float):
+    """Gauge-fixed covariance sigma^2 (J^T J)^-1 on the entries `use`, reduced to per-node stds.
+
+    Returns (receiver_std (m,), transmitter_std (n,), offset_std (n,), rank_deficient). Position std
+    = sqrt(var_x + var_y); parameters in the null space of J (not determined) get inf; nodes not
+    placed get NaN. Gauge: first placed receiver fixed, second placed receiver's y fixed.
+    """
+    m, n = F.shape
+    st = adjustment_statistics(F, use, R, S, O, sigma) if use.any() else None
+    if st is None:
+        return np.full(m, np.nan), np.full(n, np.nan), np.full(n, np.nan), True
+    return (*st.node_std(m, n), st.deficient)

@@ -1,0 +1,151 @@
+"""Flags: what the data cannot decide (collinear nodes, mirror positions, alternative hypotheses)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .placement import _node_residuals
+from .scoring import _Model, _residual_matrix
+
+
+# --------------------------------------------------------------------------------------------------
+# Final refinement, classification, flags
+# --------------------------------------------------------------------------------------------------
+
+
+def _principal_ratio(P: np.ndarray) -> float:
+    """Smaller / larger principal spread of a point set (0 = collinear)."""
+    P = P[np.isfinite(P[:, 0])]
+    if len(P) < 3:
+        return 0.0
+    s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
+    return float(s[1] / s[0]) if s[0] > 0 else 0.0
+
+
+def _reflect_across_line(x: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Reflection of point x across the principal line of the points P."""
+    c = P.mean(axis=0)
+    _, _, Vt = np.linalg.svd(P - c)
+    d = Vt[0]
+    v = x - c
+    return c + 2.0 * (v @ d) * d - v
+
+
+def _mirror_alternatives(F, inl, R, S, O) -> list[tuple[str, int, np.ndarray, float, float]]:
+    """For every placed node: its mirror image across the principal line of its inlier partners,
+    re-fitted to those measurements by Gauss-Newton (partners fixed).
+
+    Returns (kind "receiver"/"transmitter", index, alternative (x, y[, offset]), SSR of the
+    alternative, SSR of the current position) per node with enough partners (flip ambiguity).
+    """
+    out = []
+    for kind, X, partners in (("receiver", R, S), ("transmitter", np.column_stack([S, O]), R)):
+        with_offset = kind == "transmitter"
+        for k in np.flatnonzero(np.isfinite(X[:, 0])):
+            idx = np.flatnonzero(inl[:, k] if with_offset else inl[k])
+            if len(idx) < (3 if with_offset else 2):
+                continue
+            G = F[idx, k] if with_offset else F[k, idx] - O[idx]
+            P = partners[idx]
+            alt = X[k].copy()
+            alt[:2] = _reflect_across_line(X[k, :2], P)
+            for _ in range(8):
+                e, diff, dist = _node_residuals(alt, G, P, with_offset)
+                u = diff / np.maximum(dist, 1e-300)[:, None]
+                J = np.column_stack([-u, -np.ones(len(idx))]) if with_offset else -u
+                alt = alt + np.linalg.lstsq(J, -e, rcond=None)[0]
+            e_alt = _node_residuals(alt, G, P, with_offset)[0]
+            e_now = _node_residuals(X[k], G, P, with_offset)[0]
+            out.append((kind, int(k), alt, float(np.sum(e_alt**2)), float(np.sum(e_now**2))))
+    return out
+
+
+def _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor) -> list[str]:
+    """Nodes whose mirror image across the line of their partners fits nearly as well."""
+    out = []
+    var = max(sigma, floor) ** 2
+    for kind, k, alt, ssr_alt, ssr_now in _mirror_alternatives(F, inl, R, S, O):
+        X, std = (R, rstd) if kind == "receiver" else (S, tstd)
+        delta = (ssr_alt - ssr_now) / var
+        apart = np.linalg.norm(alt[:2] - X[k]) > max(3.0 * np.nan_to_num(std[k], nan=0.0, posinf=0.0), 1e3 * floor)
+        if apart and delta < opts.ambiguity_chi2:
+            partners = "transmitters" if kind == "receiver" else "receivers"
+            out.append(f"{kind} {k + 1}: its mirror position ({alt[0]:.4g}, {alt[1]:.4g}) across the line of its "
+                       f"{partners} fits its measurements as well (cost {delta:+.2g} sigma^2)")
+    return out
+
+
+def _repair_flips(F, inl, R, S, O, sigma, floor):
+    """Move every node whose re-fitted mirror position explains its inliers better by > 1 sigma^2.
+
+    Returns (R, S, O, changed). A flipped node is a local minimum of the joint cost that the
+    refinement cannot leave (the other side is beyond a ridge); the mirror test finds the other side.
+    """
+    var = max(sigma, floor) ** 2
+    R, S, O = R.copy(), S.copy(), O.copy()
+    changed = False
+    for kind, k, alt, ssr_alt, ssr_now in _mirror_alternatives(F, inl, R, S, O):
+        if ssr_alt < ssr_now - var and np.all(np.isfinite(alt)):
+            changed = True
+            if kind == "receiver":
+                R[k] = alt
+            else:
+                S[k], O[k] = alt[:2], alt[2]
+    return R, S, O, changed
+
+
+def _distinct(a: _Model, b: _Model, tol: float) -> bool:
+    """True when two models differ beyond a rigid motion (reflections allowed)."""
+    from ..metrics import align_rigid
+
+    ok = np.isfinite(a.R[:, 0]) & np.isfinite(b.R[:, 0])
+    okt = np.isfinite(a.S[:, 0]) & np.isfinite(b.S[:, 0])
+    X = np.vstack([a.R[ok], a.S[okt]])
+    Y = np.vstack([b.R[ok], b.S[okt]])
+    if len(X) < 3:
+        return False
+    aligned = align_rigid(X, Y).apply(X)
+    return float(np.linalg.norm(aligned - Y) / max(np.linalg.norm(Y - Y.mean(axis=0)), 1e-300)) > tol
+
+
+
+def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, search, best, sigma_given, rms,
+           already=()):
+    """Warnings for what the data cannot decide (see CalibrationResult.warnings)."""
+    out = []
+    placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
+    for i in np.flatnonzero(~placed_r & work.any(axis=1)):
+        if not any(w.startswith(f"receiver {i + 1}: ") for w in already):
+            out.append(f"receiver {i + 1}: could not be placed from its measurements")
+    for j in np.flatnonzero(~placed_t & work.any(axis=0)):
+        if not any(w.startswith(f"transmitter {j + 1}: ") for w in already):
+            out.append(f"transmitter {j + 1}: could not be placed from its measurements")
+    ratio = _principal_ratio(R)
+    if ratio < opts.collinear_ratio:
+        out.append(f"receivers are nearly collinear (spread ratio {ratio:.2g}): transmitters have mirror "
+                   "positions across their line that fit about as well")
+    ratio = _principal_ratio(S)
+    if ratio < opts.collinear_ratio:
+        out.append(f"transmitters are nearly collinear (spread ratio {ratio:.2g}): receivers have mirror "
+                   "positions across their line that fit about as well")
+    n_in, rejected = int(inl.sum()), int((work & ~inl & placed_r[:, None] & placed_t[None, :]).sum())
+    redundancy = n_in - (2 * int(placed_r.sum()) + 3 * int(placed_t.sum()) - 3)
+    if rejected and redundancy <= 3 * rejected:
+        out.append(f"low redundancy: {n_in} inliers for {n_in - redundancy} unknowns with {rejected} measurements "
+                   "rejected; another choice of rejected measurements may fit as well")
+    if deficient:
+        out.append("the Jacobian on the inliers is rank-deficient: some coordinates are not determined by the data "
+                   "(their std is inf)")
+    out += _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor)
+    # An alternative hypothesis (after local optimisation) of similar cost that is a different network.
+    var = max(sigma, floor) ** 2
+    best_cost = float(np.sum(np.minimum(_residual_matrix(F, R, S, O)[work] ** 2, (opts.threshold_sigmas ** 2) * var)))
+    for other in search.others:
+        E = _residual_matrix(F, other.R, other.S, other.O)[work]
+        cost = float(np.sum(np.minimum(np.nan_to_num(E, nan=np.inf) ** 2, (opts.threshold_sigmas ** 2) * var)))
+        if (cost - best_cost) / var < opts.ambiguity_chi2 and _distinct(other, best, 1e-3):
+            out.append(f"an alternative calibration fits nearly as well (cost +{(cost - best_cost) / var:.2g} sigma^2); "
+                       "the data may not decide between them")
+            break
+    if sigma_given is not None and sigma_given > 0 and rms > 3.0 * sigma_given:
+        out.append(f"the inlier RMS {rms:.3g} is {rms / sigma_given:.1f} x the given sigma; is sigma right?")
+    return out

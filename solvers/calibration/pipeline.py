@@ -1,0 +1,469 @@
+"""`calibrate`: from a TDOA matrix to one honest answer (the steps are described in the package docstring)."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..recovery import to_gauge
+from .adjustment import (
+    AdjustmentStatistics,
+    adjustment_statistics,
+    critical_value,
+    gauge_order,
+    make_problem,
+    robust_refine,
+)
+from .flags import _flags, _repair_flips
+from .placement import _fill
+from .result import STATUSES, CalibrationOptions, CalibrationResult
+from .robust import _drop_undetermined, _polish
+from .sampling import _ransac, available_solvers
+from .scoring import MAD_TO_SIGMA, _Model, _prune, _residual_matrix, _score, _Search
+
+
+def _failed(F, message, t0, seed, search: _Search | None = None, warnings=()) -> CalibrationResult:
+    m, n = F.shape
+    nan = np.full
+    return CalibrationResult(
+        status="failed", message=message, receivers=nan((m, 2), np.nan), transmitters=nan((n, 2), np.nan),
+        offsets=nan(n, np.nan), inliers=np.zeros((m, n), bool), residuals=nan((m, n), np.nan), rms=float("nan"),
+        sigma=float("nan"), sigma_estimated=True, receiver_std=nan(m, np.nan), transmitter_std=nan(n, np.nan),
+        offset_std=nan(n, np.nan), warnings=tuple(warnings),
+        solver="+".join(sorted(search.solvers)) if search else "", samples=search.samples if search else 0,
+        hypotheses=search.hypotheses if search else 0, seconds=time.perf_counter() - t0, seed=seed,
+    )
+
+
+def _check_input(F) -> np.ndarray:
+    try:
+        arr = np.array(F, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"F must be a 2-D array of real numbers (NaN = missing): {exc}") from None
+    if arr.ndim != 2:
+        raise ValueError(f"F must be a 2-D (receivers x transmitters) array, got shape {arr.shape}")
+    if np.isinf(arr).any():
+        i, j = np.argwhere(np.isinf(arr))[0]
+        raise ValueError(f"F[{i}, {j}] is infinite; mark a missing measurement with NaN")
+    return arr
+
+
+def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
+              options: CalibrationOptions | None = None) -> CalibrationResult:
+    """Calibrate a 2D TDOA network from measurements F[i, j] = |r_i - s_j| + o_j (+ noise, gross errors).
+
+    Parameters
+    ----------
+    F : (m, n) array-like of distances (time differences times the propagation speed, any unit);
+        NaN marks a missing measurement.
+    sigma : noise standard deviation of the inlier measurements (units of F), > 0; None = estimate it
+        from the residuals of the final least-squares fit (SSR / redundancy), never from a fit without
+        redundancy: with too little redundancy the status says so and asks for sigma.
+    seed : seed of numpy.random.default_rng for the sampling; the same seed gives the same result.
+    options : CalibrationOptions (thresholds, test levels, RANSAC budget, loss).
+
+    Returns
+    -------
+    CalibrationResult; its `status` says what was checked (see there). Never raises for data that
+    merely cannot be calibrated; raises ValueError for malformed input (not 2-D, not numeric, infinite
+    values) or a sigma that is not a finite positive number.
+
+    Reference: the paper's pipeline (Sec. 3) inside LO-RANSAC with extension and robust refinement
+    (Larsson et al., EUSIPCO 2021); the final adjustment and its tests after Baarda (1968).
+    """
+    t0 = time.perf_counter()
+    opts = options or CalibrationOptions()
+    F = _check_input(F)
+    if sigma is not None and not (sigma > 0 and np.isfinite(sigma)):
+        raise ValueError(f"sigma must be a finite number > 0 (the noise level of real measurements is never 0; "
+                         f"None estimates it), got {sigma}")
+    result = _calibrate_once(F, sigma, seed, opts, t0)
+    rejected = int((np.isfinite(F) & ~result.inliers).sum()) if result.status != "failed" else 0
+    if opts.stability_check and rejected and result.status not in ("failed", "unconverged"):
+        seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
+        other = _calibrate_once(F, sigma, seed2, opts, t0)
+        if other.status != "failed" and _differs(result, other):
+            first, second = (result, other) if _preferred(result, other, sigma, opts) else (other, result)
+            n_diff = int((first.inliers != second.inliers).sum())
+            note = (f"seed-dependent: a second search (seed {second.seed}) gives another answer ({n_diff} measurements "
+                    f"classified differently or nodes moved beyond 3 std); both are reported")
+            status = _worst(first.status, "ambiguous")
+            result = replace(first, status=status, warnings=(note,) + first.warnings, alternative=second.to_dict(),
+                             message=_message(status, first, note))
+    return replace(result, seconds=time.perf_counter() - t0, seed=seed)
+
+
+def _preferred(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions) -> bool:
+    """Whether answer a is preferred to b: the less severe status, then the smaller truncated cost
+    sum min(e^2, (k s)^2) over all measured entries at a common scale s (sigma, or the smaller of the
+    two estimates), then more inliers."""
+    ra, rb = STATUSES.index(a.status), STATUSES.index(b.status)
+    if ra != rb:
+        return ra > rb
+    s = sigma if sigma is not None else np.nanmin([a.sigma, b.sigma])
+    cap = (opts.threshold_sigmas * s) ** 2
+
+    def cost(r):
+        e = r.residuals[np.isfinite(r.residuals) | r.inliers]
+        return float(np.sum(np.minimum(np.nan_to_num(e, nan=np.inf) ** 2, cap)))
+
+    ca, cb = cost(a), cost(b)
+    if np.isfinite(ca) and np.isfinite(cb) and abs(ca - cb) > 1e-12 * max(ca, cb):
+        return ca < cb
+    return a.inliers.sum() >= b.inliers.sum()
+
+
+def _worst(*statuses: str) -> str:
+    return min(statuses, key=STATUSES.index)
+
+
+def _differs(a: CalibrationResult, b: CalibrationResult) -> bool:
+    """True when two results differ: another inlier set, nodes placed in one only, or positions that
+    differ (after a rigid alignment, reflections allowed) by more than 3 reported standard deviations."""
+    from ..metrics import align_rigid
+
+    if not np.array_equal(a.inliers, b.inliers):
+        return True
+    pa = np.concatenate([np.isfinite(a.receivers[:, 0]), np.isfinite(a.transmitters[:, 0])])
+    pb = np.concatenate([np.isfinite(b.receivers[:, 0]), np.isfinite(b.transmitters[:, 0])])
+    if not np.array_equal(pa, pb) or pa.sum() < 3:
+        return bool(not np.array_equal(pa, pb))
+    X = np.vstack([a.receivers, a.transmitters])[pa]
+    Y = np.vstack([b.receivers, b.transmitters])[pa]
+    std = np.concatenate([a.receiver_std, a.transmitter_std])[pa]
+    shift = np.linalg.norm(align_rigid(Y, X).apply(Y) - X, axis=1)
+    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + 1e-9 * max(float(np.abs(X).max()), 1.0)
+    return bool((shift > tol).any())
+
+
+def _message(status, res: CalibrationResult, why: str = "") -> str:
+    m, n = res.inliers.shape
+    placed_r, placed_t = np.isfinite(res.receivers[:, 0]), np.isfinite(res.transmitters[:, 0])
+    measured = ~np.isnan(res.residuals) | res.inliers
+    n_missing = m * n - int(measured.sum())
+    sig = f"sigma {res.sigma:.3g} {'estimated' if res.sigma_estimated else 'given'}"
+    head = (f"{status}: {int(placed_r.sum())}/{m} receivers, {int(placed_t.sum())}/{n} transmitters placed; "
+            f"{int(res.inliers.sum())} inliers, {int(measured.sum() - res.inliers.sum())} rejected, {n_missing} "
+            f"missing; rms {res.rms:.3g}; {sig}")
+    return head + (f" - {why}" if why else "")
+
+
+def _no_outlier(st: AdjustmentStatistics, sigma, opts: CalibrationOptions) -> bool:
+    """True when the fit on all entries shows no outlier: the global test passes (sigma given) and the
+    largest test statistic among testable entries stays below its Bonferroni bound (level alpha_global
+    over all of them), or nothing can be tested."""
+    testable = st.redundancy >= opts.min_redundancy
+    if not testable.any():
+        return True
+    if sigma is not None:
+        c = critical_value(opts.alpha_global / testable.sum())
+        return st.global_passed is not False and float(np.abs(st.w[testable]).max()) <= c
+    if st.dof < 2:
+        return True
+    c = critical_value(opts.alpha_global / testable.sum(), st.dof - 1)
+    return float(np.abs(st.w[testable]).max()) <= c
+
+
+def _robust_scale(F, work, best: _Model, floor, opts: CalibrationOptions):
+    """Noise level from a robust fit on all entries: 1.4826 x the median of |e_k| / sqrt(r_k) over the
+    entries whose redundancy number r_k is at least min_redundancy (e_k / sqrt(r_k) has the noise's
+    variance in a least-squares fit, whatever the redundancy of the entry). The first scale comes from
+    the hypothesis's residuals normalised by its approximate redundancy numbers (a minimal sample's
+    own entries, which fit it exactly, never set it).
+    Returns (scale, statistics of the last robust fit or None)."""
+    R, S, O = best.R, best.S, best.O
+    med, _, _ = _score(_residual_matrix(F, R, S, O), work, None, floor, best.redundancy)
+    s = max(MAD_TO_SIGMA * math.sqrt(med), floor) if np.isfinite(med) else floor
+    st = None
+    for _ in range(3):
+        ref = robust_refine(F, work, R, S, O, loss="cauchy", scale=opts.threshold_sigmas * s, max_iter=opts.lo_iterations)
+        R, S, O = ref.R, ref.S, ref.O
+        st = adjustment_statistics(F, work & np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :], R, S, O, None)
+        if st is None:
+            break
+        ok = st.redundancy >= max(opts.min_redundancy, 1e-3)
+        if not ok.any():
+            break
+        s = max(MAD_TO_SIGMA * float(np.median(np.abs(st.residuals[ok]) / np.sqrt(st.redundancy[ok]))), floor)
+    return s, st
+
+
+def _snoop(F, work, R, S, O, inl, sigma, opts: CalibrationOptions):
+    """Data snooping with readmission: least squares on the inliers; rejected entries whose prediction
+    by that fit passes the test come back; then the inlier with the largest test statistic above the
+    critical value (one per receiver and per transmitter per round, the entries' redundancy numbers
+    at least min_redundancy) is rejected; until nothing changes. Returns (R, S, O, inl, converged)."""
+    inl = inl.copy()
+    converged = True
+    seen = set()
+    for _ in range(opts.max_snooping_rounds):
+        ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
+        R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
+        st = adjustment_statistics(F, inl, R, S, O, sigma, alpha=opts.alpha, power=opts.power,
+                                   alpha_global=opts.alpha_global)
+        if st is None or st.dof < (1 if sigma is not None else 2):
+            break
+        key = inl.tobytes()
+        if key in seen:
+            break
+        seen.add(key)
+        dof_t = None if sigma is not None else st.dof - 1
+        c = critical_value(opts.alpha, dof_t)
+        placed = np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :]
+        cand = work & ~inl & placed
+        if cand.any():
+            q = make_problem(F, cand, st.problem.rows, st.problem.cols)
+            if len(q.ii):
+                e, h = st.hat(q)
+                wq = e / (st.sigma * np.sqrt(1.0 + h))
+                back = np.abs(wq) <= c
+                if back.any():
+                    inl[q.rows[q.ii[back]], q.cols[q.jj[back]]] = True
+                    continue
+        testable = st.redundancy >= opts.min_redundancy
+        aw = np.where(testable, np.abs(st.w), 0.0)
+        big = aw > c
+        if not big.any():
+            break
+        i, j = st.entries[:, 0], st.entries[:, 1]
+        m, n = F.shape
+        best_r = np.zeros(m)
+        best_t = np.zeros(n)
+        np.maximum.at(best_r, i, aw)
+        np.maximum.at(best_t, j, aw)
+        pick = big & (aw >= best_r[i]) & (aw >= best_t[j])
+        inl[i[pick], j[pick]] = False
+    return R, S, O, inl, converged
+
+
+def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions, rng):
+    """(R, S, O, use, converged, robust scale, passed): least squares on every entry between the nodes
+    placed by the model (unplaced ones placed first), and whether it shows no outlier.
+
+    Sigma given: the global test and the largest w-test statistic (`_no_outlier`). Sigma estimated:
+    the largest externally studentised residual, and - because two gross errors mask each other in
+    that statistic (each inflates the other's leave-one-out sigma) - the largest residual of a
+    robust fit standardised by the robust scale (`_robust_scale`), each against its Bonferroni bound
+    (the latter widened by 1.5 for the scale's own sampling error).
+    """
+    c = opts.threshold_sigmas * sigma if sigma is not None else floor
+    R, S, O = _fill(F, work, model.R, model.S, model.O, max(c, floor), rng)
+    placed = np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :]
+    ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=work & placed)
+    st = adjustment_statistics(F, work & placed, ls.R, ls.S, ls.O, sigma, alpha=opts.alpha, power=opts.power,
+                               alpha_global=opts.alpha_global)
+    passed = st is not None and ls.converged and _no_outlier(st, sigma, opts)
+    scale = sigma
+    if sigma is None:
+        scale, robust = _robust_scale(F, work, _Model(R, S, O, 0.0, 0.0, redundancy=model.redundancy), floor, opts)
+        if passed and robust is not None:
+            testable = robust.redundancy >= max(opts.min_redundancy, 1e-3)
+            if testable.any():
+                z = np.abs(robust.residuals[testable]) / (scale * np.sqrt(robust.redundancy[testable]))
+                passed = float(z.max()) <= 1.5 * critical_value(opts.alpha_global / testable.sum())
+    return ls.R, ls.S, ls.O, work & placed, ls.converged, scale, passed
+
+
+def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions):
+    """Sigma unknown, little redundancy: reject the entry with the largest externally studentised
+    residual while it exceeds the Bonferroni bound (alpha_global over the testable entries) and the
+    fit keeps at least 2 degrees of freedom; least squares after each. Returns (R, S, O, inl, converged)."""
+    inl = inl.copy()
+    converged = True
+    while True:
+        st = adjustment_statistics(F, inl, R, S, O, None, alpha=opts.alpha, power=opts.power,
+                                   alpha_global=opts.alpha_global)
+        if st is None or st.dof < 3:
+            break
+        testable = st.redundancy >= opts.min_redundancy
+        if not testable.any():
+            break
+        aw = np.where(testable, np.abs(st.w), 0.0)
+        k = int(np.argmax(aw))
+        if aw[k] <= critical_value(opts.alpha_global / testable.sum(), st.dof - 1):
+            break
+        inl[st.entries[k, 0], st.entries[k, 1]] = False
+        ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
+        R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
+    return R, S, O, inl, converged
+
+
+def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, all_data=None):
+    """The final adjustment from the best hypothesis: (R, S, O, inliers, converged, route).
+
+    1. The all-data hypothesis: least squares on every entry between placed nodes; if the fit shows
+       no outlier (`_no_outlier`), every entry is kept (route "all data").
+    2. Otherwise the robust route: robust refinement and classification at threshold_sigmas x sigma
+       (sigma given, or `_robust_scale`), flipped nodes repaired, then data snooping with
+       readmission (`_snoop`).
+    """
+    R, S, O, use, converged, scale, passed = all_data or _all_data_fit(F, work, best, sigma, floor, opts, rng)
+    if passed:
+        return R, S, O, use, converged, "all data"
+    n_fit = int(use.sum())
+    dof_all = n_fit - (2 * int(np.isfinite(R[:, 0]).sum()) + 3 * int(np.isfinite(S[:, 0]).sum()) - 3)
+    if sigma is None and dof_all < opts.min_dof_for_sigma:
+        # Too little redundancy to estimate sigma robustly: a robust fit would explain a subset exactly
+        # and call the rest outliers. Only classic data snooping from the all-data fit remains: the
+        # largest externally studentised residual, above its Bonferroni bound, one at a time.
+        R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts)
+        return R, S, O, inl, converged, "snooping"
+    thr = max(opts.threshold_sigmas * scale, floor)
+    fin = _polish(F, work, best.R, best.S, best.O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
+    R, S, O, flipped = _repair_flips(F, fin.inliers, fin.R, fin.S, fin.O, fin.sigma, floor)
+    if flipped:
+        fin = _polish(F, work, R, S, O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
+    # converged: that of the final least squares (the robust stage only warm-starts it)
+    R, S, O, inl, converged = _snoop(F, work, fin.R, fin.S, fin.O, fin.inliers, sigma, opts)
+    return R, S, O, inl, converged, "robust"
+
+
+def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> CalibrationResult:
+    m, n = F.shape
+    mask = np.isfinite(F)
+    rng = np.random.default_rng(seed)
+    warnings: list[str] = []
+
+    rows_ok, cols_ok = _prune(mask)
+    for i in np.flatnonzero(~rows_ok):
+        warnings.append(f"receiver {i + 1}: only {int(mask[i].sum())} measured transmitters usable "
+                        f"(needs {3}); not placed")
+    for j in np.flatnonzero(~cols_ok):
+        warnings.append(f"transmitter {j + 1}: only {int(mask[:, j].sum())} measured receivers usable "
+                        f"(needs {4}); not placed")
+    work = mask & rows_ok[:, None] & cols_ok[None, :]
+    n_params = 2 * int(rows_ok.sum()) + 3 * int(cols_ok.sum()) - 3
+    if rows_ok.sum() < 3 or cols_ok.sum() < 3 or work.sum() < n_params:
+        hint = ""
+        if m < 4 <= n or n < 4 <= m:
+            hint = (f" ({m} receivers x {n} transmitters: a network needs >= 3 receivers with >= 3 transmitters each "
+                    "and transmitters with >= 4 receivers each; is the matrix transposed?)")
+        return _failed(F, f"too few measurements: {int(work.sum())} usable entries between {int(rows_ok.sum())} "
+                       f"receivers and {int(cols_ok.sum())} transmitters for {max(n_params, 0)} unknowns{hint}",
+                       t0, seed, warnings=warnings)
+
+    data_scale = float(np.max(np.abs(F[work]))) or 1.0
+    floor = 1e-9 * data_scale
+    thr = None if sigma is None else max(opts.threshold_sigmas * sigma, floor)
+
+    fits = {}
+
+    def accept(model: _Model) -> bool:
+        fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng)
+        return fits[id(model)][-1]
+
+    best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(), accept, 0 if sigma is not None else 2)
+    if best is None:
+        return _failed(F, "no hypothesis: every minimal-solver sample and sub-network fit failed (degenerate geometry?)",
+                       t0, seed, search, warnings)
+
+    R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)))
+    R, S, O, inl, dropped, ls = _drop_undetermined(F, work, R, S, O, inl, opts.max_iterations)
+    warnings += dropped
+    if ls is not None:
+        converged = ls.converged
+    E = _residual_matrix(F, R, S, O)
+    rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
+
+    # Gauge of the report: receiver 1 at 0 and receiver 2 on +x, or the first two receivers with
+    # enough inliers (see gauge_order); the statistics use the same gauge.
+    placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
+    order = gauge_order(R, inl)
+    gauged = to_gauge(R[order], S[placed_t]) if len(order) >= 2 else None
+    if gauged is not None:
+        R[order], S[placed_t] = gauged
+    st = adjustment_statistics(F, inl, R, S, O, sigma, alpha=opts.alpha, power=opts.power,
+                               alpha_global=opts.alpha_global) if inl.any() else None
+    nan_mn = np.full((m, n), np.nan)
+    if st is not None and st.dof > 0:
+        sig = st.sigma
+        sig_cov = max(sig, floor / opts.threshold_sigmas)
+        st_cov = st if sig == sig_cov else replace(st, sigma=sig_cov)
+        rstd, tstd, ostd = st_cov.node_std(m, n)
+        rrel, trel = st_cov.external_reliability(m, n)
+        dof_t = None if sigma is not None else st.dof - 1
+        crit = critical_value(opts.alpha, dof_t) if dof_t is None or dof_t >= 1 else math.inf
+        redundancy, w_test, mdb = nan_mn.copy(), nan_mn.copy(), nan_mn.copy()
+        i, j = st.entries[:, 0], st.entries[:, 1]
+        redundancy[i, j], w_test[i, j], mdb[i, j] = st.redundancy, st.w, st.mdb
+        cand = work & ~inl & placed_r[:, None] & placed_t[None, :]
+        if cand.any():
+            q = make_problem(F, cand, st.problem.rows, st.problem.cols)
+            e, h = st.hat(q)
+            w_test[q.rows[q.ii], q.cols[q.jj]] = e / (st.sigma * np.sqrt(1.0 + h))
+        uncontrolled = np.zeros((m, n), bool)
+        uncontrolled[i, j] = st.redundancy < opts.min_redundancy
+        deficient = st.deficient
+    else:
+        sig = float("nan") if st is None or sigma is None else sigma
+        sig_cov = sig if np.isfinite(sig) else floor
+        rstd, tstd, ostd = (st.node_std(m, n) if st is not None and np.isfinite(sig) else
+                            (np.full(m, np.inf), np.full(n, np.inf), np.full(n, np.inf)))
+        rrel, trel = np.full(m, np.nan), np.full(n, np.nan)
+        crit = math.inf
+        redundancy, w_test, mdb = nan_mn.copy(), nan_mn.copy(), nan_mn.copy()
+        uncontrolled = inl.copy()
+        deficient = True if st is None else st.deficient
+        rstd = np.where(placed_r, rstd, np.nan)
+        tstd, ostd = np.where(placed_t, tstd, np.nan), np.where(placed_t, ostd, np.nan)
+    warnings += _flags(F, work, inl, R, S, O, sig_cov, rstd, tstd, opts, floor, deficient, search, best,
+                       sigma, rms, already=tuple(warnings))
+
+    # Status: the most severe finding; each one also becomes the first warnings, in order.
+    found: list[tuple[str, str]] = []
+    if not converged:
+        found.append(("unconverged", "the refinement did not converge within its iteration budget"))
+    spread = float(np.nanmax(np.abs(np.vstack([R[placed_r], S[placed_t]])))) if placed_r.any() else np.inf
+    if not np.isfinite(spread) or spread > 1e3 * data_scale:
+        found.append(("unconverged", f"the solution diverged (coordinates up to {spread:.3g}, data scale {data_scale:.3g})"))
+    n_work = int(work.sum())
+    kept = float(inl.sum() / max(n_work, 1))
+    if kept < 2.0 / 3.0:
+        found.append(("inconsistent", f"the model explains only {100 * kept:.0f} % of the measurements (transposed "
+                      "matrix, wrong units, not TDOA data, or mostly gross errors?)"))
+    if st is not None and st.global_passed is False:
+        found.append(("inconsistent", f"the global test of the model fails: SSR / sigma^2 = {st.global_statistic:.4g} > "
+                      f"{st.global_critical:.4g} (chi^2, {st.dof} degrees of freedom, level {opts.alpha_global:g}): the "
+                      f"residuals are {st.sigma_post / sigma:.2g} x the given sigma; is sigma right, or the model?"))
+    spread_f = float(np.percentile(F[work], 90) - np.percentile(F[work], 10)) if n_work else 0.0
+    if sigma is None and st is not None and np.isfinite(st.sigma_post) and st.sigma_post > 0.02 * max(spread_f, 1e-300):
+        found.append(("inconsistent", f"the estimated noise {st.sigma_post:.3g} is {100 * st.sigma_post / spread_f:.0f} % "
+                      "of the spread of the data: the model does not fit (transposed matrix, wrong units, not TDOA data?)"))
+    unplaced = int((~placed_r & mask.any(axis=1)).sum() + (~placed_t & mask.any(axis=0)).sum())
+    if unplaced:
+        found.append(("partial", f"{unplaced} node(s) with measurements could not be placed"))
+    if sigma is None and (st is None or st.dof < opts.min_dof_for_sigma):
+        dof = st.dof if st is not None else 0
+        found.append(("uncontrolled", f"too little redundancy to estimate sigma ({dof} degrees of freedom, needs "
+                      f"{opts.min_dof_for_sigma}): give sigma (--sigma) to test the measurements"))
+    n_unc = int(uncontrolled.sum())
+    if n_unc:
+        nodes = sorted({f"r{i + 1}" for i in np.flatnonzero(uncontrolled.any(axis=1))} |
+                       {f"s{j + 1}" for j in np.flatnonzero(uncontrolled.any(axis=0))},
+                       key=lambda s: (s[0], int(s[1:])))
+        listed = ", ".join(nodes[:8]) + (", ..." if len(nodes) > 8 else "")
+        found.append(("uncontrolled", f"{n_unc} measurement(s) have redundancy numbers below {opts.min_redundancy:g}: an "
+                      f"error in them cannot be detected (nodes {listed})"))
+    if deficient:
+        found.append(("uncontrolled", "the fit is rank-deficient: some coordinates are not determined (std inf)"))
+    status = _worst("ok", *(s for s, _ in found))
+    warnings = [why for _, why in found] + [w for w in warnings if w not in {why for _, why in found}]
+    res = CalibrationResult(
+        status=status, message="", receivers=R, transmitters=S, offsets=O, inliers=inl, residuals=E,
+        rms=rms, sigma=float(sig), sigma_estimated=sigma is None,
+        receiver_std=rstd, transmitter_std=tstd, offset_std=ostd, warnings=tuple(warnings),
+        solver="+".join(sorted(search.solvers)), samples=search.samples, hypotheses=search.hypotheses,
+        seconds=time.perf_counter() - t0, seed=seed, dof=st.dof if st is not None else 0,
+        global_test=None if st is None or st.global_statistic is None else
+        (float(st.global_statistic), float(st.global_critical), bool(st.global_passed)),
+        redundancy=redundancy, w_test=w_test, critical_value=float(crit), mdb=mdb,
+        receiver_reliability=rrel, transmitter_reliability=trel, uncontrolled=uncontrolled,
+        gauge=(int(order[0]), int(order[1])) if gauged is not None else None,
+    )
+    return replace(res, message=_message(status, res, found[0][1] if found else route_note(route)))
+
+
+def route_note(route: str) -> str:
+    return "no outlier: every measurement kept" if route == "all data" else "outliers rejected by data snooping"

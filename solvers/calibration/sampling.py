@@ -1,0 +1,451 @@
+"""Hypotheses: minimal solvers on fully measured sub-blocks, least squares on sub-networks, and the
+LO-RANSAC search over them (scored MSAC-style with sigma, LMedS on held-out entries without)."""
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..recovery import recover
+from .adjustment import robust_refine
+from .placement import _extend
+from .result import CalibrationOptions
+from .robust import _polish
+from .scoring import _classify, _Model, _prune, _residual_matrix, _score, _Search, hypothesis_redundancy
+
+Hypothesis = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+# --------------------------------------------------------------------------------------------------
+# Minimal solvers: the one adapter to solvers.api
+# --------------------------------------------------------------------------------------------------
+
+
+
+@dataclass(frozen=True)
+class MinimalSolver:
+    """A minimal solver as the pipeline sees it.
+
+    Parameters
+    ----------
+    label : str, e.g. "6r4s"
+    m, n : int
+        Size of the fully measured sub-block it needs (receivers x transmitters).
+    solve : callable
+        F_sub (m, n) -> list of candidate (receivers (m, 2), transmitters (n, 2), offsets (n,)),
+        real and geometrically valid, any order.
+    cost_ms : float
+        Relative cost per call (the pencil 1, a homotopy its number of paths), to try the cheapest first.
+    """
+
+    label: str
+    m: int
+    n: int
+    solve: Callable[[np.ndarray], list[Hypothesis]]
+    cost_ms: float
+
+
+def _solver_via_api(m: int, n: int) -> Callable[[np.ndarray], list[Hypothesis]]:
+    """F_sub -> candidates through solvers.api.solve_roots (dispatch by shape) and recovery."""
+
+    from .. import api
+
+    choice = api.select_solver(m, n)
+
+    def solve(F_sub: np.ndarray) -> list[Hypothesis]:
+        out: list[Hypothesis] = []
+        with np.errstate(all="ignore"):
+            for x in api.solve_roots(F_sub):
+                if choice.label in api.POSITIONS:
+                    cal = api._from_positions(F_sub, choice, x)
+                else:
+                    cal = recover(F_sub, x[:3], x[3:5], x[5 : 5 + n])
+                if cal is not None:
+                    out.append((cal.receivers, cal.transmitters, cal.offsets))
+        return out
+
+    return solve
+
+
+@functools.lru_cache(maxsize=1)
+def available_solvers() -> tuple[MinimalSolver, ...]:
+    """The minimal solvers hypotheses are drawn from, cheapest first.
+
+    Every generated solver of solvers.api (:data:`solvers.api.SOLVER_ORDER`): the 6r/4s curve pencil
+    (~1 ms) and the homotopy solvers, whose cost grows with their number of paths (9r/3s 75 ... 4r/5s
+    344; tables/solvers.csv).
+    """
+    from .. import api
+
+    solvers = []
+    for label, m, n in api._available():
+        module = api._module_for(label)
+        if api.select_solver(m, n).label != label:  # the api must dispatch this block shape to it
+            raise RuntimeError(f"solvers.api dispatches a {m}x{n} block to {api.select_solver(m, n).label}, not {label}")
+        # a homotopy's cost grows with its paths; a squared system (5r/4s, 5r/5s) counts all its start
+        # roots: it tracks only the full system's (152, 64), but its paths cost 5-8x the others' (5r/5s
+        # 9.4 ms per path, 9r/3s 1.2 ms; tables/solvers.csv), and drawing 5r/5s blocks made 8r/5s
+        # 10 % missing / 5 % outliers slower and no better (10 trials: 6/10 at 24 s against 7/10 at 9 s)
+        cost = 1.0 if getattr(module, "METHOD", "") != "homotopy" else float(getattr(module, "START_ROOTS", module.PATHS))
+        solvers.append(MinimalSolver(label, m, n, _solver_via_api(m, n), cost))
+    return tuple(sorted(solvers, key=lambda s: s.cost_ms))
+
+
+
+# --------------------------------------------------------------------------------------------------
+# Sampling fully measured sub-blocks
+# --------------------------------------------------------------------------------------------------
+
+
+def _sample_block(mask: np.ndarray, ms: int, ns: int, rng: np.random.Generator, tried: set, attempts: int = 25):
+    """A fully measured ms x ns block not tried before, by randomised greedy biclique search.
+
+    Columns are added one at a time, uniformly among those that keep at least ms common measured
+    rows, then ms of the common rows are drawn uniformly. (Weighting columns by their overlap
+    concentrates the samples on a few dense columns, and on any outlier they hold.)
+    Returns (rows, cols) sorted, or None when `attempts` draws found nothing new.
+    """
+    m, n = mask.shape
+    if m < ms or n < ns:
+        return None
+    for _ in range(attempts):
+        rows = np.ones(m, bool)
+        cand = np.flatnonzero(mask.sum(axis=0) >= ms)
+        chosen = []
+        for _ in range(ns):
+            overlap = mask[rows][:, cand].sum(axis=0)
+            keep = overlap >= ms
+            if not keep.any():
+                break
+            cand = cand[keep]
+            k = rng.integers(len(cand))
+            chosen.append(int(cand[k]))
+            rows &= mask[:, cand[k]]
+            cand = np.delete(cand, k)
+        if len(chosen) < ns:
+            continue
+        r = np.sort(rng.choice(np.flatnonzero(rows), ms, replace=False))
+        key = (tuple(r.tolist()), tuple(sorted(chosen)))
+        if key in tried:
+            continue
+        tried.add(key)
+        return r, np.array(sorted(chosen))
+    return None
+
+
+
+def _local_optimisation(F, mask, model: _Model, thr, floor, opts: CalibrationOptions, rng) -> _Model:
+    """LO step of LO-RANSAC: `_polish` with a small budget, rescored."""
+    out = _polish(F, mask, model.R, model.S, model.O, thr, floor, opts, rng, opts.lo_iterations, rounds=1,
+                  redundancy=model.redundancy)
+    score, ratio, _ = _score(_residual_matrix(F, out.R, out.S, out.O), mask, thr, floor)
+    return _Model(out.R, out.S, out.O, score, ratio, True, out.converged)
+
+
+
+def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floor, opts, rng, search: _Search,
+                           best_ratio: float | None = None):
+    """Candidates of one sub-block, extended to the network and scored.
+
+    Only candidates whose block RMS is within 10x of the best one (or below the threshold) are
+    extended, at most `candidates_per_sample` of them; a minimal solver's roots all fit the block
+    exactly (RMS cannot rank them), so up to `minimal_candidates` of those.
+    """
+    block = F[np.ix_(rows, cols)]
+    cands = solver.solve(block)
+    search.samples += 1
+    if not cands:
+        return []
+    rms = np.array([float(np.sqrt(np.mean(_residual_matrix(block, *c) ** 2))) for c in cands])
+    rms[~np.isfinite(rms)] = np.inf
+    best_rms = float(rms.min())
+    if not np.isfinite(best_rms):
+        return []
+    # Unknown sigma: a clean block's RMS is about 0.35 sigma (3 redundant entries of 24 or 27).
+    c = thr if thr is not None else max(floor, 8.0 * best_rms)
+    minimal = solver.m * solver.n == 2 * solver.m + 3 * solver.n - 3
+    per_sample = opts.minimal_candidates if minimal else opts.candidates_per_sample
+    keep = [k for k in np.argsort(rms)[:per_sample] if rms[k] <= max(10.0 * best_rms, c)]
+    return _extended_hypotheses(F, mask, [cands[k] for k in keep], rows, cols, c, thr, floor, rng, search, best_ratio)
+
+
+def _extended_hypotheses(F, mask, cands, rows, cols, c, thr, floor, rng, search: _Search, best_ratio):
+    """Block solutions (R_b, S_b, O_b on rows x cols) polished on the block's measured entries,
+    deduplicated, extended to the network (`_extend`) and scored."""
+    m, n = F.shape
+    block = F[np.ix_(rows, cols)]
+    sample_r = np.zeros(m, bool)
+    sample_r[rows] = True
+    out = []
+    block_mask = np.isfinite(block)
+    seen: list[np.ndarray] = []
+    for cand in cands:
+        R, S, O = np.full((m, 2), np.nan), np.full((n, 2), np.nan), np.full(n, np.nan)
+        # A few least-squares steps on the block: on noisy data the solver's root satisfies a subset
+        # of the equations exactly, and its error grows when extended; the block optimum is better.
+        pol = robust_refine(block, block_mask, *cand, loss="linear", max_iter=4)
+        R[rows], S[cols], O[cols] = (pol.R, pol.S, pol.O) if np.all(np.isfinite(pol.R)) else cand
+        if any(np.allclose(O[cols], o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())) for o in seen):
+            continue  # two roots polished into the same block solution
+        seen.append(O[cols].copy())
+        R, S, O = _extend(F, mask, R, S, O, c, rng, sample_r, best_ratio)
+        rr = hypothesis_redundancy(mask, rows, cols, R, S)
+        score, ratio, _ = _score(_residual_matrix(F, R, S, O), mask, thr, floor, rr)
+        search.hypotheses += 1
+        out.append(_Model(R, S, O, score, ratio, redundancy=rr))
+    return out
+
+
+def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | None, suspicious: np.ndarray | None = None,
+                       redundancy: int = 2, attempts: int = 20):
+    """A random sub-network (gaps allowed) that determines its nodes with little redundancy.
+
+    Unguided (suspicious None or empty): nodes are left out one at a time in random order as long
+    as the rest keeps at least `redundancy` (or, drawn at random, one more) measured entries more
+    than unknowns, so that the sub-network holds as few measurements (and gross errors) as can
+    still expose one. Guided: for up to 3 of the `suspicious` entries (an (k, 2) array of
+    (receiver, transmitter), e.g. the current best's rejected measurements) the receiver or the
+    transmitter is left out, at random. Nodes left with too few measurements among the rest are
+    pruned (`_prune`) in both cases. Returns (rows, cols) as index arrays when the sub-network is
+    valid and not in `tried` (None: repeats allowed), else None.
+    Leaving nodes out, not entries, is what lets a sub-network avoid a node's gross error when no
+    fully measured block does (low-redundancy networks with gaps).
+    """
+    m, n = mask.shape
+
+    def pruned(rows, cols):
+        keep_r, keep_c = _prune(mask & rows[:, None] & cols[None, :])
+        keep_r &= rows
+        keep_c &= cols
+        sub = mask & keep_r[:, None] & keep_c[None, :]
+        ok = keep_r.sum() >= 3 and keep_c.sum() >= 3
+        return keep_r, keep_c, int(sub.sum()) - (2 * int(keep_r.sum()) + 3 * int(keep_c.sum()) - 3) if ok else -1
+
+    for _ in range(attempts):
+        rows, cols = np.ones(m, bool), np.ones(n, bool)
+        if suspicious is not None and len(suspicious):
+            pick = suspicious[rng.permutation(len(suspicious))[: int(rng.integers(1, min(3, len(suspicious)) + 1))]]
+            by_row = rng.random(len(pick)) < 0.5
+            rows[pick[by_row, 0]] = False
+            cols[pick[~by_row, 1]] = False
+            rows, cols, spare = pruned(rows, cols)
+        else:
+            target = redundancy + int(rng.integers(0, 2))
+            rows, cols, spare = pruned(rows, cols)
+            for node in rng.permutation(m + n):
+                r2, c2 = rows.copy(), cols.copy()
+                if node < m:
+                    r2[node] = False
+                else:
+                    c2[node - m] = False
+                r2, c2, spare2 = pruned(r2, c2)
+                if spare2 >= target:
+                    rows, cols, spare = r2, c2, spare2
+        if spare < redundancy:
+            continue
+        key = ("subnetwork", tuple(np.flatnonzero(rows).tolist()), tuple(np.flatnonzero(cols).tolist()))
+        if tried is not None and key in tried:
+            continue
+        if tried is not None:
+            tried.add(key)
+        return np.flatnonzero(rows), np.flatnonzero(cols)
+    return None
+
+
+def _random_start(F, mask, rows, cols, rng):
+    """Receivers, transmitters and offsets of rows x cols drawn at the scale of the data."""
+    spread = float(np.percentile(F[mask], 90) - np.percentile(F[mask], 10)) or 1.0
+    sub = F[np.ix_(rows, cols)]
+    centre = np.array([np.median(v[np.isfinite(v)]) for v in sub.T])
+    return (0.5 * spread * rng.standard_normal((len(rows), 2)), 0.5 * spread * rng.standard_normal((len(cols), 2)),
+            centre - 0.5 * spread + 0.1 * spread * rng.standard_normal(len(cols)))
+
+
+def _hypotheses_from_subnetwork(F, mask, rows, cols, thr, floor, opts, rng, search: _Search, best_ratio,
+                                start: _Model | None = None):
+    """Least squares on a sub-network's measured entries, extended and scored.
+
+    The multi-start local optimisation of a non-minimal sample: it needs no fully measured block
+    and costs milliseconds for a small network. It starts from `start` (the current best, whose
+    gross errors the sub-network may leave out) where that places every node of the sub-network,
+    else from a random start. A fit whose RMS on its own entries exceeds the threshold (a gross
+    error inside, or a local minimum) is not extended.
+    """
+    block = F[np.ix_(rows, cols)]
+    sub_mask = np.isfinite(block)
+    search.samples += 1
+    x0 = None
+    if start is not None:
+        x0 = start.R[rows], start.S[cols], start.O[cols]
+        if not all(np.isfinite(a).all() for a in x0):
+            x0 = None
+    # Least squares first: a redescending loss far from any solution gives every entry the same tiny
+    # weight and stalls; near a basin, the LO step's robust loss then sheds the outliers.
+    ls = robust_refine(block, sub_mask, *(x0 or _random_start(F, mask, rows, cols, rng)), loss="linear",
+                       max_iter=3 * opts.lo_iterations)
+    if not np.all(np.isfinite(ls.R)):
+        return []
+    rms = float(np.sqrt(np.mean(_residual_matrix(block, ls.R, ls.S, ls.O)[sub_mask] ** 2)))
+    if thr is not None and not rms <= thr:
+        return []
+    c = thr if thr is not None else max(floor, 8.0 * rms)
+    return _extended_hypotheses(F, mask, [(ls.R, ls.S, ls.O)], rows, cols, c, thr, floor, rng, search, best_ratio)
+
+
+def _better(a: _Model, b: _Model, floor: float) -> bool:
+    """Whether model a beats b: a lower score, or (a tie within floor^2, as LMedS gives on noiseless
+    data when more than half of the entries fit two models exactly) a higher inlier ratio."""
+    if abs(a.score - b.score) <= floor * floor:
+        return a.inlier_ratio > b.inlier_ratio
+    return a.score < b.score
+
+
+def _needed(w: float, k: int, confidence: float, success: float = 1.0) -> float:
+    """Samples for an all-inlier sample of k entries (and a `success`ful solve) with this confidence."""
+    p = success * w**k
+    if p >= 1.0:
+        return 0.0
+    return math.log(1.0 - confidence) / math.log1p(-p) if p > 0 else math.inf
+
+
+def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
+            accept: Callable[[_Model], bool] | None = None, confirm: int = 0) -> tuple[_Model | None, _Search]:
+    """LO-RANSAC over the minimal solvers on fully measured sub-blocks, then over sub-networks solved
+    by least squares from random starts (see module docstring).
+
+    accept: called on every new best model; True ends the search (the pipeline passes the all-data
+    test: a least-squares fit on every entry that shows no outlier leaves nothing to find), at once
+    when confirm is 0, else when the model stays the best for `confirm` more samples (with sigma
+    unknown, a fit distorted by gross errors can look clean on its own scale; a better hypothesis
+    from another sample then beats it).
+    """
+    search = _Search()
+    best: _Model | None = None
+
+    def offer(models) -> bool:
+        """Keep the best model (LO on each new best, up to the budget); True when the best changed."""
+        nonlocal best
+        changed = False
+        for model in models:
+            if best is not None and not _better(model, best, floor):
+                if not model.refined and np.isfinite(model.score):
+                    search.runners_up = sorted(search.runners_up + [model], key=lambda x: x.score)[: opts.runners_up]
+                continue
+            if search.local_optimisations < opts.max_local_optimisations:
+                search.local_optimisations += 1
+                lo = _local_optimisation(F, mask, model, thr, floor, opts, rng)
+                if lo.score <= model.score:
+                    model = lo
+            if best is not None and best.refined:
+                search.others.append(best)
+            best, changed = model, True
+            pending[0] = None
+            if accept is not None and accept(best):
+                if confirm == 0:
+                    search.accepted = True
+                    return True
+                pending[0] = search.samples
+        return changed
+
+    pending: list = [None]  # samples drawn when the current best passed `accept`
+
+    def ratio_of(model: _Model) -> float:
+        # With sigma unknown the inlier ratio is measured on the model's own scale, which gross errors
+        # inflate: a distorted model "explains" almost everything. Until the all-data test accepts a
+        # model, the sample count assumes at least `unknown_sigma_outliers` of gross errors.
+        return model.inlier_ratio if thr is not None else min(model.inlier_ratio, 1.0 - opts.unknown_sigma_outliers)
+
+    def confirmed() -> bool:
+        if pending[0] is not None and search.samples - pending[0] >= confirm:
+            search.accepted = True
+        return search.accepted
+
+    needed = math.inf
+    tried: set = set()
+    exhausted: set = set()
+    drawn_by: dict[str, int] = {}
+    # min_samples guards against trusting one lucky sample, unless a hypothesis explains every entry.
+    # min_samples also holds with sigma unknown: a hypothesis distorted by gross errors explains all
+    # entries on its own inflated scale (inlier ratio 1, needed 0).
+    floor_samples = opts.min_samples if thr is None else 0
+    while (not confirmed() and search.samples < (max(needed, opts.min_samples) if needed > 0 else floor_samples)
+           and search.samples < opts.max_samples):
+        drawn = None
+        for solver in solvers:
+            if solver.label in exhausted or solver.cost_ms > opts.max_solver_cost:
+                continue
+            if solver.cost_ms > opts.expensive_cost and drawn_by.get(solver.label, 0) >= opts.expensive_samples:
+                continue
+            if pending[0] is not None and solver.cost_ms > opts.expensive_cost:
+                break  # the accepted model is confirmed by what the cheap solvers could draw
+            block = _sample_block(mask, solver.m, solver.n, rng, tried)
+            if block is None:
+                exhausted.add(solver.label)
+                continue
+            drawn = (solver, block)
+            break
+        if drawn is None:
+            break
+        solver, (rows, cols) = drawn
+        search.solvers.add(solver.label)
+        drawn_by[solver.label] = drawn_by.get(solver.label, 0) + 1
+        if offer(_hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
+                                        best.inlier_ratio if best is not None else None)):
+            needed = _needed(ratio_of(best), solver.m * solver.n, opts.confidence)
+
+    if search.accepted or pending[0] is not None:
+        search.accepted = True  # the blocks ran out (or the count was met) with the accepted model still best
+        return best, search
+    confident = best is not None and ((needed == 0 and search.samples >= floor_samples)
+                                      or search.samples >= max(needed, opts.min_samples))
+    small = _n_params_mask(mask) <= opts.subnetwork_max_params
+    if confident or (best is not None and not small and search.samples >= opts.min_samples):
+        return best, search
+    # Sub-networks: the blocks ran out before the adaptive count was reached in a small network (few
+    # fully measured blocks, low redundancy), or there were too few blocks at all.
+    search.solvers.add("subnetworks")
+    search.local_optimisations = min(search.local_optimisations, opts.max_local_optimisations // 2)
+    k = max(int(mask.sum() * 0.75), 1)  # entries of a typical sub-network
+    needed_sub = _needed(ratio_of(best), k, opts.confidence, opts.subnetwork_convergence) if best else math.inf
+    drawn_sub = 0
+    while drawn_sub < min(needed_sub, opts.subnetwork_samples) and not confirmed():
+        # Every other draw is guided by the best model so far: it leaves out the node of one of its
+        # rejected measurements and starts from it (a best model with a gross error inside is often
+        # in the right basin but pulled off it).
+        guided = best is not None and drawn_sub % 2 == 1
+        suspicious = None
+        if guided:
+            _, _, t = _score(_residual_matrix(F, best.R, best.S, best.O), mask, thr, floor, best.redundancy)
+            suspicious = np.argwhere(mask & ~_classify(_residual_matrix(F, best.R, best.S, best.O), mask, t))
+        # Unguided draws may repeat a sub-network: each gets a new random start.
+        block = _sample_subnetwork(mask, rng, tried if guided else None, suspicious)
+        if block is None:
+            if guided:
+                drawn_sub += 1
+                continue
+            # No redundant sub-network (e.g. as many measurements as unknowns): random starts on all.
+            block = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        drawn_sub += 1
+        if offer(_hypotheses_from_subnetwork(F, mask, *block, thr, floor, opts, rng, search,
+                                             best.inlier_ratio if best is not None else None,
+                                             best if guided else None)):
+            needed_sub = _needed(ratio_of(best), k, opts.confidence, opts.subnetwork_convergence)
+    # The runners-up get their local optimisation too: with low redundancy a hypothesis in the right
+    # basin, pulled off by a gross error, can score worse than a wrong one before LO and better after.
+    if pending[0] is not None:
+        search.accepted = True
+    for model in search.runners_up if not search.accepted else ():
+        lo = _local_optimisation(F, mask, model, thr, floor, opts, rng)
+        search.local_optimisations += 1
+        if best is None or _better(lo, best, floor):
+            if best is not None and best.refined:
+                search.others.append(best)
+            best = lo
+    return best, search
+
+
+def _n_params_mask(mask: np.ndarray) -> int:
+    """Unknowns 2m + 3n - 3 of the nodes that have measurements."""
+    return 2 * int(mask.any(axis=1).sum()) + 3 * int(mask.any(axis=0).sum()) - 3
