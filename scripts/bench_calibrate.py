@@ -47,8 +47,7 @@ sys.path.insert(0, ROOT)
 import numpy as np  # noqa: E402
 
 from solvers.calibration import STATUSES, calibrate  # noqa: E402
-from solvers.metrics import calibration_errors  # noqa: E402
-from solvers.recovery import to_gauge  # noqa: E402
+from solvers.metrics import calibration_errors, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network, corrupt_measurements  # noqa: E402
 
 CELLS = ((9, 3), (7, 3), (6, 4), (5, 5), (8, 5), (10, 8), (20, 10), (12, 20))
@@ -66,40 +65,12 @@ def network(m, n, sigma, missing, gross, seed):
     return net, F, bad
 
 
-def node_z(res, net) -> np.ndarray:
-    """|position error| / reported std of every placed node, in the result's gauge (truth moved into
-    it; the reflection the gauge leaves free is the one that fits better)."""
-    if res.gauge is None:
-        return np.array([])
-    i0, i1 = res.gauge
-    order = [i0, i1] + [i for i in range(net.m) if i not in (i0, i1)]
-    gt = to_gauge(net.receivers[order], net.transmitters)
-    if gt is None:
-        return np.array([])
-    Rt = np.empty_like(net.receivers)
-    Rt[order] = gt[0]
-    St = gt[1]
-    est = np.vstack([res.receivers, res.transmitters])
-    std = np.concatenate([res.receiver_std, res.transmitter_std])
-    best = None
-    for flip in (1.0, -1.0):
-        tru = np.vstack([Rt, St]) * np.array([1.0, flip])
-        err = np.linalg.norm(est - tru, axis=1)
-        if best is None or np.nansum(err) < np.nansum(best):
-            best = err
-    ok = np.isfinite(best) & np.isfinite(std)
-    fixed = ok & (std == 0)  # the gauge receiver at the origin: error 0 by construction
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = best[ok & ~fixed] / std[ok & ~fixed]
-    return z
-
-
 def one_call(net, F, bad, sigma_true, given: bool, seed: int) -> dict:
     res = calibrate(F, sigma=sigma_true if given else None, seed=seed)
     good = np.isfinite(F) & ~bad
     placed = bool(np.isfinite(res.receivers).all() and np.isfinite(res.transmitters).all())
     err = calibration_errors(res, net).position if placed else np.inf
-    z = node_z(res, net)
+    z = standardised_node_errors(res, net)
     return {
         "kept": int((res.inliers & good).sum()), "good": int(good.sum()),
         "rejected_bad": int((~res.inliers & bad).sum()), "bad": int(bad.sum()),

@@ -34,6 +34,7 @@ def _failed(F, message, t0, seed, search: _Search | None = None, warnings=()) ->
         offset_std=nan(n, np.nan), warnings=tuple(warnings),
         solver="+".join(sorted(search.solvers)) if search else "", samples=search.samples if search else 0,
         hypotheses=search.hypotheses if search else 0, seconds=time.perf_counter() - t0, seed=seed,
+        measured=np.isfinite(F),
     )
 
 
@@ -141,7 +142,7 @@ def _differs(a: CalibrationResult, b: CalibrationResult) -> bool:
 def _message(status, res: CalibrationResult, why: str = "") -> str:
     m, n = res.inliers.shape
     placed_r, placed_t = np.isfinite(res.receivers[:, 0]), np.isfinite(res.transmitters[:, 0])
-    measured = ~np.isnan(res.residuals) | res.inliers
+    measured = res.measured
     n_missing = m * n - int(measured.sum())
     sig = f"sigma {res.sigma:.3g} {'estimated' if res.sigma_estimated else 'given'}"
     head = (f"{status}: {int(placed_r.sum())}/{m} receivers, {int(placed_t.sum())}/{n} transmitters placed; "
@@ -459,7 +460,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         global_test=None if st is None or st.global_statistic is None else
         (float(st.global_statistic), float(st.global_critical), bool(st.global_passed)),
         redundancy=redundancy, w_test=w_test, critical_value=float(crit), mdb=mdb,
-        receiver_reliability=rrel, transmitter_reliability=trel, uncontrolled=uncontrolled,
+        receiver_reliability=rrel, transmitter_reliability=trel, uncontrolled=uncontrolled, measured=mask,
         gauge=(int(order[0]), int(order[1])) if gauged is not None else None,
     )
     return replace(res, message=_message(status, res, found[0][1] if found else route_note(route)))

@@ -155,6 +155,7 @@ class CalibrationResult:
     uncontrolled : (m, n) inlier entries with redundancy number below the bound (not testable)
     alternative : when status is "ambiguous", the other answer (a dict as `to_dict` gives), else None
     gauge : (i, k), the receivers (0-based) fixed at the origin and on the positive x axis
+    measured : (m, n) bool, the entries of F that hold a measurement
     """
 
     status: Status
@@ -187,6 +188,7 @@ class CalibrationResult:
     uncontrolled: np.ndarray | None = None
     alternative: dict | None = None
     gauge: tuple[int, int] | None = None
+    measured: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
