@@ -11,7 +11,8 @@ correlation's RMS is a missed detection (NaN); reflections and overlapping sourc
 path give gross errors. Nothing is planted: gaps and outliers come from the signal chain.
 The matrix is calibrated with sigma estimated, and compared with the simulator's ground truth after the
 best rigid alignment (solvers.metrics), over the nodes it placed (`unplaced` counts those it reports as
-not determined). Writes tables/room_simulation.csv and .md (one row per room).
+not determined), and each node's error in units of its reported standard deviation (`max_err_over_std`).
+Writes tables/room_simulation.csv and .md (one row per room).
 
 Needs the optional extra: pip install -e ".[audio]"  (pyroomacoustics).
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/room_simulation.py [--rooms 5] [--seed 0] [--rt60 0.3] [--snr 20]
@@ -33,7 +34,7 @@ sys.path.insert(0, ROOT)
 import numpy as np  # noqa: E402
 
 from solvers.calibration import calibrate  # noqa: E402
-from solvers.metrics import align_rigid  # noqa: E402
+from solvers.metrics import align_rigid, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
 
 FS = 16_000
@@ -116,7 +117,7 @@ def run(seed: int, mics: int, sources: int, rt60: float, snr_db: float, min_peak
     row["unplaced"] = int((~placed).sum())
     if res.status == "failed" or placed.sum() < 3:
         row.update({"flagged": "", "false_rejects": "", "rms_position_err_m": "", "relative_position_err": "",
-                    "offset_rms_err_m": "", "sigma_estimated_m": ""})
+                    "offset_rms_err_m": "", "sigma_estimated_m": "", "max_err_over_std": ""})
         return row
     # Errors over the placed nodes (a node the data do not fix is reported as not placed).
     aligned = align_rigid(X[placed], Y[placed]).apply(X[placed])
@@ -129,6 +130,8 @@ def run(seed: int, mics: int, sources: int, rt60: float, snr_db: float, min_peak
         "relative_position_err": float(f"{np.linalg.norm(aligned - Y[placed]) / spread:.3g}"),
         "offset_rms_err_m": float(f"{np.sqrt(np.mean((res.offsets[off] - net.offsets[off]) ** 2)):.3g}"),
         "sigma_estimated_m": float(f"{res.sigma:.3g}"),
+        # the largest node error in units of its reported std (in the result's gauge): honest if small
+        "max_err_over_std": float(f"{np.max(standardised_node_errors(res, net), initial=0.0):.3g}"),
     })
     return row
 

@@ -257,7 +257,8 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
                                alpha_global=opts.alpha_global)
     passed = st is not None and ls.converged and _no_outlier(st, sigma, opts)
     scale = sigma
-    if sigma is None:
+    if sigma is None and st is not None and st.dof >= opts.min_dof_for_sigma:
+        # (below that redundancy a robust scale means nothing, and only classic snooping is done)
         scale, robust = _robust_scale(F, work, _Model(R, S, O, 0.0, 0.0, redundancy=model.redundancy), floor, opts)
         if passed and robust is not None:
             testable = robust.redundancy >= max(opts.min_redundancy, 1e-3)
@@ -311,6 +312,8 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
         # largest externally studentised residual, above its Bonferroni bound, one at a time.
         R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts)
         return R, S, O, inl, converged, "snooping"
+    if scale is None:
+        scale, _ = _robust_scale(F, work, best, floor, opts)
     thr = max(opts.threshold_sigmas * scale, floor)
     fin = _polish(F, work, best.R, best.S, best.O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
     R, S, O, flipped = _repair_flips(F, fin.inliers, fin.R, fin.S, fin.O, fin.sigma, floor)
