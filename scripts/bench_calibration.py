@@ -11,7 +11,7 @@ Success: every node placed and both errors <= 3 x the reference's + 1e-9. Also: 
 (rejected by `inliers`), inliers falsely rejected, status "unconverged", silent failures (not a success,
 status "ok" and no warning), seconds per call, hypotheses per second.
 A second table, the noiseless minimal configurations 9r/3s and 6r/4s, compares calibrate with
-solvers.api.calibrate (today's path) on the same networks: median / p90 log10 errors and failures (> 1e-6).
+solvers.api.solve_network (today's path) on the same networks: median / p90 log10 errors and failures (> 1e-6).
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_calibration.py [--trials 20] [--quick] [--seed 0]
 """
@@ -127,11 +127,11 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def minimal_rows(trials: int, seed: int) -> list[dict]:
-    """Noiseless 9r/3s and 6r/4s: solvers.calibrate vs solvers.api.calibrate on the same networks."""
+    """Noiseless 9r/3s and 6r/4s: solvers.calibrate vs solvers.api.solve_network on the same networks."""
     out = []
     for m, n in ((9, 3), (6, 4)):
-        errs = {"calibrate": [], "api.calibrate": []}
-        secs = {"calibrate": [], "api.calibrate": []}
+        errs = {"calibrate": [], "api.solve_network": []}
+        secs = {"calibrate": [], "api.solve_network": []}
         for t in range(trials):
             net = random_network(m, n, np.random.default_rng(seed + 100_000 + t))
             F = net.measurements()
@@ -141,10 +141,10 @@ def minimal_rows(trials: int, seed: int) -> list[dict]:
             e = calibration_errors(res, net) if np.isfinite(res.receivers).all() else None
             errs["calibrate"].append(max(e.position, e.offset) if e else np.inf)
             t0 = time.perf_counter()
-            cands = api.calibrate(F)
-            secs["api.calibrate"].append(time.perf_counter() - t0)
+            cands = api.solve_network(F)
+            secs["api.solve_network"].append(time.perf_counter() - t0)
             e = calibration_errors(cands[0], net) if cands else None
-            errs["api.calibrate"].append(max(e.position, e.offset) if e else np.inf)
+            errs["api.solve_network"].append(max(e.position, e.offset) if e else np.inf)
         for name in errs:
             log = np.log10(np.maximum(np.array(errs[name]), 1e-17))
             out.append({"shape": f"{m}r/{n}s", "method": name, "trials": trials,
