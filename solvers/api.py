@@ -1,6 +1,6 @@
 """Public entry points: from TDOA measurements to calibrations (paper Section 3 pipeline).
 
-``calibrate(F)`` validates the data, runs the cheapest generated solver that fits the network on a
+``solve_network(F)`` validates the data, runs the cheapest generated solver that fits the network on a
 subset (the first receivers and transmitters; :data:`SOLVER_ORDER`), recovers positions and offsets from every
 real candidate with all receivers (:mod:`solvers.recovery`), places the transmitters the solver did
 not use by linear TDOA multilateration, refines with Levenberg-Marquardt on all m*n measurements
@@ -19,7 +19,7 @@ import numpy as np
 from .recovery import Calibration, recover, rms_residual
 from .refine import refine as _refine
 
-__all__ = ["SOLVER_ORDER", "SolverChoice", "calibrate", "minimal_configuration", "select_solver", "solve_roots"]
+__all__ = ["SOLVER_ORDER", "SolverChoice", "minimal_configuration", "select_solver", "solve_network", "solve_roots"]
 
 _GENERATED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
 
@@ -162,8 +162,10 @@ def _extend(F: np.ndarray, cal: Calibration, n_used: int) -> Calibration | None:
     return Calibration(cal.receivers, tra, off, res) if np.isfinite(res) else None
 
 
-def calibrate(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]:
-    """Calibrate a network from TDOA measurements F[i, j] = |r_i - s_j| + o_j.
+def solve_network(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]:
+    """Candidate calibrations of a network from complete, clean TDOA measurements F[i, j] = |r_i - s_j| + o_j.
+
+    The paper's pipeline; for measured data (gaps, gross errors, a status) use :func:`solvers.calibrate`.
 
     Parameters
     ----------

@@ -1,23 +1,64 @@
 """Files around `solvers.calibrate`: the measurement CSV, the JSON report and the map plot.
 
-CSV: one row per receiver, one column per transmitter, F[i, j] = |r_i - s_j| + o_j in any distance
-unit. An empty cell, NaN, NA or N/A is a missing measurement. An optional header row (transmitter
-names) and header column (receiver names) are detected: the first row / column is a header when it
-holds a cell that is neither a number nor a missing marker. Every defect is reported as one
-`MeasurementFileError` naming the file, the line and the column (1-based, as an editor shows them).
+What F holds: one row per receiver, one column per transmitter, f_ij = |r_i - s_j| + o_j, distances
+(arrival times or time differences multiplied by the propagation speed, e.g. the speed of sound), in
+any one unit; o_j is transmitter j's unknown offset (its emission time times the speed).
+
+The CSV reader (:func:`read_measurements`, ``-`` reads standard input):
+
+* Text: UTF-8 (a byte-order mark is dropped) or UTF-16 with a byte-order mark (a spreadsheet's
+  "Unicode text"). Line ends \n, \r\n or \r.
+* Comments: from a ``#`` outside double quotes to the end of its line is a comment; a line that holds
+  nothing else is skipped, as are blank lines. Exception: a cell ``#N/A`` (a spreadsheet's missing value).
+* Delimiter: TAB, ``;``, ``,`` or runs of spaces. Unless given, it is the first of TAB, ``;``, ``,``
+  that splits every line into the same number (>= 2) of cells; if none does, the one on the most
+  lines (the ragged line is then reported); if none occurs, runs of spaces. With ``;``, TAB or
+  spaces as delimiter, a decimal comma (``1,5``) is read as a decimal point.
+* Cells: a number (``12``, ``-0.5``, ``1.2e3``), or a missing measurement: an empty cell, ``NaN``,
+  ``NA``, ``N/A`` or ``#N/A``. Anything else is refused, as is an infinite or overflowing value
+  (``inf``, ``1e400``).
+* Names (``header="auto"``): the first row holds the transmitter names when one of its cells after
+  the first is text, or when its first cell is text or empty and its other cells are distinct integers
+  (``rx,1,2,3``: transmitters named 1, 2, 3); in that second case its first cell labels the receiver
+  names, so the first column holds them. If then every measurement is an integer too, the first row
+  could as well be a receiver's measurements and the file is refused (give ``header``). The first
+  column holds the receiver names when the header row's first cell is empty (``,s1,s2``), when below
+  a header row it reads 0, 1, 2, ... or 1, 2, 3, ... (a row index), or when one of its cells below the
+  header row is text. ``header="row"``, ``"column"``, ``"both"`` or ``"none"``
+  says it instead. Nodes without names are numbered 1, 2, ...
+* A last column that is empty on every line (a delimiter at the end of every line) is dropped.
+
+Every defect is one `MeasurementFileError` line naming the file, the line and the column (1-based:
+line as an editor counts it, column as the cell's position in its line).
 """
 from __future__ import annotations
 
 import csv
 import json
 import math
+import os
+import re
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MeasurementFileError", "Measurements", "plot_calibration", "read_measurements", "write_json"]
+__all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "parse_measurements",
+           "plot_calibration", "plot_formats", "read_measurements", "report_dict", "write_json"]
 
-_MISSING = {"", "nan", "na", "n/a"}
+#: Delimiters by name (``--delimiter``); the characters themselves are accepted too.
+DELIMITERS = {"comma": ",", "semicolon": ";", "tab": "\t", "space": " "}
+
+#: Which of the first row / first column hold names (``--header``).
+HEADERS = ("auto", "row", "column", "both", "none")
+
+_MISSING = {"", "nan", "na", "n/a", "#n/a"}
+_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d+(?:[eE][+-]?\d+)?")
+_INTEGER = re.compile(r"[+-]?\d+")
+_INFINITE = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity"}
+_SNIFFED = ("\t", ";", ",")
+_STDIN = "-"
 
 
 class MeasurementFileError(ValueError):
@@ -26,74 +67,287 @@ class MeasurementFileError(ValueError):
 
 @dataclass(frozen=True)
 class Measurements:
-    """A measurement matrix with the receiver and transmitter names of the file (or 1, 2, ...)."""
+    """A measurement matrix with the receiver and transmitter names of the file (or 1, 2, ...).
+
+    F : (m, n) float array, NaN where a measurement is missing
+    receivers, transmitters : names, one per row / column of F
+    source : the file name ("stdin" for standard input)
+    delimiter : the delimiter the file was read with
+    """
 
     F: np.ndarray
     receivers: tuple[str, ...]
     transmitters: tuple[str, ...]
+    source: str = ""
+    delimiter: str = ","
+
+    def transposed(self) -> Measurements:
+        """The same file read with receivers as columns (F transposed, names swapped)."""
+        return Measurements(self.F.T.copy(), self.transmitters, self.receivers, self.source, self.delimiter)
 
 
-def _number(cell: str) -> float | None:
-    """float of a cell, NaN for a missing marker, None if it is not a number."""
-    text = cell.strip()
-    if text.lower() in _MISSING:
+def _delimiter_name(d: str) -> str:
+    return {v: k for k, v in DELIMITERS.items()}.get(d, repr(d))
+
+
+def _delimiter(name: str) -> str:
+    """The delimiter character of a ``--delimiter`` value (a name of DELIMITERS or the character)."""
+    key = name.lower() if len(name) > 1 else name
+    if key in DELIMITERS:
+        return DELIMITERS[key]
+    if name in DELIMITERS.values() or name == "\\t":
+        return "\t" if name == "\\t" else name
+    raise MeasurementFileError(f"unknown delimiter {name!r}; give one of {', '.join(DELIMITERS)} (or , ; and a TAB character)")
+
+
+def _decode(data: bytes, source: str) -> str:
+    """Text of the file's bytes: UTF-8 (BOM dropped) or UTF-16 with a BOM; a one-line error otherwise."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return data.decode("utf-16")
+        except UnicodeDecodeError as e:
+            raise MeasurementFileError(f"{source}: broken UTF-16 text at byte {e.start}") from None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[: e.start].count(b"\n") + 1
+        raise MeasurementFileError(f"{source}: line {line}: not UTF-8 text (byte 0x{data[e.start]:02x}); "
+                                   "save the file as UTF-8 (CSV UTF-8 in a spreadsheet)") from None
+    if "\x00" in text:
+        line = text[: text.index("\x00")].count("\n") + 1
+        raise MeasurementFileError(f"{source}: line {line}: a NUL byte: a binary file, not a CSV text")
+    return text
+
+
+def _strip_comment(line: str) -> str:
+    """The line without its comment: from the first # outside double quotes, except a cell #N/A."""
+    quoted = False
+    k = 0
+    while k < len(line):
+        c = line[k]
+        if c == '"':
+            quoted = not quoted
+        elif c == "#" and not quoted:
+            if line[k : k + 4].upper() == "#N/A" and not line[k + 4 : k + 5].strip(" \t,;"):
+                k += 4
+                continue
+            return line[:k]
+        k += 1
+    return line
+
+
+def _count_outside_quotes(line: str, d: str) -> int:
+    quoted, count = False, 0
+    for c in line:
+        if c == '"':
+            quoted = not quoted
+        elif c == d and not quoted:
+            count += 1
+    return count
+
+
+def _sniff(lines: list[tuple[int, str]]) -> str:
+    """The delimiter of the content lines (see the module docstring)."""
+    counts = {d: [_count_outside_quotes(text, d) for _, text in lines] for d in _SNIFFED}
+    for d in _SNIFFED:
+        if counts[d][0] > 0 and all(c == counts[d][0] for c in counts[d]):
+            return d
+    used = {d: sum(c > 0 for c in counts[d]) for d in _SNIFFED}
+    best = max(_SNIFFED, key=lambda d: used[d])  # max keeps the first of equals: TAB, ;, ,
+    if used[best]:
+        return best
+    return " "
+
+
+def _split(text: str, d: str, source: str, line: int) -> list[str]:
+    """Cells of one line (double quotes as in CSV); a one-line error for a broken quote."""
+    if d == " ":
+        return text.split()
+    try:
+        rows = list(csv.reader([text], delimiter=d, skipinitialspace=True, strict=True))
+    except csv.Error as e:
+        raise MeasurementFileError(f"{source}: line {line}: {e} (a double quote opens a quoted cell that must close "
+                                   "on the same line)") from None
+    return [cell.strip() for cell in rows[0]] if rows else [""]
+
+
+def _value(cell: str, decimal_comma: bool) -> float | None:
+    """float of a cell, NaN for a missing marker, +-inf for an infinite or overflowing value, None
+    for text."""
+    low = cell.lower()
+    if low in _MISSING:
         return math.nan
-    try:
-        value = float(text)
-    except ValueError:
-        return None
-    return value
+    if low in _INFINITE:
+        return math.inf
+    if _NUMBER.fullmatch(cell):
+        return float(cell)
+    if decimal_comma and _DECIMAL_COMMA.fullmatch(cell):
+        return float(cell.replace(",", "."))
+    return None
 
 
-def read_measurements(path: str) -> Measurements:
-    """Read a TDOA measurement matrix from a CSV file (see the module docstring).
+def _is_text(cell: str, decimal_comma: bool) -> bool:
+    return _value(cell, decimal_comma) is None
 
-    Raises MeasurementFileError for an unreadable, empty, ragged or non-numeric file (one line,
-    naming the line and column), or infinite values.
+
+def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | None = None,
+                       header: str = "auto") -> Measurements:
+    """A measurement matrix from CSV text (rules in the module docstring).
+
+    Parameters
+    ----------
+    text : the file's text
+    source : the name that error messages give (the file name)
+    delimiter : None to sniff it, else a name of DELIMITERS or the character
+    header : "auto", "row" (first row: transmitter names), "column" (first column: receiver names),
+        "both" or "none"
+
+    Raises MeasurementFileError (one line naming source, line and column) for anything that is not
+    a matrix of measurements.
     """
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as handle:
-            rows = [(k + 1, row) for k, row in enumerate(csv.reader(handle)) if any(c.strip() for c in row)]
-    except OSError as exc:
-        raise MeasurementFileError(f"cannot read {path}: {exc.strerror}") from None
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise MeasurementFileError(f"{path}: not a text CSV file ({exc})") from None
-    if not rows:
-        raise MeasurementFileError(f"{path}: no data (empty file)")
+    if header not in HEADERS:
+        raise MeasurementFileError(f"unknown header choice {header!r}; give one of {', '.join(HEADERS)}")
+    lines = []
+    for k, raw in enumerate(re.split(r"\r\n|\r|\n", text)):
+        content = _strip_comment(raw)
+        if content.strip():
+            lines.append((k + 1, content))
+    if not lines:
+        raise MeasurementFileError(f"{source}: no data (empty file, or only comments)")
+    d = _sniff(lines) if delimiter is None else _delimiter(delimiter)
+    decimal_comma = d != ","
+    rows = [(line, _split(content, d, source, line)) for line, content in lines]
     width = len(rows[0][1])
     for line, row in rows:
         if len(row) != width:
-            raise MeasurementFileError(f"{path}: line {line} has {len(row)} cells, expected {width} as on line {rows[0][0]}")
-    # Row 1 is a header if it has text after its first cell, or text in its first cell while the
-    # other rows' first cells are numbers (no header column to explain that text).
-    header_row = any(_number(c) is None for c in rows[0][1][1:]) or (
-        _number(rows[0][1][0]) is None and all(_number(r[0]) is not None for _, r in rows[1:]))
+            raise MeasurementFileError(f"{source}: line {line} has {len(row)} cells, expected {width} as on line "
+                                       f"{rows[0][0]} (cells separated by {_delimiter_name(d)})")
+    if width == 1:
+        raise MeasurementFileError(f"{source}: one cell per line (read with {_delimiter_name(d)} as delimiter): a "
+                                   "network needs a column per transmitter; the delimiter is TAB, ';', ',' or spaces "
+                                   "(--delimiter)")
+    if all(row[-1] == "" for _, row in rows):  # a delimiter at the end of every line
+        rows = [(line, row[:-1]) for line, row in rows]
+        width -= 1
+    header_row, header_col = _names_layout(rows, header, decimal_comma, source)
     body = rows[1:] if header_row else rows
-    header_col = bool(body) and any(_number(r[0]) is None for _, r in body)
     first = 1 if header_col else 0
     if not body or width - first == 0:
-        raise MeasurementFileError(f"{path}: no measurements (only a header)")
+        raise MeasurementFileError(f"{source}: no measurements (only names)")
     F = np.empty((len(body), width - first))
     for i, (line, row) in enumerate(body):
         for j, cell in enumerate(row[first:]):
-            value = _number(cell)
+            value = _value(cell, decimal_comma)
+            where = f"{source}: line {line}, column {j + first + 1}"
             if value is None:
-                raise MeasurementFileError(f"{path}: line {line}, column {j + first + 1}: {cell.strip()!r} is not a number "
-                                           "(leave the cell empty or write NaN for a missing measurement)")
+                hint = " (a decimal comma needs ; or TAB as delimiter)" if _DECIMAL_COMMA.fullmatch(cell) else ""
+                raise MeasurementFileError(f"{where}: {cell!r} is not a number{hint} (leave the cell empty or write "
+                                           "NaN for a missing measurement)")
             if math.isinf(value):
-                raise MeasurementFileError(f"{path}: line {line}, column {j + first + 1}: infinite value")
+                if cell.lower() in _INFINITE:
+                    raise MeasurementFileError(f"{where}: infinite value")
+                raise MeasurementFileError(f"{where}: {cell!r} overflows (beyond {sys.float_info.max:.3g}); "
+                                           "check the units")
             F[i, j] = value
-    names_r = tuple(r[0].strip() for _, r in body) if header_col else tuple(str(i + 1) for i in range(len(body)))
-    names_t = tuple(c.strip() for c in rows[0][1][first:]) if header_row else tuple(str(j + 1) for j in range(F.shape[1]))
-    return Measurements(F, names_r, names_t)
+    names_r = tuple(row[0] or str(i + 1) for i, (_, row) in enumerate(body)) if header_col else \
+        tuple(str(i + 1) for i in range(len(body)))
+    names_t = tuple(c or str(j + 1) for j, c in enumerate(rows[0][1][first:])) if header_row else \
+        tuple(str(j + 1) for j in range(F.shape[1]))
+    return Measurements(F, names_r, names_t, source, d)
 
 
-def report_dict(result, measurements: Measurements | None = None) -> dict:
-    """The JSON report: `CalibrationResult.to_dict()` plus the node names of the file."""
+def _names_layout(rows, header: str, decimal_comma: bool, source: str) -> tuple[bool, bool]:
+    """(first row holds names, first column holds names) by the rules of the module docstring."""
+    if header != "auto":
+        return header in ("row", "both"), header in ("column", "both")
+    line1, top = rows[0]
+    rest = top[1:]
+    text_after_first = any(_is_text(c, decimal_comma) for c in rest)
+    corner = top[0]
+    integer_names = (bool(rest) and (corner == "" or _is_text(corner, decimal_comma))
+                     and all(_INTEGER.fullmatch(c) for c in rest) and len({int(c) for c in rest}) == len(rest))
+    header_row = text_after_first or integer_names
+    body = rows[1:] if header_row else rows
+    header_col = (header_row and (corner == "" or integer_names or _is_row_index([r[0] for _, r in body]))) or \
+        any(_is_text(r[0], decimal_comma) for _, r in body)
+    if integer_names and not text_after_first and body:
+        first = 1 if header_col else 0
+        if all(_INTEGER.fullmatch(c) or c.lower() in _MISSING for _, r in body for c in r[first:]):
+            raise MeasurementFileError(
+                f"{source}: line {line1} ({corner!r}, then integers) could be transmitter names or the measurements "
+                f"of a receiver {corner!r}, as every measurement is an integer; say which with --header both "
+                "(names) or --header column (measurements)")
+    return header_row, header_col
+
+
+def _is_row_index(cells: list[str]) -> bool:
+    """Whether a column reads 0, 1, 2, ... or 1, 2, 3, ... (a row index, as pandas writes it)."""
+    if len(cells) < 2 or not all(_INTEGER.fullmatch(c) for c in cells):
+        return False
+    values = [int(c) for c in cells]
+    return values in (list(range(len(cells))), list(range(1, len(cells) + 1)))
+
+
+def read_measurements(path: str, *, delimiter: str | None = None, header: str = "auto") -> Measurements:
+    """Read a TDOA measurement matrix from a CSV file, or from standard input when path is ``-``
+    (rules in the module docstring; options as :func:`parse_measurements`).
+
+    Raises MeasurementFileError (one line naming the file, line and column) for an unreadable,
+    empty, ragged or non-numeric file, or an infinite or overflowing value.
+    """
+    source = "stdin" if path == _STDIN else path
+    try:
+        if path == _STDIN:
+            stream = getattr(sys.stdin, "buffer", None)
+            data = stream.read() if stream is not None else sys.stdin.read().encode("utf-8")
+        else:
+            with open(path, "rb") as handle:
+                data = handle.read()
+    except OSError as exc:
+        raise MeasurementFileError(f"cannot read {source}: {exc.strerror or exc}") from None
+    return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
+
+
+def plot_formats() -> tuple[str, ...]:
+    """File extensions matplotlib can write (png, pdf, svg, ...)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    return tuple(sorted(Figure().canvas.get_supported_filetypes()))
+
+
+def check_output_path(path: str, option: str, reading: str | None = None, formats: tuple[str, ...] | None = None) -> None:
+    """Refuse, before any computing, an output path that cannot be written: a directory, a missing or
+    unwritable directory, the measurement file itself (`reading`), or (`formats` given) an extension
+    not among them. One-line MeasurementFileError naming the option and the path."""
+    if path == _STDIN:
+        raise MeasurementFileError(f"{option} -: give a file name ({'--json prints the JSON' if option == '--out' else 'a plot is a file'})")
+    if os.path.isdir(path):
+        raise MeasurementFileError(f"cannot write {path} ({option}): it is a directory")
+    folder = os.path.dirname(path) or "."
+    if not os.path.isdir(folder):
+        raise MeasurementFileError(f"cannot write {path} ({option}): no directory {folder}")
+    if not os.access(folder, os.W_OK | os.X_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise MeasurementFileError(f"cannot write {path} ({option}): permission denied")
+    if reading not in (None, _STDIN) and os.path.exists(path) and os.path.exists(reading) and os.path.samefile(path, reading):
+        raise MeasurementFileError(f"{option} {path} is the measurement file; give another name")
+    if formats is not None:
+        ext = os.path.splitext(path)[1].lstrip(".").lower()
+        if ext not in formats:
+            got = f"extension .{ext}" if ext else "no extension"
+            raise MeasurementFileError(f"{option} {path}: {got}; give one of {', '.join('.' + f for f in formats)}")
+
+
+def report_dict(result, measurements: Measurements | None = None, units: str | None = None) -> dict:
+    """The JSON report: `CalibrationResult.to_dict()` plus the node names of the file and the name
+    of its distance unit (None when not given)."""
     out = result.to_dict()
     if measurements is not None:
         out["receiver_names"] = list(measurements.receivers)
         out["transmitter_names"] = list(measurements.transmitters)
+    out["units"] = units
     return out
 
 
@@ -104,9 +358,10 @@ def write_json(report: dict, path: str) -> None:
         handle.write("\n")
 
 
-def plot_calibration(result, path: str, measurements: Measurements | None = None) -> None:
+def plot_calibration(result, path: str, measurements: Measurements | None = None, units: str | None = None) -> None:
     """Map of the calibration: receivers (triangles), transmitters (circles), 1-sigma circles, and
-    every rejected measurement as a dashed red line between its receiver and transmitter."""
+    every rejected measurement as a dashed red line between its receiver and transmitter; `units`
+    labels the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -132,6 +387,9 @@ def plot_calibration(result, path: str, measurements: Measurements | None = None
             if np.isfinite(std[k]) and std[k] > 0:
                 ax.add_patch(plt.Circle(P[k], std[k], fill=False, color="gray", lw=0.5))
     ax.set_aspect("equal")
+    if units:
+        ax.set_xlabel(f"x [{units}]")
+        ax.set_ylabel(f"y [{units}]")
     ax.set_title(f"{result.status}: rms {result.rms:.3g}, {int((~result.inliers & np.isfinite(result.residuals)).sum())} "
                  f"rejected, {len(result.warnings)} warning(s)")
     ax.legend(loc="best", fontsize=8)

@@ -9,7 +9,7 @@ generate   regenerate a numeric solver (spec over GF(p) -> solvers/generated/) a
 template-check  how many action-matrix relations single elimination templates of a formulation or of
            a system file reach over GF(p), per multiplier family and degree (solvers.feasibility)
 reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
-calibrate  calibrate a network from a CSV of measurements (gaps, outliers; solvers.calibrate)
+calibrate  calibrate a network from a CSV of measurements (gaps, outliers; solvers.calibration)
 
 Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
 stderr with exit status 2; a disagreement between primes exits with status 3.
@@ -615,34 +615,80 @@ def _version() -> str:
 
 
 def _add_calibrate(sub: argparse._SubParsersAction) -> None:
+    from solvers.calibrate_io import DELIMITERS, HEADERS
+
     p = sub.add_parser(
         "calibrate", help="calibrate a network from a CSV of TDOA measurements (missing entries, outliers)",
-        description="Calibrate receivers, transmitters and transmitter offsets from MEAS.csv: one row per receiver, "
-        "one column per transmitter, f_ij = |r_i - s_j| + o_j; an empty cell or NaN is a missing measurement; an "
-        "optional header row and column name the nodes. LO-RANSAC over the minimal solvers, extension and robust "
-        "refinement (solvers.calibrate). Exit status 0 when the calibration converged (read the warnings), 1 when "
-        "it did not or failed, 2 for a malformed file or option.")
-    p.add_argument("file", metavar="MEAS.csv", help="measurement matrix (CSV)")
-    p.add_argument("--sigma", type=float, help="noise standard deviation of the measurements (default: estimated)")
+        description="Calibrate receivers, transmitters and transmitter offsets from MEAS.csv ('-': standard input): "
+        "one row per receiver, one column per transmitter (--transpose for the other way round), f_ij = |r_i - s_j| + "
+        "o_j: distances, i.e. arrival times or time differences multiplied by the propagation speed, all in one unit "
+        "(name it with --units); o_j is transmitter j's unknown offset. An empty cell, NaN, NA, N/A or #N/A is a "
+        "missing measurement; # starts a comment; the delimiter (TAB, ';', ',' or spaces) is detected; a first row / "
+        "column of names is detected (transmitter names may be numbers: 'rx,1,2,3'; --header overrides). "
+        "LO-RANSAC over the minimal solvers, extension and robust refinement, a least-squares adjustment with its tests (solvers.calibration). Exit status 0 "
+        "when the status is ok (every check passed), 1 for any other status (partial, uncontrolled, inconsistent, "
+        "ambiguous, unconverged, failed: the first line says why), 2 for a malformed file or option.")
+    p.add_argument("file", metavar="MEAS.csv", help="measurement matrix (CSV); - reads standard input")
+    p.add_argument("--sigma", type=float, help="noise standard deviation of the measurements, > 0, in the unit of "
+                   "the file (default: estimated)")
+    p.add_argument("--units", metavar="NAME", help="name of the file's distance unit (m, mm, ...), printed with the "
+                   "numbers (default: none)")
+    p.add_argument("--delimiter", metavar="D", help=f"cell delimiter: {', '.join(DELIMITERS)} (default: detected)")
+    p.add_argument("--header", choices=HEADERS, default="auto", help="which of the first row (transmitter names) and "
+                   "first column (receiver names) hold names (default: auto, see the README)")
+    p.add_argument("--transpose", action="store_true", help="the file has one row per transmitter and one column "
+                   "per receiver")
     p.add_argument("--seed", type=int, default=0, help="seed of the random sampling (default 0)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--out", metavar="FILE.json", help="also write the JSON result to FILE.json")
-    p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red) to FILE.png")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red) to FILE.png "
+                   "(or .pdf, .svg, ...)")
     p.set_defaults(func=cmd_calibrate)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from solvers.calibration import calibrate
-    from solvers.calibrate_io import MeasurementFileError, plot_calibration, read_measurements, report_dict, write_json
+    import math
 
-    if args.sigma is not None and not args.sigma >= 0:
-        raise UserError(f"--sigma must be >= 0, got {args.sigma}")
+    from solvers.api import select_solver
+    from solvers.calibration import calibrate
+    from solvers.calibrate_io import (MeasurementFileError, check_output_path, plot_calibration, plot_formats,
+                                      read_measurements, report_dict, write_json)
+
+    if args.sigma is not None and not (args.sigma > 0 and math.isfinite(args.sigma)):
+        why = "the noise of real measurements is never zero" if args.sigma == 0 else "it is a standard deviation"
+        raise UserError(f"--sigma must be a finite number > 0, got {args.sigma:g}: {why}; omit --sigma to estimate it")
+    if args.units is not None and (not args.units.strip() or not args.units.isprintable()):
+        raise UserError(f"--units {args.units!r}: give a printable name such as m or mm")
     try:
-        meas = read_measurements(args.file)
+        if args.out:
+            check_output_path(args.out, "--out", reading=args.file)
+        if args.plot:
+            check_output_path(args.plot, "--plot", reading=args.file, formats=plot_formats())
+        if args.out and args.plot and os.path.abspath(args.out) == os.path.abspath(args.plot):
+            raise MeasurementFileError(f"--out and --plot name the same file {args.out}")
+        meas = read_measurements(args.file, delimiter=args.delimiter, header=args.header)
     except MeasurementFileError as e:
         raise UserError(str(e)) from None
+    if args.transpose:
+        meas = meas.transposed()
+    m, n = meas.F.shape
+
+    def solvable(rows: int, cols: int) -> bool:
+        try:
+            select_solver(rows, cols)
+        except ValueError:
+            return False
+        return True
+
+    if not solvable(m, n) and solvable(n, m):
+        layout = (f"{m} rows (receivers) x {n} columns (transmitters)" if not args.transpose else
+                  f"with --transpose, {m} columns (receivers) x {n} rows (transmitters)")
+        advice = ("the file looks transposed: if its rows are transmitters, give --transpose" if not args.transpose
+                  else "drop --transpose if the file's rows are receivers")
+        raise UserError(f"{meas.source}: {layout} cannot be calibrated (too few receivers or transmitters for every "
+                        f"solver), but {n} receivers x {m} transmitters can: {advice}")
     result = calibrate(meas.F, sigma=args.sigma, seed=args.seed)
-    report = report_dict(result, meas)
+    report = report_dict(result, meas, args.units)
     if args.out:
         try:
             write_json(report, args.out)
@@ -653,23 +699,25 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"no plot: {result.message}", file=sys.stderr)
         else:
             try:
-                plot_calibration(result, args.plot, meas)
+                plot_calibration(result, args.plot, meas, units=args.units)
             except OSError as e:
                 raise UserError(f"cannot write {args.plot}: {e.strerror}") from None
     if args.json:
         print(json.dumps(report))
     else:
-        _print_calibration(result, meas)
-    return 0 if result.ok else 1
+        _print_calibration(result, meas, args.units)
+    return 0 if result.status == "ok" else 1
 
 
-def _print_calibration(result, meas) -> None:
+def _print_calibration(result, meas, units: str | None = None) -> None:
     print(result.message)
+    unit = f" {units}" if units else ""
     if result.status != "failed":
-        print(f"sigma {result.sigma:.3g} ({'estimated' if result.sigma_estimated else 'given'}); "
+        print(f"sigma {result.sigma:.3g}{unit} ({'estimated' if result.sigma_estimated else 'given'}); "
               f"hypotheses from {result.solver}: {result.samples} samples, {result.hypotheses} hypotheses, "
               f"{result.seconds:.2f} s")
-        print(f"{'node':<12} {'x':>12} {'y':>12} {'offset':>12} {'std':>10}")
+        bracket = f" [{units}]" if units else ""
+        print(f"{'node':<12} {'x' + bracket:>12} {'y' + bracket:>12} {'offset' + bracket:>12} {'std' + bracket:>10}")
         for k, name in enumerate(meas.receivers):
             x, y = result.receivers[k]
             print(f"{'r ' + name:<12} {x:12.5g} {y:12.5g} {'':>12} {result.receiver_std[k]:10.3g}")

@@ -60,7 +60,7 @@ MODULE_TEMPLATE = '''\
 
 solve(F) -> ({degree}, {nunknowns}) complex candidate roots in the unknown order {unknown_list};
 solve_batch(F) for F of shape (..., {m}, {n}) -> (..., {degree}, {nunknowns}). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns them into calibrations.
+spurious (NaN rows for lost ones); solvers.api.solve_network turns them into calibrations.
 """
 from __future__ import annotations
 

@@ -132,7 +132,7 @@ class SubsystemSolver:
         the next subset (:meth:`subsets`), until one passes or all were tried. The roots describe the
         receivers only, so every subset's candidates are in the same unknowns. The filter is for exact
         data (relative tolerance :data:`FILTER_TOL`): on noisy data every subset is tried and nothing
-        passes; measured networks go through :func:`solvers.api.calibrate`, which solves 4 x 6 data
+        passes; measured networks go through :func:`solvers.api.solve_network`, which solves 4 x 6 data
         with the 4r/5s solver and refines on all measurements.
         """
         F = np.asarray(F, dtype=float)

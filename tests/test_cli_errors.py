@@ -26,6 +26,8 @@ def files(tmp_path):
     (tmp_path / "utf16.ms").write_text("x,y\n0\nx-1,y-1\n", encoding="utf-16")
     (tmp_path / "binary.ms").write_bytes(bytes(range(256)))
     (tmp_path / "huge.ms").write_text("x\n0\nx^65536-1\n")
+    (tmp_path / "meas.csv").write_text("rx;s1;s2;s3\nr1;1;2;3,5\n# r2 pending\nr2;4;5;1e400\n")
+    (tmp_path / "ambiguous.csv").write_text("rx,1,2,3\nr1,4,5,6\n")
     return tmp_path
 
 
@@ -49,6 +51,13 @@ BAD = [
     (["generate", "5r6s"], "give --out DIR"),
     (["template-check", "nonsense"], "neither a file nor a formulation"),
     (["template-check", "9r3s:C2-C9", "--seed", "-3"], "argument --seed"),
+    (["calibrate", "{tmp}/meas.csv"], "meas.csv: line 4, column 4: '1e400' overflows"),
+    (["calibrate", "{tmp}/ambiguous.csv"], "could be transmitter names or the measurements of a receiver 'rx'"),
+    (["calibrate", "{tmp}/meas.csv", "--sigma", "0"], "--sigma must be a finite number > 0"),
+    (["calibrate", "{tmp}/meas.csv", "--sigma", "lots"], "argument --sigma: invalid float value"),
+    (["calibrate", "{tmp}/meas.csv", "--header", "maybe"], "argument --header: invalid choice"),
+    (["calibrate", "{tmp}/meas.csv", "--plot", "{tmp}/map.txt"], "extension .txt"),
+    (["calibrate", "{tmp}/missing.csv"], "cannot read"),
 ]
 
 

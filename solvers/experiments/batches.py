@@ -24,7 +24,7 @@ from analysis.paths import cache_dir
 from analysis.progress import Progress
 
 from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INIT_LABEL, INITS, Init, check_init, config_key, config_label
-from .trial import TRIAL_COLUMNS, TrialOptions, load_calibrate, run_trial
+from .trial import TRIAL_COLUMNS, TrialOptions, load_solve_network, run_trial
 
 #: Per-batch CSV cache in the user cache directory (analysis.paths), keyed by every parameter that
 #: changes the numbers.
@@ -212,7 +212,7 @@ def run_trials(
     if not sigma >= 0:
         raise ValueError(f"sigma must be >= 0, got {sigma}")
     if init == "solver":
-        load_calibrate()
+        load_solve_network()
     path = None
     if cache:
         key = _cache_key(key_config, init, trials, sigma, seed, options)

@@ -7,7 +7,7 @@ Setup (paper Sec. 4): receiver and transmitter coordinates ~ N(0, 10^2), transmi
 ~ N(0, 1); measurements f_ij = ||r_i - s_j|| + o_j (+ N(0, sigma^2) noise for Fig. 2). Two ways to
 start Levenberg-Marquardt (`solvers.refine.refine`, all m*n measurements):
 
-* ``"solver"`` ("ours" in the paper): the algebraic minimal solver. ``solvers.api.calibrate(F,
+* ``"solver"`` ("ours" in the paper): the algebraic minimal solver. ``solvers.api.solve_network(F,
   refine=False)`` returns the real, valid candidates best residual first; the best
   ``refine_candidates`` of them are refined and the refined calibration with the smallest RMS
   residual is kept.
@@ -91,7 +91,7 @@ OUTCOMES = ("ok", "no_candidate", "solver_error", "error_above_threshold")
 
 
 class SolverUnavailable(RuntimeError):
-    """``solvers.api`` (the algebraic solvers) cannot be imported or lacks ``calibrate``."""
+    """``solvers.api`` (the algebraic solvers) cannot be imported or lacks ``solve_network``."""
 
 
 class TrialError(RuntimeError):
@@ -138,7 +138,7 @@ class TrialOptions:
 
 
 def _load_solve_roots() -> Callable[..., np.ndarray] | None:
-    """Return ``solvers.api.solve_roots`` if it exists (after `load_calibrate` succeeded)."""
+    """Return ``solvers.api.solve_roots`` if it exists (after `load_solve_network` succeeded)."""
     solve_roots = getattr(importlib.import_module("solvers.api"), "solve_roots", None)
     return solve_roots if callable(solve_roots) else None
 
@@ -157,37 +157,37 @@ def _count_roots(roots: np.ndarray) -> tuple[int, int]:
     return int(roots.shape[0]), int(np.sum(imag <= REAL_TOL * scale))
 
 
-def load_calibrate() -> Callable[..., list]:
-    """Return ``solvers.api.calibrate`` or raise SolverUnavailable with the reason."""
+def load_solve_network() -> Callable[..., list]:
+    """Return ``solvers.api.solve_network`` or raise SolverUnavailable with the reason."""
     try:
         api = importlib.import_module("solvers.api")
     except Exception as exc:  # ImportError, or an error inside a half-written module
         raise SolverUnavailable(f"solvers.api cannot be imported ({type(exc).__name__}: {exc})") from exc
-    calibrate = getattr(api, "calibrate", None)
-    if not callable(calibrate):
-        raise SolverUnavailable("solvers.api has no callable calibrate(F, refine=...)")
-    return calibrate
+    solve_network = getattr(api, "solve_network", None)
+    if not callable(solve_network):
+        raise SolverUnavailable("solvers.api has no callable solve_network(F, refine=...)")
+    return solve_network
 
 
 def solver_status(configs: Iterable[str] = tuple(CONFIGS)) -> tuple[bool, str]:
-    """Return (available, reason): can ``solvers.api.calibrate`` solve every configuration?
+    """Return (available, reason): can ``solvers.api.solve_network`` solve every configuration?
 
     One noiseless instance per configuration (seed 0) must give at least one candidate; the
     reason is "ok" or a one-line explanation suitable for a skip message.
     """
     try:
-        calibrate = load_calibrate()
+        solve_network = load_solve_network()
     except SolverUnavailable as exc:
         return False, str(exc)
     for config in configs:
         m, n = config_shape(config)
         F = random_network(m, n, np.random.default_rng(0)).measurements()
         try:
-            candidates = calibrate(F, refine=False)
+            candidates = solve_network(F, refine=False)
         except Exception as exc:
-            return False, f"solvers.api.calibrate fails on {config_label(config)}: {type(exc).__name__}: {exc}"
+            return False, f"solvers.api.solve_network fails on {config_label(config)}: {type(exc).__name__}: {exc}"
         if not candidates:
-            return False, f"solvers.api.calibrate returns no candidate on a noiseless {config_label(config)} instance"
+            return False, f"solvers.api.solve_network returns no candidate on a noiseless {config_label(config)} instance"
     return True, "ok"
 
 
@@ -239,7 +239,7 @@ def run_trial(
                                      refined candidates), and their sum
       n_roots, n_real_roots          finite / real roots of the polynomial system (solve_roots;
                                      NaN for "random" or when not counted)
-      n_real_candidates              calibrations from calibrate(F, refine=False): real roots
+      n_real_candidates              calibrations from solve_network(F, refine=False): real roots
                                      with positive-definite H and a valid geometry, deduplicated
                                      (NaN for "random")
       n_refined                      starting points refined by LM
@@ -261,12 +261,12 @@ def run_trial(
     key = config_key(config)
     check_init(init)
     m, n = CONFIGS[key]
-    calibrate = load_calibrate() if init == "solver" else None
+    solve_network = load_solve_network() if init == "solver" else None
     try:
         # LM from random starts overflows harmlessly on its way to a (wrong) minimum.
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            return _run_trial(key, init, m, n, seed, sigma, options, trial, calibrate)
+            return _run_trial(key, init, m, n, seed, sigma, options, trial, solve_network)
     except SolverUnavailable:
         raise
     except Exception as exc:
@@ -285,7 +285,7 @@ def _run_trial(
     sigma: float,
     options: TrialOptions,
     trial: int,
-    calibrate: Callable[..., list] | None,
+    solve_network: Callable[..., list] | None,
 ) -> dict[str, object]:
     rng = np.random.default_rng(seed)
     network = random_network(m, n, rng, options.position_sigma, options.offset_sigma)
@@ -298,10 +298,10 @@ def _run_trial(
     if init == "random":
         starts = [random_initial(m, n, rng, options.position_sigma, options.offset_sigma)]
     else:
-        assert calibrate is not None
+        assert solve_network is not None
         t0 = time.perf_counter()
         try:
-            candidates = list(calibrate(F, refine=False))
+            candidates = list(solve_network(F, refine=False))
         except (np.linalg.LinAlgError, FloatingPointError, ZeroDivisionError):
             candidates, outcome = [], "solver_error"
         solver_s = time.perf_counter() - t0

@@ -6,7 +6,7 @@
 
 solve(F) -> (22, 9) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3, o4;
 solve_batch(F) for F of shape (..., 6, 4) -> (..., 22, 9). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns them into calibrations.
+spurious (NaN rows for lost ones); solvers.api.solve_network turns them into calibrations.
 """
 from __future__ import annotations
 
