@@ -140,6 +140,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", help="comma-separated cells, e.g. 9r3s,8r5s (default all; 'scale' for the scale rows)")
+    ap.add_argument("--conditions", help="comma-separated conditions (clean, gross, missing; default all)")
+    ap.add_argument("--gross-networks", type=int, help="networks per gross-error cell (default: --networks)")
     ap.add_argument("--quick", action="store_true", help="10 networks a cell, 1 per scale row, into tables/quick/")
     ap.add_argument("--out", help="output directory (default tables/, or tables/quick/ with --quick)")
     args = ap.parse_args(argv)
@@ -155,7 +157,10 @@ def main(argv=None) -> int:
             continue
         for sigma in SIGMAS:
             for cond, (missing, gross) in CONDITIONS.items():
-                jobs.append(((m, n), sigma, cond, missing, gross, networks))
+                if args.conditions and cond.split()[0] not in args.conditions.split(","):
+                    continue
+                count = args.gross_networks if gross and args.gross_networks else networks
+                jobs.append(((m, n), sigma, cond, missing, gross, count))
     if not only or "scale" in only:
         for (m, n) in SCALE:
             jobs.append(((m, n), 1e-2, SCALE_CONDITION[0], SCALE_CONDITION[1], SCALE_CONDITION[2], scale_networks))
@@ -189,6 +194,7 @@ def main(argv=None) -> int:
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "commit": commit, "worktree_dirty": dirty, "networks_per_cell": networks, "scale_networks": scale_networks,
+        "gross_networks_per_cell": args.gross_networks or networks,
         "seed": args.seed, "seconds": round(time.perf_counter() - t_start, 1), "jobs": args.jobs,
         "networks": "positions uniform in [-5, 5]^2, offsets uniform in [-2, 2], Gaussian noise sigma; network k of "
                     "a cell uses numpy.random.default_rng(seed + 1000 k + 7)",

@@ -716,14 +716,24 @@ def _print_calibration(result, meas, units: str | None = None) -> None:
         print(f"sigma {result.sigma:.3g}{unit} ({'estimated' if result.sigma_estimated else 'given'}); "
               f"hypotheses from {result.solver}: {result.samples} samples, {result.hypotheses} hypotheses, "
               f"{result.seconds:.2f} s")
+        gt = result.global_test
+        test = ("global test not run (sigma estimated)" if gt is None else
+                f"global test SSR/sigma^2 {gt[0]:.4g} vs {gt[1]:.4g}: {'passed' if gt[2] else 'FAILED'}")
+        n_unc = int(result.uncontrolled.sum()) if result.uncontrolled is not None else 0
+        print(f"adjustment: {result.dof} degrees of freedom; {test}; outlier test |w| <= {result.critical_value:.3g}; "
+              f"{n_unc} measurement(s) uncontrolled (redundancy number < 0.01)")
         bracket = f" [{units}]" if units else ""
-        print(f"{'node':<12} {'x' + bracket:>12} {'y' + bracket:>12} {'offset' + bracket:>12} {'std' + bracket:>10}")
+        print(f"{'node':<12} {'x' + bracket:>12} {'y' + bracket:>12} {'offset' + bracket:>12} {'std' + bracket:>10} "
+              f"{'reliab.' + bracket:>10}")
+        rel_r = result.receiver_reliability if result.receiver_reliability is not None else [float('nan')] * result.m
+        rel_t = result.transmitter_reliability if result.transmitter_reliability is not None else [float('nan')] * result.n
         for k, name in enumerate(meas.receivers):
             x, y = result.receivers[k]
-            print(f"{'r ' + name:<12} {x:12.5g} {y:12.5g} {'':>12} {result.receiver_std[k]:10.3g}")
+            print(f"{'r ' + name:<12} {x:12.5g} {y:12.5g} {'':>12} {result.receiver_std[k]:10.3g} {rel_r[k]:10.3g}")
         for k, name in enumerate(meas.transmitters):
             x, y = result.transmitters[k]
-            print(f"{'s ' + name:<12} {x:12.5g} {y:12.5g} {result.offsets[k]:12.5g} {result.transmitter_std[k]:10.3g}")
+            print(f"{'s ' + name:<12} {x:12.5g} {y:12.5g} {result.offsets[k]:12.5g} {result.transmitter_std[k]:10.3g} "
+                  f"{rel_t[k]:10.3g}")
     for w in result.warnings:
         print(f"warning: {w}")
 

@@ -270,7 +270,8 @@ def test_standard_input_and_units(capsys, tmp_path, monkeypatch):
     lines = out.splitlines()
     assert (code, lines[0], lines[2:]) == (from_file[0], *(lambda x: (x[0], x[2:]))(from_file[1].splitlines()))
     assert re.match(r"sigma \S+ m \((estimated|given)\)", lines[1])
-    assert lines[2].split() == ["node", "x", "[m]", "y", "[m]", "offset", "[m]", "std", "[m]"]
+    assert lines[2].startswith("adjustment: ") and "degrees of freedom" in lines[2]
+    assert lines[3].split() == ["node", "x", "[m]", "y", "[m]", "offset", "[m]", "std", "[m]", "reliab.", "[m]"]
     assert lines[3].split()[:2] == ["r", "r1"] and lines[3 + 8 + 5].split()[:2] == ["s", "s6"]
     monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
     code, out, _ = run(capsys, "calibrate", "-", "--json", "--units", "mm", "--seed", "3")

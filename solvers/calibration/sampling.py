@@ -363,6 +363,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         return search.accepted
 
     needed = math.inf
+    needed_own = math.inf  # from the best model's own inlier ratio (not capped when sigma is unknown)
     tried: set = set()
     exhausted: set = set()
     drawn_by: dict[str, int] = {}
@@ -380,6 +381,8 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
                 continue
             if pending[0] is not None and solver.cost_ms > opts.expensive_cost:
                 break  # the accepted model is confirmed by what the cheap solvers could draw
+            if solver.cost_ms > opts.expensive_cost and search.samples >= max(needed_own, opts.min_samples):
+                continue  # the sigma-unknown pessimism draws more cheap samples, never costly ones
             block = _sample_block(mask, solver.m, solver.n, rng, tried)
             if block is None:
                 exhausted.add(solver.label)
@@ -394,6 +397,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         if offer(_hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
                                         best.inlier_ratio if best is not None else None)):
             needed = _needed(ratio_of(best), solver.m * solver.n, opts.confidence)
+            needed_own = _needed(best.inlier_ratio, solver.m * solver.n, opts.confidence)
 
     if search.accepted or pending[0] is not None:
         search.accepted = True  # the blocks ran out (or the count was met) with the accepted model still best
