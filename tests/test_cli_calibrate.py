@@ -272,7 +272,7 @@ def test_standard_input_and_units(capsys, tmp_path, monkeypatch):
     assert re.match(r"sigma \S+ m \((estimated|given)\)", lines[1])
     assert lines[2].startswith("adjustment: ") and "degrees of freedom" in lines[2]
     assert lines[3].split() == ["node", "x", "[m]", "y", "[m]", "offset", "[m]", "std", "[m]", "reliab.", "[m]"]
-    assert lines[3].split()[:2] == ["r", "r1"] and lines[3 + 8 + 5].split()[:2] == ["s", "s6"]
+    assert lines[4].split()[:2] == ["r", "r1"] and lines[4 + 8 + 5].split()[:2] == ["s", "s6"]
     monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
     code, out, _ = run(capsys, "calibrate", "-", "--json", "--units", "mm", "--seed", "3")
     assert json.loads(out)["units"] == "mm" and json.loads(out)["transmitter_names"][0] == "s1"
