@@ -56,10 +56,11 @@ def test_user_system_counts_like_sympy():
 
 
 @pytest.mark.parametrize("text, match", [
-    ("unknowns: x\nparameters: a\nequations:\nx^2 - z\n", "undeclared"),
+    ("unknowns: x\nparameters: a\nequations:\nx^2 - z\n", "line 4, column 7: unknown name 'z'"),
     ("unknowns: x\nparameters: a, b\nequations:\nx^2 - a\n", None),
     ("unknowns: x\nequations:\nx - 1\n", "parameters"),
-    ("unknowns: x\nparameters: a\nequations:\nsin(x) - a\n", "polynomial"),
+    ("unknowns: x\nparameters: a\nequations:\nsin(x) - a\n", "unknown name 'sin'.*polynomial"),
+    ("unknowns: x\nparameters: a\nequations:\nx^2 - 0.5*a\n", "line 4, column 8: decimal numbers"),
     ("parameters: a\nequations:\nx - a\n", "unknowns"),
     ("unknowns: x\nparameters: x\nequations:\nx\n", "both"),
 ])
