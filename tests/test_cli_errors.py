@@ -46,7 +46,9 @@ BAD = [
     (["degree", "--tdoa", "6r4s", "--equations", "C2,"], "empty token"),
     (["degree", "--tdoa", "3r3s"], "m (receivers) must be >= 4"),
     (["tables", "--jobs", "0"], "--jobs must be at least 1"),
-    (["generate", "5r6s"], "give --out DIR"),
+    (["generate", "5r6s"], "the following arguments are required: --out"),
+    (["generate", "5r6s", "--out", "{tmp}/gen"], "no committed solver for 5r6s"),
+    (["generate", "9r3s", "--out", "{tmp}/gen", "--start", "{tmp}/start.json"], "--start is for a system FILE"),
     (["template-check", "nonsense"], "neither a file nor a formulation"),
     (["template-check", "9r3s:C2-C9", "--seed", "-3"], "argument --seed"),
 ]
