@@ -326,11 +326,12 @@ class ParametricSystem:
 
 def _as_expr(terms, symbols: Sequence[sympy.Symbol]) -> sympy.Expr:
     """The sympy expression of a parsed polynomial ``{exponents: Fraction}`` in ``symbols``."""
-    if not terms:
-        return sympy.Integer(0)
-    gens = tuple(symbols) or (sympy.Symbol("_dummy"),)
-    rep = {e: sympy.Rational(c.numerator, c.denominator) for e, c in terms.items()}
-    return sympy.Poly.from_dict(rep, *gens, domain="QQ").as_expr()
+    out = []
+    for exps, c in terms.items():  # Add and Mul put the terms in sympy's canonical order
+        factors = [sympy.Rational(c.numerator, c.denominator)]
+        factors += [s**k if k > 1 else s for s, k in zip(symbols, exps) if k]
+        out.append(sympy.Mul(*factors))
+    return sympy.Add(*out)
 
 
 def _weighted_degree(expr: sympy.Expr, weights: dict) -> int:
