@@ -257,6 +257,7 @@ class HomotopyMethod:
             raise homotopy.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
                                          f"{len(system.unknowns)} unknowns: a homotopy solver needs a square system")
         system.check_parameters_occur()
+        _check_names(system)
         if job.start is None:
             _check_linear_in_parameters(system)
         full_report = None
@@ -300,6 +301,19 @@ class HomotopyMethod:
 #: Method name -> strategy (names as in solvers.methods.spec.METHODS).
 METHODS: dict[str, Method] = {"curve-pencil": PencilMethod(), "homotopy": HomotopyMethod()}
 assert tuple(METHODS) == METHOD_NAMES
+
+
+#: Names the generated coefficient function uses itself (solvers.methods.homotopy.coefficient_source:
+#: its argument q, numpy, its result, sympy.cse's t_0, t_1, ...): a system's names must differ.
+GENERATED_CODE_NAMES = re.compile(r"q|np|out|coefficients|t_\d+")
+
+
+def _check_names(system: ParametricSystem) -> None:
+    names = system.unknowns + system.parameters + tuple(name for name, _ in system.definitions)
+    taken = [v for v in names if GENERATED_CODE_NAMES.fullmatch(v)]
+    if taken:
+        raise homotopy.HomotopyError(f"{system.name}: the names {', '.join(taken)} are used by the generated solver "
+                                     "code (q, np, out, coefficients, t_0, t_1, ...); rename them")
 
 
 def _check_linear_in_parameters(system: ParametricSystem) -> None:

@@ -104,6 +104,16 @@ def test_parameters_entering_non_linearly_need_a_start_pair(tmp_path, monkeypatc
     assert "'parameters' must be a list of 2 values (a, b)" in capsys.readouterr().err
 
 
+def test_names_the_generated_code_uses_are_refused(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "names.sys").write_text("unknowns: x, out\nparameters: q, np, t_0\nequations:\n"
+                                        "x^2 + out^2 - q\nx*out - np*x + t_0\n")
+    assert main(["generate", "names.sys", "--out", "gen"]) == 2
+    err = capsys.readouterr().err
+    assert "the names out, q, np, t_0 are used by the generated solver code" in err and "Traceback" not in err, err
+    assert not (tmp_path / "gen").exists()
+
+
 def test_unknown_method_and_target_are_named():
     from solvers.generate import GenerationError, generate
 
