@@ -35,7 +35,7 @@ from analysis.formulations import Formulation, definition_order, factored_equati
 from .methods import homotopy
 from .methods.spec import load_spec, spec_sha256
 
-__all__ = ["MODULE_TEMPLATE", "METHOD_PARTS", "POLISH_ITERATIONS", "emit_module", "factored_equations",
+__all__ = ["MODULE_TEMPLATE", "METHOD_PARTS", "POLISH_ITERATIONS", "emit_module", "factored_equations", "read_spec",
            "module_name", "pencil_coefficients", "scale_powers"]
 
 #: Default Gauss-Newton polishing steps on the input equations of a pencil solver. The homotopy
@@ -239,7 +239,7 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
 METHOD_PARTS = {"curve-pencil": _pencil_parts, "homotopy": _homotopy_parts}
 
 
-def _load(spec_text: str) -> dict:
+def read_spec(spec_text: str) -> dict:
     """A spec of either format (the pencil's ``tdoa-solver/2``, the homotopy's own)."""
     kind = json.loads(spec_text).get("kind")
     return (homotopy.load_spec if kind == "homotopy" else load_spec)(spec_text)
@@ -252,7 +252,7 @@ def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str)
     :func:`solvers.methods.homotopy.coefficient_source`); command: the shell command that regenerates
     the module, printed in its header.
     """
-    spec = _load(spec_text)
+    spec = read_spec(spec_text)
     kind = spec["kind"]
     if kind not in METHOD_PARTS:
         raise ValueError(f"unknown solver kind {kind!r}; valid: {', '.join(METHOD_PARTS)}")

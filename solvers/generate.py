@@ -455,7 +455,7 @@ def emit_committed(json_path: str) -> tuple[str, str]:
     if label not in SOLVERS:
         raise GenerationError(f"{json_path}: not a committed configuration ({', '.join(SOLVERS)})")
     if "_pencil" in stem:
-        coefficients = codegen.pencil_coefficients(codegen._load(text))
+        coefficients = codegen.pencil_coefficients(codegen.read_spec(text))
     else:
         coefficients = homotopy.coefficient_source(solver_system(label))
     return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients, committed_command(label))
