@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
+import shlex
 import time
 from dataclasses import dataclass
 from typing import Callable, Protocol, Union
@@ -427,7 +428,8 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     (refused without one). full: the over-determined system that a parametric ``target`` squares (its
     count is certified too and only the start roots satisfying it are tracked; same unknowns and
     parameters). command: the regenerating command printed in the module's header (default:
-    :func:`committed_command` for a committed configuration, else a description of this call).
+    :func:`committed_command` for a committed configuration written to :data:`GENERATED_DIR`, the
+    ``tdoa-workbench generate`` command for another label, else a description of this call).
     """
     if method is not None and method not in METHODS:
         raise GenerationError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
@@ -435,8 +437,11 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     job, kind, label = _job(target, name, start, method, full)
     built = METHODS[kind].build(job, seed, progress)
     if command is None:
-        if label is not None and job.name == f"tdoa_{label}":
+        if label is not None and job.name == f"tdoa_{label}" and os.path.abspath(out) == GENERATED_DIR:
             command = committed_command(label)
+        elif isinstance(target, str) and name is None and method in (None, kind):
+            command = f"tdoa-workbench generate {shlex.quote(target)} --out {shlex.quote(out)}"
+            command += f" --seed {seed}" if seed else ""
         else:
             what = repr(target) if isinstance(target, str) else f"the system {target.name!r}"
             command = f"call solvers.generate.generate({what}, method={kind!r}, out=..., seed={seed})"
