@@ -52,7 +52,8 @@ MODULE_TEMPLATE = '''\
 
 solve(F) -> ({rows}, {nvars}) complex candidate roots in the unknown order {unknown_list};
 solve_batch(F) for F of shape (..., {pshape}) -> (..., {rows}, {nvars}). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns TDOA roots into calibrations.
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets.
 """
 from __future__ import annotations
 

@@ -8,7 +8,8 @@ monodromy) are tracked to the data by the compiled tracker of solvers.methods.tr
 
 solve(F) -> (344, 5) complex candidate roots in the unknown order X, Y, xi3, xi4, eta4;
 solve_batch(F) for F of shape (..., 4, 5) -> (..., 344, 5). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns TDOA roots into calibrations.
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets.
 """
 from __future__ import annotations
 

@@ -10,7 +10,8 @@ satisfy the full system (22 equations, 64 roots certified over GF(p)) are tracke
 
 solve(F) -> (64, 10) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3, o4, o5;
 solve_batch(F) for F of shape (..., 5, 5) -> (..., 64, 10). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns TDOA roots into calibrations.
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets.
 """
 from __future__ import annotations
 

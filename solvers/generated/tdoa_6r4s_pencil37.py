@@ -9,7 +9,8 @@ solvers.methods.pencil. The pencil's other eigenvalues (infinite, o_1 = infinity
 
 solve(F) -> (22, 9) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3, o4;
 solve_batch(F) for F of shape (..., 6, 4) -> (..., 22, 9). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns TDOA roots into calibrations.
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets.
 """
 from __future__ import annotations
 

@@ -8,7 +8,8 @@ monodromy) are tracked to the data by the compiled tracker of solvers.methods.tr
 
 solve(F) -> (75, 8) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3;
 solve_batch(F) for F of shape (..., 9, 3) -> (..., 75, 8). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrate turns TDOA roots into calibrations.
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets.
 """
 from __future__ import annotations
 
