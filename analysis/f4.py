@@ -6,9 +6,7 @@ Gebauer-Möller criteria; the linear algebra is delegated to a backend of :mod:`
 
 Every step works on arrays: the basis elements live in a term pool of packed monomial codes
 (:class:`analysis.ring.MonomialCodes`), so symbolic preprocessing, matrix assembly and the pair update
-are numpy operations over all rows, monomials and pairs of a round at once. :func:`select_pairs`,
-:func:`_symbolic_preprocessing`, :func:`split_pivots` and :func:`_build_matrix` give the same steps on
-Python rows and keys, for callers that record an F4 run step by step (``solvers.methods.staged``).
+are numpy operations over all rows, monomials and pairs of a round at once.
 
 Reference: J.-C. Faugère, "A new efficient algorithm for computing Gröbner bases (F4)", JPAA 1999;
 R. Gebauer and H. M. Möller, "On an installation of Buchberger's algorithm", JSC 1988.
@@ -22,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .linalg import Backend, MatrixTooLarge, Row, SparseRows, get_backend
+from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
@@ -500,45 +498,6 @@ def _pair_rows(
     fresh = np.ones(len(index), dtype=bool)
     fresh[1:] = (mult[1:] != mult[:-1]) | (index[1:] != index[:-1])
     return mult[fresh], index[fresh]
-
-
-# ----------------------------------------------------------------------------------------------
-# the F4 steps on Python rows, for callers that record them (solvers.methods.staged)
-# ----------------------------------------------------------------------------------------------
-def select_pairs(state: _State) -> tuple[int, list, list[tuple[int, int]]]:
-    """Pop the pairs of minimal lcm degree; return (degree, pairs, sorted rows (multiplier key, index))."""
-    d, pi, pj, lcms = state.pop_pairs()
-    mult, index = _pair_rows(state, d, pi, pj, lcms)
-    pairs = [(i, j, tuple(lcm)) for i, j, lcm in zip(pi.tolist(), pj.tolist(), lcms.tolist())]
-    return d, pairs, list(zip(state.codes.to_keys(mult), index.tolist()))
-
-
-def _symbolic_preprocessing(
-    state: _State, rows: list[tuple[int, int]], leads_done: bool = True
-) -> tuple[list[tuple[int, int]], list[int]]:
-    """:func:`_preprocess` on rows given as (multiplier key, basis index): returns all rows and the
-    column monomials in decreasing order, as keys."""
-    codes = state.codes
-    mult = codes.from_keys([t for t, _ in rows])
-    index = np.array([i for _, i in rows], dtype=np.int64)
-    rows, columns = _preprocess(state, _Rows.of(state, mult, index), leads_done)
-    return list(zip(codes.to_keys(rows.mult), rows.index.tolist())), codes.to_keys(columns[::-1])
-
-
-def split_pivots(matrix: Sequence[Row]) -> tuple[dict[int, int], list[int]]:
-    """One pivot row per leading column (the sparsest), the others to reduce: (column -> row, rows)."""
-    leads = np.array([r[0][0] for r in matrix], dtype=np.int64)
-    lengths = np.array([len(r[0]) for r in matrix], dtype=np.int64)
-    pivot_rows, reduce_rows = _split_pivots(leads, lengths)
-    return {int(leads[r]): int(r) for r in pivot_rows}, reduce_rows.tolist()
-
-
-def _build_matrix(state: _State, rows: list[tuple[int, int]], columns: list[int]) -> list[Row]:
-    """The rows (multiplier key, basis index) over the columns (keys, decreasing) as (cols, vals) lists."""
-    codes = state.codes
-    mult = codes.from_keys([t for t, _ in rows])
-    index = np.array([i for _, i in rows], dtype=np.int64)
-    return _assemble(state, _Rows.of(state, mult, index), codes.from_keys(columns)[::-1]).to_rows()
 
 
 # ----------------------------------------------------------------------------------------------

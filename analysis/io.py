@@ -317,8 +317,8 @@ class System:
     ) -> "System":
         """The system of sympy expressions (or equations lhs = rhs) with rational coefficients.
 
-        Symbols are matched by name, so assumptions (``real=True`` ...) do not matter; strings are
-        sympified with the variables bound to plain symbols. Floats, unknown symbols and
+        Symbols are matched by name, so assumptions (``real=True`` ...) do not matter; strings are read
+        by this module's parser (:func:`parse_polynomial`), never evaluated. Floats, unknown symbols and
         non-polynomial expressions raise :class:`InputError`.
         """
         import sympy
@@ -329,7 +329,13 @@ class System:
         polys = []
         for i, expr in enumerate(exprs):
             what = f"{source}: expression {i + 1}"
-            expr = sympy.sympify(expr, locals=dict(by_name)) if isinstance(expr, str) else sympy.sympify(expr)
+            if isinstance(expr, str):
+                polys.append(parse_polynomial(expr, names, 0, what))
+                continue
+            try:
+                expr = sympy.sympify(expr, strict=True)  # strict: objects only, a string is never parsed
+            except sympy.SympifyError:
+                raise InputError(f"{what} is not a sympy expression or polynomial text: {expr!r}") from None
             if isinstance(expr, sympy.Equality):
                 expr = expr.lhs - expr.rhs
             if not isinstance(expr, sympy.Expr):
@@ -433,8 +439,10 @@ class _Parser:
         atom   := INTEGER | VARIABLE | '(' poly ')'
     """
 
-    def __init__(self, tokens: list[_Token], variables: tuple[str, ...], characteristic: int, source: str):
+    def __init__(self, tokens: list[_Token], variables: tuple[str, ...], characteristic: int, source: str,
+                 kind: str = "variable"):
         self.variables = variables
+        self.kind = kind
         self.index = {v: i for i, v in enumerate(variables)}
         self.nvars = len(variables)
         self.p = characteristic
@@ -545,7 +553,7 @@ class _Parser:
         if tok.kind == "name":
             i = self.index.get(tok.text)
             if i is None:
-                raise self.fail(tok, f"unknown variable {tok.text!r}; variables are {', '.join(self.variables)}")
+                raise self.fail(tok, f"unknown {self.kind} {tok.text!r}; {self.kind}s are {', '.join(self.variables)}")
             return _Expr({1 << (_FIELD * i): 1}, 1, 1)
         if tok.text == "(":
             inner = self.poly()
@@ -592,9 +600,15 @@ def _split_polynomials(tokens: list[_Token], source: str) -> list[list[_Token]]:
 
 
 def parse_polynomial(
-    text: str, variables: Sequence[str], characteristic: int = 0, source: str = "<string>", line: int = 1
+    text: str, variables: Sequence[str], characteristic: int = 0, source: str = "<string>", line: int = 1,
+    kind: str = "variable",
 ) -> Coefficients:
-    """One polynomial in msolve syntax as ``{exponents: Fraction}`` (not reduced mod the characteristic)."""
+    """One polynomial in msolve syntax as ``{exponents: Fraction}`` (not reduced mod the characteristic).
+
+    ``line`` is the line number of the text's first line in its source (for error messages); ``kind``
+    is the word for the names in the message about an unknown one (e.g. ``"name"`` where parameters
+    are read as further variables, :mod:`analysis.parametric`).
+    """
     variables = _check_variables(variables, source)
     p = _check_characteristic(characteristic, source)
     tokens = _tokenize([(line + k, _strip_comment(t)) for k, t in enumerate(text.split("\n"))], source)
@@ -604,7 +618,7 @@ def parse_polynomial(
     if len(groups) != 1:
         g = groups[1][0]
         raise InputError(f"{_where(source, g.line, g.col)}: expected one polynomial, found a ',' before it")
-    return _Parser(groups[0], variables, p, source).parse()
+    return _Parser(groups[0], variables, p, source, kind).parse()
 
 
 def parse_msolve(text: str, source: str = "<string>") -> System:

@@ -20,10 +20,14 @@ Text format (``parse``)::
     x^2 + y^2 - a
     x*y - b
 
-One equation per line (or separated by ';'); ``^`` or ``**`` for powers; rational coefficients.
+One equation per line (or separated by ';'); ``^`` or ``**`` for powers; rational coefficients
+(``3/4*x``; '/' only by constants); parentheses. The file is data: it is read by the project's own
+polynomial parser (the one behind the msolve format, :mod:`analysis.io`), parameters and definitions
+as further variables, and nothing in it is evaluated.
 """
 from __future__ import annotations
 
+import keyword
 import re
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -33,6 +37,7 @@ import numpy as np
 import sympy
 
 from .degree import DEFAULT_PRIMES, DegreeReport, PrimeDisagreement, analyse
+from .io import InputError, parse_polynomial
 from .ring import Poly, Ring
 
 __all__ = ["ParametricSystem", "ParametricError", "GFSample", "parse", "from_formulation"]
@@ -45,15 +50,16 @@ class ParametricError(ValueError):
 #: (parameter values mod p, a known root mod p or None) for one prime and one seed.
 GFSample = tuple[list[int], "list[int] | None"]
 
-_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
 @dataclass(frozen=True)
 class ParametricSystem:
     """Equations f(x; q) = 0 in ``unknowns`` x with coefficients polynomial in ``parameters`` q.
 
-    equations / nonzero: sympy-parseable strings (kept as text so a system is plain data; the sympy
-    forms are cached). symmetry: sign vectors (tuples of +-1, one per unknown), the non-identity
+    equations / nonzero: polynomial text in the syntax of :func:`analysis.io.parse_polynomial` (kept
+    as text so a system is plain data; read by the project's parser, never evaluated; the sympy
+    forms built from the parse are cached). symmetry: sign vectors (tuples of +-1, one per unknown), the non-identity
     elements of a group acting on the roots of every instance. gf_sampler: optional
     ``(p, seed) -> (q mod p, root mod p)``; without it, parameters are drawn at random (only sound
     for square systems, whose generic instance has roots). scale_powers: optional weights w_k such
@@ -76,8 +82,9 @@ class ParametricSystem:
     def __post_init__(self) -> None:
         for kind, names in (("unknown", self.unknowns), ("parameter", self.parameters)):
             for v in names:
-                if not _NAME.match(v):
-                    raise ParametricError(f"{self.name}: {kind} name {v!r} is not an identifier")
+                if not _NAME.match(v) or keyword.iskeyword(v):
+                    raise ParametricError(f"{self.name}: {kind} name {v!r} is not a name (a letter followed by "
+                                          "letters, digits or '_'; not a Python keyword)")
         clash = set(self.unknowns) & set(self.parameters)
         if clash:
             raise ParametricError(f"{self.name}: {sorted(clash)} declared both as unknown and parameter")
@@ -128,22 +135,22 @@ class ParametricSystem:
     def q_symbols(self) -> tuple[sympy.Symbol, ...]:
         return tuple(sympy.Symbol(v) for v in self.parameters)
 
-    def _parse_expr(self, text: str, what: str, aux: int | None = None) -> sympy.Expr:
+    def _parse_expr(self, text: str, what: str, aux: int | None = None, where: tuple[int, int] | None = None) -> sympy.Expr:
+        """One polynomial of the system, read by the project's parser (:func:`analysis.io.parse_polynomial`).
+
+        Unknowns, parameters and the usable definitions are all variables of the parser; its exact
+        expansion becomes a sympy expression built from symbols and rationals (no text is evaluated).
+        where: (line, column) of the text in its file, for the error message.
+        """
         usable = self.aux_symbols if aux is None else self.aux_symbols[:aux]
-        names = {s.name: s for s in self.x_symbols + self.q_symbols + usable}
+        symbols = self.x_symbols + self.q_symbols + usable
+        line, col = where or (1, 1)
         try:
-            expr = sympy.sympify(text.replace("^", "**"), locals=names, rational=True)
-        except (sympy.SympifyError, SyntaxError, TypeError) as exc:
-            raise ParametricError(f"{self.name}: cannot read {what} {text!r}: {exc}") from None
-        if not isinstance(expr, sympy.Expr):
-            raise ParametricError(f"{self.name}: {what} {text!r} is not an expression")
-        unknown = {s.name for s in expr.free_symbols} - set(names)
-        if unknown:
-            raise ParametricError(f"{self.name}: {what} {text!r} uses undeclared names {sorted(unknown)}")
-        expr = sympy.expand(expr)
-        if not expr.is_polynomial(*names.values()):
-            raise ParametricError(f"{self.name}: {what} {text!r} is not a polynomial")
-        return expr
+            terms = parse_polynomial(" " * (col - 1) + text, [s.name for s in symbols], 0,
+                                     self.name if where else f"{self.name}: {what}", line, kind="name")
+        except InputError as exc:
+            raise ParametricError(f"{exc} (in {what}; a polynomial with rational coefficients is expected)") from None
+        return _as_expr(terms, symbols)
 
     @cached_property
     def exprs(self) -> tuple[sympy.Expr, ...]:
@@ -317,6 +324,16 @@ class ParametricSystem:
         return "\n".join(lines) + "\n"
 
 
+def _as_expr(terms, symbols: Sequence[sympy.Symbol]) -> sympy.Expr:
+    """The sympy expression of a parsed polynomial ``{exponents: Fraction}`` in ``symbols``."""
+    out = []
+    for exps, c in terms.items():  # Add and Mul put the terms in sympy's canonical order
+        factors = [sympy.Rational(c.numerator, c.denominator)]
+        factors += [s**k if k > 1 else s for s, k in zip(symbols, exps) if k]
+        out.append(sympy.Mul(*factors))
+    return sympy.Add(*out)
+
+
 def _weighted_degree(expr: sympy.Expr, weights: dict) -> int:
     """Degree of a polynomial expression when symbol s has degree weights[s] (others 0)."""
     syms = [s for s in expr.free_symbols if weights.get(s)]
@@ -338,13 +355,19 @@ def _gf_value(cterms, values: Sequence[int], p: int) -> int:
 
 
 def parse(text: str, name: str = "<system>") -> ParametricSystem:
-    """Read a parametric system from the text format of the module docstring."""
-    fields: dict[str, list[str]] = {}
+    """Read a parametric system from the text format of the module docstring.
+
+    The text is data: names are checked, every polynomial is read by the project's parser
+    (:func:`analysis.io.parse_polynomial`, parameters as further variables) and nothing is evaluated.
+    Errors are :class:`ParametricError` naming ``name``, the line and the column.
+    """
+    fields: dict[str, list[tuple[str, int, int]]] = {}
     current = None
     for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
+        line = raw.split("#", 1)[0]
+        if not line.strip():
             continue
+        offset = 0
         head, sep, rest = line.partition(":")
         key = head.strip().lower()
         if sep and key in ("unknowns", "variables", "parameters", "nonzero", "equations"):
@@ -353,22 +376,26 @@ def parse(text: str, name: str = "<system>") -> ParametricSystem:
                 raise ParametricError(f"{name}, line {lineno}: '{key}:' given twice")
             fields[key] = []
             current = key
-            line = rest.strip()
-            if not line:
+            offset, line = len(head) + 1, rest
+            if not line.strip():
                 continue
         if current is None:
             raise ParametricError(f"{name}, line {lineno}: expected 'unknowns:', 'parameters:' or 'equations:' first")
-        if current == "equations":
-            fields[current].extend(e.strip() for e in line.split(";") if e.strip())
-        else:
-            fields[current].extend(e.strip() for e in line.split(",") if e.strip())
+        for piece in re.finditer(r"[^;]+" if current == "equations" else r"[^,]+", line):
+            item = piece.group().strip()
+            if item:
+                col = offset + piece.start() + len(piece.group()) - len(piece.group().lstrip()) + 1
+                fields[current].append((item, lineno, col))
     for key in ("unknowns", "parameters", "equations"):
         if not fields.get(key):
             raise ParametricError(f"{name}: no '{key}:' section (or it is empty)")
-    system = ParametricSystem(name, tuple(fields["unknowns"]), tuple(fields["parameters"]), tuple(fields["equations"]),
-                              tuple(fields.get("nonzero", ())))
-    system.exprs  # parse now: errors name the file
-    system.nonzero_exprs
+    texts = {k: tuple(item for item, _, _ in v) for k, v in fields.items()}
+    system = ParametricSystem(name, texts["unknowns"], texts["parameters"], texts["equations"], texts.get("nonzero", ()))
+    # read every polynomial now, so that errors name the line and column in the file
+    system.__dict__["exprs"] = tuple(system._parse_expr(t, f"equation {k + 1}", where=(ln, col))
+                                     for k, (t, ln, col) in enumerate(fields["equations"]))
+    system.__dict__["nonzero_exprs"] = tuple(system._parse_expr(t, "nonzero condition", where=(ln, col))
+                                             for t, ln, col in fields.get("nonzero", ()))
     return system
 
 

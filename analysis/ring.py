@@ -230,11 +230,19 @@ class Ring:
         return Poly.from_dict(self, acc)
 
     def from_sympy(self, expr) -> "Poly":
-        """Polynomial from a sympy expression in (a subset of) the ring's variables."""
+        """Polynomial from a sympy expression in (a subset of) the ring's variables.
+
+        A string is read by the project's polynomial parser (:func:`analysis.io.parse_polynomial`),
+        never evaluated.
+        """
         import sympy
 
+        if isinstance(expr, str):
+            from .io import parse_polynomial  # io builds on this module; the parser is needed only here
+
+            return self.from_terms(parse_polynomial(expr, self.variables))
         syms = sympy.symbols(self.variables)
-        expr = sympy.sympify(expr)
+        expr = sympy.sympify(expr, strict=True)  # strict: objects only, no text parsing
         unknown = sorted(str(s) for s in expr.free_symbols if str(s) not in self.variables)
         if unknown:
             raise ValueError(f"unknown variable(s) {', '.join(unknown)}; ring variables: {', '.join(self.variables)}")

@@ -48,10 +48,8 @@ import tempfile  # noqa: E402
 
 from solvers import generate as gen  # noqa: E402
 from solvers.api import SOLVER_ORDER  # noqa: E402
-from solvers.codegen import SOLVERS  # noqa: E402
 from solvers.subsystem import SUBSYSTEMS, module_for  # noqa: E402
 from solvers.synthetic import random_network, true_root  # noqa: E402
-from solvers.methods.spec import build_spec  # noqa: E402
 
 FAIL_TOL = 1e-6
 #: Rounds of single-solve timing; the best round's median is reported (as bench_engine's best of 3).
@@ -137,11 +135,8 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
     gen_s = float("nan")
     if generate and label not in SUBSYSTEMS:  # a subsystem solver generates nothing of its own
         t0 = time.perf_counter()
-        if homotopy:
-            with tempfile.TemporaryDirectory() as tmp:
-                gen.generate(label, directory=tmp)
-        else:
-            build_spec(SOLVERS[label])
+        with tempfile.TemporaryDirectory() as tmp:
+            gen.generate(label, out=tmp)
         gen_s = time.perf_counter() - t0
     rng = np.random.default_rng(seed)
     nets = [random_network(m, n, rng) for _ in range(trials)]
@@ -171,7 +166,7 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
     single_ms = 1e3 * min(medians)
     row = {
         "solver": label,
-        "formulation": module.SYSTEM if homotopy else module.FORMULATION,
+        "formulation": module.SYSTEM,
         "method": module.METHOD,
         "basis_size": module.DEGREE,
         "size": f"{paths}x{len(module.UNKNOWNS)}" if homotopy else f"{module.SIZE[0]}x{module.SIZE[1]}",

@@ -1,9 +1,11 @@
 """Regenerate the solvers in solvers/generated/: root counts certified over GF(p), spec JSON and module.
 
-Usage: python scripts/generate_solvers.py [6r4s 9r3s 8r3s 7r3s 6r3s 5r4s 5r5s ...] [--emit-only]
-  6r4s           the eigenvalue pencil (solvers.codegen); the others: parameter homotopies (solvers.generate).
-  --emit-only    re-emit the pencil module from its committed JSON spec (no construction).
-Same as `tdoa-workbench generate CONFIG` for each configuration.
+Usage: python scripts/generate_solvers.py [6r4s 9r3s 8r3s 7r3s 6r3s 5r4s 5r5s 4r5s ...] [--emit-only]
+  CONFIG         build the configuration's solver again (solvers.generate.generate; the 6r4s eigenvalue
+                 pencil, the others parameter homotopies whose start roots monodromy recomputes).
+  --emit-only    re-emit the modules of the given (default: all) committed solvers from their committed
+                 JSON specs (no construction, numerics unchanged).
+Same as `tdoa-workbench generate CONFIG --out solvers/generated` for each configuration.
 """
 from __future__ import annotations
 
@@ -14,30 +16,29 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from solvers import generate as gen  # noqa: E402
-from solvers.codegen import SOLVERS as PENCILS  # noqa: E402
-from solvers.codegen import emit_all  # noqa: E402
-from solvers.codegen import generate as generate_pencil  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    every = list(PENCILS) + list(gen.SOLVERS)
+    every = list(gen.SOLVERS)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("configs", nargs="*", default=every, help=f"subset of {', '.join(every)}")
-    parser.add_argument("--emit-only", action="store_true", help="re-emit the pencil module from its committed spec")
+    parser.add_argument("--emit-only", action="store_true", help="re-emit the modules from their committed specs")
     args = parser.parse_args(argv)
+    unknown = [c for c in args.configs if c not in gen.SOLVERS]
+    if unknown:
+        parser.error(f"unknown configuration(s) {', '.join(unknown)}; valid: {', '.join(every)}")
     if args.emit_only:
-        for path in emit_all():
-            print(f"emitted {path}")
+        for json_path in gen.committed_specs():
+            if os.path.basename(json_path).split("_")[1] in args.configs:
+                py_path, text = gen.emit_committed(json_path)
+                with open(py_path, "w", encoding="utf-8", newline="\n") as fh:
+                    fh.write(text)
+                print(f"emitted {py_path}")
         return 0
     for label in args.configs:
-        if label in PENCILS:
-            stats = generate_pencil(label)
-            print(f"{label}: {stats.formulation}  {stats.method}  |B| {stats.degree}  size {stats.size[0]} x "
-                  f"{stats.size[1]}  {stats.seconds:.1f} s  -> {stats.module}", flush=True)
-        elif label in gen.SOLVERS:
-            print(gen.generate(label, progress=lambda msg: print("  " + msg, file=sys.stderr, flush=True)).summary(), flush=True)
-        else:
-            parser.error(f"unknown configuration {label!r}; valid: {', '.join(every)}")
+        result = gen.generate(label, out=gen.GENERATED_DIR,
+                              progress=lambda msg: print("  " + msg, file=sys.stderr, flush=True))
+        print(result.summary(), flush=True)
     return 0
 
 

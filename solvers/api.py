@@ -5,7 +5,9 @@ subset (the first receivers and transmitters; :data:`SOLVER_ORDER`), recovers po
 real candidate with all receivers (:mod:`solvers.recovery`), places the transmitters the solver did
 not use by linear TDOA multilateration, refines with Levenberg-Marquardt on all m*n measurements
 (:mod:`solvers.refine`) and returns the calibrations best first. ``solve_roots(F)`` is the lower-level
-entry: the raw candidate roots (H, b, o) of the dispatched solver.
+entry: the raw candidate roots (H, b, o) of the dispatched solver. ``calibrations(module, F)`` turns
+the roots of any generated TDOA solver (committed or written by ``solvers.generate``) on its own data
+into positions and offsets.
 """
 from __future__ import annotations
 
@@ -19,7 +21,8 @@ import numpy as np
 from .recovery import Calibration, recover, rms_residual
 from .refine import refine as _refine
 
-__all__ = ["SOLVER_ORDER", "SolverChoice", "minimal_configuration", "select_solver", "solve_network", "solve_roots"]
+__all__ = ["SOLVER_ORDER", "SolverChoice", "calibrations", "minimal_configuration", "select_solver",
+           "solve_network", "solve_roots"]
 
 _GENERATED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
 
@@ -106,18 +109,62 @@ def solve_roots(F) -> np.ndarray:
 
 def _from_positions(F: np.ndarray, choice: SolverChoice, x: np.ndarray, tol: float = 1e-6) -> Calibration | None:
     """A real calibration of the solver's block from a positions root (None for a complex network)."""
-    from analysis.positions import network_from_root, positions_system
+    from analysis.positions import positions_system
 
+    if F.shape[0] > choice.m:
+        return None  # receivers beyond the block: a cheaper solver covers such networks
     system = positions_system(choice.m, choice.n, POSITIONS[choice.label])
-    block = F[: choice.m, : choice.n]
+    return _positions_calibration(system, F[: choice.m, : choice.n], x, tol)
+
+
+def _positions_calibration(system, block: np.ndarray, x: np.ndarray, tol: float = 1e-6) -> Calibration | None:
+    """The calibration of a positions formulation's root x on its data block (None unless real and finite)."""
+    from analysis.positions import network_from_root
+
     rec, tra, off = network_from_root(system, x, block)
     parts = np.concatenate([rec.ravel(), tra.ravel(), off])
     if not np.all(np.isfinite(parts)) or np.max(np.abs(parts.imag)) > tol * (1.0 + np.max(np.abs(parts))):
         return None
     rec, tra, off = rec.real, tra.real, off.real
-    if F.shape[0] > choice.m:
-        return None  # receivers beyond the block: a cheaper solver covers such networks
     return Calibration(rec, tra, off, rms_residual(block, rec, tra, off))
+
+
+#: The first unknowns of every (H, b, o) formulation; the offsets o_1..o_n follow.
+HBO_UNKNOWNS = ("h11", "h12", "h22", "b1", "b2")
+
+
+def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration]:
+    """Positions and offsets from a generated TDOA solver's candidate roots on its own data.
+
+    module: a generated solver module (``SYSTEM``, ``CONFIG``, ``UNKNOWNS``, ``solve``), whether
+    committed or written by ``solvers.generate.generate``; F: its (m, n) = ``CONFIG`` data; roots: its
+    candidates (default ``module.solve(F)``). (H, b, o) roots go through :func:`solvers.recovery.recover`,
+    positions roots (4r/5s) through :func:`analysis.positions.network_from_root`. Returns the real,
+    geometrically valid calibrations sorted by RMS residual (best first), in the gauge r_1 = 0,
+    r_2 = (r_2x > 0, 0); a reflection of the plane is a second solution the data cannot tell apart,
+    one representative is returned. Nothing is refined (:func:`calibrate` and
+    :func:`solvers.calibrate.calibrate` do). Raises ValueError for a module whose unknowns are not a
+    TDOA formulation's, or for data of another shape.
+    """
+    F = np.asarray(F, dtype=float)
+    m, n = module.CONFIG if getattr(module, "CONFIG", None) else (None, None)
+    if F.shape != (m, n):
+        raise ValueError(f"{module.__name__}: data of shape {F.shape} given; the solver needs ({m}, {n})")
+    roots = module.solve(F) if roots is None else np.asarray(roots)
+    system = None
+    if "positions-" in module.SYSTEM:
+        from analysis.positions import positions_system
+
+        system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
+    elif tuple(module.UNKNOWNS) != HBO_UNKNOWNS + tuple(f"o{j}" for j in range(1, n + 1)):
+        raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b, o) nor a positions formulation's")
+    out = []
+    with np.errstate(all="ignore"):
+        for x in roots[np.all(np.isfinite(roots), axis=1)]:
+            cal = _positions_calibration(system, F, x) if system is not None else recover(F, x[:3], x[3:5], x[5:])
+            if cal is not None:
+                out.append(cal)
+    return sorted(out, key=lambda c: c.residual)
 
 
 def multilateration_system(receivers: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,7 @@ Subcommands
 degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
            or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``)
 tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
-generate   regenerate a numeric solver (spec over GF(p) -> solvers/generated/) and print its statistics
+generate   build a numeric solver (spec over GF(p) + module) into --out DIR and print its statistics
 template-check  how many action-matrix relations single elimination templates of a formulation or of
            a system file reach over GF(p), per multiplier family and degree (solvers.feasibility)
 reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
@@ -405,24 +405,55 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "generate", help="build a numeric solver: a Table 3 configuration, any formulation, or your own system",
         description="Certify the root count over GF(p) (two primes, two seeds), build the solver and write "
-        "<name>.json (spec) and <name>.py (module with solve(F)). TARGET is a committed configuration "
-        "(6r4s: eigenvalue pencil; 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s: parameter homotopy; written to "
-        "solvers/generated/; 4r6s is solved by the 4r5s solver, the sixth transmitter filtering), "
-        "a TDOA formulation label such as 7r3s:B2,B3,C2-C7, or a FILE with a parametric system (lines "
-        "'unknowns: x, y', 'parameters: a, b', optional 'nonzero: x', then 'equations:' and one polynomial per "
-        "line); formulations and files need --out DIR.")
+        "<name>_<method><size>.json (spec) and .py (module with solve(F)) into DIR, and nowhere else. TARGET is "
+        "a committed configuration (6r4s: eigenvalue pencil; 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s: parameter "
+        "homotopy; 4r6s is solved by the 4r5s solver, the sixth transmitter filtering; the committed copies in "
+        "solvers/generated/ are written by scripts/generate_solvers.py), a TDOA formulation label such as "
+        "7r3s:B2,B3,C2-C7, or a FILE with a parametric system (lines 'unknowns: x, y', 'parameters: a, b', "
+        "optional 'nonzero: x', then 'equations:' and one polynomial per line). A system whose coefficients are "
+        "not linear in its parameters needs --start.")
     p.add_argument("target", help="configuration (6r4s, 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s, 4r6s), "
                    "formulation label or system FILE")
-    p.add_argument("--out", metavar="DIR", help="output directory (required for formulations and files)")
+    p.add_argument("--out", metavar="DIR", required=True, help="output directory (created if needed)")
     p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")
+    p.add_argument("--start", metavar="JSON",
+                   help="system FILE only: a start pair, {\"parameters\": [...], \"root\": [...]} with one value per "
+                   "parameter and per unknown (numbers or [re, im]); generic complex values, the root satisfying the "
+                   "system there. Needed when the parameters enter non-linearly")
     p.set_defaults(func=cmd_generate)
 
 
+def _read_start(path: str, system) -> tuple:
+    """(q0, x0) of a --start JSON file, checked against the system's parameters and unknowns."""
+    import numpy as np
+
+    try:
+        data = json.loads(_read_text(path))
+    except json.JSONDecodeError as exc:
+        raise UserError(f"{path}: not JSON ({exc})") from None
+
+    def values(key: str, names) -> np.ndarray:
+        raw = data.get(key) if isinstance(data, dict) else None
+        if not isinstance(raw, list) or len(raw) != len(names):
+            raise UserError(f"{path}: '{key}' must be a list of {len(names)} values ({', '.join(names)})")
+        out = []
+        for v in raw:
+            if isinstance(v, list) and len(v) == 2 and all(isinstance(t, (int, float)) for t in v):
+                out.append(complex(v[0], v[1]))
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                out.append(complex(v))
+            else:
+                raise UserError(f"{path}: '{key}' values must be numbers or [re, im] pairs, got {v!r}")
+        return np.array(out)
+
+    return values("parameters", system.parameters), values("root", system.unknowns)
+
+
 def cmd_generate(args: argparse.Namespace) -> int:
-    from analysis.parametric import ParametricError, from_formulation, parse
+    import shlex
+
+    from analysis.parametric import ParametricError, parse
     from solvers import generate as gen
-    from solvers.codegen import SOLVERS as PENCILS
-    from solvers.codegen import generate as generate_pencil
     from solvers.methods.homotopy import HomotopyError
     from solvers.subsystem import SUBSYSTEMS
 
@@ -433,49 +464,41 @@ def cmd_generate(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     target = args.target
-    committed = ", ".join(sorted(set(gen.SOLVERS) | set(PENCILS) | set(SUBSYSTEMS)))
-    if ":" not in target and not os.path.exists(target):
+    committed = ", ".join(sorted(set(gen.SOLVERS) | set(SUBSYSTEMS)))
+    is_file = ":" not in target and os.path.exists(target)
+    if ":" not in target and not is_file:
         label = target.replace("/", "")
         if label in SUBSYSTEMS:
             base = SUBSYSTEMS[label][0]
             print(f"{label} is solved by the {base} solver on its first transmitters, the others filtering the "
-                  f"candidates (solvers.subsystem); regenerating {base}", file=sys.stderr)
+                  f"candidates (solvers.subsystem); generating {base}", file=sys.stderr)
             label = base
-        if label in PENCILS or label in gen.SOLVERS:
+        if label in gen.SOLVERS:
             target = label
         elif re.fullmatch(r"\d+r/?\d+s", target):
-            raise UserError(f"no committed solver for {target}; committed: {committed}; otherwise give --out DIR "
-                            "and a formulation label such as 7r3s:B2,B3,C2-C7")
+            raise UserError(f"no committed solver for {target}; committed: {committed}; otherwise give a "
+                            "formulation label such as 7r3s:B2,B3,C2-C7")
         else:
             raise UserError(f"{target}: no such file (and not a configuration or formulation label)")
+    if args.start and not is_file:
+        raise UserError("--start is for a system FILE; TDOA targets draw their own start pair (a complex network)")
+    command = f"tdoa-workbench generate {shlex.quote(args.target)} --out {shlex.quote(args.out)}"
+    command += f" --seed {args.seed}" if args.seed else ""
+    command += f" --start {shlex.quote(args.start)}" if args.start else ""
     try:
-        if target in PENCILS:
-            stats = generate_pencil(target)
-            print(f"{stats.formulation}: {stats.method}, {stats.degree} roots certified over GF(p), pencil "
-                  f"{stats.size[0]} x {stats.size[1]}; {stats.seconds:.1f} s -> {stats.module}")
-            return 0
-        if target in gen.SOLVERS:
-            print(gen.generate(target, seed=args.seed, progress=progress).summary())
-            return 0
-        if not args.out:
-            raise UserError(f"{args.target}: give --out DIR for a formulation or a system file "
-                            f"(committed configurations: {committed})")
-        if os.path.exists(target):
+        if is_file:
             system = parse(_read_text(target), os.path.basename(target))
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
-            config = None
+            start = _read_start(args.start, system) if args.start else None
+            result = gen.generate(system, out=args.out, name=name, seed=args.seed, start=start, command=command,
+                                  progress=progress)
         else:
-            system = from_formulation(target, saturate_det_h=True)
-            name = "tdoa_" + re.sub(r"\W+", "_", target).strip("_")
-            config = (int(target.split("r")[0]), int(target.split("r")[1].split("s")[0]))
-        os.makedirs(args.out, exist_ok=True)
-        result = gen.generate_system(system, name, args.out, gen.homotopy.HomotopyOptions(seed=args.seed),
-                                     gen._tdoa_start(*config) if config else None, None, config, progress)
+            result = gen.generate(target, out=args.out, seed=args.seed, command=command, progress=progress)
         print(result.summary())
-    except (ParametricError, HomotopyError) as exc:
+    except (ParametricError, HomotopyError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
-        raise UserError(f"{args.out or args.target}: {exc.strerror or exc}") from None
+        raise UserError(f"{args.out}: {exc.strerror or exc}") from None
     return 0
 
 

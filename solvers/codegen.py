@@ -1,17 +1,22 @@
 """Code generation: one Python module per solver from its spec, byte-for-byte reproducible.
 
-The module text is one template with named holes (:data:`MODULE_TEMPLATE`) filled by small emit
-functions: the header (do-not-edit notice, spec file name and sha256), constants, and the coefficient
-function. The numerics live in :mod:`solvers.runtime` and the method's module in :mod:`solvers.methods`;
-the generated file stays small.
+The module text is one template with named holes (:data:`MODULE_TEMPLATE`) for every method: the
+header (do-not-edit notice, the command that regenerates it, the spec's sha256), the docstring, the
+constants every solver has (``SYSTEM``, ``CONFIG``, ``UNKNOWNS``, ``METHOD``, ``DEGREE``,
+``SCALE_POWERS``, ``SPEC_FILE``, ``SPEC_SHA256``) and those of its method, the coefficient function,
+``solver()`` and ``solve`` / ``solve_batch``. A method contributes the holes' text
+(:data:`METHOD_PARTS`); the numerics live in its module (:mod:`solvers.methods`) and in
+:mod:`solvers.runtime`, so the generated file stays small. :mod:`solvers.generate` builds the specs
+and writes the files.
 
-Coefficients are emitted in factored form: the equations are rebuilt symbolically (:func:`factored_equations`)
-in terms of the differences and sums of measurements against receiver 1, e_ij = f_ij - f_1j and
-p_ij = f_ij + f_1j, and the compaction constants c_ij = e p - e p (D~ = c + 2 e_{i1} o_1 - 2 e_ij o_j),
-then expanded only in the unknowns. A 3 x 3 minor of D~ thus becomes a sum of small determinants in
-(c, e) instead of a degree-6 polynomial in f expanded into thousands of cancelling terms (which lost
-about 10 of the 16 digits). ``sympy.cse`` shares the subexpressions; the same function runs on Python
-floats, numpy arrays and complex arrays.
+Pencil coefficients are emitted in factored form: the equations are rebuilt symbolically
+(:func:`factored_equations`) in terms of the differences and sums of measurements against receiver
+1, e_ij = f_ij - f_1j and p_ij = f_ij + f_1j, and the compaction constants c_ij = e p - e p (D~ = c +
+2 e_{i1} o_1 - 2 e_ij o_j), then expanded only in the unknowns. A 3 x 3 minor of D~ thus becomes a
+sum of small determinants in (c, e) instead of a degree-6 polynomial in f expanded into thousands of
+cancelling terms (which lost about 10 of the 16 digits). ``sympy.cse`` shares the subexpressions;
+the same function runs on Python floats, numpy arrays and complex arrays. Homotopy coefficients come
+from :func:`solvers.methods.homotopy.coefficient_source`.
 
 Data normalisation: a root of the data F / s maps back to F by h -> h / s^2, b -> b, o -> o * s
 (positions and offsets scale with the data, H = (4 S^T S)^-1 scales as 1/s^2, b = -1/2 S^-1 s_1 is
@@ -20,7 +25,6 @@ scale-free); the generated module solves with s = RMS(F) and undoes it.
 from __future__ import annotations
 
 import json
-import os
 import re
 from dataclasses import dataclass
 
@@ -28,94 +32,81 @@ import sympy
 
 from analysis.formulations import Formulation, definition_order, factored_equations
 
-from .methods.spec import METHODS, SPEC_FORMAT, STAGED_FORMAT, TemplateOptions, build_spec, dump_spec, load_spec, spec_sha256
+from .methods import homotopy
+from .methods.spec import load_spec, spec_sha256
 
-__all__ = ["GENERATED_DIR", "MODULE_TEMPLATE", "POLISH_ITERATIONS", "SOLVERS", "GenerationStats", "emit_all",
-           "emit_module", "factored_equations", "generate", "generated_specs", "module_name", "scale_powers",
-           "write_solver"]
+__all__ = ["MODULE_TEMPLATE", "METHOD_PARTS", "POLISH_ITERATIONS", "emit_module", "factored_equations", "read_spec",
+           "module_name", "pencil_coefficients", "scale_powers"]
 
-GENERATED_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
-
-#: Default Gauss-Newton polishing steps on the input equations, per solver kind. The homotopy
-#: endpoints already get Newton steps on the exact C system, so they are not polished again.
-POLISH_ITERATIONS = {"curve-pencil": 1, "homotopy": 0, "staged": 8}
-
-_DESCRIPTIONS = {
-    "curve-pencil": (
-        "rank-2 curve of the offsets (kernel of [c | alpha | beta]) and the bordered\n"
-        "{rows} x {rows} quartic matrix polynomial of C2-C6 and B2 on it; column-degree pencil {size0} x {size1} (QZ).\n"
-        "{degree} roots (GF(p) degree); the pencil's other eigenvalues (infinite, o_1 = infinity) are dropped."),
-    "homotopy": (
-        "parameter homotopy from a generic complex instance whose {degree} roots were\n"
-        "found by monodromy (RK4 predictor, Newton corrector, {degree} paths in {size1} unknowns)."),
-    "staged": (
-        "staged F4-trace elimination template (fallback), action variable {action},\n"
-        "final action-matrix template {size0} x {size1}."),
-}
+#: Default Gauss-Newton polishing steps on the input equations of a pencil solver. The homotopy
+#: endpoints already get Newton steps on the exact system, so they are not polished again.
+POLISH_ITERATIONS = {"curve-pencil": 1}
 
 MODULE_TEMPLATE = '''\
-# Generated by solvers.codegen from {spec_file} -- DO NOT EDIT (run scripts/generate_solvers.py).
+# Generated by solvers.generate ({method}) from {spec_file} -- DO NOT EDIT.
+# Regenerate: {command}
 # spec sha256: {spec_sha}
-"""Solver for {formulation}: {description}
+"""Solver for {system}: {summary}
 
-solve(F) -> ({degree}, {nunknowns}) complex candidate roots in the unknown order {unknown_list};
-solve_batch(F) for F of shape (..., {m}, {n}) -> (..., {degree}, {nunknowns}). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.solve_network turns them into calibrations.
+{description}
+
+solve(F) -> ({rows}, {nvars}) complex candidate roots in the unknown order {unknown_list};
+solve_batch(F) for F of shape (..., {pshape}) -> (..., {rows}, {nvars}). Candidates may be complex or
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets.
 """
 from __future__ import annotations
 
-from solvers import runtime
+{imports}
 
-FORMULATION = "{formulation}"
-CONFIG = ({m}, {n})
+SYSTEM = "{system}"
+CONFIG = {config}
 UNKNOWNS = {unknowns}
 METHOD = "{method}"
 DEGREE = {degree}
-BASIS_SIZE = {degree}
-SIZE = ({size0}, {size1})
+{method_constants}
+SCALE_POWERS = {scale_powers}
 SPEC_FILE = "{spec_file}"
 SPEC_SHA256 = "{spec_sha}"
-SCALE_POWERS = {scale_powers}
-POLISH_ITERATIONS = {polish}
 
 _SOLVER = []
 
 
-def coefficients(f):
-    """Coefficients of the input equations, in spec order, from the {mn} measurements f (row-major)."""
-{coefficient_body}
+{coefficients}
 
 
 def solver():
     """The runtime solver built from the spec (once per process)."""
     if not _SOLVER:
-        _SOLVER.append(runtime.load_solver(runtime.spec_path(__file__, SPEC_FILE), SCALE_POWERS))
+{load}
     return _SOLVER[0]
 
 
-def solve_batch(F, polish=POLISH_ITERATIONS):
-    """Candidate roots for a batch of data F (..., {m}, {n}) -> (..., {degree}, {nunknowns}) complex."""
-    return runtime.solve_batch(solver(), coefficients, F, CONFIG, polish)
-
-
-def solve(F, polish=POLISH_ITERATIONS):
-    """Candidate roots ({degree}, {nunknowns}) for one data matrix F ({m}, {n})."""
-    return runtime.solve_one(solver(), coefficients, F, CONFIG, polish)
+{solve}
 '''
 
-_KIND_TAGS = {"curve-pencil": "pencil", "homotopy": "homotopy", "staged": "t"}
+
+@dataclass(frozen=True)
+class ModuleParts:
+    """What a method puts into the template's holes for one spec."""
+
+    summary: str
+    description: str
+    rows: int
+    pshape: tuple[int, ...]
+    config: tuple[int, int] | None
+    imports: str
+    method_constants: str
+    scale_powers: tuple[float, ...] | None
+    load: str
+    solve: str
 
 
-def module_name(spec: dict) -> str:
-    """File stem with configuration, method and size, e.g. ``tdoa_6r4s_pencil37``, ``tdoa_9r3s_homotopy75``."""
-    label = spec["formulation"].split(":")[0]
-    kind = spec.get("kind", "staged")
-    if kind == "staged":
-        rows, cols = spec["final"]["shape"]
-        return f"tdoa_{label}_t{rows}x{cols}"
-    if kind == "curve-pencil":
-        return f"tdoa_{label}_pencil{spec['size'][0]}"
-    return f"tdoa_{label}_homotopy{spec['size'][0]}"
+def module_name(name: str, spec: dict) -> str:
+    """File stem: the solver's name, method and size, e.g. ``tdoa_6r4s_pencil37``, ``tdoa_9r3s_homotopy75``."""
+    if spec["kind"] == "curve-pencil":
+        return f"{name}_pencil{spec['size'][0]}"
+    return f"{name}_homotopy{spec['paths']}"
 
 
 def scale_powers(unknowns: tuple[str, ...] | list[str]) -> tuple[float, ...]:
@@ -138,7 +129,7 @@ def scale_powers(unknowns: tuple[str, ...] | list[str]) -> tuple[float, ...]:
 # --------------------------------------------------------------------------------------------------
 
 
-def _coefficient_body(spec: dict) -> str:
+def _pencil_coefficient_body(spec: dict) -> str:
     formulation = Formulation.parse(spec["formulation"])
     polys, defs = factored_equations(formulation)
     mons = [tuple(mm) for mm in spec["monomials"]]
@@ -179,132 +170,100 @@ def _print(expr) -> str:
     return _FLOAT_RE.sub(lambda mm: repr(int(mm.group(1)) / int(mm.group(2))), text)
 
 
-# --------------------------------------------------------------------------------------------------
-# emission
-# --------------------------------------------------------------------------------------------------
-
-
-def emit_module(spec_text: str, spec_file: str) -> str:
-    """The module text for a spec (JSON text as stored; its sha256 goes into the header)."""
-    spec = load_spec(spec_text)
-    kind = spec.get("kind", "staged")
-    formulation = Formulation.parse(spec["formulation"])
-    m, n = formulation.config.m, formulation.config.n
-    unknowns = tuple(spec["unknowns"])
-    if kind == "staged":
-        size = tuple(spec["final"]["shape"])
-        degree = len(spec["basis"])
-    else:
-        size = tuple(spec["size"])
-        degree = int(spec["degree"])
-    fields = dict(degree=degree, size0=size[0], size1=size[1], rows=11, action=spec.get("action", ""))
-    return MODULE_TEMPLATE.format(
-        spec_file=spec_file,
-        spec_sha=spec_sha256(spec_text),
-        formulation=spec["formulation"],
-        description=_DESCRIPTIONS[kind].format(**fields),
-        method=kind,
-        degree=degree,
-        size0=size[0],
-        size1=size[1],
-        nunknowns=len(unknowns),
-        unknown_list=", ".join(unknowns),
-        unknowns=repr(unknowns),
-        m=m,
-        n=n,
-        mn=m * n,
-        scale_powers=repr(scale_powers(unknowns)),
-        polish=POLISH_ITERATIONS[kind],
-        coefficient_body=_coefficient_body(spec),
-    )
-
-
-def write_solver(spec: dict, directory: str = GENERATED_DIR) -> tuple[str, str]:
-    """Write <name>.json and <name>.py for a spec; returns both paths."""
-    name = module_name(spec)
-    text = dump_spec(spec)
-    json_path = os.path.join(directory, name + ".json")
-    py_path = os.path.join(directory, name + ".py")
-    with open(json_path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(text)
-    with open(py_path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(emit_module(text, name + ".json"))
-    return json_path, py_path
+def pencil_coefficients(spec: dict) -> str:
+    """The coefficient function of a pencil module: ``coefficients(f)`` from the m*n measurements."""
+    config = Formulation.parse(spec["formulation"]).config
+    return (f"def coefficients(f):\n"
+            f'    """Coefficients of the input equations, in spec order, from the {config.m * config.n} measurements f '
+            f'(row-major)."""\n{_pencil_coefficient_body(spec)}')
 
 
 # --------------------------------------------------------------------------------------------------
-# the project's solvers
+# the methods' parts
 # --------------------------------------------------------------------------------------------------
 
-#: Configuration label -> formulation of the solvers emitted here (the 6r4s pencil, paper Section 3.2);
-#: the homotopy solvers (9r3s, ...) are emitted by solvers.generate.
-SOLVERS = {
-    "6r4s": "6r4s:B2,C2-C6,minors(10)",
-}
+
+def _pencil_parts(spec: dict) -> ModuleParts:
+    config = Formulation.parse(spec["formulation"]).config
+    size, degree = spec["size"], int(spec["degree"])
+    shape = f"({config.m}, {config.n})"
+    return ModuleParts(
+        summary=f"eigenvalue pencil, {degree} roots certified over GF(p).",
+        description=(f"Rank-2 curve of the offsets (kernel of [c | alpha | beta]) and the bordered 11 x 11 quartic\n"
+                     f"matrix polynomial of C2-C6 and B2 on it; column-degree pencil {size[0]} x {size[1]} (QZ) in\n"
+                     f"solvers.methods.pencil. The pencil's other eigenvalues (infinite, o_1 = infinity) are dropped."),
+        rows=degree, pshape=(config.m, config.n), config=(config.m, config.n),
+        imports="from solvers import runtime",
+        method_constants=f"SIZE = ({size[0]}, {size[1]})\nPOLISH_ITERATIONS = {POLISH_ITERATIONS['curve-pencil']}",
+        scale_powers=scale_powers(spec["unknowns"]),
+        load="        _SOLVER.append(runtime.load_solver(runtime.spec_path(__file__, SPEC_FILE), SCALE_POWERS))",
+        solve=(f"def solve_batch(F, polish=POLISH_ITERATIONS):\n"
+               f'    """Candidate roots for a batch of data F (..., {config.m}, {config.n}) -> (..., {degree}, '
+               f'{len(spec["unknowns"])}) complex."""\n'
+               f"    return runtime.solve_batch(solver(), coefficients, F, CONFIG, polish)\n\n\n"
+               f"def solve(F, polish=POLISH_ITERATIONS):\n"
+               f'    """Candidate roots ({degree}, {len(spec["unknowns"])}) for one data matrix F {shape}."""\n'
+               f"    return runtime.solve_one(solver(), coefficients, F, CONFIG, polish)"))
 
 
-@dataclass(frozen=True)
-class GenerationStats:
-    """What :func:`generate` built."""
+def _homotopy_parts(spec: dict) -> ModuleParts:
+    config = spec.get("config")
+    pshape = tuple(config) if config else (len(spec["parameters"]),)
+    paths, nvars = spec["paths"], len(spec["unknowns"])
+    full = spec.get("full_system")
+    tracked = ""
+    if full:
+        tracked = (f"\nThe spec stores all {len(spec['start_roots'])} roots of the squared system; only the {paths} that also\n"
+                   f"satisfy the full system ({full['equations']} equations, {full['degree']} roots certified over GF(p)) "
+                   f"are tracked.")
+    shape = ", ".join(map(str, pshape))
+    return ModuleParts(
+        summary=f"parameter homotopy with {paths} paths in {nvars} unknowns.",
+        description=(f"The {paths} roots of a generic complex start instance (certified count over GF(p), found by\n"
+                     f"monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.{tracked}"),
+        rows=paths, pshape=pshape, config=tuple(config) if config else None,
+        imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import homotopy as _method",
+        method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"
+                          f"START_ROOTS = {len(spec['start_roots'])}"),
+        scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
+        load=("        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), SPEC_FILE), encoding=\"utf-8\") as fh:\n"
+              "            _SOLVER.append(_method.HomotopySolver(_method.load_spec(fh.read()), coefficients))"),
+        solve=(f"def solve_batch(F):\n"
+               f'    """Candidate roots for a batch of data F (..., {shape}) -> (..., {paths}, {nvars}) complex."""\n'
+               f"    return _method.solve_scaled(solver(), F, {pshape!r}, SCALE_POWERS)\n\n\n"
+               f"def solve(F):\n"
+               f'    """Candidate roots ({paths}, {nvars}) for one instance F ({shape})."""\n'
+               f"    return solve_batch(np.asarray(F)[None])[0]"))
 
-    label: str
-    formulation: str
-    method: str
-    degree: int
-    size: tuple[int, int]
-    seconds: float
-    module: str
-    checks: tuple
+
+#: Method (spec kind) -> the text it puts into the template's holes.
+METHOD_PARTS = {"curve-pencil": _pencil_parts, "homotopy": _homotopy_parts}
 
 
-def _remove_stale(label: str, keep: str, directory: str) -> None:
-    for name in os.listdir(directory):
-        stem, ext = os.path.splitext(name)
-        if stem.startswith(f"tdoa_{label}_") and stem != keep and ext in (".py", ".json"):
-            os.remove(os.path.join(directory, name))
+def read_spec(spec_text: str) -> dict:
+    """A spec of either format (the pencil's ``tdoa-solver/2``, the homotopy's own)."""
+    kind = json.loads(spec_text).get("kind")
+    return (homotopy.load_spec if kind == "homotopy" else load_spec)(spec_text)
 
 
-def generate(config_label: str, options: TemplateOptions = TemplateOptions(), directory: str = GENERATED_DIR,
-             method: str | None = None) -> GenerationStats:
-    """Build the spec of a configuration's solver and write its spec and module.
+def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str) -> str:
+    """The module text of a spec (JSON text as stored; its sha256 goes into the header).
 
-    config_label: ``"6r4s"`` or ``"9r3s"`` (see :data:`SOLVERS`); method: one of
-    :data:`solvers.methods.spec.METHODS` (default: the formulation's, see :func:`solvers.methods.spec.solver_method`).
-    Older files of the same configuration are removed.
+    coefficients: the source of the module's ``coefficients`` function (:func:`pencil_coefficients`,
+    :func:`solvers.methods.homotopy.coefficient_source`); command: the shell command that regenerates
+    the module, printed in its header.
     """
-    if config_label not in SOLVERS:
-        raise ValueError(f"unknown solver {config_label!r}; valid: {', '.join(SOLVERS)}")
-    if method is not None and method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
-    result = build_spec(SOLVERS[config_label], options, method)
-    spec = result.spec
-    name = module_name(spec)
-    _remove_stale(config_label, name, directory)
-    _, py_path = write_solver(spec, directory)
-    return GenerationStats(config_label, spec["formulation"], spec.get("kind", "staged"), int(spec["degree"]),
-                           tuple(result.shape), result.seconds, py_path, result.candidates)
-
-
-def generated_specs(directory: str = GENERATED_DIR) -> list[str]:
-    """Paths of the committed spec files emitted by this module (homotopy specs: solvers.generate)."""
-    out = []
-    for f in sorted(os.listdir(directory)):
-        if f.startswith("tdoa_") and f.endswith(".json"):
-            with open(os.path.join(directory, f), encoding="utf-8") as fh:
-                if json.load(fh).get("format") in (SPEC_FORMAT, STAGED_FORMAT):
-                    out.append(os.path.join(directory, f))
-    return out
-
-
-def emit_all(directory: str = GENERATED_DIR) -> list[str]:
-    """Re-emit every module from its committed spec (cheap; no template search)."""
-    out = []
-    for json_path in generated_specs(directory):
-        with open(json_path, encoding="utf-8") as fh:
-            text = fh.read()
-        stem = os.path.splitext(os.path.basename(json_path))[0]
-        py_path = os.path.join(directory, stem + ".py")
-        with open(py_path, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(emit_module(text, stem + ".json"))
-        out.append(py_path)
-    return out
+    spec = read_spec(spec_text)
+    kind = spec["kind"]
+    if kind not in METHOD_PARTS:
+        raise ValueError(f"unknown solver kind {kind!r}; valid: {', '.join(METHOD_PARTS)}")
+    parts = METHOD_PARTS[kind](spec)
+    unknowns = tuple(spec["unknowns"])
+    return MODULE_TEMPLATE.format(
+        method=kind, spec_file=spec_file, command=command, spec_sha=spec_sha256(spec_text),
+        system=spec["formulation"] if kind == "curve-pencil" else spec["system"],
+        summary=parts.summary, description=parts.description, rows=parts.rows, nvars=len(unknowns),
+        unknown_list=", ".join(unknowns), pshape=", ".join(map(str, parts.pshape)),
+        imports=parts.imports, config=repr(parts.config), unknowns=repr(unknowns), degree=int(spec["degree"]),
+        method_constants=parts.method_constants, scale_powers=repr(parts.scale_powers),
+        coefficients=coefficients.rstrip("\n"), load=parts.load, solve=parts.solve)

@@ -16,7 +16,7 @@ basis can separate the roots (:func:`basis_condition`).
 
 scripts/template_evidence.py runs these on the paper's 9r/3s formulation and writes
 tables/template_evidence_9r3s.csv, the evidence for solving it by parameter homotopy instead
-(:mod:`solvers.methods.staged`). Ranks are exact (FLINT ``nmod_mat``).
+(the action-matrix template generator, retired). Ranks are exact (FLINT ``nmod_mat``).
 """
 from __future__ import annotations
 

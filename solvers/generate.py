@@ -1,42 +1,56 @@
-"""One generator for every solver: a formulation or a user's parametric system -> spec + module.
+"""The one solver generator: a configuration, a formulation or a user's parametric system -> spec + module.
 
-``generate(label)`` builds a committed TDOA solver (see :data:`SOLVERS`); ``generate_system(system)``
-builds one for any square :class:`analysis.parametric.ParametricSystem` (e.g. read from a text file by
-:func:`analysis.parametric.parse`). Methods:
+:func:`generate` takes a committed configuration label (:data:`SOLVERS`), a TDOA formulation label
+(``7r3s:B2,B3,C2-C7``) or an :class:`analysis.parametric.ParametricSystem` (e.g. read from a text
+file by :func:`analysis.parametric.parse`) and writes ``<name>_<method><size>.json`` (plain-text
+spec) and ``.py`` (the module of :mod:`solvers.codegen`'s one template: do-not-edit header with the
+command that regenerates it and the spec's sha256, coefficient function, ``solve(F)``) into the
+directory ``out``, and nowhere else. Methods are strategies behind one interface (:data:`METHODS`):
 
-* ``pencil`` (6r4s): the eigenvalue construction of :mod:`solvers.methods.pencil` (curve pencil);
+* ``curve-pencil`` (6r4s, paper Section 3.2): the eigenvalue construction of :mod:`solvers.methods.pencil`;
 * ``homotopy``: parameter homotopy (:mod:`solvers.methods.homotopy`), the general method: every
   square system with a certified root count gets one.
 
 Every homotopy solver's root count is certified over GF(p) first (two primes, two seeds, known root
-checked); monodromy must reach exactly that count. An over-determined formulation (5r4s, 5r5s) is
-squared by random integer combinations of its minors; the full system's count is certified too, and
-only the start roots that satisfy it are tracked (5r/5s: 64 of the squared system's 710). Output: ``<name>.json`` (plain-text spec) and
-``<name>.py`` (do-not-edit header with the spec's sha256; coefficient function; ``solve(F)``).
+checked); monodromy must reach exactly that count. Its start pair (generic complex parameters with
+one known root) comes from a complex network for TDOA systems, is drawn for a system linear in its
+parameters, or is given by the user; a system not linear in its parameters without one is refused
+before any work. An over-determined formulation (5r4s, 5r5s) is squared by random integer
+combinations of its minors; the full system's count is certified too, and only the start roots that
+satisfy it are tracked (5r/5s: 64 of the squared system's 710).
+
+The committed solvers (solvers/generated/) are written by ``scripts/generate_solvers.py``;
+:func:`emit_committed` re-emits one from its committed spec (no numerics recomputed).
 """
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
+import re
+import shlex
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Protocol, Union
 
 import numpy as np
 
+from analysis.formulations import Formulation
 from analysis.parametric import ParametricSystem, from_formulation, from_positions, square
 
-from .methods import homotopy, tracker
-from .methods.spec import dump_spec, spec_sha256
+from . import codegen
+from .methods import homotopy, pencil, tracker
+from .methods.spec import METHODS as METHOD_NAMES
+from .methods.spec import TemplateOptions, dump_spec, solver_method
 
-__all__ = ["GENERATED_DIR", "SOLVERS", "Generated", "emit_homotopy_module", "generate", "generate_system",
-           "homotopy_module_name"]
+__all__ = ["GENERATED_DIR", "METHODS", "SOLVERS", "Generated", "GenerationError", "committed_command",
+           "emit_committed", "generate", "solver_system"]
 
+#: Where the committed solvers live (written by scripts/generate_solvers.py, read by solvers.api).
 GENERATED_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
 
-#: Configuration label -> formulation of its committed homotopy solver (Table 3 cells).
+#: Configuration label -> formulation of its committed solver (Section 3.2 pencil and Table 3 cells).
 SOLVERS = {
+    "6r4s": "6r4s:B2,C2-C6,minors(10)",
     "9r3s": "9r3s:C2-C9",
     "8r3s": "8r3s:B2,C2-C8",
     "7r3s": "7r3s:B2,B3,C2-C7",
@@ -53,9 +67,16 @@ POSITIONS = {"4r5s": "receivers-orbits"}
 #: the minors by random integer combinations (analysis.parametric.square); counted on one seed.
 SQUARED = {"5r4s": 7, "5r5s": 6}
 
+#: A start pair: generic complex parameters q0 and one root x0 there, or a function rng -> such a pair.
+Start = Union[tuple[np.ndarray, np.ndarray], Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]]
+
+
+class GenerationError(ValueError):
+    """A generation that cannot be run as asked (unknown target or method, missing output directory)."""
+
 
 def solver_system(label: str) -> ParametricSystem:
-    """The (square) parametric system of a registered configuration, det H saturated."""
+    """The (square) parametric system of a registered homotopy configuration, det H saturated."""
     if label in POSITIONS:
         m, n = (int(v) for v in label[:-1].split("r"))
         return from_positions(m, n, POSITIONS[label])
@@ -67,20 +88,23 @@ def solver_system(label: str) -> ParametricSystem:
 
 @dataclass(frozen=True)
 class Generated:
-    """What a generation built (printed by the CLI as a readable summary)."""
+    """What a generation built (printed by the CLI as a readable summary).
+
+    candidates: rows of ``solve(F)`` (the pencil's roots; the homotopy's tracked paths).
+    """
 
     name: str
     system: str
     method: str
     degree: int
-    paths: int
+    candidates: int
     seconds: float
     module: str
     report: dict
 
     def summary(self) -> str:
         extra = ", ".join(f"{k} {v}" for k, v in self.report.items() if k not in ("method", "degree", "paths", "seconds"))
-        return (f"{self.system}: {self.method}, {self.degree} roots certified over GF(p), {self.paths} paths; "
+        return (f"{self.system}: {self.method}, {self.degree} roots certified over GF(p), {self.candidates} candidates; "
                 f"{extra}; {self.seconds:.1f} s -> {self.module}")
 
 
@@ -161,176 +185,290 @@ def _tdoa_trials(label: str, powers: tuple[float, ...]) -> Callable[[int], tuple
 
 
 # --------------------------------------------------------------------------------------------------
-# emission
+# the methods: one interface
 # --------------------------------------------------------------------------------------------------
 
-HOMOTOPY_TEMPLATE = '''\
-# Generated by solvers.generate from {spec_file} -- DO NOT EDIT (run `tdoa-workbench generate {label}`).
-# spec sha256: {spec_sha}
-"""Solver for {system}: parameter homotopy with {paths} paths in {nvars} unknowns.
 
-The {paths} roots of a generic complex start instance (certified count over GF(p), found by monodromy)
-are tracked to the data by the compiled tracker of solvers.methods.tracker.{tracked_note}
-solve(F) -> ({paths}, {nvars}) complex candidate roots in the unknown order {unknown_list};
-solve_batch(F) for F of shape (..., {pshape}) -> (..., {paths}, {nvars}). NaN rows for lost paths.
-"""
-from __future__ import annotations
+@dataclass(frozen=True)
+class Job:
+    """One generation: the solver's name and what it solves, with what the methods need to build it.
 
-import os
+    formulation: a TDOA formulation label (pencil; the homotopy's system came from it) or None;
+    system: the square parametric system (homotopy); full: the over-determined system it squares;
+    start / trials: start pair and seeded real instances (TDOA targets; a user's start pair);
+    seeds: the GF(p) certification's seeds.
+    """
 
-import numpy as np
-
-from solvers.methods import homotopy as _method
-
-SYSTEM = "{system}"
-CONFIG = {config}
-UNKNOWNS = {unknowns}
-PARAMETERS = {nparams}
-METHOD = "homotopy"
-DEGREE = {degree}
-PATHS = {paths}
-START_ROOTS = {start_roots}
-SCALE_POWERS = {scale_powers}
-SPEC_FILE = "{spec_file}"
-SPEC_SHA256 = "{spec_sha}"
-
-_SOLVER = []
+    name: str
+    formulation: str | None = None
+    system: ParametricSystem | None = None
+    config: tuple[int, int] | None = None
+    start: Callable | None = None
+    trials: Callable | None = None
+    full: ParametricSystem | None = None
+    seeds: tuple[int, ...] = (0, 1)
 
 
-{coefficient_source}
+@dataclass(frozen=True)
+class Built:
+    """A method's result: the JSON-ready spec, the module's coefficient function (source) and a report."""
 
-def solver():
-    """The runtime solver built from the spec (once per process)."""
-    if not _SOLVER:
-        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), SPEC_FILE), encoding="utf-8") as fh:
-            _SOLVER.append(_method.HomotopySolver(_method.load_spec(fh.read()), coefficients))
-    return _SOLVER[0]
-
-
-def solve_batch(F):
-    """Candidate roots for a batch of data F (..., {pshape}) -> (..., {paths}, {nvars}) complex."""
-    return _method.solve_scaled(solver(), F, {pshape_tuple}, SCALE_POWERS)
+    spec: dict
+    coefficients: str
+    degree: int
+    candidates: int
+    report: dict
 
 
-def solve(F):
-    """Candidate roots ({paths}, {nvars}) for one instance F ({pshape})."""
-    return solve_batch(np.asarray(F)[None])[0]
-'''
+class Method(Protocol):
+    """A solving method as the generator sees it: it builds a spec and the coefficient source."""
+
+    kind: str
+
+    def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built: ...
 
 
-def homotopy_module_name(spec: dict) -> str:
-    return f"{spec['name']}_homotopy{spec['paths']}"
+class PencilMethod:
+    """The 6r4s eigenvalue pencil (:mod:`solvers.methods.pencil`); needs the pencil's formulation."""
+
+    kind = "curve-pencil"
+
+    def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built:
+        if job.formulation is None:
+            raise GenerationError(f"{job.name}: the curve pencil is built from its TDOA formulation, "
+                                  f"{SOLVERS['6r4s']}, not from a parametric system")
+        if progress:
+            progress(f"{job.formulation}: certifying the root count over GF(p) and building the pencil")
+        result = pencil.build(job.formulation, TemplateOptions())
+        spec = result.spec
+        report = dict(result.candidates[0]) if result.candidates else {}
+        report["size"] = "x".join(map(str, spec["size"]))
+        return Built(spec, codegen.pencil_coefficients(spec), int(spec["degree"]), int(spec["degree"]), report)
 
 
-def emit_homotopy_module(spec_text: str, spec_file: str, source: str) -> str:
-    spec = homotopy.load_spec(spec_text)
-    config = spec.get("config")
-    pshape = tuple(config) if config else (len(spec["parameters"]),)
-    return HOMOTOPY_TEMPLATE.format(
-        spec_file=spec_file, spec_sha=spec_sha256(spec_text), label=spec["name"], system=spec["system"],
-        paths=spec["paths"], nvars=len(spec["unknowns"]), unknown_list=", ".join(spec["unknowns"]),
-        pshape=", ".join(map(str, pshape)), pshape_tuple=repr(pshape), config=repr(tuple(config)) if config else "None",
-        unknowns=repr(tuple(spec["unknowns"])), nparams=len(spec["parameters"]), degree=spec["degree"],
-        scale_powers=repr(tuple(spec["scale_powers"])) if spec.get("scale_powers") else "None",
-        coefficient_source=source, tracked_note=_tracked_note(spec), start_roots=len(spec["start_roots"]))
+class HomotopyMethod:
+    """Parameter homotopy (:mod:`solvers.methods.homotopy`) of a square parametric system."""
+
+    kind = "homotopy"
+
+    def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built:
+        system, full = job.system, job.full
+        options = homotopy.HomotopyOptions(seed=seed)
+        if not system.is_square:
+            raise homotopy.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
+                                         f"{len(system.unknowns)} unknowns: a homotopy solver needs a square system")
+        system.check_parameters_occur()
+        _check_names(system)
+        if job.start is None:
+            _check_linear_in_parameters(system)
+        full_report = None
+        if full is not None:
+            if tuple(full.unknowns) != tuple(system.unknowns) or tuple(full.parameters) != tuple(system.parameters):
+                raise homotopy.HomotopyError(f"{full.name} and {system.name} differ in unknowns or parameters")
+            if progress:
+                progress(f"{full.name}: certifying the full system's root count over GF(p) (two primes x 2 seeds)")
+            full_report = full.degree(seeds=(0, 1))
+            if not full_report.zero_dimensional or full_report.degree == 0:
+                raise homotopy.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
+                                             f"(dimension {full_report.dimension}, degree {full_report.degree})")
+        if progress:
+            progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
+        report = system.degree(seeds=job.seeds)
+        if not report.zero_dimensional:
+            raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
+        if report.degree == 0:
+            raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
+        # a squared system is verified once, on the paths it will track (below), not on all its roots
+        build_options = dataclasses.replace(options, verify_trials=0) if full is not None else options
+        spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
+        spec = {"name": job.name, **spec, "paths": len(spec["start_roots"]),
+                "certified": {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
+                              "saturated_by": list(system.nonzero)},
+                "config": list(job.config) if job.config else None,
+                "scale_powers": list(system.scale_powers) if system.scale_powers else None}
+        if full_report is not None:
+            coefficients = homotopy.load_coefficients(source)
+            tracked = homotopy.full_system_roots(full, spec, coefficients, full_report.degree)
+            spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
+                                   "primes": list(full_report.primes), "seeds": [0, 1], "tracked": tracked}
+            spec["degree"] = spec["paths"] = full_report.degree
+            spec["tracker"] = dict(tracker.FAMILY)  # a jump to another family is invisible to the duplicate test
+            build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
+            if job.trials is not None and options.verify_trials:
+                build["verified"] = homotopy.verify(full.name, spec, coefficients, job.trials, options.verify_trials)
+        return Built(spec, source, report.degree, spec["paths"], build)
 
 
-def _tracked_note(spec: dict) -> str:
-    full = spec.get("full_system")
-    if not full:
-        return ""
-    return (f"\nThe spec stores all {len(spec['start_roots'])} roots of the squared system; only the {spec['paths']} that also\n"
-            f"satisfy the full system ({full['equations']} equations, {full['degree']} roots certified over GF(p)) are tracked.")
+#: Method name -> strategy (names as in solvers.methods.spec.METHODS).
+METHODS: dict[str, Method] = {"curve-pencil": PencilMethod(), "homotopy": HomotopyMethod()}
+assert tuple(METHODS) == METHOD_NAMES
 
 
-def _write(spec: dict, source: str, directory: str) -> str:
-    name = homotopy_module_name(spec)
+#: Names the generated coefficient function uses itself (solvers.methods.homotopy.coefficient_source:
+#: its argument q, numpy, its result, sympy.cse's t_0, t_1, ...): a system's names must differ.
+GENERATED_CODE_NAMES = re.compile(r"q|np|out|coefficients|t_\d+")
+
+
+def _check_names(system: ParametricSystem) -> None:
+    names = system.unknowns + system.parameters + tuple(name for name, _ in system.definitions)
+    taken = [v for v in names if GENERATED_CODE_NAMES.fullmatch(v)]
+    if taken:
+        raise homotopy.HomotopyError(f"{system.name}: the names {', '.join(taken)} are used by the generated solver "
+                                     "code (q, np, out, coefficients, t_0, t_1, ...); rename them")
+
+
+def _check_linear_in_parameters(system: ParametricSystem) -> None:
+    """Raise unless the generator can draw a start pair itself (coefficients affine in the parameters)."""
+    degrees = system.coefficient_degrees
+    if system.definitions or max(degrees) > 1:
+        k = next((i for i, d in enumerate(degrees) if d > 1), None)
+        where = ""
+        if k is not None:
+            sizes = np.cumsum([len(eq) for eq in system.terms])
+            where = f" (equation {int(np.searchsorted(sizes, k, side='right')) + 1} has a coefficient of degree {degrees[k]})"
+        raise homotopy.HomotopyError(
+            f"{system.name}: the parameters enter non-linearly{where}; the generator draws a start pair (generic "
+            "complex parameters with a known root) only for systems linear in their parameters. Give one: "
+            "`tdoa-workbench generate FILE --out DIR --start START.json` (parameters and a root there) or "
+            "solvers.generate.generate(system, start=(q0, x0), out=...)")
+
+
+# --------------------------------------------------------------------------------------------------
+# the entry
+# --------------------------------------------------------------------------------------------------
+
+
+def committed_command(label: str) -> str:
+    """The command that regenerates a committed solver (run from the repository root)."""
+    return f"python scripts/generate_solvers.py {label}"
+
+
+def _config(label: str) -> tuple[int, int]:
+    m, n = (int(v) for v in label.split(":")[0][:-1].split("r"))
+    return m, n
+
+
+def _job(target, name: str | None, start: Start | None, method: str | None,
+         full: ParametricSystem | None = None) -> tuple[Job, str, str | None]:
+    """The job, its method and (for a committed configuration) its label."""
+    if full is not None and not isinstance(target, ParametricSystem):
+        raise GenerationError("full= is for a parametric system that squares it; TDOA targets square their own")
+    if isinstance(target, ParametricSystem):
+        if method not in (None, "homotopy"):
+            raise GenerationError(f"{target.name}: a parametric system is solved by the homotopy method, not {method!r}")
+        if start is not None and not callable(start):
+            q0, x0 = (np.asarray(v, dtype=complex) for v in start)
+            start = lambda rng, q0=q0, x0=x0: (q0, x0)  # noqa: E731 (the build draws nothing from rng)
+        return Job(name or _identifier(target.name), system=target, start=start, full=full), "homotopy", None
+    if not isinstance(target, str):
+        raise GenerationError(f"target must be a configuration label, a formulation label or a ParametricSystem, "
+                              f"got {type(target).__name__}")
+    label = target.replace("/", "") if target.replace("/", "") in SOLVERS else None
+    formulation = SOLVERS[label] if label else target
+    if label is None and ":" not in target:
+        raise GenerationError(f"unknown configuration {target!r}; committed: {', '.join(SOLVERS)}; or give a "
+                              "formulation label such as 7r3s:B2,B3,C2-C7 or a parametric system")
+    if start is not None:
+        raise GenerationError(f"{target}: TDOA targets draw their own start pair (a complex network)")
+    config = _config(formulation)
+    name = name or "tdoa_" + (label or re.sub(r"\W+", "_", target).strip("_"))
+    if label in POSITIONS:
+        if method not in (None, "homotopy"):
+            raise GenerationError(f"{label}: its positions formulation is solved by the homotopy method, not {method!r}")
+        system, variant = solver_system(label), POSITIONS[label]
+        return (Job(name, formulation, system, config, _positions_start(*config, variant),
+                    _positions_trials(*config, variant, system.scale_powers)), "homotopy", label)
+    chosen = method or solver_method(Formulation.parse(formulation))
+    if chosen == "curve-pencil":
+        return Job(name, formulation, config=config), chosen, label
+    system = solver_system(label) if label else from_formulation(formulation, saturate_det_h=True)
+    full = from_formulation(formulation, saturate_det_h=True) if label in SQUARED else None
+    trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
+    return (Job(name, formulation, system, config, _tdoa_start(*config), trials, full,
+                seeds=(0,) if label in SQUARED else (0, 1)), chosen, label)
+
+
+def _identifier(text: str) -> str:
+    return re.sub(r"\W+", "_", text).strip("_") or "system"
+
+
+def _remove_stale(out: str, name: str, keep: str) -> None:
+    """Remove this solver's older modules and specs in ``out`` (other sizes or methods); nothing else."""
+    stale = re.compile(re.escape(name) + r"_(pencil|homotopy)\d+")
+    for f in os.listdir(out):
+        stem, ext = os.path.splitext(f)
+        if ext in (".py", ".json") and stem != keep and stale.fullmatch(stem):
+            os.remove(os.path.join(out, f))
+
+
+def write(out: str, name: str, spec: dict, coefficients: str, command: str) -> str:
+    """Write ``<module>.json`` and ``<module>.py`` into ``out`` (older files of the solver removed); the module path."""
+    stem = codegen.module_name(name, spec)
     text = dump_spec(spec)
-    with open(os.path.join(directory, name + ".json"), "w", encoding="utf-8", newline="\n") as fh:
+    os.makedirs(out, exist_ok=True)
+    _remove_stale(out, name, stem)
+    with open(os.path.join(out, stem + ".json"), "w", encoding="utf-8", newline="\n") as fh:
         fh.write(text)
-    py_path = os.path.join(directory, name + ".py")
+    py_path = os.path.join(out, stem + ".py")
     with open(py_path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(emit_homotopy_module(text, name + ".json", source))
+        fh.write(codegen.emit_module(text, stem + ".json", coefficients, command))
     return py_path
 
 
-def _remove_stale(prefix: str, keep: str, directory: str) -> None:
-    for f in os.listdir(directory):
-        stem, ext = os.path.splitext(f)
-        if stem.startswith(prefix + "_") and stem != keep and ext in (".py", ".json") and "homotopy" in stem:
-            os.remove(os.path.join(directory, f))
+def generate(target: "str | ParametricSystem", method: str | None = None, *, out: str, name: str | None = None,
+             seed: int = 0, start: Start | None = None, full: ParametricSystem | None = None,
+             command: str | None = None, progress: Callable[[str], None] | None = None) -> Generated:
+    """Build a solver and write its spec and module into ``out`` (and nowhere else).
 
-
-def generate_system(system: ParametricSystem, name: str, directory: str = GENERATED_DIR,
-                    options: homotopy.HomotopyOptions = homotopy.HomotopyOptions(),
-                    start=None, trials=None, config: tuple[int, int] | None = None,
-                    progress: Callable[[str], None] | None = None, seeds: tuple[int, ...] = (0, 1),
-                    full: ParametricSystem | None = None) -> Generated:
-    """Certify the root count over GF(p) (two primes x ``seeds``), build the homotopy solver and write spec + module.
-
-    full: the over-determined system that ``system`` squares (same unknowns and parameters). Its root
-    count is certified too (two primes, two seeds), and only the start roots that satisfy it are
-    tracked (:func:`solvers.methods.homotopy.full_system_roots`): 5r/5s tracks 64 of 710 paths.
+    target: a committed configuration (:data:`SOLVERS`, e.g. ``"9r3s"``), a TDOA formulation label
+    (``"7r3s:B2,B3,C2-C7"``) or a square :class:`ParametricSystem`. method: one of :data:`METHODS`
+    (default: ``curve-pencil`` for the pencil's formulation, ``homotopy`` otherwise). out: output
+    directory (created). name: file-name prefix (default ``tdoa_<label>``, or the system's name).
+    seed: monodromy seed. start: a start pair (q0, x0) for a system not linear in its parameters
+    (refused without one). full: the over-determined system that a parametric ``target`` squares (its
+    count is certified too and only the start roots satisfying it are tracked; same unknowns and
+    parameters). command: the regenerating command printed in the module's header (default:
+    :func:`committed_command` for a committed configuration written to :data:`GENERATED_DIR`, the
+    ``tdoa-workbench generate`` command for another label, else a description of this call).
     """
+    if method is not None and method not in METHODS:
+        raise GenerationError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
     t0 = time.perf_counter()
-    if not system.is_square:
-        raise homotopy.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
-                                     f"{len(system.unknowns)} unknowns: a homotopy solver needs a square system")
-    system.check_parameters_occur()
-    full_report = None
-    if full is not None:
-        if tuple(full.unknowns) != tuple(system.unknowns) or tuple(full.parameters) != tuple(system.parameters):
-            raise homotopy.HomotopyError(f"{full.name} and {system.name} differ in unknowns or parameters")
-        if progress:
-            progress(f"{full.name}: certifying the full system's root count over GF(p) (two primes x 2 seeds)")
-        full_report = full.degree(seeds=(0, 1))
-        if not full_report.zero_dimensional or full_report.degree == 0:
-            raise homotopy.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
-                                         f"(dimension {full_report.dimension}, degree {full_report.degree})")
-    if progress:
-        progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(seeds)} seed(s))")
-    report = system.degree(seeds=seeds)
-    if not report.zero_dimensional:
-        raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
-    if report.degree == 0:
-        raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
-    # a squared system is verified once, on the paths it will track (below), not on all its roots
-    build_options = dataclasses.replace(options, verify_trials=0) if full is not None else options
-    spec, source, build = homotopy.build(system, report.degree, start, trials, build_options, progress)
-    spec = {"name": name, **spec, "paths": len(spec["start_roots"]),
-            "certified": {"primes": list(report.primes), "seeds": list(seeds), "degree": report.degree,
-                          "saturated_by": list(system.nonzero)},
-            "config": list(config) if config else None,
-            "scale_powers": list(system.scale_powers) if system.scale_powers else None}
-    if full_report is not None:
-        coefficients = homotopy.load_coefficients(source)
-        tracked = homotopy.full_system_roots(full, spec, coefficients, full_report.degree)
-        spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
-                               "primes": list(full_report.primes), "seeds": [0, 1], "tracked": tracked}
-        spec["degree"] = spec["paths"] = full_report.degree
-        spec["tracker"] = dict(tracker.FAMILY)  # a jump to another family is invisible to the duplicate test
-        build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
-        if trials is not None and options.verify_trials:
-            build["verified"] = homotopy.verify(full.name, spec, coefficients, trials, options.verify_trials)
-    os.makedirs(directory, exist_ok=True)
-    _remove_stale(name, homotopy_module_name(spec), directory)
-    py_path = _write(spec, source, directory)
-    return Generated(homotopy_module_name(spec), system.name, "homotopy", report.degree, spec["paths"],
-                     time.perf_counter() - t0, py_path, build)
+    job, kind, label = _job(target, name, start, method, full)
+    built = METHODS[kind].build(job, seed, progress)
+    if command is None:
+        if label is not None and job.name == f"tdoa_{label}" and os.path.abspath(out) == GENERATED_DIR:
+            command = committed_command(label)
+        elif isinstance(target, str) and name is None and method in (None, kind):
+            command = f"tdoa-workbench generate {shlex.quote(target)} --out {shlex.quote(out)}"
+            command += f" --seed {seed}" if seed else ""
+        else:
+            what = repr(target) if isinstance(target, str) else f"the system {target.name!r}"
+            command = f"call solvers.generate.generate({what}, method={kind!r}, out=..., seed={seed})"
+    py_path = write(out, job.name, built.spec, built.coefficients, command)
+    system = job.system.name if job.system is not None else job.formulation
+    return Generated(codegen.module_name(job.name, built.spec), system, kind, built.degree, built.candidates,
+                     time.perf_counter() - t0, py_path, built.report)
 
 
-def generate(label: str, directory: str = GENERATED_DIR, seed: int = 0,
-             progress: Callable[[str], None] | None = None) -> Generated:
-    """Build the committed solver of a TDOA configuration (see :data:`SOLVERS`)."""
+def emit_committed(json_path: str) -> tuple[str, str]:
+    """(module path, module text) of a committed solver re-emitted from its spec (no numerics recomputed)."""
+    with open(json_path, encoding="utf-8") as fh:
+        text = fh.read()
+    stem = os.path.splitext(os.path.basename(json_path))[0]
+    label = stem.split("_")[1]
     if label not in SOLVERS:
-        raise ValueError(f"no homotopy solver registered for {label!r}; valid: {', '.join(SOLVERS)}")
-    system = solver_system(label)
-    m, n = (int(v) for v in label[:-1].split("r"))
-    if label in POSITIONS:
-        start, trials = _positions_start(m, n, POSITIONS[label]), _positions_trials(m, n, POSITIONS[label], system.scale_powers)
+        raise GenerationError(f"{json_path}: not a committed configuration ({', '.join(SOLVERS)})")
+    if "_pencil" in stem:
+        coefficients = codegen.pencil_coefficients(codegen.read_spec(text))
     else:
-        start, trials = _tdoa_start(m, n), _tdoa_trials(label, system.scale_powers)
-    full = from_formulation(SOLVERS[label], saturate_det_h=True) if label in SQUARED else None
-    return generate_system(system, f"tdoa_{label}", directory, homotopy.HomotopyOptions(seed=seed),
-                           start, trials, (m, n), progress,
-                           seeds=(0,) if label in SQUARED else (0, 1), full=full)
+        coefficients = homotopy.coefficient_source(solver_system(label))
+    return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients, committed_command(label))
+
+
+def committed_specs(directory: str = GENERATED_DIR) -> list[str]:
+    """Paths of the committed specs (one per solver in ``directory``)."""
+    return [os.path.join(directory, f) for f in sorted(os.listdir(directory))
+            if f.startswith("tdoa_") and f.endswith(".json")]
+
+

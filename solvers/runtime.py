@@ -1,13 +1,13 @@
-"""Shared online kernels of the generated pencil and staged solvers.
+"""Online glue of the generated pencil solvers: normalisation, polishing, batched solve.
 
 A generated module (solvers/generated/*.py) holds the solver's constants and the coefficient function
-of its equations; what every method needs online lives here, vectorised over a leading batch axis:
+of its equations; what the pencil method needs around its kernel lives here, vectorised over a
+leading batch axis:
 
 * data normalisation (divide by the RMS measurement) and the map of roots back to the data scale;
 * evaluation of a polynomial system from its coefficient vector, Gauss-Newton polishing;
-* :func:`load_solver`, which builds a spec's kernel by its kind (``curve-pencil``:
-  :class:`solvers.methods.pencil.CurvePencilSolver`; ``staged``:
-  :class:`solvers.methods.staged.StagedSolver`), and the batched solve around it.
+* :func:`load_solver`, which builds a spec's kernel (``curve-pencil``:
+  :class:`solvers.methods.pencil.CurvePencilSolver`), and the batched solve around it.
 
 Each method's own numerics live beside its offline build in :mod:`solvers.methods`; homotopy
 solvers are driven by :mod:`solvers.methods.homotopy` alone. Only numpy and scipy are used.
@@ -173,15 +173,10 @@ class _Solver:
 
     def __init__(self, spec: dict, scale_powers: tuple[float, ...]):
         self.spec = spec
-        kind = spec.get("kind", "staged")
-        if kind == "curve-pencil":
-            self.kernel = CurvePencilSolver(spec)
-        elif kind == "staged":
-            from .methods.staged import StagedSolver  # its offline build needs the exact algebra
-
-            self.kernel = StagedSolver(spec)
-        else:
-            raise ValueError(f"unknown solver kind {kind!r}; valid: curve-pencil, staged (homotopy: solvers.methods)")
+        kind = spec.get("kind")
+        if kind != "curve-pencil":
+            raise ValueError(f"unknown solver kind {kind!r}; valid: curve-pencil (homotopy: solvers.methods.homotopy)")
+        self.kernel = CurvePencilSolver(spec)
         self.kind = kind
         self.basis_size = self.kernel.basis_size
         self.nvars = len(spec["unknowns"])
@@ -192,8 +187,6 @@ class _Solver:
         self.system = PolySystem(term_exps, term_eq, len(spec["inputs"]))
 
     def roots(self, Fn: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
-        if self.kind == "staged":
-            return self.kernel.roots_from_coefficients(coeffs)
         return self.kernel.roots(Fn)
 
 

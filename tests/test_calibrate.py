@@ -116,3 +116,38 @@ def test_refinement_from_solver_output_converges():
     result = refine(start, F)
     assert result.calibration.residual < 1e-9 < result.initial_residual
     assert calibration_errors(result.calibration, net).position < 1e-8
+
+
+@pytest.mark.parametrize("label", ["6r4s", "9r3s", "4r5s"])
+def test_calibrations_from_a_generated_solvers_roots(label):
+    # generate -> solve -> positions: pencil and homotopy (H, b, o) roots, and a positions formulation
+    from solvers.api import _module_for, calibrations
+
+    module = _module_for(label)
+    net = random_network(*module.CONFIG, np.random.default_rng(3))
+    roots = None
+    if label == "4r5s":  # its 344 paths take seconds: the true root (orbit invariants) and a complex one
+        from analysis.positions import _to_gauge
+        from solvers.subsystem import orbits_from_receivers
+
+        truth = orbits_from_receivers(_to_gauge(np.asarray(net.receivers, float), np.asarray(net.transmitters, float))[0])
+        roots = np.array([truth + 1j, truth, np.full_like(truth, np.nan)], dtype=complex)
+    cals = calibrations(module, net.measurements(), roots)
+    assert cals and all(a.residual <= b.residual for a, b in zip(cals, cals[1:]))
+    best = cals[0]
+    assert best.receivers.shape == (module.CONFIG[0], 2) and best.offsets.shape == (module.CONFIG[1],)
+    assert best.receivers[0].tolist() == [0.0, 0.0] and abs(best.receivers[1, 1]) < 1e-12 < best.receivers[1, 0]
+    errors = calibration_errors(best, net)
+    assert best.residual < 1e-8 and max(errors.position, errors.offset) < 1e-8, (label, best.residual, errors)
+
+
+def test_calibrations_refuse_other_data_and_systems():
+    from types import SimpleNamespace
+
+    from solvers.api import _module_for, calibrations
+
+    with pytest.raises(ValueError, match=r"needs \(6, 4\)"):
+        calibrations(_module_for("6r4s"), np.ones((5, 4)))
+    other = SimpleNamespace(__name__="circle", SYSTEM="circle", CONFIG=(6, 4), UNKNOWNS=("x", "y"))
+    with pytest.raises(ValueError, match="neither"):
+        calibrations(other, np.ones((6, 4)), roots=np.zeros((1, 2)))

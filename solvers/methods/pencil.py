@@ -9,7 +9,8 @@ number of spurious eigenvalues to drop), both checked on seeded real networks.
 Online (:class:`CurvePencilSolver`): the bordered matrix polynomial of the data, its column-degree
 linearisation (37 x 37) solved by QZ, the spurious eigenvalues dropped by count. Generated modules
 reach it through :func:`solvers.runtime.load_solver`; the online part needs only numpy and scipy
-(the exact algebra of the build is imported by :func:`build` alone).
+(the exact algebra of the build is imported by :func:`build` alone). This module imports nothing
+of :mod:`solvers.runtime` or :mod:`solvers.generate` (they import it): no import circle.
 """
 from __future__ import annotations
 
@@ -34,7 +35,6 @@ __all__ = ["PENCIL_COLUMN_DEGREES", "CurvePencilSolver", "build", "compaction_pi
 
 def _real_trials(formulation: Formulation, trials: int) -> tuple[np.ndarray, np.ndarray]:
     """Seeded noiseless networks (seeds 0..trials-1): normalised data and the root in that frame."""
-    from ..runtime import data_scale
     from ..synthetic import random_network, true_root
 
     m, n = formulation.config.m, formulation.config.n
@@ -45,7 +45,7 @@ def _real_trials(formulation: Formulation, trials: int) -> tuple[np.ndarray, np.
         F.append(net.measurements())
         X.append(np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o]))
     F, X = np.array(F), np.array(X)
-    s = data_scale(F)
+    s = np.sqrt(np.mean(F * F, axis=(1, 2)))  # the generated module's normalisation (solvers.runtime.data_scale)
     powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
     return F / s[:, None, None], X / s[:, None] ** powers
 

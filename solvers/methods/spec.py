@@ -4,12 +4,12 @@ Step 1 of solver generation: on consistent random instances over GF(p) a formula
 roots is fixed (the size of the standard monomial basis of its grevlex Gröbner basis,
 :func:`gf_degree`) and a method builds a JSON spec, which :mod:`solvers.codegen` turns into a module
 and the method's online kernel executes. This module owns what every such spec shares: its format
-tags, :class:`TemplateOptions` and :class:`TemplateResult`, the term structure of the input
-equations (the layout of the generated coefficient vector), the choice of method for a formulation
-(:func:`solver_method`, :func:`build_spec`) and the byte-stable JSON text (:func:`dump_spec`,
-:func:`load_spec`, :func:`spec_sha256`). Methods: :mod:`solvers.methods.pencil` (``curve-pencil``),
-:mod:`solvers.methods.staged` (``staged``) and :mod:`solvers.methods.homotopy` (``homotopy``, built
-by :mod:`solvers.generate`; its spec format is its own).
+tag, :class:`TemplateOptions` and :class:`TemplateResult`, the term structure of the input equations
+(the layout of the generated coefficient vector), the choice of method for a formulation
+(:func:`solver_method`) and the byte-stable JSON text (:func:`dump_spec`, :func:`load_spec`,
+:func:`spec_sha256`). Methods: :mod:`solvers.methods.pencil` (``curve-pencil``) and
+:mod:`solvers.methods.homotopy` (``homotopy``; its spec format is its own); :mod:`solvers.generate`
+runs them. This module imports no method (the methods import it), so there is no import circle.
 """
 from __future__ import annotations
 
@@ -25,11 +25,9 @@ from analysis.ring import Ring
 __all__ = [
     "METHODS",
     "SPEC_FORMAT",
-    "STAGED_FORMAT",
     "TemplateError",
     "TemplateOptions",
     "TemplateResult",
-    "build_spec",
     "common_spec",
     "dump_spec",
     "gf_degree",
@@ -40,12 +38,10 @@ __all__ = [
     "term_structure",
 ]
 
-#: Format of the curve-pencil and homotopy specs.
+#: Format of the curve-pencil specs.
 SPEC_FORMAT = "tdoa-solver/2"
-#: Format of the staged F4-trace templates (fallback).
-STAGED_FORMAT = "tdoa-staged-template/1"
-#: Solver construction methods.
-METHODS = ("curve-pencil", "homotopy", "staged")
+#: Solver construction methods (solvers.generate runs them).
+METHODS = ("curve-pencil", "homotopy")
 
 
 class TemplateError(RuntimeError):
@@ -58,14 +54,12 @@ class TemplateOptions:
 
     prime: characteristic of the GF(p) instances (< 2^16 so that every product is exact in float64).
     seed: seed of the GF(p) instance (printed in errors); the degree is confirmed on seed + 1.
-    actions: staged templates only: candidate action variables (None: every unknown).
     chart_angle: curve-pencil only: the chart nu -> (lambda, mu) = nu (cos a, sin a) + (-sin a, cos a).
     verify_trials: seeded real networks on which a built solver must find the known root.
     """
 
     prime: int = 65521
     seed: int = 1
-    actions: tuple[str, ...] | None = None
     chart_angle: float = 0.3
     verify_trials: int = 20
 
@@ -80,9 +74,7 @@ class TemplateResult:
 
     @property
     def shape(self) -> tuple[int, int]:
-        """Size of the numeric core: final template (staged), companion pencil, or (paths, unknowns)."""
-        if self.spec.get("kind", "staged") == "staged":
-            return tuple(self.spec["final"]["shape"])
+        """Size of the numeric core: the pencil's (rows, columns)."""
         return tuple(self.spec["size"])
 
 
@@ -131,33 +123,15 @@ def term_structure(formulation: Formulation | str) -> tuple[list[list[int]], lis
 
 
 def solver_method(formulation: Formulation | str) -> str:
-    """The construction used for a formulation: ``curve-pencil``, ``homotopy`` or ``staged``."""
+    """The construction used for a formulation: ``curve-pencil`` (6r4s with B2, C2-C6 and its ten
+    minors, paper Section 3.2) or ``homotopy`` (every other formulation; it must be square)."""
     formulation = as_formulation(formulation)
     config, eqs = formulation.config, tuple(formulation.equations)
     c_eqs = tuple(f"C{i}" for i in range(2, config.m + 1))
     minors = tuple(e for e in eqs if e.startswith("M"))
     if (config.m == 6 and config.n == 4 and set(eqs) == {"B2", *c_eqs, *minors} and len(minors) == 10):
         return "curve-pencil"
-    if config.n == 3 and all(e.startswith("C") for e in eqs) and len(eqs) == len(formulation.unknowns):
-        return "homotopy"
-    return "staged"
-
-
-def build_spec(formulation: Formulation | str, options: TemplateOptions = TemplateOptions(),
-               method: str | None = None) -> TemplateResult:
-    """Build the spec of a formulation's solver by ``method`` (default :func:`solver_method`)."""
-    from . import pencil, staged  # the methods import this interface
-
-    formulation = as_formulation(formulation)
-    method = method or solver_method(formulation)
-    if method == "curve-pencil":
-        return pencil.build(formulation, options)
-    if method == "homotopy":
-        raise TemplateError(f"{formulation.label}: homotopy solvers are built by solvers.generate "
-                            "(tdoa-workbench generate)")
-    if method == "staged":
-        return staged.build(formulation, options)
-    raise ValueError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
+    return "homotopy"
 
 
 def spec_header(formulation: Formulation, options: TemplateOptions, kind: str, degree: int,
@@ -210,9 +184,8 @@ def dump_spec(spec: dict) -> str:
 def load_spec(text: str) -> dict:
     """Parse a spec; raises :class:`TemplateError` for an unknown format."""
     spec = json.loads(text)
-    if spec.get("format") not in (SPEC_FORMAT, STAGED_FORMAT):
-        raise TemplateError(f"unknown template spec format {spec.get('format')!r}; "
-                            f"expected {SPEC_FORMAT} or {STAGED_FORMAT}")
+    if spec.get("format") != SPEC_FORMAT:
+        raise TemplateError(f"unknown template spec format {spec.get('format')!r}; expected {SPEC_FORMAT}")
     return spec
 
 
