@@ -142,8 +142,8 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
     positions roots (4r/5s) through :func:`analysis.positions.network_from_root`. Returns the real,
     geometrically valid calibrations sorted by RMS residual (best first), in the gauge r_1 = 0,
     r_2 = (r_2x > 0, 0); a reflection of the plane is a second solution the data cannot tell apart,
-    one representative is returned. Nothing is refined (:func:`calibrate` and
-    :func:`solvers.calibrate.calibrate` do). Raises ValueError for a module whose unknowns are not a
+    one representative is returned. Nothing is refined (:func:`solve_network` and
+    :func:`solvers.calibration.calibrate` do). Raises ValueError for a module whose unknowns are not a
     TDOA formulation's, or for data of another shape.
     """
     F = np.asarray(F, dtype=float)
