@@ -86,34 +86,36 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
         other = _calibrate_once(F, sigma, seed2, opts, t0)
         if other.status != "failed" and _differs(result, other):
-            first, second = (result, other) if _preferred(result, other, sigma, opts) else (other, result)
+            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts)
+            first, second = (result, other) if (cost_r, -result.inliers.sum()) <= (cost_o, -other.inliers.sum()) \
+                else (other, result)
+            gap = abs(cost_r - cost_o) / scale**2 if np.isfinite(cost_r - cost_o) else np.inf
             n_diff = int((first.inliers != second.inliers).sum())
-            note = (f"seed-dependent: a second search (seed {second.seed}) gives another answer ({n_diff} measurements "
-                    f"classified differently or nodes moved beyond 3 std); both are reported")
-            status = _worst(first.status, "ambiguous")
-            result = replace(first, status=status, warnings=(note,) + first.warnings, alternative=second.to_dict(),
-                             message=_message(status, first, note))
+            if gap < opts.ambiguity_chi2:
+                note = (f"seed-dependent: a second search (seed {second.seed}) gives another answer that fits about as "
+                        f"well (cost +{gap:.2g} sigma^2; {n_diff} measurements classified differently or nodes moved "
+                        f"beyond 3 std); both are reported")
+                status = _worst(first.status, "ambiguous")
+                result = replace(first, status=status, warnings=(note,) + first.warnings, alternative=second.to_dict(),
+                                 message=_message(status, first, note))
+            else:
+                note = (f"a second search (seed {second.seed}) found a worse answer (cost +{gap:.3g} sigma^2, {n_diff} "
+                        f"measurements classified differently); this one is kept")
+                result = replace(first, warnings=first.warnings + (note,))
     return replace(result, seconds=time.perf_counter() - t0, seed=seed)
 
 
-def _preferred(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions) -> bool:
-    """Whether answer a is preferred to b: the less severe status, then the smaller truncated cost
-    sum min(e^2, (k s)^2) over all measured entries at a common scale s (sigma, or the smaller of the
-    two estimates), then more inliers."""
-    ra, rb = STATUSES.index(a.status), STATUSES.index(b.status)
-    if ra != rb:
-        return ra > rb
-    s = sigma if sigma is not None else np.nanmin([a.sigma, b.sigma])
+def _truncated_costs(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions):
+    """(cost of a, cost of b, scale s): sum over every measured entry of min(e^2, (k s)^2) (an entry
+    of an unplaced node counts (k s)^2) at one scale s, the given sigma or the smaller estimate."""
+    s = sigma if sigma is not None else float(np.nanmin([a.sigma, b.sigma]))
     cap = (opts.threshold_sigmas * s) ** 2
 
     def cost(r):
-        e = r.residuals[np.isfinite(r.residuals) | r.inliers]
+        e = r.residuals[r.measured]
         return float(np.sum(np.minimum(np.nan_to_num(e, nan=np.inf) ** 2, cap)))
 
-    ca, cb = cost(a), cost(b)
-    if np.isfinite(ca) and np.isfinite(cb) and abs(ca - cb) > 1e-12 * max(ca, cb):
-        return ca < cb
-    return a.inliers.sum() >= b.inliers.sum()
+    return cost(a), cost(b), s
 
 
 def _worst(*statuses: str) -> str:
@@ -358,7 +360,8 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng)
         return fits[id(model)][-1]
 
-    best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(), accept, 0 if sigma is not None else 2)
+    best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(), accept,
+                           0.0 if sigma is not None else opts.confirm_outliers)
     if best is None:
         return _failed(F, "no hypothesis: every minimal-solver sample and sub-network fit failed (degenerate geometry?)",
                        t0, seed, search, warnings)

@@ -62,6 +62,10 @@ class CalibrationOptions:
     max_snooping_rounds : refits of the data snooping (rejection / readmission) loop
     unknown_sigma_outliers : with sigma unknown, the RANSAC sample count assumes at least this share of
         gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted)
+    confirm_outliers : with sigma unknown, a model that passes the all-data test ends the search only
+        after as many more samples as an all-inlier sample needs at this share of gross errors (14
+        for a 6 x 4 block) without a better one: a fit distorted by gross errors can pass the test
+        on its own inflated scale
     stability_check : when entries were rejected, repeat the search with a second seed and report the
         result as "ambiguous" (with the other answer) if it differs
     """
@@ -93,6 +97,7 @@ class CalibrationOptions:
     max_snooping_rounds: int = 60
     stability_check: bool = True
     unknown_sigma_outliers: float = 0.1
+    confirm_outliers: float = 0.05
 
     def __post_init__(self) -> None:
         if self.loss not in _LOSSES:

@@ -311,13 +311,14 @@ def _needed(w: float, k: int, confidence: float, success: float = 1.0) -> float:
 
 
 def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
-            accept: Callable[[_Model], bool] | None = None, confirm: int = 0) -> tuple[_Model | None, _Search]:
+            accept: Callable[[_Model], bool] | None = None, confirm: float = 0.0) -> tuple[_Model | None, _Search]:
     """LO-RANSAC over the minimal solvers on fully measured sub-blocks, then over sub-networks solved
     by least squares from random starts (see module docstring).
 
     accept: called on every new best model; True ends the search (the pipeline passes the all-data
     test: a least-squares fit on every entry that shows no outlier leaves nothing to find), at once
-    when confirm is 0, else when the model stays the best for `confirm` more samples (with sigma
+    when confirm is 0, else when the model stays the best for as many more samples as an all-inlier
+    sample needs when a share `confirm` of the entries were gross errors (with sigma
     unknown, a fit distorted by gross errors can look clean on its own scale; a better hypothesis
     from another sample then beats it).
     """
@@ -347,9 +348,12 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
                     search.accepted = True
                     return True
                 pending[0] = search.samples
+                pending[1] = min(_needed(1.0 - confirm, k_now[0], opts.confidence), opts.max_samples)
         return changed
 
-    pending: list = [None]  # samples drawn when the current best passed `accept`
+    # [samples drawn when the current best passed `accept`, samples needed to confirm it]
+    pending: list = [None, 0]
+    k_now = [1]  # entries of the sample being offered
 
     def ratio_of(model: _Model) -> float:
         # With sigma unknown the inlier ratio is measured on the model's own scale, which gross errors
@@ -358,7 +362,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         return model.inlier_ratio if thr is not None else min(model.inlier_ratio, 1.0 - opts.unknown_sigma_outliers)
 
     def confirmed() -> bool:
-        if pending[0] is not None and search.samples - pending[0] >= confirm:
+        if pending[0] is not None and search.samples - pending[0] >= pending[1]:
             search.accepted = True
         return search.accepted
 
@@ -392,6 +396,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         if drawn is None:
             break
         solver, (rows, cols) = drawn
+        k_now[0] = solver.m * solver.n
         search.solvers.add(solver.label)
         drawn_by[solver.label] = drawn_by.get(solver.label, 0) + 1
         if offer(_hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
@@ -412,6 +417,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     search.solvers.add("subnetworks")
     search.local_optimisations = min(search.local_optimisations, opts.max_local_optimisations // 2)
     k = max(int(mask.sum() * 0.75), 1)  # entries of a typical sub-network
+    k_now[0] = k
     needed_sub = _needed(ratio_of(best), k, opts.confidence, opts.subnetwork_convergence) if best else math.inf
     drawn_sub = 0
     while drawn_sub < min(needed_sub, opts.subnetwork_samples) and not confirmed():
