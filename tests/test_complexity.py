@@ -4,12 +4,14 @@ rule, saturation by det H, caching and limits of the sweep, and staleness of tab
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from analysis import complexity
+from analysis import complexity, tables
 from analysis.complexity import (
     DEFAULT_PRIMES,
     ENGINE_VERSION,
@@ -32,12 +34,18 @@ from analysis.quotient import action_matrix, saturate, standard_monomials
 from analysis.ring import Ring
 from analysis.tables import (
     PAPER_TABLE3,
+    QUICK,
+    TablePlan,
+    _csv_text,
     _paper_table2,
     _paper_table3_numbers,
+    build_section32,
     format_result_row,
+    make_tables,
     paper_reference,
     parse_cells,
     reduce_formulation,
+    section32_formulations,
     table2_formulations,
 )
 
@@ -265,6 +273,23 @@ def test_committed_formulations_csv_is_not_stale():
     assert checked == 2
 
 
+def test_committed_section32_csv_is_what_the_code_writes():
+    """tables/section32.csv is exactly what build_section32 writes from the committed results
+    (tables/formulations.csv) and a freshly enumerated plan, rows in the same order; the plan's
+    searches are handed over in sorted-key order, as a cached plan returns them."""
+    section32 = repo_root() / "tables" / "section32.csv"
+    with (repo_root() / "tables" / "formulations.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    as_int = lambda text: int(text) if text else None  # noqa: E731
+    results = {r["label"]: SimpleNamespace(
+        label=r["label"], config=r["config"], status=r["status"], instance_degrees=r["instance_degrees"],
+        **{k: as_int(r[k]) for k in ("degree", "saturated_degree", "dimension", "tangent_dim",
+                                      "independent_equations", "n_minors")}) for r in rows}
+    searches = section32_formulations()
+    plan = TablePlan((), (), {k: tuple(searches[k]) for k in sorted(searches)}, QUICK)
+    assert _csv_text(build_section32(plan, results)) == section32.read_text(encoding="utf-8")
+
+
 @pytest.mark.slow
 def test_table2_in_full():
     """All six rows of Table 2 on 2 primes x 2 seeds (about 25 s on an idle machine, 4 instances each)."""
@@ -278,12 +303,20 @@ def test_table2_in_full():
 
 def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path, monkeypatch):
     """A first run (nothing cached) must write the tables and provenance (regression: KeyError); a rerun
-    reads the cached plan and results and rewrites nothing but the untracked timing record."""
-    from analysis.tables import QUICK, make_tables
+    reads the cached plan and results and rewrites nothing but the untracked timing record.
 
+    Section 3.2 searches (stand-ins among the formulations computed anyway, listed out of order): the
+    cached plan comes back with its searches in sorted-key order, and section32.csv must not follow
+    that (regression: its rows swapped between a first run and a rerun)."""
+    searches = {"64": ["6r4s:A,C2-C6,minors(10)"], "22/66": [F6], "154": [F9]}
+    monkeypatch.setattr(tables, "section32_formulations", lambda: searches)
+    budget = dataclasses.replace(QUICK, section32=True)
     monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "user-cache"))
     summary = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
-                          cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
+                          cache_dir=tmp_path / "cache", progress=False, budget=budget)
+    with open(tmp_path / "out" / "section32.csv", newline="") as handle:
+        rows = [(r["search"], r["formulation"]) for r in csv.DictReader(handle)]
+    assert rows == [("22/66", F6), ("154", F9), ("64", "6r4s:A,C2-C6,minors(10)")]
     assert summary.computed > 0
     provenance = json.loads((tmp_path / "out" / "provenance.json").read_text())
     assert provenance["last_uncached_run"]["formulations"] == summary.computed
@@ -292,7 +325,7 @@ def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path, monkeypatc
     files = sorted((tmp_path / "out").iterdir())
     before = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in files}
     again = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
-                        cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
+                        cache_dir=tmp_path / "cache", progress=False, budget=budget)
     assert again.computed == 0
     after = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in sorted((tmp_path / "out").iterdir())}
     changed = sorted(name for name in after if after[name] != before.get(name))
