@@ -661,6 +661,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata costs 50 ms)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog} {_version()}")
+        parser.exit()
+
+
 def _version() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -741,7 +749,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tdoa-workbench",
         description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action=_VersionAction, nargs=0, help="show the program's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_degree(sub)
     _add_tables(sub)
