@@ -207,6 +207,27 @@ def test_table4_writer_has_paper_columns(tmp_path):
     assert r"\begin{tabular}" in tex and "9r/3s rand" in tex and tex.count(r"\\") >= 6
 
 
+def test_a_rerun_with_the_same_results_rewrites_no_table(tmp_path):
+    """Table 4 from a rerun that measured other runtimes but the same results: keep_timings gives it the
+    written runtimes, and no file changes (a clean checkout stays clean); other results keep their own."""
+    from solvers.experiments.config import keep_timings
+
+    frames = {(config, "random"): ex.run_trials(config, "random", 3, jobs=1, cache=False, progress=False)
+              for config in ("9r3s", "6r4s")}
+    first = keep_timings(ex.table4(frames), tmp_path / "table4.csv")  # nothing written yet: rounded only
+    paths = ex.write_table4(first, tmp_path, {"commit": "abc", "date": "monday"})
+    before = {p: p.read_bytes() for p in paths.values()}
+    slower = ex.table4({key: frame.assign(total_s=frame["total_s"] * 3, lm_s=frame["lm_s"] * 3)
+                        for key, frame in frames.items()})
+    assert not slower["median_runtime_ms"].equals(first["median_runtime_ms"])
+    kept = keep_timings(slower, paths["csv"])
+    assert kept["median_runtime_ms"].equals(first["median_runtime_ms"])
+    ex.write_table4(kept, tmp_path, {"commit": "def", "date": "tuesday"})
+    assert {p: p.read_bytes() for p in paths.values()} == before
+    other = slower.assign(failure_rate=slower["failure_rate"] + 0.5)
+    assert not keep_timings(other, paths["csv"])["median_runtime_ms"].equals(first["median_runtime_ms"])
+
+
 def test_summary_counts_missing_estimates_as_infinite():
     frame = ex.run_trials("6r4s", "random", 3, jobs=1, cache=False, progress=False)
     frame.loc[:, "position_error"] = [1e-3, np.nan, np.nan]

@@ -14,7 +14,7 @@ import pandas as pd
 
 from analysis.paths import DATA_DIR
 
-from .config import CONFIGS, INIT_LABEL, INITS, TABLES_DIR, config_label, write_output
+from .config import CONFIGS, CSV_FLOAT_FORMAT, INIT_LABEL, INITS, TABLES_DIR, config_label, write_output
 from .summary import summarise, summarise_noise_text
 
 PAPER_ACCURACY_CSV = DATA_DIR / "paper_accuracy.csv"
@@ -166,7 +166,7 @@ def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict |
     directory.mkdir(parents=True, exist_ok=True)
     meta = meta or {}
     paths = {ext: directory / f"table4.{ext}" for ext in ("csv", "md", "tex")}
-    write_output(paths["csv"], table.to_csv(index=False, float_format="%.6g"))
+    write_output(paths["csv"], table.to_csv(index=False, float_format=CSV_FLOAT_FORMAT))
 
     headers = [label for _, label, _ in _DISPLAY]
     rows = _display_rows(table)
