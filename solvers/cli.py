@@ -772,7 +772,8 @@ def _user_error(e: Exception) -> tuple[str, int] | None:
     if isinstance(e, cls("analysis.msolve", "MsolveError")):
         return f"{e}; --engine own computes without it", 2
     if isinstance(e, cls("analysis.linalg", "MatrixTooLarge")):
-        return f"{e}; raise --max-memory / --max-cells if the machine allows, or give a smaller system", 2
+        flag = "--max-memory" if "memory cap" in str(e) else "--max-cells"  # the cap that stopped it
+        return f"{e}; raise {flag} if the machine allows, or give a smaller system", 2
     if isinstance(e, cls("analysis.formulations", "InconsistentSample")):
         return f"{e}; try another --seed", 2
     if isinstance(e, (UserError, ValueError, OverflowError, cls("analysis.formulations", "SamplingFailed"))):

@@ -65,7 +65,8 @@ def test_saturation_removes_a_planted_point(capsys, tmp_path):
         ("x,y\n0\nx+*y\n", (), "line 3"),
         ("x,y\n7\nx+y\n", ("--prime", "11"), "conflicts"),
         ("x,y\n0\nx+y\n", ("--prime", "9"), "not prime"),
-        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-cells", "1"), "exceeds the cap"),
+        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-cells", "1"), "exceeds the cap of 1 cells; raise --max-cells"),
+        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-memory", "1"), "memory cap of 1 B; raise --max-memory"),
     ],
 )
 def test_bad_input_is_one_line_with_status_2(capsys, tmp_path, text, args, fragment):

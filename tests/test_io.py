@@ -391,3 +391,17 @@ def test_msolve_cross_check(tmp_path, text):
     expected = groebner([f for f in polys if f]).basis
     answer = parse_msolve_basis((tmp_path / "gb").read_text(), ring, system.variables)
     assert {g.monic() for g in answer} == set(expected)
+
+
+def test_integers_of_any_length(tmp_path):
+    """Coefficients beyond Python's 4300-digit limit for int <-> str are read and written (in chunks,
+    without lifting the process-wide limit); a characteristic or an exponent that long is a clear error."""
+    big, den = 7 * (10**5000 - 1) // 9, (10**4400 - 1) // 3 + 2  # 77...7 and 33...35
+    system = parse_msolve("x,y\n0\n" + "7" * 5000 + "*x - y/" + "3" * 4399 + "5, y^2 - 1\n")
+    assert system.polynomials[0] == {(1, 0): Fraction(big), (0, 1): Fraction(-1, den)}
+    assert parse_msolve(to_msolve(system)) == system
+    assert read_system(write_system(system, tmp_path / "big.ms", "msolve")) == system
+    with pytest.raises(InputError, match="characteristic of 5000 digits"):
+        parse_msolve("x\n" + "1" * 5000 + "\nx\n")
+    with pytest.raises(InputError, match="exponent of 5000 digits too large"):
+        parse_msolve("x\n0\nx^" + "9" * 5000 + "\n")
