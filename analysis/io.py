@@ -58,6 +58,44 @@ _VARIABLE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 _VARIABLE_RULE = "a letter followed by letters, digits or '_'"
 
 
+_CHUNK = 4000
+"""Digits converted at a time: Python refuses int <-> str conversions above 4300 digits by default
+(``sys.set_int_max_str_digits``); a file's integers may be longer, and are converted in chunks instead
+of lifting that process-wide limit."""
+
+
+def _int_from_digits(text: str) -> int:
+    """The integer written in decimal digits, of any length."""
+    if len(text) <= _CHUNK:
+        return int(text)
+    value = 0
+    for start in range(0, len(text), _CHUNK):
+        chunk = text[start:start + _CHUNK]
+        value = value * 10 ** len(chunk) + int(chunk)
+    return value
+
+
+def _int_to_digits(n: int) -> str:
+    """Decimal digits of an integer of any size (with a leading '-' when negative)."""
+    if n < 0:
+        return "-" + _int_to_digits(-n)
+    if n.bit_length() < 3 * _CHUNK:  # below 10^3600: within the limit
+        return str(n)
+    base = 10 ** _CHUNK
+    chunks = []
+    while n:
+        n, low = divmod(n, base)
+        chunks.append(low)
+    return str(chunks[-1]) + "".join(str(c).zfill(_CHUNK) for c in reversed(chunks[:-1]))
+
+
+def _short(n: "int | Fraction") -> str:
+    """A number for an error message: as it is, or its size when it is very long."""
+    n = Fraction(n)
+    digits = len(_int_to_digits(abs(n.numerator)))
+    return _fraction_str(n) if digits <= 30 else f"of {digits} digits"
+
+
 class InputError(ValueError):
     """A polynomial system (file, text or objects) that cannot be read; the message is one line."""
 
@@ -528,12 +566,12 @@ class _Parser:
         if e is None:
             raise self.fail(start, "exponent must be a nonnegative integer constant, got a polynomial")
         if e.denominator != 1:
-            raise self.fail(start, f"non-integer exponent {e}")
+            raise self.fail(start, f"non-integer exponent {_short(e)}")
         if e < 0:
-            raise self.fail(start, f"negative exponent {e}")
+            raise self.fail(start, f"negative exponent {_short(e)}")
         n = int(e)
         if n > MAX_DEGREE or n * max(base.exact_degree(self.nvars), 0) > MAX_DEGREE:
-            raise self.fail(start, f"exponent {n} too large (total degrees are limited to {MAX_DEGREE})")
+            raise self.fail(start, f"exponent {_short(n)} too large (total degrees are limited to {MAX_DEGREE})")
         if len(base.terms) == 1:  # a term: no expansion needed (the common case x^5 in a file)
             ((m, c),) = base.terms.items()
             return _Expr({m * n: c**n}, base.den**n, base.deg * n)
@@ -549,7 +587,7 @@ class _Parser:
     def atom(self) -> _Expr:
         tok = self.take()
         if tok.kind == "num":
-            return _Expr({0: int(tok.text)})
+            return _Expr({0: _int_from_digits(tok.text)})
         if tok.kind == "name":
             i = self.index.get(tok.text)
             if i is None:
@@ -642,6 +680,9 @@ def parse_msolve(text: str, source: str = "<string>") -> System:
         raise InputError(
             f"{_where(source, char_line)}: characteristic must be an integer (0 or a prime), got {char_text!r}"
         )
+    if len(char_text.lstrip("+-")) > 30:
+        raise InputError(f"{_where(source, char_line)}: characteristic of {len(char_text.lstrip('+-'))} digits; it "
+                         "must be 0 or a prime below 2^31")
     p = _check_characteristic(int(char_text), _where(source, char_line))
 
     tokens = _tokenize([(n, t) for n, t in lines if n > char_line], source)
@@ -680,7 +721,8 @@ def _grevlex_key(m: tuple[int, ...]) -> tuple:
 
 
 def _fraction_str(c: Fraction) -> str:
-    return str(c.numerator) if c.denominator == 1 else f"{c.numerator}/{c.denominator}"
+    num = _int_to_digits(c.numerator)
+    return num if c.denominator == 1 else f"{num}/{_int_to_digits(c.denominator)}"
 
 
 def format_polynomial(poly: Mapping[tuple[int, ...], Fraction], variables: Sequence[str], spaced: bool = True) -> str:

@@ -10,7 +10,6 @@ import heapq
 import time
 from typing import Sequence
 
-import flint
 import numpy as np
 
 from .f4 import F4Options, GroebnerResult, groebner
@@ -248,7 +247,9 @@ def variable_action_matrices(gb: GroebnerResult, basis: Sequence[int]) -> np.nda
     return M
 
 
-def _flint(M: np.ndarray, p: int) -> "flint.nmod_mat":
+def _flint(M: np.ndarray, p: int) -> "flint.nmod_mat":  # noqa: F821
+    import flint  # only here and in saturated_degree: python-flint costs 70 ms to import
+
     return flint.nmod_mat(M.shape[0], M.shape[1], [int(x) for x in M.ravel()], p)
 
 
@@ -262,6 +263,8 @@ def saturated_degree(gb: GroebnerResult, f: Poly, basis: Sequence[int] | None = 
     nb = len(basis)
     if nb == 0:
         return 0
+    import flint
+
     p = gb.ring.prime
     var_mats = [_flint(X, p) for X in variable_action_matrices(gb, basis)]
     Mf = flint.nmod_mat(nb, nb, p)

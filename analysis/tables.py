@@ -561,10 +561,19 @@ SECTION32_TARGETS: dict[str, tuple[str, tuple[int, ...]]] = {
 
 def build_section32(plan: TablePlan, results: Mapping[str, FormulationResult]) -> pd.DataFrame:
     """The Section 3.2 searches: every searched formulation, plus every other computed formulation of
-    the same configuration whose degree (as generated or saturated) is one of the paper's numbers."""
+    the same configuration whose degree (as generated or saturated) is one of the paper's numbers.
+
+    Rows come in the order of :data:`SECTION32_TARGETS`, then of each search's labels: a plan read back
+    from the cache (JSON with sorted keys) lists the searches in another order than a fresh one, and the
+    CSV must not follow it."""
     rows = []
-    for key, labels in plan.section32.items():
-        config, targets = SECTION32_TARGETS[key]
+    unknown = sorted(set(plan.section32) - set(SECTION32_TARGETS))
+    if unknown:
+        raise ValueError(f"unknown Section 3.2 search(es) {', '.join(unknown)}; valid: {', '.join(SECTION32_TARGETS)}")
+    for key, (config, targets) in SECTION32_TARGETS.items():
+        if key not in plan.section32:
+            continue
+        labels = plan.section32[key]
         hits = [r.label for r in sorted(results.values(), key=lambda r: r.label)
                 if r.config == config and ({r.degree, r.saturated_degree} & set(targets))]
         for label in dict.fromkeys(list(labels) + hits):

@@ -32,7 +32,6 @@ import json
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -47,12 +46,11 @@ from analysis.benchmarks import (  # noqa: E402
     BENCHMARK_SYSTEMS,
     TDOA_TABLE_SYSTEMS,
     benchmark_system,
-    find_msolve,
-    parse_msolve_basis,
-    to_msolve_input,
 )
 from analysis.f4 import F4Options, GroebnerResult, groebner  # noqa: E402
+from analysis.msolve import find_msolve, groebner_msolve, msolve_version  # noqa: E402
 from analysis.quotient import NotZeroDimensional, degree, dimension  # noqa: E402
+from analysis.ring import Ring  # noqa: E402
 
 PRIME = 65521
 DEFAULT_SYSTEMS = ("katsura-6", "katsura-7", "cyclic-6", *TDOA_TABLE_SYSTEMS)
@@ -123,38 +121,19 @@ def time_engine(polys, repeat: int, backend: str) -> tuple[float, GroebnerResult
     return best, result
 
 
-def _run_msolve(exe: str, text: str, workdir: Path, timeout: float) -> tuple[float, str]:
-    src, out = workdir / "input.ms", workdir / "output.ms"
-    src.write_text(text)
-    if out.exists():
-        out.unlink()
-    t0 = time.perf_counter()
-    subprocess.run(
-        [exe, "-g", "2", "-t", "1", "-f", str(src), "-o", str(out)],
-        check=True,
-        timeout=timeout,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
-    elapsed = time.perf_counter() - t0
-    return elapsed, out.read_text()
-
-
 def msolve_startup(exe: str, repeat: int, prime: int) -> float:
     """Best wall-clock time of msolve on the trivial system {x}: process start and library loading."""
-    with tempfile.TemporaryDirectory() as tmp:
-        return min(_run_msolve(exe, f"x\n{prime}\nx\n", Path(tmp), 60)[0] for _ in range(repeat))
+    x = Ring(["x"], prime).gen(0)
+    return min(groebner_msolve([x], exe).seconds for _ in range(repeat))
 
 
-def time_msolve(exe: str, polys, repeat: int, timeout: float) -> tuple[float, str]:
-    """Best wall-clock time of msolve -g 2 over repeat runs, and its output text."""
-    text = to_msolve_input(polys)
-    best, output = float("inf"), ""
-    with tempfile.TemporaryDirectory() as tmp:
-        for _ in range(repeat):
-            elapsed, output = _run_msolve(exe, text, Path(tmp), timeout)
-            best = min(best, elapsed)
-    return best, output
+def time_msolve(exe: str, polys, repeat: int, timeout: float) -> tuple[float, GroebnerResult]:
+    """Best wall-clock time of msolve -g 2 -t 1 over repeat runs, and its reduced basis."""
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        result = groebner_msolve(polys, exe, threads=1, timeout=timeout)
+        best = min(best, result.seconds)
+    return best, result
 
 
 _SYMPY_CHILD = r"""
@@ -220,16 +199,6 @@ def _version(module: str) -> str:
         return version(module)
     except Exception:  # not installed: recorded as empty
         return ""
-
-
-def msolve_version(exe: str | None) -> str:
-    if exe is None:
-        return ""
-    out = subprocess.run([exe, "-h"], capture_output=True, text=True).stdout
-    for line in out.splitlines():
-        if "version" in line:
-            return line.split("version")[-1].strip()
-    return ""
 
 
 def metadata(args, exe: str | None, startup: float | None) -> dict:
@@ -338,9 +307,8 @@ def main(argv: list[str] | None = None) -> int:
         row = Row(name, ring.nvars, degree_or_none(gb), len(gb.basis), engine_s, max_matrix=f"{rows_}x{cols_}")
         if exe:
             print(f"[{name}] msolve ...", flush=True)
-            raw, output = time_msolve(exe, polys, msolve_repeat, timeout=600)
-            ref = tuple(g.monic() for g in parse_msolve_basis(output, ring))
-            ref_gb = GroebnerResult(ring, ref, ())
+            raw, ref_gb = time_msolve(exe, polys, msolve_repeat, timeout=600)
+            ref = ref_gb.basis
             row.msolve_raw_s = raw
             row.msolve_startup_s = startup
             row.msolve_s = max(raw - startup, 0.0)

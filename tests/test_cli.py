@@ -65,7 +65,8 @@ def test_saturation_removes_a_planted_point(capsys, tmp_path):
         ("x,y\n0\nx+*y\n", (), "line 3"),
         ("x,y\n7\nx+y\n", ("--prime", "11"), "conflicts"),
         ("x,y\n0\nx+y\n", ("--prime", "9"), "not prime"),
-        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-cells", "1"), "exceeds the cap"),
+        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-cells", "1"), "exceeds the cap of 1 cells; raise --max-cells"),
+        ("x,y\n0\nx^2+y^2-1,x*y-2\n", ("--max-memory", "1"), "memory cap of 1 B; raise --max-memory"),
     ],
 )
 def test_bad_input_is_one_line_with_status_2(capsys, tmp_path, text, args, fragment):
@@ -156,3 +157,22 @@ def test_version(capsys):
     with pytest.raises(SystemExit):
         main(["--version"])
     assert capsys.readouterr().out.startswith("tdoa-workbench ")
+
+
+HEAVY = ("sympy", "pandas", "matplotlib", "scipy", "numba")
+
+
+@pytest.mark.parametrize("argv", [["degree", str(EXAMPLE.parent / "katsura7.ms")],
+                                  ["degree", "--tdoa", "6r4s", "--equations", "B2,C2-C6,minors"]],
+                         ids=["file", "tdoa"])
+def test_degree_imports_only_what_it_needs(argv):
+    """Start-up: ``degree`` imports none of the heavy libraries the other commands use (sympy alone
+    took 0.4 s, the calibration package's scipy.sparse 0.25 s); flint only where a rank is needed."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from solvers.cli import main; status = main(sys.argv[1:]); "
+            f"print(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r}))); sys.exit(status)")
+    out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout

@@ -4,12 +4,14 @@ rule, saturation by det H, caching and limits of the sweep, and staleness of tab
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
-import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from analysis import complexity, tables
 from analysis.complexity import (
     DEFAULT_PRIMES,
     ENGINE_VERSION,
@@ -32,12 +34,18 @@ from analysis.quotient import action_matrix, saturate, standard_monomials
 from analysis.ring import Ring
 from analysis.tables import (
     PAPER_TABLE3,
+    QUICK,
+    TablePlan,
+    _csv_text,
     _paper_table2,
     _paper_table3_numbers,
+    build_section32,
     format_result_row,
+    make_tables,
     paper_reference,
     parse_cells,
     reduce_formulation,
+    section32_formulations,
     table2_formulations,
 )
 
@@ -51,7 +59,11 @@ F6 = "6r4s:B2,C2-C6,minors(10)"
 # --------------------------------------------------------------------------------------------------
 
 
-def test_sweep_gives_75_and_22_and_second_run_reads_the_cache(tmp_path):
+def _no_worker(*args, **kwargs):
+    raise AssertionError("a cached sweep computed something")
+
+
+def test_sweep_gives_75_and_22_and_second_run_reads_the_cache(tmp_path, monkeypatch):
     flags = []
     results = sweep([F9, F6], primes=DEFAULT_PRIMES, seeds=SEEDS, jobs=1, timeout=None, cache_dir=tmp_path,
                     progress=False, on_result=lambda r, cached: flags.append(cached))
@@ -65,10 +77,10 @@ def test_sweep_gives_75_and_22_and_second_run_reads_the_cache(tmp_path):
     assert len(list(tmp_path.glob("*.json"))) == 2
 
     flags.clear()
-    t0 = time.perf_counter()
+    monkeypatch.setattr(complexity, "_run_pool", _no_worker)  # no worker is even started
+    monkeypatch.setattr(complexity, "compute_formulation", _no_worker)
     again = sweep([F6, F9], primes=DEFAULT_PRIMES, seeds=SEEDS, jobs=2, cache_dir=tmp_path, progress=False,
                   on_result=lambda r, cached: flags.append(cached))
-    assert time.perf_counter() - t0 < 2.0  # no worker is even started
     assert flags == [True, True]
     assert [r.degree for r in again] == [22, 75]
     assert again[1].to_dict() == r9.to_dict()
@@ -89,13 +101,14 @@ def test_worker_pool_and_wall_clock_timeout(tmp_path):
     fast = sweep([F6, "5r5s:B2,B3,C2-C5,minors(16)"], seeds=(0,), jobs=2, timeout=120, cache_dir=tmp_path,
                  progress=False)
     assert [r.degree for r in fast] == [22, 64]
-    # a formulation that cannot finish in 0.5 s: the worker is killed and the status recorded
-    (slow,) = sweep(["7r3s:A,B2,C2-C7"], seeds=(0,), jobs=1, timeout=0.5, cache_dir=tmp_path, progress=False)
-    assert slow.status == "timeout" and slow.degree is None
-    assert "timeout" in slow.instance_degrees
+    # a limit no computation can meet (a spawned worker needs longer than 0.01 s just to import numpy,
+    # and this formulation takes seconds): the worker is killed and the status recorded
+    (slow,) = sweep(["7r3s:A,B2,C2-C7"], seeds=(0,), jobs=1, timeout=0.01, cache_dir=tmp_path, progress=False)
+    assert slow.status == "timeout" and slow.degree is None and slow.timeout == 0.01
+    assert "timeout" in slow.instance_degrees and "wall-clock limit of 0.01 s" in slow.message
     # a timeout is not reused under a longer limit
     assert not _usable(slow, F4Options(), 10.0, False)
-    assert _usable(slow, F4Options(), 0.5, False)
+    assert _usable(slow, F4Options(), 0.01, False)
 
 
 def test_positive_dimensional_formulation_reports_its_dimension():
@@ -260,6 +273,23 @@ def test_committed_formulations_csv_is_not_stale():
     assert checked == 2
 
 
+def test_committed_section32_csv_is_what_the_code_writes():
+    """tables/section32.csv is exactly what build_section32 writes from the committed results
+    (tables/formulations.csv) and a freshly enumerated plan, rows in the same order; the plan's
+    searches are handed over in sorted-key order, as a cached plan returns them."""
+    section32 = repo_root() / "tables" / "section32.csv"
+    with (repo_root() / "tables" / "formulations.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    as_int = lambda text: int(text) if text else None  # noqa: E731
+    results = {r["label"]: SimpleNamespace(
+        label=r["label"], config=r["config"], status=r["status"], instance_degrees=r["instance_degrees"],
+        **{k: as_int(r[k]) for k in ("degree", "saturated_degree", "dimension", "tangent_dim",
+                                      "independent_equations", "n_minors")}) for r in rows}
+    searches = section32_formulations()
+    plan = TablePlan((), (), {k: tuple(searches[k]) for k in sorted(searches)}, QUICK)
+    assert _csv_text(build_section32(plan, results)) == section32.read_text(encoding="utf-8")
+
+
 @pytest.mark.slow
 def test_table2_in_full():
     """All six rows of Table 2 on 2 primes x 2 seeds (about 25 s on an idle machine, 4 instances each)."""
@@ -273,12 +303,20 @@ def test_table2_in_full():
 
 def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path, monkeypatch):
     """A first run (nothing cached) must write the tables and provenance (regression: KeyError); a rerun
-    reads the cached plan and results and rewrites nothing but the untracked timing record."""
-    from analysis.tables import QUICK, make_tables
+    reads the cached plan and results and rewrites nothing but the untracked timing record.
 
+    Section 3.2 searches (stand-ins among the formulations computed anyway, listed out of order): the
+    cached plan comes back with its searches in sorted-key order, and section32.csv must not follow
+    that (regression: its rows swapped between a first run and a rerun)."""
+    searches = {"64": ["6r4s:A,C2-C6,minors(10)"], "22/66": [F6], "154": [F9]}
+    monkeypatch.setattr(tables, "section32_formulations", lambda: searches)
+    budget = dataclasses.replace(QUICK, section32=True)
     monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "user-cache"))
     summary = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
-                          cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
+                          cache_dir=tmp_path / "cache", progress=False, budget=budget)
+    with open(tmp_path / "out" / "section32.csv", newline="") as handle:
+        rows = [(r["search"], r["formulation"]) for r in csv.DictReader(handle)]
+    assert rows == [("22/66", F6), ("154", F9), ("64", "6r4s:A,C2-C6,minors(10)")]
     assert summary.computed > 0
     provenance = json.loads((tmp_path / "out" / "provenance.json").read_text())
     assert provenance["last_uncached_run"]["formulations"] == summary.computed
@@ -287,7 +325,7 @@ def test_make_tables_from_an_empty_cache_writes_its_outputs(tmp_path, monkeypatc
     files = sorted((tmp_path / "out").iterdir())
     before = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in files}
     again = make_tables(quick=True, jobs=1, cells="6/4", out_dir=tmp_path / "out",
-                        cache_dir=tmp_path / "cache", progress=False, budget=QUICK)
+                        cache_dir=tmp_path / "cache", progress=False, budget=budget)
     assert again.computed == 0
     after = {f.name: (f.stat().st_mtime_ns, f.read_bytes()) for f in sorted((tmp_path / "out").iterdir())}
     changed = sorted(name for name in after if after[name] != before.get(name))

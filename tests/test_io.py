@@ -21,6 +21,8 @@ from analysis.io import (
     to_singular,
     write_system,
 )
+from analysis.f4 import groebner
+from analysis.msolve import INSTALL_HINT, find_msolve, parse_msolve_basis
 from analysis.ring import BadPrime, Ring
 from analysis.systems import katsura
 
@@ -370,3 +372,36 @@ def test_macaulay2_cross_check(tmp_path, text, _, expected):
     path = write_system(parse_msolve(text), tmp_path / "s.m2", "m2")
     out = subprocess.run(["M2", "--script", str(path)], capture_output=True, text=True, timeout=120)
     assert out.stdout.split() == expected, out.stdout + out.stderr
+
+
+BIG_Q = "x,y,z\n0\n123456789012345678901*x^2 - 3/7*y*z, y^2 - x + 5, z^3 - x*y - 1\n"
+
+
+@pytest.mark.skipif(find_msolve() is None, reason=f"msolve not installed ({INSTALL_HINT})")
+@pytest.mark.parametrize("text", [t for t, _, _ in CROSS_CHECKS] + [BIG_Q], ids=CROSS_IDS + ["big-rationals"])
+def test_msolve_cross_check(tmp_path, text):
+    """The exporter's file, run by msolve itself: its reduced basis (over Q: reduced mod 65521) is the own
+    engine's. Reserved names, rationals and 21-digit integers go through as msolve reads them."""
+    system = parse_msolve(text)
+    path = write_system(system, tmp_path / "s.ms", "msolve")
+    out = subprocess.run([find_msolve(), "-g", "2", "-t", "1", "-f", str(path), "-o", str(tmp_path / "gb")],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    ring, polys = system.to_ring(system.characteristic or 65521)
+    expected = groebner([f for f in polys if f]).basis
+    answer = parse_msolve_basis((tmp_path / "gb").read_text(), ring, system.variables)
+    assert {g.monic() for g in answer} == set(expected)
+
+
+def test_integers_of_any_length(tmp_path):
+    """Coefficients beyond Python's 4300-digit limit for int <-> str are read and written (in chunks,
+    without lifting the process-wide limit); a characteristic or an exponent that long is a clear error."""
+    big, den = 7 * (10**5000 - 1) // 9, (10**4400 - 1) // 3 + 2  # 77...7 and 33...35
+    system = parse_msolve("x,y\n0\n" + "7" * 5000 + "*x - y/" + "3" * 4399 + "5, y^2 - 1\n")
+    assert system.polynomials[0] == {(1, 0): Fraction(big), (0, 1): Fraction(-1, den)}
+    assert parse_msolve(to_msolve(system)) == system
+    assert read_system(write_system(system, tmp_path / "big.ms", "msolve")) == system
+    with pytest.raises(InputError, match="characteristic of 5000 digits"):
+        parse_msolve("x\n" + "1" * 5000 + "\nx\n")
+    with pytest.raises(InputError, match="exponent of 5000 digits too large"):
+        parse_msolve("x\n0\nx^" + "9" * 5000 + "\n")

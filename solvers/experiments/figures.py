@@ -14,7 +14,8 @@ import pandas as pd
 
 from solvers.metrics import log10_error
 
-from .config import CONFIGS, FIGURES_DIR, INIT_LABEL, INITS, config_label, write_output
+from .config import (CONFIGS, CSV_FLOAT_FORMAT, FIGURES_DIR, INIT_LABEL, INITS, config_label, keep_timings,
+                     write_output)
 from .provenance import package_version
 from .summary import median_log10
 
@@ -123,7 +124,7 @@ def plot_histograms(
                  f"(dashed: medians; errors outside 1e{edges[0]:.0f}..1e{edges[-1]:.0f} are drawn in the end bins)")
     title = "Fig. 1: log10 relative error histograms, ours vs random initialisation"
     csv_path = Path(stem).with_suffix(".csv")
-    fresh = write_output(csv_path, pd.DataFrame(count_rows).to_csv(index=False, float_format="%.6g"))
+    fresh = write_output(csv_path, pd.DataFrame(count_rows).to_csv(index=False, float_format=CSV_FLOAT_FORMAT))
     paths = _save(fig, Path(stem), title, "Paper Sec. 4.1 Fig. 1 reproduction", meta, fresh)
     plt.close(fig)
     return paths + [csv_path]
@@ -184,7 +185,8 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
                  f"({trials} trials per point; shaded: interquartile range of 'ours')")
     title = "Fig. 2: median relative error vs noise sigma"
     csv_path = Path(stem).with_suffix(".csv")
-    fresh = write_output(csv_path, data.to_csv(index=False, float_format="%.6g"))
+    data = keep_timings(data, csv_path)  # not drawn; a rerun with the same results keeps the file
+    fresh = write_output(csv_path, data.to_csv(index=False, float_format=CSV_FLOAT_FORMAT))
     paths = _save(fig, Path(stem), title, "Paper Sec. 4.2 Fig. 2 reproduction", meta, fresh)
     plt.close(fig)
     return paths + [csv_path]

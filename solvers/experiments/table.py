@@ -1,27 +1,37 @@
 """Table 4 of the paper: its rows from trial batches, the paper's values beside, and its writers.
 
-Owns the table (`table4`, `TABLE4_COLUMNS`, `PAPER_TABLE4`), its CSV/Markdown/LaTeX files
+Owns the table (`table4`, `TABLE4_COLUMNS`, `PAPER_TABLE4` read from the package data), its CSV/Markdown/LaTeX files
 (`write_table4`) and the text comparing every number with the paper (`comparison_report`).
 """
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .config import CONFIGS, INIT_LABEL, INITS, TABLES_DIR, config_label, write_output
+from analysis.paths import DATA_DIR
+
+from .config import CONFIGS, CSV_FLOAT_FORMAT, INIT_LABEL, INITS, TABLES_DIR, config_label, write_output
 from .summary import summarise, summarise_noise_text
 
-#: Paper Table 4: median log10 relative (position, offset) error, 1000 noiseless trials.
-#: Transcribed in /work/shared/reference/paper_accuracy.csv (checked by the tests).
-PAPER_TABLE4: dict[tuple[str, str], tuple[float, float]] = {
-    ("9r3s", "random"): (0.31, 1.63),
-    ("9r3s", "solver"): (-15.0, -14.0),
-    ("6r4s", "random"): (0.55, 1.93),
-    ("6r4s", "solver"): (-15.0, -14.0),
-}
+PAPER_ACCURACY_CSV = DATA_DIR / "paper_accuracy.csv"
+"""The paper's accuracy numbers (Table 4), transcribed; package data beside ``paper_tables.csv``."""
+
+
+def paper_table4(path: Path | str = PAPER_ACCURACY_CSV) -> dict[tuple[str, str], tuple[float, float]]:
+    """Paper Table 4 from ``analysis/data/paper_accuracy.csv``: (config, init) -> median log10 relative
+    (position, offset) error over 1000 noiseless trials (config "9r3s", init "random" or "solver")."""
+    with open(path, newline="", encoding="utf-8") as handle:
+        rows = [r for r in csv.DictReader(handle) if r["table"] == "4"]
+    return {(r["solver"].replace("/", ""), r["init"]):
+            (float(r["median_log10_position_error"]), float(r["median_log10_offset_error"])) for r in rows}
+
+
+#: Paper Table 4 (:func:`paper_table4`), read once.
+PAPER_TABLE4: dict[tuple[str, str], tuple[float, float]] = paper_table4()
 
 #: Columns of Table 4 (`table4`); "paper_*" are the paper's values beside ours.
 TABLE4_COLUMNS: tuple[str, ...] = (
@@ -156,7 +166,7 @@ def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict |
     directory.mkdir(parents=True, exist_ok=True)
     meta = meta or {}
     paths = {ext: directory / f"table4.{ext}" for ext in ("csv", "md", "tex")}
-    write_output(paths["csv"], table.to_csv(index=False, float_format="%.6g"))
+    write_output(paths["csv"], table.to_csv(index=False, float_format=CSV_FLOAT_FORMAT))
 
     headers = [label for _, label, _ in _DISPLAY]
     rows = _display_rows(table)
