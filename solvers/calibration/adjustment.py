@@ -398,11 +398,16 @@ class AdjustmentStatistics:
 
 
 def adjustment_statistics(F, use, R, S, O, sigma_prior: float | None, *, alpha: float = 0.001,
-                          power: float = 0.8, alpha_global: float = 0.01) -> AdjustmentStatistics | None:
+                          power: float = 0.8, alpha_global: float = 0.01,
+                          weights: np.ndarray | None = None) -> AdjustmentStatistics | None:
     """Statistics of the least-squares fit (R, S, O) on the entries `use` (see AdjustmentStatistics).
 
     alpha: level of each entry's test (Baarda's alpha_0); power: the probability of detecting a bias
     of the MDB; alpha_global: level of the global test of the model. None if the gauge cannot be fixed.
+    weights: (m, n) weights of an iteratively reweighted (robust) fit; the redundancy numbers are then
+    those of the weighted fit, r_k = 1 - w_k j_k^T (J^T W J)^-1 j_k: an entry the robust loss ignores
+    gets r ~ 1, and the entries of a subset the fit explains exactly get r ~ 0 (their residuals say
+    nothing about the noise). The tests below assume an unweighted fit.
     """
     from scipy import stats
 
@@ -411,12 +416,13 @@ def adjustment_statistics(F, use, R, S, O, sigma_prior: float | None, *, alpha: 
         return None
     p, x = gp
     e, diff, dist = entry_residuals(x, p)
-    N, _ = normal_equations(p, diff, dist, np.ones(len(e)), e)
+    wk = np.ones(len(e)) if weights is None else weights[p.rows[p.ii], p.cols[p.jj]]
+    N, _ = normal_equations(p, diff, dist, wk, e)
     Ninv, null = _pseudo_inverse(N)
     Ninv_p = np.zeros((p.n_params + 1, p.n_params + 1))
     Ninv_p[:-1, :-1] = Ninv
     v = jacobian_values(diff, dist)
-    h = np.einsum("ka,kab,kb->k", v, Ninv_p[p.slots[:, :, None], p.slots[:, None, :]], v)
+    h = wk * np.einsum("ka,kab,kb->k", v, Ninv_p[p.slots[:, :, None], p.slots[:, None, :]], v)
     r = np.clip(1.0 - h, 0.0, 1.0)
     k = len(e)
     rank = p.n_params - int(null.sum())

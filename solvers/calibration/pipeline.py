@@ -181,9 +181,15 @@ def _robust_scale(F, work, best: _Model, floor, opts: CalibrationOptions):
     s = max(MAD_TO_SIGMA * math.sqrt(med), floor) if np.isfinite(med) else floor
     st = None
     for _ in range(3):
-        ref = robust_refine(F, work, R, S, O, loss="cauchy", scale=opts.threshold_sigmas * s, max_iter=opts.lo_iterations)
+        c = opts.threshold_sigmas * s
+        ref = robust_refine(F, work, R, S, O, loss="cauchy", scale=c, max_iter=opts.lo_iterations)
         R, S, O = ref.R, ref.S, ref.O
-        st = adjustment_statistics(F, work & np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :], R, S, O, None)
+        # redundancy numbers of the weighted fit: a subset the Cauchy fit explains exactly has r ~ 0
+        # and cannot shrink the scale (the collapse a minimal fit's zero residuals caused)
+        E = _residual_matrix(F, R, S, O)
+        w = 1.0 / (1.0 + (np.nan_to_num(E, nan=0.0) / c) ** 2)
+        st = adjustment_statistics(F, work & np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :], R, S, O, None,
+                                   weights=w)
         if st is None:
             break
         ok = st.redundancy >= max(opts.min_redundancy, 1e-3)
@@ -322,8 +328,14 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
     if flipped:
         fin = _polish(F, work, R, S, O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
     # converged: that of the final least squares (the robust stage only warm-starts it)
-    R, S, O, inl, converged = _snoop(F, work, fin.R, fin.S, fin.O, fin.inliers, sigma, opts)
-    return R, S, O, inl, converged, "robust"
+    R2, S2, O2, inl, converged = _snoop(F, work, fin.R, fin.S, fin.O, fin.inliers, sigma, opts)
+    kept_dof = int(inl.sum()) - (2 * int(np.isfinite(R2[:, 0]).sum()) + 3 * int(np.isfinite(S2[:, 0]).sum()) - 3)
+    if sigma is None and kept_dof < opts.min_dof_for_sigma:
+        # The robust route kept too little redundancy to say what the noise is: its rejections rest on a
+        # scale it cannot estimate. Only classic snooping from the all-data fit is justified.
+        R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts)
+        return R, S, O, inl, converged, "snooping"
+    return R2, S2, O2, inl, converged, "robust"
 
 
 def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> CalibrationResult:
