@@ -87,8 +87,10 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         other = _calibrate_once(F, sigma, seed2, opts, t0)
         if other.status != "failed" and _differs(result, other):
             cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts)
-            first, second = (result, other) if (cost_r, -result.inliers.sum()) <= (cost_o, -other.inliers.sum()) \
-                else (other, result)
+            unusable = ("failed", "unconverged", "inconsistent")
+            key_r = (result.status in unusable, cost_r, -result.inliers.sum())
+            key_o = (other.status in unusable, cost_o, -other.inliers.sum())
+            first, second = (result, other) if key_r <= key_o else (other, result)
             gap = abs(cost_r - cost_o) / scale**2 if np.isfinite(cost_r - cost_o) else np.inf
             n_diff = int((first.inliers != second.inliers).sum())
             if gap < opts.ambiguity_chi2:
@@ -107,8 +109,9 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
 
 def _truncated_costs(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions):
     """(cost of a, cost of b, scale s): sum over every measured entry of min(e^2, (k s)^2) (an entry
-    of an unplaced node counts (k s)^2) at one scale s, the given sigma or the smaller estimate."""
-    s = sigma if sigma is not None else float(np.nanmin([a.sigma, b.sigma]))
+    of an unplaced node counts (k s)^2) at one scale s, the given sigma or the larger estimate (the
+    smaller could be that of a fit that explains a subset exactly and call everything else an outlier)."""
+    s = sigma if sigma is not None else float(np.nanmax([a.sigma, b.sigma]))
     cap = (opts.threshold_sigmas * s) ** 2
 
     def cost(r):
@@ -278,7 +281,7 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
 
 def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions):
     """Sigma unknown, little redundancy: reject the entry with the largest externally studentised
-    residual while it exceeds the Bonferroni bound (alpha_global over the testable entries) and the
+    residual while it exceeds the Bonferroni bound (alpha over the testable entries) and the
     fit keeps at least 2 degrees of freedom; least squares after each. Returns (R, S, O, inl, converged)."""
     inl = inl.copy()
     converged = True
@@ -292,7 +295,9 @@ def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions):
             break
         aw = np.where(testable, np.abs(st.w), 0.0)
         k = int(np.argmax(aw))
-        if aw[k] <= critical_value(opts.alpha_global / testable.sum(), st.dof - 1):
+        # family-wise level alpha (0.001): with 2-9 degrees of freedom one false rejection costs a node
+        # (a receiver with 3 measurements keeps 2 and cannot be placed), a gross error is far beyond it
+        if aw[k] <= critical_value(opts.alpha / testable.sum(), st.dof - 1):
             break
         inl[st.entries[k, 0], st.entries[k, 1]] = False
         ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
