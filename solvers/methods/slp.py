@@ -1,0 +1,443 @@
+"""Straight-line programs: a system kept in its factored form, differentiated, compiled to a tape.
+
+A :class:`Program` records arithmetic on :class:`Value` objects (operator overloading), so a system is
+written once from its formulas (matrices, products, determinants) instead of its expanded monomials.
+Every operation is hash-consed (the same operation on the same operands is one node: common
+subexpressions are shared) and constants are folded (x * 0, x + 0, x * 1, c1 * c2 ...).
+:func:`derivative` differentiates a set of nodes by forward accumulation on the graph, one input at a
+time, creating new nodes in the same program (so derivative nodes share subexpressions with each
+other and with the values). :meth:`Program.compile` keeps what the outputs need and allocates registers
+by liveness: the :class:`Tape` is an array of instructions ``(opcode, destination, a, b)`` with a real
+immediate, run for many points at once by :mod:`solvers.methods.tape_kernel`.
+
+:func:`homotopy_program` builds, for a parameter homotopy H(x, s) = F(x; q0 + s (q1 - q0)), the
+program of H, its Jacobian in x and dH/ds (and the shorter program of H alone for a corrector that
+reuses its Jacobian); :func:`tdoa_equations` writes the TDOA formulation's equations (analysis.
+formulations: compaction matrix, A/B/C families) on program values.
+
+Reference: the straight-line programs of HomotopyContinuation.jl's ModelKit (Breiding & Timme, 2018)
+and Griewank & Walther, "Evaluating derivatives", 2nd ed. (2008), ch. 2-3.
+"""
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+__all__ = ["OPCODES", "Program", "Tape", "Value", "derivative", "homotopy_program", "tdoa_equations",
+           "tdoa_homotopy_tapes"]
+
+#: Instruction set of the tape. a, b are registers; ``imm`` the instruction's real immediate.
+#: INPUT rows are written by the caller before a run; OUT copies register a to output row b.
+OPCODES = ("ADD", "SUB", "MUL", "NEG", "CMUL", "CADD", "SQR", "CONST", "OUT")
+ADD, SUB, MUL, NEG, CMUL, CADD, SQR, CONST, OUT = range(len(OPCODES))
+
+_INPUT = -1
+
+
+class Value:
+    """A node of a :class:`Program`; arithmetic with Values and real numbers records new nodes."""
+
+    __slots__ = ("program", "id")
+
+    def __init__(self, program: "Program", id: int):
+        self.program, self.id = program, id
+
+    def _other(self, other) -> "Value":
+        if isinstance(other, Value):
+            if other.program is not self.program:
+                raise ValueError("values of two programs mixed")
+            return other
+        if isinstance(other, numbers.Real):
+            return self.program.constant(float(other))
+        return NotImplemented
+
+    def __add__(self, other):
+        o = self._other(other)
+        return NotImplemented if o is NotImplemented else self.program.add(self, o)
+
+    __radd__ = __add__
+
+    def __sub__(self, other):
+        o = self._other(other)
+        return NotImplemented if o is NotImplemented else self.program.sub(self, o)
+
+    def __rsub__(self, other):
+        o = self._other(other)
+        return NotImplemented if o is NotImplemented else self.program.sub(o, self)
+
+    def __mul__(self, other):
+        o = self._other(other)
+        return NotImplemented if o is NotImplemented else self.program.mul(self, o)
+
+    __rmul__ = __mul__
+
+    def __neg__(self):
+        return self.program.neg(self)
+
+    def __pow__(self, k: int):
+        if not isinstance(k, int) or k < 0:
+            raise ValueError(f"only non-negative integer powers, not {k!r}")
+        out, base = self.program.constant(1.0), self
+        while k:
+            if k & 1:
+                out = out * base
+            k >>= 1
+            if k:
+                base = self.program.sqr(base)
+        return out
+
+    def __repr__(self) -> str:
+        return f"Value({self.id}: {self.program.describe(self.id)})"
+
+
+class Program:
+    """A hash-consed expression graph with constant folding (see the module docstring).
+
+    Nodes are ``(op, a, b, imm)``: op an opcode or ``_INPUT``; a, b node ids (-1 unused); imm a float
+    (the constant of CONST, CMUL, CADD; the input's index for inputs). Creation order is a topological
+    order.
+    """
+
+    def __init__(self):
+        self.nodes: list[tuple[int, int, int, float]] = []
+        self.names: list[str] = []
+        self._index: dict[tuple, int] = {}
+
+    # -- node creation --------------------------------------------------------------------------
+    def _node(self, op: int, a: int = -1, b: int = -1, imm: float = 0.0) -> Value:
+        key = (op, a, b, imm)
+        i = self._index.get(key)
+        if i is None:
+            i = len(self.nodes)
+            self.nodes.append(key)
+            self._index[key] = i
+        return Value(self, i)
+
+    def input(self, name: str) -> Value:
+        self.names.append(name)
+        return self._node(_INPUT, imm=float(len(self.names) - 1))
+
+    def inputs(self, names: Sequence[str]) -> list[Value]:
+        return [self.input(n) for n in names]
+
+    def constant(self, c: float) -> Value:
+        return self._node(CONST, imm=float(c) + 0.0)  # +0.0: -0.0 and 0.0 are one constant
+
+    def _const_of(self, v: Value) -> float | None:
+        op, _, _, imm = self.nodes[v.id]
+        return imm if op == CONST else None
+
+    def add(self, a: Value, b: Value) -> Value:
+        ca, cb = self._const_of(a), self._const_of(b)
+        if ca is not None and cb is not None:
+            return self.constant(ca + cb)
+        if ca is not None:
+            a, b, ca, cb = b, a, cb, ca
+        if cb is not None:
+            return a if cb == 0.0 else self._cadd(a, cb)
+        if self.nodes[b.id][0] == NEG:
+            return self.sub(a, Value(self, self.nodes[b.id][1]))
+        if self.nodes[a.id][0] == NEG:
+            return self.sub(b, Value(self, self.nodes[a.id][1]))
+        x, y = sorted((a.id, b.id))
+        return self._node(ADD, x, y)
+
+    def _cadd(self, a: Value, c: float) -> Value:
+        op, x, _, imm = self.nodes[a.id]
+        if op == CADD:  # (x + c1) + c2
+            return self.add(Value(self, x), self.constant(imm + c))
+        return self._node(CADD, a.id, imm=c)
+
+    def sub(self, a: Value, b: Value) -> Value:
+        ca, cb = self._const_of(a), self._const_of(b)
+        if ca is not None and cb is not None:
+            return self.constant(ca - cb)
+        if cb is not None:
+            return self.add(a, self.constant(-cb))
+        if ca is not None:
+            return self.neg(b) if ca == 0.0 else self._cadd(self.neg(b), ca)
+        if a.id == b.id:
+            return self.constant(0.0)
+        if self.nodes[b.id][0] == NEG:
+            return self.add(a, Value(self, self.nodes[b.id][1]))
+        return self._node(SUB, a.id, b.id)
+
+    def neg(self, a: Value) -> Value:
+        op, x, y, imm = self.nodes[a.id]
+        if op == CONST:
+            return self.constant(-imm)
+        if op == NEG:
+            return Value(self, x)
+        if op == SUB:
+            return self._node(SUB, y, x)
+        if op == CMUL:
+            return self.scale(Value(self, x), -imm)
+        return self._node(NEG, a.id)
+
+    def scale(self, a: Value, c: float) -> Value:
+        op, x, _, imm = self.nodes[a.id]
+        if c == 0.0:
+            return self.constant(0.0)
+        if c == 1.0:
+            return a
+        if op == CONST:
+            return self.constant(c * imm)
+        if c == -1.0:
+            return self.neg(a)
+        if op == CMUL:
+            return self.scale(Value(self, x), c * imm)
+        if op == NEG:
+            return self.scale(Value(self, x), -c)
+        return self._node(CMUL, a.id, imm=c)
+
+    def mul(self, a: Value, b: Value) -> Value:
+        ca, cb = self._const_of(a), self._const_of(b)
+        if ca is not None and cb is not None:
+            return self.constant(ca * cb)
+        if ca is not None:
+            return self.scale(b, ca)
+        if cb is not None:
+            return self.scale(a, cb)
+        if a.id == b.id:
+            return self.sqr(a)
+        # constant factors move out of products: (c x) y = c (x y), so x y is shared
+        for u, v in ((a, b), (b, a)):
+            op, x, _, imm = self.nodes[u.id]
+            if op == CMUL:
+                return self.scale(self.mul(Value(self, x), v), imm)
+            if op == NEG:
+                return self.neg(self.mul(Value(self, x), v))
+        x, y = sorted((a.id, b.id))
+        return self._node(MUL, x, y)
+
+    def sqr(self, a: Value) -> Value:
+        op, x, _, imm = self.nodes[a.id]
+        if op == CONST:
+            return self.constant(imm * imm)
+        if op == NEG:
+            return self.sqr(Value(self, x))
+        if op == CMUL:
+            return self.scale(self.sqr(Value(self, x)), imm * imm)
+        return self._node(SQR, a.id)
+
+    def describe(self, i: int) -> str:
+        op, a, b, imm = self.nodes[i]
+        if op == _INPUT:
+            return self.names[int(imm)]
+        return f"{OPCODES[op]}({a}, {b}, {imm:g})"
+
+    def is_zero(self, v: Value) -> bool:
+        return self._const_of(v) == 0.0
+
+    # -- compilation ------------------------------------------------------------------------------
+    def compile(self, outputs: Sequence[Value]) -> "Tape":
+        """The tape computing ``outputs`` (output row k = outputs[k]) from the inputs.
+
+        Input k is register k (the caller writes it); other nodes get registers by liveness (a register
+        is reused after the last instruction that reads it), so the workspace stays small.
+        """
+        n_in = len(self.names)
+        need = np.zeros(len(self.nodes), dtype=bool)
+        stack = [v.id for v in outputs]
+        while stack:
+            i = stack.pop()
+            if need[i]:
+                continue
+            need[i] = True
+            op, a, b, _ = self.nodes[i]
+            for j in (a, b):
+                if j >= 0 and op not in (CONST, _INPUT):
+                    stack.append(j)
+        order = [i for i in range(len(self.nodes)) if need[i] and self.nodes[i][0] != _INPUT]
+        last = {}
+        for pos, i in enumerate(order):
+            op, a, b, _ = self.nodes[i]
+            for j in (a, b):
+                if j >= 0:
+                    last[j] = pos
+        out_ids = {v.id for v in outputs}
+        reg = {i: int(self.nodes[i][3]) for i in range(len(self.nodes)) if self.nodes[i][0] == _INPUT}
+        free: list[int] = []
+        n_reg = n_in
+        code, imm = [], []
+        for pos, i in enumerate(order):
+            op, a, b, c = self.nodes[i]
+            ra = reg[a] if a >= 0 else 0
+            rb = reg[b] if b >= 0 else 0
+            # operands whose last use is here free their registers before the destination is chosen
+            # (an instruction may write its own operand: the kernel reads before it writes, per point)
+            for j in {a, b}:
+                if j >= 0 and last.get(j) == pos and j not in out_ids and self.nodes[j][0] != _INPUT:
+                    free.append(reg[j])
+            if free:
+                d = free.pop()
+            else:
+                d = n_reg
+                n_reg += 1
+            reg[i] = d
+            code.append((op, d, ra, rb))
+            imm.append(c)
+            if i not in out_ids and i not in last:  # dead (cannot happen for needed nodes)
+                free.append(d)
+        for k, v in enumerate(outputs):
+            code.append((OUT, k, reg[v.id], 0))
+            imm.append(0.0)
+        return Tape(np.array(code, dtype=np.int32).reshape(-1, 4), np.array(imm, dtype=np.float64),
+                    n_in, n_reg, len(outputs), tuple(self.names))
+
+
+@dataclass(frozen=True)
+class Tape:
+    """Instructions (n, 4) int32 ``(opcode, destination, a, b)`` and immediates (n,); registers
+    0..n_inputs-1 are the inputs, n_registers in all; OUT instructions write output rows."""
+
+    code: np.ndarray
+    imm: np.ndarray
+    n_inputs: int
+    n_registers: int
+    n_outputs: int
+    input_names: tuple[str, ...]
+
+    @property
+    def n_instructions(self) -> int:
+        """Arithmetic instructions (OUT copies not counted)."""
+        return int(np.sum(self.code[:, 0] != OUT))
+
+    def counts(self) -> dict[str, int]:
+        ops, k = np.unique(self.code[:, 0], return_counts=True)
+        return {OPCODES[o]: int(c) for o, c in zip(ops, k)}
+
+
+def derivative(values: Sequence[Value], wrt: Value) -> list[Value]:
+    """d values / d wrt by forward accumulation on the graph (new nodes in the same program)."""
+    prog = values[0].program if values else wrt.program
+    top = max(v.id for v in values) if values else -1
+    zero = prog.constant(0.0)
+    d: dict[int, Value] = {}
+    nodes = prog.nodes
+    for i in range(min(wrt.id, top + 1), top + 1):
+        op, a, b, c = nodes[i]
+        if op == _INPUT:
+            d[i] = prog.constant(1.0) if i == wrt.id else zero
+            continue
+        if op == CONST:
+            continue
+        da = d.get(a, zero) if a >= 0 else zero
+        db = d.get(b, zero) if b >= 0 else zero
+        if prog.is_zero(da) and prog.is_zero(db):
+            continue
+        va, vb = Value(prog, a), (Value(prog, b) if b >= 0 else None)
+        if op == ADD:
+            r = da + db
+        elif op == SUB:
+            r = da - db
+        elif op == NEG:
+            r = -da
+        elif op == CMUL:
+            r = prog.scale(da, c)
+        elif op == CADD:
+            r = da
+        elif op == SQR:
+            r = prog.scale(va * da, 2.0)
+        elif op == MUL:
+            r = da * vb + va * db
+        else:  # pragma: no cover - OUT never appears in a program's nodes
+            raise AssertionError(op)
+        d[i] = r
+    return [d.get(v.id, zero) for v in values]
+
+
+def homotopy_program(equations: Callable[[list[Value], list[Value]], list[Value]], unknowns: Sequence[str],
+                     parameters: Sequence[str]) -> tuple[Program, list[Value], list[Value], list[Value]]:
+    """Program of H(x, s) = F(x; q0 + s dq), its Jacobian dH/dx and dH/ds.
+
+    ``equations(x, q)`` writes F on program values. Inputs, in register order: the unknowns, s, the
+    start parameters q0_k and the directions dq_k (``q0:<name>``, ``dq:<name>``). Returns the program
+    and the lists H (N), J (N * N, row-major: J[e * N + k] = dH_e / dx_k), Hs (N).
+    """
+    prog = Program()
+    x = prog.inputs(list(unknowns))
+    s = prog.input("s")
+    q0 = prog.inputs([f"q0:{p}" for p in parameters])
+    dq = prog.inputs([f"dq:{p}" for p in parameters])
+    q = [a + s * b for a, b in zip(q0, dq)]
+    H = list(equations(x, q))
+    if len(H) != len(x):
+        raise ValueError(f"{len(H)} equations in {len(x)} unknowns: a homotopy needs a square system")
+    J = [None] * (len(H) * len(x))
+    for k, xk in enumerate(x):
+        col = derivative(H, xk)
+        for e in range(len(H)):
+            J[e * len(x) + k] = col[e]
+    Hs = derivative(H, s)
+    return prog, H, J, Hs
+
+
+# --------------------------------------------------------------------------------------------------
+# the TDOA formulation, unexpanded
+# --------------------------------------------------------------------------------------------------
+
+
+def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Value]]:
+    """``equations(x, q)`` of a TDOA formulation (families A, B, C) written from its formulas.
+
+    Same equations as :func:`analysis.formulations.factored_equations` (and the generated solvers'
+    coefficients): unknowns h11, h12, h22, b1, b2, o1..on; parameters f_ij row by row. e_ij = f_ij -
+    f_1j, p_ij = f_ij + f_1j; compaction matrix D~_ij = c_ij + 2 e_{i+1,1} o1 - 2 e_{i+1,j+1} o_{j+1}
+    with c_ij = e p - e p; d_ij^2 - d_1j^2 = e_ij (p_ij - 2 o_j); d_11^2 = (f_11 - o1)^2.
+    """
+    from analysis.formulations import _family, as_formulation
+
+    formulation = as_formulation(formulation)
+    config = formulation.config
+    m, n = config.m, config.n
+    for name in formulation.equations:
+        if _family(name) not in ("A", "B", "C"):
+            raise ValueError(f"{formulation.label}: equation {name} has no unexpanded program (families A, B, C)")
+
+    def equations(x: list[Value], q: list[Value]) -> list[Value]:
+        h11, h12, h22, b1, b2, *o = x
+        f = [q[i * n:(i + 1) * n] for i in range(m)]
+        e = {(i, j): f[i][j] - f[0][j] for i in range(1, m) for j in range(n)}
+        p = {(i, j): f[i][j] + f[0][j] for i in range(1, m) for j in range(n)}
+
+        def comp(i: int, j: int) -> Value:  # D~_ij, 1-based
+            c = e[i, j] * p[i, j] - e[i, 0] * p[i, 0]
+            return c + 2.0 * (e[i, 0] * o[0]) - 2.0 * (e[i, j] * o[j])
+
+        det = h11 * h22 - h12 * h12
+        d2_11 = (f[0][0] - o[0]) ** 2
+        out = []
+        for name in formulation.equations:
+            if name == "A":
+                b_adj_b = h22 * b1 * b1 - 2.0 * (h12 * b1 * b2) + h11 * b2 * b2
+                out.append(d2_11 * det - b_adj_b)
+            elif name.startswith("B"):
+                j = int(name[1:])
+                e_adj_e, b_adj_e = (h22, b1 * h22 - b2 * h12) if j == 2 else (h11, b2 * h11 - b1 * h12)
+                lhs = (f[0][j - 1] - o[j - 1]) ** 2 - d2_11
+                out.append(lhs * det - 0.25 * e_adj_e + b_adj_e)
+            else:
+                i = int(name[1:])
+                r1, r2 = comp(i - 1, 1), comp(i - 1, 2)
+                quad = h11 * (r1 * r1) + 2.0 * (h12 * (r1 * r2)) + h22 * (r2 * r2)
+                lin = b1 * r1 + b2 * r2
+                d2_diff = e[i - 1, 0] * (p[i - 1, 0] - 2.0 * o[0])
+                out.append(d2_diff - quad + 2.0 * lin)
+        return out
+
+    return equations
+
+
+def tdoa_homotopy_tapes(formulation) -> dict[str, Tape]:
+    """Tapes of a TDOA formulation's homotopy: ``"HJ"`` (outputs H, J row-major, dH/ds), ``"H"`` (H)."""
+    from analysis.formulations import as_formulation, data_symbols
+
+    formulation = as_formulation(formulation)
+    config = formulation.config
+    params = [s.name for row in data_symbols(config) for s in row]
+    prog, H, J, Hs = homotopy_program(tdoa_equations(formulation), config.unknowns, params)
+    return {"HJ": prog.compile(H + J + Hs), "H": prog.compile(H)}

@@ -1,0 +1,75 @@
+"""Straight-line programs and the tape interpreter: common subexpressions, constant folding, and the
+TDOA homotopy tapes against the tracker's monomial kernel and finite differences."""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+
+from solvers.generate import SOLVERS
+from solvers.methods import slp, tape_kernel, tracker
+
+
+def test_program_shares_and_folds():
+    prog = slp.Program()
+    x, y = prog.inputs(["x", "y"])
+    a = x * y + 2.0 * x
+    b = y * x + x * 2.0
+    assert a.id == b.id  # hash-consed, commutative operands sorted
+    assert (x * 1.0).id == x.id and (x + 0.0).id == x.id and prog.is_zero(x * 0.0)
+    assert (-(-x)).id == x.id and (x - x).id == prog.constant(0.0).id
+    dx, dy = slp.derivative([x * x * y], x)[0], slp.derivative([x * x * y], y)[0]
+    tape = prog.compile([x * x * y, dx, dy])
+    out = tape_kernel.run(tape, np.array([[1.5 + 0.5j, -2.0], [0.25j, 3.0 - 1j]]))
+    X, Y = np.array([1.5 + 0.5j, -2.0]), np.array([0.25j, 3.0 - 1j])
+    np.testing.assert_allclose(out, [X * X * Y, 2 * X * Y, X * X], rtol=1e-14)
+
+
+def test_power_by_squaring():
+    prog = slp.Program()
+    (x,) = prog.inputs(["x"])
+    tape = prog.compile([x ** 5, x ** 0])
+    z = np.array([[0.3 - 1.1j]])
+    np.testing.assert_allclose(tape_kernel.run(tape, z)[:, 0], [z[0, 0] ** 5, 1.0], rtol=1e-14)
+    assert tape.n_instructions == 4  # x^2, x^4, x^5 and the constant 1
+
+
+@pytest.mark.parametrize("label", ["9r3s", "6r3s"])
+def test_tdoa_tape_matches_tracker_kernel(label):
+    """H, J, dH/ds of the unexpanded tape equal the generated solver's expanded system at random
+    complex points on a random segment; J and dH/ds agree with central finite differences."""
+    name = {"9r3s": "tdoa_9r3s_homotopy75", "6r3s": "tdoa_6r3s_homotopy180"}[label]
+    solver = importlib.import_module(f"solvers.generated.{name}").solver()
+    tapes = slp.tdoa_homotopy_tapes(SOLVERS[label])
+    rng = np.random.default_rng(7)
+    P, N = 12, solver.nvars
+    x = solver.x0[:P] + 0.3 * (rng.normal(size=(P, N)) + 1j * rng.normal(size=(P, N)))
+    q0 = solver.q0
+    q1 = rng.normal(size=len(q0)) + 0.1j * rng.normal(size=len(q0))
+    s = rng.uniform(size=P)
+    H, J, Hs = tracker.evaluate(solver.structure, solver.segment(q0[None], q1[None]), x, s)
+    out = tape_kernel.evaluate(tapes["HJ"], x, s, q0, q1)
+    scale = np.abs(H).max() + np.abs(J).max()
+    np.testing.assert_allclose(out[:, :N], H, atol=1e-12 * scale)
+    np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), J, atol=1e-12 * scale)
+    np.testing.assert_allclose(out[:, N + N * N:], Hs, atol=1e-12 * (np.abs(Hs).max()))
+    np.testing.assert_allclose(tape_kernel.evaluate(tapes["H"], x, s, q0, q1), H, atol=1e-12 * scale)
+    # finite differences (complex-analytic: a real step suffices)
+    eps = 1e-6
+    Jfd = np.empty((P, N, N), dtype=complex)
+    for k in range(N):
+        dxk = np.zeros(N)
+        dxk[k] = eps * (1.0 + np.abs(x[:, k]).max())
+        hp = tape_kernel.evaluate(tapes["H"], x + dxk, s, q0, q1)
+        hm = tape_kernel.evaluate(tapes["H"], x - dxk, s, q0, q1)
+        Jfd[:, :, k] = (hp - hm) / (2 * dxk[k])
+    np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), Jfd, atol=1e-6 * scale)
+    hp = tape_kernel.evaluate(tapes["H"], x, s + eps, q0, q1)
+    hm = tape_kernel.evaluate(tapes["H"], x, s - eps, q0, q1)
+    np.testing.assert_allclose(out[:, N + N * N:], (hp - hm) / (2 * eps), atol=1e-6 * np.abs(Hs).max())
+
+
+def test_tape_rejects_unsupported_families():
+    with pytest.raises(ValueError, match="no unexpanded program"):
+        slp.tdoa_equations("5r4s:A,B2,B3,C2-C5,minors")
