@@ -41,7 +41,7 @@ def _tape_loop(code, imm, Rr, Ri, Or, Oi, P, reps):
         tape_kernel.run_tape(code, imm, Rr, Ri, Or, Oi, P)
 
 
-def best(f, repeat: int) -> float:
+def best(f, repeat: int = 5) -> float:
     out = np.inf
     for _ in range(repeat):
         t0 = time.perf_counter()

@@ -14,7 +14,9 @@ A squared system's spec may name the start roots that satisfy the full (over-det
 (``full_system.tracked``, :func:`full_system_roots`); only those are tracked.
 
 Online (:class:`HomotopySolver`): for target parameters q1, every (tracked) start root is tracked along the
-complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`); paths that stall,
+complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`), or, for systems with
+an unexpanded straight-line program (the TDOA A/B/C formulations, :mod:`solvers.methods.slp`), by the
+batched tracker on its instruction tape (:mod:`solvers.methods.batch_tracker`; same steps); paths that stall,
 and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
 step control. Because q0 is a generic complex point, the segment misses the discriminant with
 probability one (the gamma trick; Sommese & Wampler 2005, ch. 7).
@@ -33,7 +35,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from . import tracker
+from . import batch_tracker, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -180,11 +182,41 @@ def _pairs(z: np.ndarray) -> list:
     return [_pairs(row) for row in z]
 
 
-class HomotopySolver:
-    """Tracks the stored start roots from q0 to target parameters (the online half of the method)."""
+#: Evaluators of a solver's system: "tape" (straight-line program, batched tracker; an error where the
+#: system has none), "monomials" (the expanded system's coefficients, tracker.track), "auto" (the tape
+#: where the system has one).
+EVALUATORS = ("auto", "tape", "monomials")
 
-    def __init__(self, spec: dict, coefficients: Callable):
+
+def _tape(spec: dict, evaluator: str):
+    """The H+J+dH/ds tape of the spec's system, or None (evaluator "monomials", or no program)."""
+    if evaluator not in EVALUATORS:
+        raise ValueError(f"unknown evaluator {evaluator!r}; valid: {', '.join(EVALUATORS)}")
+    if evaluator == "monomials":
+        return None
+    from . import slp
+
+    try:
+        tape = slp.tdoa_homotopy_tapes(spec["system"])["HJ"]
+    except ValueError:
+        tape = None
+    names = list(spec["unknowns"]) + ["s"] + [f"q0:{p}" for p in spec["parameters"]] + [f"dq:{p}" for p in spec["parameters"]]
+    if tape is not None and list(tape.input_names) != names:
+        tape = None
+    if tape is None and evaluator == "tape":
+        raise HomotopyError(f"{spec['system']}: no straight-line program for this system (TDOA families A, B, C only)")
+    return tape
+
+
+class HomotopySolver:
+    """Tracks the stored start roots from q0 to target parameters (the online half of the method).
+
+    ``evaluator`` (:data:`EVALUATORS`): how the tracker evaluates the system.
+    """
+
+    def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
         self.coefficients = coefficients
+        self.tape = _tape(spec, evaluator)
         self.structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
         self.degree = int(spec["coefficient_degree"])
         self.q0 = _complex_array(spec["start_parameters"])
@@ -222,8 +254,11 @@ class HomotopySolver:
     def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
               options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats."""
+        options = options or self.options
+        if self.tape is not None and options.predictor == "rk4":
+            return batch_tracker.track(self.tape, q0, q1, x0, inst, options)
         G = self.segment(q0, q1)
-        return tracker.track(self.structure, G, x0, inst, options or self.options)
+        return tracker.track(self.structure, G, x0, inst, options)
 
     def _route(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Track the complete root set xa (K, N) of qa to every target q (B, P) along straight segments.
