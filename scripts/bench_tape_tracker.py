@@ -2,7 +2,7 @@
 
 Per solver (the 3-transmitter cells, whose systems have an unexpanded straight-line program): on N
 seeded noiseless networks (solvers.synthetic.random_network, as scripts/bench_solvers.py), each
-evaluator ("monomials": tracker.track; "tape": batch_tracker.track) solves every network through the
+evaluator ("monomials": tracker.track; "tape": tape_kernel.track) solves every network through the
 generated module's solve path (solve_scaled: scaling, tracking, retracking, detours, Newton on the
 target); reported: median ms of one solve (best of three rounds over the first ``--single`` networks),
 its ratio to numpy's complex eig of the root count's size (one BLAS thread) timed in this process,
@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
 from solvers.generate import GENERATED_DIR  # noqa: E402
-from solvers.methods import batch_tracker, homotopy, tape_kernel  # noqa: E402
+from solvers.methods import homotopy, tape_kernel  # noqa: E402
 from solvers.synthetic import random_network, true_root  # noqa: E402
 
 from bench_tape import best as _best  # noqa: E402  (scripts/ is on the path of a script)
@@ -54,46 +54,47 @@ def _truth(net) -> np.ndarray:
     return np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
 
 
-@njit(cache=True)
+@njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them
 def _lu_loop(J0r, J0i, Or, Oi, N, piv, ok, br, bi, P, reps):
     """reps x (copy the Jacobians in, one batched LU, two solves): the tracker's work per evaluation."""
     for r in range(reps):
         Or[:, :P] = J0r[:, :P]
         Oi[:, :P] = J0i[:, :P]
-        batch_tracker._lu(Or, Oi, N, N, piv, ok, P)
-        batch_tracker._solve(Or, Oi, N, N, piv, br, bi, P)
-        batch_tracker._solve(Or, Oi, N, N, piv, br, bi, P)
+        tape_kernel._lu(Or, Oi, N, N, piv, ok, P)
+        tape_kernel._solve(Or, Oi, N, N, piv, br, bi, P)
+        tape_kernel._solve(Or, Oi, N, N, piv, br, bi, P)
 
 
-@njit(cache=True)
+@njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them
 def _copy_loop(J0r, J0i, Or, Oi, P, reps):
     for r in range(reps):
         Or[:, :P] = J0r[:, :P]
         Oi[:, :P] = J0i[:, :P]
 
 
-def _kernel_costs(solver, P: int, rng) -> tuple[float, float]:
-    """Seconds per path of one tape evaluation and of one LU with two solves, at P paths per call."""
-    tape = solver.tape
+def _kernel_costs(solver, P: int, rng) -> tuple[float, float, float]:
+    """Seconds per path of one evaluation of the full and of the Newton tape and of one LU with two
+    solves, at P paths per call."""
     N = solver.nvars
     x = np.resize(solver.x0, (P, N))
     q1 = rng.normal(size=len(solver.q0)) + 0j
-    out = tape_kernel.evaluate(tape, x, rng.uniform(size=P), solver.q0, q1).T  # (n_out, P)
-    Rr, Ri, Or, Oi = tape_kernel.workspace(tape, P)
     inputs = np.concatenate([x.T, np.full((1, P), 0.5), np.tile(solver.q0[:, None], (1, P)),
                              np.tile((q1 - solver.q0)[:, None], (1, P))])
-    Rr[: tape.n_inputs], Ri[: tape.n_inputs] = inputs.real, inputs.imag
     reps = max(1, 20000 // P)
-    tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
-    t_eval = _best(lambda: [tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P) for _ in range(reps)]) / (reps * P)
-    J0r, J0i = np.ascontiguousarray(out.real), np.ascontiguousarray(out.imag)
+    costs = []
+    for tape in (solver.tapes.full, solver.tapes.newton):
+        Rr, Ri, Or, Oi = tape_kernel.workspace(tape, P)
+        Rr[: tape.n_inputs], Ri[: tape.n_inputs] = inputs.real, inputs.imag
+        tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
+        costs.append(_best(lambda: [tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P) for _ in range(reps)]) / (reps * P))
+    J0r, J0i = np.ascontiguousarray(Or), np.ascontiguousarray(Oi)
     piv, ok = np.zeros((N, P), dtype=np.int64), np.zeros(P, dtype=bool)
     br, bi = np.ones((N, P)), np.zeros((N, P))
     _lu_loop(J0r, J0i, Or, Oi, N, piv, ok, br, bi, P, 1)
     _copy_loop(J0r, J0i, Or, Oi, P, 1)
     t_lu = _best(lambda: _lu_loop(J0r, J0i, Or, Oi, N, piv, ok, br, bi, P, reps)) / (reps * P)
     t_copy = _best(lambda: _copy_loop(J0r, J0i, Or, Oi, P, reps)) / (reps * P)
-    return t_eval, t_lu - t_copy
+    return costs[0], costs[1], t_lu - t_copy
 
 
 def bench(label: str, trials: int, seed: int, single: int) -> list[dict]:
@@ -138,27 +139,27 @@ def bench(label: str, trials: int, seed: int, single: int) -> list[dict]:
                "median_log10_err": float(np.median(log)), "p90_log10_err": float(np.percentile(log, 90)),
                "p99_log10_err": float(np.percentile(log, 99))}
         if evaluator == "tape":
-            # evaluations per path of one plain track (lock step: 3 stages + Newton per attempt)
+            # evaluations per path of one plain track (lock step: per attempt three predictor stages and
+            # the last Newton step on the full tape, the other Newton steps on the Newton tape)
             opts = solver.options
             sc = np.sqrt(np.mean(np.abs(F[:single].reshape(len(F[:single]), -1)) ** 2, axis=1))
-            n_eval, t_track = [], []
+            attempts, t_track = [], []
             for f, s in zip(F[:single], sc):
                 q = f.reshape(1, -1).astype(complex) / s
-                t = time.perf_counter()
-                _, stats = batch_tracker.track(solver.tape, solver.q0[None], q, solver.x0, None, opts)
-                t_track.append(time.perf_counter() - t)
-                for _ in range(2):  # best of three per network
+                t_track.append(np.inf)
+                for _ in range(3):  # best of three per network
                     t = time.perf_counter()
-                    batch_tracker.track(solver.tape, solver.q0[None], q, solver.x0, None, opts)
+                    _, stats = tape_kernel.track(solver.tapes, solver.q0[None], q, solver.x0, None, opts)
                     t_track[-1] = min(t_track[-1], time.perf_counter() - t)
-                attempts = stats[:, 1] + stats[:, 2]
-                n_eval.append(np.mean(attempts * (3 + opts.newton) + 1 + opts.final_newton * (stats[:, 0] == 0)))
-            t_eval, t_lu = _kernel_costs(solver, K, rng)
-            ev = float(np.median(n_eval))
-            row.update({"attempts_per_path": float(np.median(n_eval) - 1 - opts.final_newton) / (3 + opts.newton),
-                        "evals_per_path": ev, "us_eval": 1e6 * t_eval, "us_lu": 1e6 * t_lu,
+                attempts.append(float(np.mean(stats[:, 1] + stats[:, 2])))
+            t_full, t_newton, t_lu = _kernel_costs(solver, K, rng)
+            a = float(np.median(attempts))
+            n_full, n_newton = 4 * a + 1, (opts.newton - 1) * a + opts.final_newton
+            row.update({"attempts_per_path": a, "evals_per_path": n_full + n_newton, "us_eval": 1e6 * t_full,
+                        "us_eval_newton": 1e6 * t_newton, "us_lu": 1e6 * t_lu,
                         "us_path_track": 1e6 * float(np.median(t_track)) / K,
-                        "us_path_eval": 1e6 * ev * t_eval, "us_path_lu": 1e6 * ev * t_lu})
+                        "us_path_eval": 1e6 * (n_full * t_full + n_newton * t_newton),
+                        "us_path_lu": 1e6 * (n_full + n_newton) * t_lu})
         rows.append(row)
     return rows
 
@@ -179,7 +180,8 @@ def main(argv=None) -> None:
                   f"p90 {r['p90_log10_err']:.2f} p99 {r['p99_log10_err']:.2f}")
         t = rows[-1]
         print(f"  tape tracker, one plain track: {t['us_path_track']:.0f} us/path; {t['evals_per_path']:.0f} evaluations "
-              f"per path ({t['attempts_per_path']:.0f} step attempts); evaluation {t['us_eval']:.2f} us x evals = "
+              f"per path ({t['attempts_per_path']:.0f} step attempts); evaluation {t['us_eval']:.2f} us (full tape), "
+              f"{t['us_eval_newton']:.2f} us (Newton tape): "
               f"{t['us_path_eval']:.0f} us, LU + 2 solves {t['us_lu']:.2f} us x evals = {t['us_path_lu']:.0f} us, "
               f"rest (bookkeeping) {t['us_path_track'] - t['us_path_eval'] - t['us_path_lu']:.0f} us; "
               f"solve beyond tracking {t['us_per_path'] - t['us_path_track']:.0f} us/path")

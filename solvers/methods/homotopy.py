@@ -16,7 +16,7 @@ A squared system's spec may name the start roots that satisfy the full (over-det
 Online (:class:`HomotopySolver`): for target parameters q1, every (tracked) start root is tracked along the
 complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`), or, for systems with
 an unexpanded straight-line program (the TDOA A/B/C formulations, :mod:`solvers.methods.slp`), by the
-batched tracker on its instruction tape (:mod:`solvers.methods.batch_tracker`; same steps); paths that stall,
+batched tracker on its instruction tapes (:mod:`solvers.methods.tape_kernel`); paths that stall,
 and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
 step control. Because q0 is a generic complex point, the segment misses the discriminant with
 probability one (the gamma trick; Sommese & Wampler 2005, ch. 7).
@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from . import batch_tracker, tracker
+from . import tape_kernel, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -188,8 +188,9 @@ def _pairs(z: np.ndarray) -> list:
 EVALUATORS = ("auto", "tape", "monomials")
 
 
-def _tape(spec: dict, evaluator: str):
-    """The H+J+dH/ds tape of the spec's system, or None (evaluator "monomials", or no program)."""
+def _tapes(spec: dict, evaluator: str):
+    """The homotopy tapes (slp.HomotopyTapes) of the spec's system, or None (evaluator "monomials", or
+    no program)."""
     if evaluator not in EVALUATORS:
         raise ValueError(f"unknown evaluator {evaluator!r}; valid: {', '.join(EVALUATORS)}")
     if evaluator == "monomials":
@@ -197,15 +198,15 @@ def _tape(spec: dict, evaluator: str):
     from . import slp
 
     try:
-        tape = slp.tdoa_homotopy_tapes(spec["system"])["HJ"]
+        tapes = slp.tdoa_homotopy_tapes(spec["system"])
     except ValueError:
-        tape = None
+        tapes = None
     names = list(spec["unknowns"]) + ["s"] + [f"q0:{p}" for p in spec["parameters"]] + [f"dq:{p}" for p in spec["parameters"]]
-    if tape is not None and list(tape.input_names) != names:
-        tape = None
-    if tape is None and evaluator == "tape":
+    if tapes is not None and list(tapes.full.input_names) != names:
+        tapes = None
+    if tapes is None and evaluator == "tape":
         raise HomotopyError(f"{spec['system']}: no straight-line program for this system (TDOA families A, B, C only)")
-    return tape
+    return tapes
 
 
 class HomotopySolver:
@@ -216,7 +217,7 @@ class HomotopySolver:
 
     def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
         self.coefficients = coefficients
-        self.tape = _tape(spec, evaluator)
+        self.tapes = _tapes(spec, evaluator)
         self.structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
         self.degree = int(spec["coefficient_degree"])
         self.q0 = _complex_array(spec["start_parameters"])
@@ -236,6 +237,8 @@ class HomotopySolver:
 
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         """Newton steps on the system at parameters q (B, P); x (P', N), path p on instance inst[p]."""
+        if self.tapes is not None:
+            return tape_kernel.newton(self.tapes, q, x, inst, steps)
         G = self.segment(q, q)
         for _ in range(steps):
             H, J, _ = tracker.evaluate(self.structure, G, x, np.zeros(len(x)), inst)
@@ -255,8 +258,8 @@ class HomotopySolver:
               options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats."""
         options = options or self.options
-        if self.tape is not None and options.predictor == "rk4":
-            return batch_tracker.track(self.tape, q0, q1, x0, inst, options)
+        if self.tapes is not None and options.predictor == "rk4":
+            return tape_kernel.track(self.tapes, q0, q1, x0, inst, options)
         G = self.segment(q0, q1)
         return tracker.track(self.structure, G, x0, inst, options)
 

@@ -26,13 +26,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["OPCODES", "Program", "Tape", "Value", "derivative", "homotopy_program", "tdoa_equations",
-           "tdoa_homotopy_tapes"]
+__all__ = ["OPCODES", "HomotopyTapes", "Program", "Tape", "Value", "derivative", "homotopy_program",
+           "tdoa_equations", "tdoa_homotopy_tapes"]
 
-#: Instruction set of the tape. a, b are registers; ``imm`` the instruction's real immediate.
-#: INPUT rows are written by the caller before a run; OUT copies register a to output row b.
-OPCODES = ("ADD", "SUB", "MUL", "NEG", "CMUL", "CADD", "SQR", "CONST", "OUT")
-ADD, SUB, MUL, NEG, CMUL, CADD, SQR, CONST, OUT = range(len(OPCODES))
+from .tape_kernel import ADD, AXPY, CADD, CMUL, CONST, MUL, MULADD, NEG, OPCODES, OUT, SQR, SUB  # noqa: F401
 
 _INPUT = -1
 
@@ -233,11 +230,13 @@ class Program:
         return self._const_of(v) == 0.0
 
     # -- compilation ------------------------------------------------------------------------------
-    def compile(self, outputs: Sequence[Value]) -> "Tape":
+    def compile(self, outputs: Sequence[Value], fuse: bool = True) -> "Tape":
         """The tape computing ``outputs`` (output row k = outputs[k]) from the inputs.
 
         Input k is register k (the caller writes it); other nodes get registers by liveness (a register
-        is reused after the last instruction that reads it), so the workspace stays small.
+        is reused after the last instruction that reads it), so the workspace stays small. With
+        ``fuse``, a product (or constant multiple) read only by one sum or difference is computed
+        inside it (MULADD, AXPY): fewer instructions and register round trips.
         """
         n_in = len(self.names)
         need = np.zeros(len(self.nodes), dtype=bool)
@@ -252,25 +251,37 @@ class Program:
                 if j >= 0 and op not in (CONST, _INPUT):
                     stack.append(j)
         order = [i for i in range(len(self.nodes)) if need[i] and self.nodes[i][0] != _INPUT]
-        last = {}
-        for pos, i in enumerate(order):
+        out_ids = {v.id for v in outputs}
+        uses: dict[int, int] = {}
+        for i in order:
             op, a, b, _ = self.nodes[i]
             for j in (a, b):
                 if j >= 0:
-                    last[j] = pos
-        out_ids = {v.id for v in outputs}
+                    uses[j] = uses.get(j, 0) + 1
+        instr: dict[int, tuple[int, tuple[int, ...], float]] = {}
+        fused: set[int] = set()
+        for i in order:
+            op, a, b, c = self.nodes[i]
+            ins = (op, tuple(j for j in (a, b) if j >= 0), c)
+            if fuse and op in (ADD, SUB):
+                ins = self._fused(op, a, b, uses, out_ids, fused) or ins
+            instr[i] = ins
+        emitted = [i for i in order if i not in fused]
+        last = {}
+        for pos, i in enumerate(emitted):
+            for j in instr[i][1]:
+                last[j] = pos
         reg = {i: int(self.nodes[i][3]) for i in range(len(self.nodes)) if self.nodes[i][0] == _INPUT}
         free: list[int] = []
         n_reg = n_in
         code, imm = [], []
-        for pos, i in enumerate(order):
-            op, a, b, c = self.nodes[i]
-            ra = reg[a] if a >= 0 else 0
-            rb = reg[b] if b >= 0 else 0
+        for pos, i in enumerate(emitted):
+            op, operands, c = instr[i]
+            regs = [reg[j] for j in operands] + [0] * (3 - len(operands))
             # operands whose last use is here free their registers before the destination is chosen
             # (an instruction may write its own operand: the kernel reads before it writes, per point)
-            for j in {a, b}:
-                if j >= 0 and last.get(j) == pos and j not in out_ids and self.nodes[j][0] != _INPUT:
+            for j in set(operands):
+                if last.get(j) == pos and j not in out_ids and self.nodes[j][0] != _INPUT:
                     free.append(reg[j])
             if free:
                 d = free.pop()
@@ -278,20 +289,44 @@ class Program:
                 d = n_reg
                 n_reg += 1
             reg[i] = d
-            code.append((op, d, ra, rb))
+            code.append((op, d, *regs))
             imm.append(c)
-            if i not in out_ids and i not in last:  # dead (cannot happen for needed nodes)
-                free.append(d)
         for k, v in enumerate(outputs):
-            code.append((OUT, k, reg[v.id], 0))
+            code.append((OUT, k, reg[v.id], 0, 0))
             imm.append(0.0)
-        return Tape(np.array(code, dtype=np.int32).reshape(-1, 4), np.array(imm, dtype=np.float64),
+        return Tape(np.array(code, dtype=np.int32).reshape(-1, 5), np.array(imm, dtype=np.float64),
                     n_in, n_reg, len(outputs), tuple(self.names))
+
+    def _fused(self, op: int, a: int, b: int, uses: dict, out_ids: set, fused: set):
+        """The fused instruction (op, operands, imm) for the sum or difference a +- b, or None."""
+
+        def single(j: int, kinds: tuple[int, ...]) -> bool:
+            return uses.get(j) == 1 and j not in out_ids and self.nodes[j][0] in kinds
+
+        def factors(j: int) -> tuple[int, int]:
+            o, x, y, _ = self.nodes[j]
+            return (x, x) if o == SQR else (x, y)
+
+        products = (MUL, SQR)
+        if single(b, products):  # a + x y, a - x y
+            fused.add(b)
+            return (MULADD, (*factors(b), a), 1.0 if op == ADD else -1.0)
+        if op == ADD and single(a, products):  # x y + b
+            fused.add(a)
+            return (MULADD, (*factors(a), b), 1.0)
+        if single(b, (CMUL,)):  # a +- k x
+            fused.add(b)
+            k = self.nodes[b][3]
+            return (AXPY, (a, self.nodes[b][1]), k if op == ADD else -k)
+        if op == ADD and single(a, (CMUL,)):  # k x + b
+            fused.add(a)
+            return (AXPY, (b, self.nodes[a][1]), self.nodes[a][3])
+        return None
 
 
 @dataclass(frozen=True)
 class Tape:
-    """Instructions (n, 4) int32 ``(opcode, destination, a, b)`` and immediates (n,); registers
+    """Instructions (n, 5) int32 ``(opcode, destination, a, b, c)`` and immediates (n,); registers
     0..n_inputs-1 are the inputs, n_registers in all; OUT instructions write output rows."""
 
     code: np.ndarray
@@ -432,12 +467,34 @@ def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Val
     return equations
 
 
-def tdoa_homotopy_tapes(formulation) -> dict[str, Tape]:
-    """Tapes of a TDOA formulation's homotopy: ``"HJ"`` (outputs H, J row-major, dH/ds), ``"H"`` (H)."""
+@dataclass(frozen=True)
+class HomotopyTapes:
+    """The tapes of one homotopy, on the same inputs (:func:`homotopy_program`); outputs in rows:
+    ``full`` H (N), J (N * N, row-major), dH/ds (N), for the predictor and the step that gives the next
+    tangent; ``newton`` H and J, for the other Newton steps (dH/ds is a third of ``full``);
+    ``residual`` H."""
+
+    full: Tape
+    newton: Tape
+    residual: Tape
+
+    @property
+    def n_registers(self) -> int:
+        return max(self.full.n_registers, self.newton.n_registers, self.residual.n_registers)
+
+
+def homotopy_tapes(equations: Callable[[list[Value], list[Value]], list[Value]], unknowns: Sequence[str],
+                   parameters: Sequence[str]) -> HomotopyTapes:
+    """The :class:`HomotopyTapes` of the system ``equations(x, q)`` (see :func:`homotopy_program`)."""
+    prog, H, J, Hs = homotopy_program(equations, unknowns, parameters)
+    return HomotopyTapes(prog.compile(H + J + Hs), prog.compile(H + J), prog.compile(H))
+
+
+def tdoa_homotopy_tapes(formulation) -> HomotopyTapes:
+    """The homotopy tapes of a TDOA formulation (families A, B, C; ValueError for others)."""
     from analysis.formulations import as_formulation, data_symbols
 
     formulation = as_formulation(formulation)
     config = formulation.config
-    params = [s.name for row in data_symbols(config) for s in row]
-    prog, H, J, Hs = homotopy_program(tdoa_equations(formulation), config.unknowns, params)
-    return {"HJ": prog.compile(H + J + Hs), "H": prog.compile(H)}
+    return homotopy_tapes(tdoa_equations(formulation), config.unknowns,
+                          [s.name for row in data_symbols(config) for s in row])
