@@ -144,29 +144,36 @@ def _swap(Xr, Xi, u, v, p):
 def _lu(Ar, Ai, base, N, piv, ok, P):
     """In-place LU with partial pivoting of the matrices in rows base + i N + j of Ar, Ai (one per
     column p < P), the diagonal replaced by its reciprocal; piv (N, capacity) receives the pivots,
-    ok[p] is False where a matrix is singular (its column then holds inf or nan, the others not)."""
+    ok[p] is False where a matrix is singular (its column then holds inf or nan, the others not).
+
+    Interchanges as in LINPACK's zgefa: step k swaps rows k and piv[k] in columns k.. only (the
+    multipliers stay where they were computed; :func:`_solve` interleaves the swaps), and every loop
+    runs over the points, so it vectorises."""
+    best = np.empty(P)
     for p in range(P):
         ok[p] = True
     for k in range(N):
         kk = base + k * N + k
         for p in range(P):
-            best = Ar[kk, p] * Ar[kk, p] + Ai[kk, p] * Ai[kk, p]
-            r = k
-            for i in range(k + 1, N):
-                ik = base + i * N + k
+            best[p] = Ar[kk, p] * Ar[kk, p] + Ai[kk, p] * Ai[kk, p]
+            piv[k, p] = k
+        for i in range(k + 1, N):
+            ik = base + i * N + k
+            for p in range(P):
                 a = Ar[ik, p] * Ar[ik, p] + Ai[ik, p] * Ai[ik, p]
-                if a > best:
-                    best = a
-                    r = i
-            piv[k, p] = r
-            if not (best > 0.0) or not np.isfinite(best):
+                if a > best[p]:
+                    best[p] = a
+                    piv[k, p] = i
+        for j in range(k, N):
+            for p in range(P):  # (a swap of row k with itself where piv[k, p] = k)
+                _swap(Ar, Ai, base + k * N + j, base + piv[k, p] * N + j, p)
+        for p in range(P):
+            b = best[p]
+            if not (b > 0.0) or not np.isfinite(b):
                 ok[p] = False
-                best = 1e-300
-            if r != k:
-                for j in range(N):
-                    _swap(Ar, Ai, base + k * N + j, base + r * N + j, p)
-            Ar[kk, p] = Ar[kk, p] / best
-            Ai[kk, p] = -Ai[kk, p] / best
+                b = 1e-300
+            Ar[kk, p] = Ar[kk, p] / b
+            Ai[kk, p] = -Ai[kk, p] / b
         for i in range(k + 1, N):
             ik = base + i * N + k
             _mul_row(Ar, Ai, ik, Ar, Ai, kk, P)
@@ -199,11 +206,9 @@ def _solve(Ar, Ai, base, N, piv, br, bi, P):
     """Solve A y = b in place in br, bi (N, capacity) with the factors of :func:`_lu`."""
     for k in range(N):
         for p in range(P):
-            if piv[k, p] != k:
-                _swap(br, bi, k, piv[k, p], p)
-    for i in range(N):
-        for j in range(i):
-            _sub_product(br, bi, i, j, Ar, Ai, base + i * N + j, P)
+            _swap(br, bi, k, piv[k, p], p)
+        for i in range(k + 1, N):
+            _sub_product(br, bi, i, k, Ar, Ai, base + i * N + k, P)
     for i in range(N - 1, -1, -1):
         for j in range(i + 1, N):
             _sub_product(br, bi, i, j, Ar, Ai, base + i * N + j, P)
