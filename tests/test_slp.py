@@ -74,3 +74,31 @@ def test_tdoa_tape_matches_tracker_kernel(label):
 def test_tape_rejects_unsupported_families():
     with pytest.raises(ValueError, match="no unexpanded program"):
         slp.tdoa_equations("5r4s:A,B2,B3,C2-C5,minors")
+
+
+def test_batched_tracker_matches_tracker():
+    """The lock-step tape tracker and the per-path monomial tracker take the same steps to the same
+    endpoints (9r/3s, one seeded network; the tape tracker's last Newton step factors at the point of
+    the tangent, so a path whose corrector converged in one step may differ by a step)."""
+    from solvers.generated import tdoa_9r3s_homotopy75 as module
+    from solvers.synthetic import random_network
+
+    solver = module.solver()
+    assert solver.tapes is not None
+    F = random_network(9, 3, np.random.default_rng(3)).measurements().reshape(1, -1)
+    q = F / np.sqrt(np.mean(F ** 2))
+    x_old, s_old = tracker.track(solver.structure, solver.segment(solver.q0[None], q), solver.x0, None, solver.options)
+    x_new, s_new = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options)
+    np.testing.assert_array_equal(s_new[:, 0], s_old[:, 0])
+    assert np.mean(s_new[:, 1] == s_old[:, 1]) > 0.9
+    ok = s_old[:, 0] == 0
+    np.testing.assert_allclose(x_new[ok], x_old[ok], rtol=1e-7, atol=1e-7 * np.abs(x_old[ok]).max())
+    x_chord, s_chord = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options, corrector="chord")
+    np.testing.assert_array_equal(s_chord[:, 0], s_old[:, 0])
+    np.testing.assert_allclose(x_chord[ok], x_old[ok], rtol=1e-7, atol=1e-7 * np.abs(x_old[ok]).max())
+    # Newton on the tape (batched LU) = Newton on the monomials (numpy solve)
+    x = x_old[ok] * (1 + 1e-4)
+    G = solver.segment(q, q)
+    H, J, _ = tracker.evaluate(solver.structure, G, x, np.zeros(len(x)))
+    expected = x - np.linalg.solve(J, H[..., None])[..., 0]
+    np.testing.assert_allclose(tape_kernel.newton(solver.tapes, q, x), expected, rtol=1e-9, atol=1e-12)

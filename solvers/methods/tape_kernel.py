@@ -244,6 +244,12 @@ def _newton_step(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P):
     """Newton correction dx = J^-1 H at (x, s) (not applied); the factored Jacobian stays in the outputs."""
     _eval(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
     _lu(Or, Oi, N, N, piv, ok, P)
+    _correction(Or, Oi, N, piv, dxr, dxi, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _correction(Or, Oi, N, piv, dxr, dxi, P):
+    """dx = J^-1 H with H and the factored J in the outputs."""
     for v in range(N):
         for p in range(P):
             dxr[v, p] = Or[v, p]
@@ -263,11 +269,12 @@ def _load_segment(Rr, Ri, N, q0, dq, b, col):
 
 
 @njit(cache=True, nogil=True)
-def _track_batch(code, imm, ncode, nimm, n_reg, n_out, x0, q0, dq, inst, opts, x_out, stats):
+def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q0, dq, inst, opts, x_out, stats):
     """Track paths x0 (M, N) along the segments q0 + s dq (B, Q) (path m on inst[m]); endpoints to
     x_out (M, N) and stats (M, 4): status, steps, rejected, last s (as tracker._track_one).
 
-    code, imm: the full tape (H, J, dH/ds); ncode, nimm: the Newton tape (H, J)."""
+    code, imm: the full tape (H, J, dH/ds); ncode, nimm: the Newton tape (H, J); rcode, rimm: the
+    residual tape (H). chord: the corrector's steps after the first reuse its Jacobian (see :func:`track`)."""
     h0, hmin, hmax, target, accept, tol = opts[0], opts[1], opts[2], opts[3], opts[4], opts[5]
     newton, final_newton, max_steps, big = int(opts[6]), int(opts[7]), int(opts[8]), opts[9]
     contract = opts[10]
@@ -406,11 +413,15 @@ def _track_batch(code, imm, ncode, nimm, n_reg, n_out, x0, q0, dq, inst, opts, x
             e0[p] = np.inf
             e[p] = np.inf
             done[p] = not good[p]
-        # -- Newton corrector; the last iteration's factorisation gives the tangent at the new point
-        # (at the point before its correction; a path whose corrector finished earlier is evaluated
-        # there too, at its final point)
+        # -- corrector. Newton: the last iteration's factorisation gives the tangent at the new point (at
+        # the point before its correction; a path whose corrector finished earlier is evaluated there
+        # too, at its final point). Chord: the first iteration's factorisation (at the predicted point)
+        # serves every iteration and gives the tangent.
         for it in range(newton):
-            if it == newton - 1:
+            if chord and it > 0:
+                _eval(rcode, rimm, Rr, Ri, Or, Oi, N, xpr, xpi, s1, P)
+                _correction(Or, Oi, N, piv, dxr, dxi, P)
+            elif it == newton - 1 or chord:
                 _newton_step(code, imm, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
                 _tangent(Or, Oi, N, piv, ktr, kti, P)
             else:
@@ -571,13 +582,21 @@ def _check(tapes: "HomotopyTapes", N: int, Q: int) -> None:
         raise ValueError(f"the tapes have {tapes.full.n_inputs} inputs; {N} unknowns and {Q} parameters need {N + 1 + 2 * Q}")
 
 
+#: Correctors of :func:`track`: "newton" (every step factors the Jacobian at its point: the corrector of
+#: tracker._track_one) or "chord" (the steps after the first reuse its factorisation and evaluate H
+#: alone; the next tangent comes from the Jacobian at the predicted point).
+CORRECTORS = ("newton", "chord")
+
+
 def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
-          options: TrackerOptions = TrackerOptions()) -> tuple[np.ndarray, np.ndarray]:
+          options: TrackerOptions = TrackerOptions(), corrector: str = "newton") -> tuple[np.ndarray, np.ndarray]:
     """Track x0 (P, N) along q0 -> q1 ((B, Q) or (Q,), broadcast); path p on segment inst[p].
 
     Returns endpoints (P, N) (NaN unless the path reached s = 1) and stats (P, 4), as
     :func:`tracker.track`.
     """
+    if corrector not in CORRECTORS:
+        raise ValueError(f"unknown corrector {corrector!r}; valid: {', '.join(CORRECTORS)}")
     if options.predictor != "rk4":
         raise ValueError(f"the batched tracker predicts by rk4 only, not {options.predictor!r}")
     x0 = np.ascontiguousarray(np.atleast_2d(x0), dtype=np.complex128)
@@ -588,7 +607,8 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
     x = np.empty_like(x0)
     stats = np.zeros((M, 4))
     if M:
-        _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.n_registers,
+        _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
+                     tapes.residual.imm, corrector == "chord", tapes.n_registers,
                      tapes.full.n_outputs, x0, q0, dq, inst, options.as_array(), x, stats)
     x[stats[:, 0] != 0] = np.nan
     return x, stats
