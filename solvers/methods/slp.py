@@ -230,13 +230,17 @@ class Program:
         return self._const_of(v) == 0.0
 
     # -- compilation ------------------------------------------------------------------------------
-    def compile(self, outputs: Sequence[Value], fuse: bool = True) -> "Tape":
+    def compile(self, outputs: Sequence[Value], fuse: bool = True, schedule: Sequence[int] | None = None) -> "Tape":
         """The tape computing ``outputs`` (output row k = outputs[k]) from the inputs.
 
         Input k is register k (the caller writes it); other nodes get registers by liveness (a register
         is reused after the last instruction that reads it), so the workspace stays small. With
         ``fuse``, a product (or constant multiple) read only by one sum or difference is computed
-        inside it (MULADD, AXPY): fewer instructions and register round trips.
+        inside it (MULADD, AXPY): fewer instructions and register round trips. ``schedule`` (output
+        indices): the outputs are computed one after the other in this order, each with what it needs
+        that is not computed yet (depth first), and written as soon as computed; grouping outputs that
+        share intermediates (an equation, its Jacobian row and dH/ds) keeps fewer values alive at once
+        than creation order. The arithmetic is the same either way.
         """
         n_in = len(self.names)
         need = np.zeros(len(self.nodes), dtype=bool)
@@ -266,34 +270,63 @@ class Program:
             if fuse and op in (ADD, SUB):
                 ins = self._fused(op, a, b, uses, out_ids, fused) or ins
             instr[i] = ins
-        emitted = [i for i in order if i not in fused]
+        # items: (node, None) computes a node, (node, k) writes it to output row k
+        writes: dict[int, list[int]] = {}
+        for k, v in enumerate(outputs):
+            writes.setdefault(v.id, []).append(k)
+        items: list[tuple[int, int | None]] = []
+        if schedule is None:
+            items = [(i, None) for i in order if i not in fused]
+            items += [(v.id, k) for k, v in enumerate(outputs)]
+        else:
+            if sorted(schedule) != list(range(len(outputs))):
+                raise ValueError("schedule must be a permutation of the output indices")
+            done = {i for i in range(len(self.nodes)) if self.nodes[i][0] == _INPUT}
+            items = [(i, k) for i in sorted(done & set(writes)) for k in writes[i]]
+            for k in schedule:
+                stack = [(outputs[k].id, False)]
+                while stack:
+                    i, expanded = stack.pop()
+                    if i in done:
+                        continue
+                    if expanded:
+                        done.add(i)
+                        items.append((i, None))
+                        items += [(i, w) for w in writes.get(i, ())]
+                        continue
+                    stack.append((i, True))
+                    stack += [(j, False) for j in reversed(instr[i][1]) if j not in done]
         last = {}
-        for pos, i in enumerate(emitted):
-            for j in instr[i][1]:
+        for pos, (i, k) in enumerate(items):
+            for j in (instr[i][1] if k is None else (i,)):
                 last[j] = pos
         reg = {i: int(self.nodes[i][3]) for i in range(len(self.nodes)) if self.nodes[i][0] == _INPUT}
         free: list[int] = []
         n_reg = n_in
         code, imm = [], []
-        for pos, i in enumerate(emitted):
+        for pos, (i, k) in enumerate(items):
+            if k is not None:
+                code.append((OUT, k, reg[i], 0, 0))
+                imm.append(0.0)
+                if last.get(i) == pos and self.nodes[i][0] != _INPUT and (schedule is not None or i not in out_ids):
+                    free.append(reg[i])
+                continue
             op, operands, c = instr[i]
             regs = [reg[j] for j in operands] + [0] * (3 - len(operands))
-            # operands whose last use is here free their registers before the destination is chosen
-            # (an instruction may write its own operand: the kernel reads before it writes, per point)
-            for j in set(operands):
-                if last.get(j) == pos and j not in out_ids and self.nodes[j][0] != _INPUT:
-                    free.append(reg[j])
+            # the destination is chosen before the operands whose last use is here free their registers:
+            # an instruction never writes a register it reads (the kernel's loop over points vectorises
+            # only when its stores cannot overlap its loads)
             if free:
                 d = free.pop()
             else:
                 d = n_reg
                 n_reg += 1
             reg[i] = d
+            for j in set(operands):
+                if last.get(j) == pos and self.nodes[j][0] != _INPUT:
+                    free.append(reg[j])
             code.append((op, d, *regs))
             imm.append(c)
-        for k, v in enumerate(outputs):
-            code.append((OUT, k, reg[v.id], 0, 0))
-            imm.append(0.0)
         return Tape(np.array(code, dtype=np.int32).reshape(-1, 5), np.array(imm, dtype=np.float64),
                     n_in, n_reg, len(outputs), tuple(self.names))
 
@@ -487,7 +520,12 @@ def homotopy_tapes(equations: Callable[[list[Value], list[Value]], list[Value]],
                    parameters: Sequence[str]) -> HomotopyTapes:
     """The :class:`HomotopyTapes` of the system ``equations(x, q)`` (see :func:`homotopy_program`)."""
     prog, H, J, Hs = homotopy_program(equations, unknowns, parameters)
-    return HomotopyTapes(prog.compile(H + J + Hs), prog.compile(H + J), prog.compile(H))
+    N = len(H)
+    rows = [[e] + [N + e * N + k for k in range(N)] for e in range(N)]  # an equation and its Jacobian row
+    full = [k for e, row in enumerate(rows) for k in row + [N + N * N + e]]
+    newton = [k for row in rows for k in row]
+    return HomotopyTapes(prog.compile(H + J + Hs, schedule=full), prog.compile(H + J, schedule=newton),
+                         prog.compile(H, schedule=list(range(N))))
 
 
 def tdoa_homotopy_tapes(formulation) -> HomotopyTapes:
