@@ -51,6 +51,45 @@ def best(f, repeat: int = 5) -> float:
     return out
 
 
+def rates(S, P: int, rng: np.random.Generator, repeat: int = 7) -> dict[str, float]:
+    """Seconds per path per evaluation at P paths per call of the homotopy solver S's system: its tapes
+    ("full", "newton", "residual"; absent for a solver without a program) and the tracker's kernel with
+    s changing at every call ("changing") and fixed ("fixed"); "eig": seconds of numpy's eig of the
+    root count's size. Interleaved rounds (this machine's load drifts), minimum over ``repeat``."""
+    x = np.resize(S.x0, (P, S.nvars)) + 0.01 * (rng.normal(size=(P, S.nvars)) + 1j * rng.normal(size=(P, S.nvars)))
+    q1 = rng.normal(size=len(S.q0)) + 0j
+    s = rng.uniform(size=P)
+    N = S.nvars
+    G = S.segment(S.q0[None], q1[None])
+    G_fixed = np.ascontiguousarray(G[:, :, :1])  # constant coefficients: no Horner
+    G_fixed[0, :, 0] = np.sum(G[0], axis=1)  # c_t(1), any fixed s will do
+    inst = np.zeros(P, dtype=np.int64)
+    out = (np.empty((P, N), complex), np.empty((P, N, N), complex), np.empty((P, N), complex))
+    reps = max(1, 20000 // P)
+    runs = {}  # name -> (function of a repetition count, evaluations per repetition)
+    for key, g in (("changing", G), ("fixed", G_fixed)):
+        tdeg = tracker._degrees(g)
+        _old_kernel_loop(x, s, g, inst, tdeg, *S.structure.arrays, *out, 1)
+        runs[key] = (functools.partial(_old_kernel_loop, x, s, g, inst, tdeg, *S.structure.arrays, *out), P)
+    inputs = np.concatenate([x.T, s[None, :], np.tile(S.q0[:, None], (1, P)), np.tile((q1 - S.q0)[:, None], (1, P))])
+    tapes = getattr(S, "tapes", None)
+    for kind in ("full", "newton", "residual") if tapes is not None else ():
+        tape = getattr(tapes, kind)
+        Rr, Ri, Or, Oi = tape_kernel.workspace(tape, P)
+        Rr[: tape.n_inputs] = inputs.real
+        Ri[: tape.n_inputs] = inputs.imag
+        _tape_loop(tape.code, tape.imm, Rr, Ri, Or, Oi, P, 1)
+        runs[kind] = (functools.partial(_tape_loop, tape.code, tape.imm, Rr, Ri, Or, Oi, P), P)
+    A = rng.normal(size=(S.n_paths, S.n_paths)) + 1j * rng.normal(size=(S.n_paths, S.n_paths))
+    runs["eig"] = (lambda k: [np.linalg.eig(A) for _ in range(k)], 1)
+    row = {key: np.inf for key in runs}
+    for _ in range(repeat):
+        for key, (f, per) in runs.items():
+            k = 1 if key == "eig" else reps
+            row[key] = min(row[key], best(lambda: f(k), 1) / (k * per))
+    return row
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--systems", nargs="+", default=["9r3s", "6r3s"])
@@ -64,38 +103,9 @@ def main(argv=None) -> None:
         build = time.perf_counter() - t0
         name = [m for m in os.listdir(os.path.join(os.path.dirname(tracker.__file__), "..", "generated"))
                 if m.startswith(f"tdoa_{label}_homotopy") and m.endswith(".py")][0][:-3]
-        mod = importlib.import_module(f"solvers.generated.{name}")
-        S = mod.solver()
+        S = importlib.import_module(f"solvers.generated.{name}").solver()
         P = args.paths or S.n_paths
-        x = np.resize(S.x0, (P, S.nvars)) + 0.01 * (rng.normal(size=(P, S.nvars)) + 1j * rng.normal(size=(P, S.nvars)))
-        q1 = rng.normal(size=len(S.q0)) + 0j
-        s = rng.uniform(size=P)
-        N = S.nvars
-        G = S.segment(S.q0[None], q1[None])
-        G_fixed = np.ascontiguousarray(S.segment(S.q0[None], q1[None])[:, :, :1])  # coefficients at s = 0: no Horner
-        G_fixed[0, :, 0] = np.sum(G[0], axis=1)  # c_t(1), any fixed s will do
-        inst = np.zeros(P, dtype=np.int64)
-        out = (np.empty((P, N), complex), np.empty((P, N, N), complex), np.empty((P, N), complex))
-        reps = max(1, 20000 // P)
-        runs = {}  # name -> (function of reps, divisor); timed in interleaved rounds (load drifts)
-        for key, g in (("changing", G), ("fixed", G_fixed)):
-            tdeg = tracker._degrees(g)
-            _old_kernel_loop(x, s, g, inst, tdeg, *S.structure.arrays, *out, 1)
-            runs[key] = (functools.partial(_old_kernel_loop, x, s, g, inst, tdeg, *S.structure.arrays, *out), reps * P)
-        inputs = np.concatenate([x.T, s[None, :], np.tile(S.q0[:, None], (1, P)), np.tile((q1 - S.q0)[:, None], (1, P))])
-        for kind, tape in (("full", tapes.full), ("newton", tapes.newton), ("residual", tapes.residual)):
-            Rr, Ri, Or, Oi = tape_kernel.workspace(tape, P)
-            Rr[: tape.n_inputs] = inputs.real
-            Ri[: tape.n_inputs] = inputs.imag
-            _tape_loop(tape.code, tape.imm, Rr, Ri, Or, Oi, P, 1)
-            runs[kind] = (functools.partial(_tape_loop, tape.code, tape.imm, Rr, Ri, Or, Oi, P), reps * P)
-        A = rng.normal(size=(S.n_paths, S.n_paths)) + 1j * rng.normal(size=(S.n_paths, S.n_paths))
-        runs["eig"] = (lambda k: [np.linalg.eig(A) for _ in range(k)], 1)
-        row = {key: np.inf for key in runs}
-        for _ in range(args.repeat):
-            for key, (f, div) in runs.items():
-                k = 1 if key == "eig" else reps
-                row[key] = min(row[key], best(lambda: f(k), 1) / (div if key != "eig" else 1))
+        row = rates(S, P, rng, args.repeat)
         t_old, t_old_fixed, t_eig = row["changing"], row["fixed"], row["eig"]
         hj = tapes.full
         print(f"{label}: tape H+J+Hs {hj.n_instructions} instructions, {hj.n_registers} registers "
