@@ -181,7 +181,7 @@ def _lu(Ar, Ai, base, N, piv, ok, P):
                 _sub_product(Ar, Ai, base + i * N + j, base + k * N + j, Ar, Ai, ik, P)
 
 
-@njit(cache=True, nogil=True, boundscheck=False, inline="always")
+@njit(cache=True, nogil=True, boundscheck=False)
 def _mul_row(Br, Bi, i, Fr, Fi, f, P):
     """Row i of B *= row f of F, over the points."""
     for p in range(P):
@@ -191,7 +191,7 @@ def _mul_row(Br, Bi, i, Fr, Fi, f, P):
         Bi[i, p] = yi
 
 
-@njit(cache=True, nogil=True, boundscheck=False, inline="always")
+@njit(cache=True, nogil=True, boundscheck=False)
 def _sub_product(Br, Bi, i, j, Fr, Fi, f, P):
     """Row i of B -= row f of F times row j of B, over the points (complex numbers as two arrays)."""
     for p in range(P):
