@@ -3,11 +3,12 @@ TDOA homotopy tapes against the tracker's monomial kernel and finite differences
 from __future__ import annotations
 
 import importlib
+import os
 
 import numpy as np
 import pytest
 
-from solvers.generate import SOLVERS
+from solvers.generate import GENERATED_DIR, SOLVERS
 from solvers.methods import slp, tape_kernel, tracker
 
 
@@ -102,3 +103,25 @@ def test_batched_tracker_matches_tracker():
     H, J, _ = tracker.evaluate(solver.structure, G, x, np.zeros(len(x)))
     expected = x - np.linalg.solve(J, H[..., None])[..., 0]
     np.testing.assert_allclose(tape_kernel.newton(solver.tapes, q, x), expected, rtol=1e-9, atol=1e-12)
+
+
+def test_expanded_tape_matches_tracker_kernel():
+    """A system without a program from its formulas (5r/4s: minors squared) gets one traced from its
+    generated coefficient function and monomials (evaluator "tape"); it equals the monomial kernel."""
+    from solvers.generated import tdoa_5r4s_homotopy152 as module
+    from solvers.methods import homotopy
+
+    solver = module.solver()
+    assert solver.tapes is None  # "auto": no program from the formulation
+    with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
+        tape_solver = homotopy.HomotopySolver(homotopy.load_spec(fh.read()), module.coefficients, "tape")
+    rng = np.random.default_rng(11)
+    P, N = 6, solver.nvars
+    x = solver.x0[:P] * (1 + 0.1 * rng.normal(size=(P, N)))
+    q1 = rng.normal(size=len(solver.q0)) + 0j
+    s = rng.uniform(size=P)
+    H, J, Hs = tracker.evaluate(solver.structure, solver.segment(solver.q0[None], q1[None]), x, s)
+    out = tape_kernel.evaluate(tape_solver.tapes.full, x, s, solver.q0, q1)
+    np.testing.assert_allclose(out[:, :N], H, atol=1e-12 * np.abs(H).max())
+    np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), J, atol=1e-12 * np.abs(J).max())
+    np.testing.assert_allclose(out[:, N + N * N:], Hs, atol=1e-12 * np.abs(Hs).max())

@@ -182,15 +182,16 @@ def _pairs(z: np.ndarray) -> list:
     return [_pairs(row) for row in z]
 
 
-#: Evaluators of a solver's system: "tape" (straight-line program, batched tracker; an error where the
-#: system has none), "monomials" (the expanded system's coefficients, tracker.track), "auto" (the tape
-#: where the system has one).
+#: Evaluators of a solver's system: "auto" (the batched tracker on the straight-line program written from
+#: the formulation where the system has one: TDOA families A, B, C; else "monomials"), "tape" (that
+#: program, or else one traced from the generated coefficient function and the expanded monomials:
+#: slower to evaluate, not yet validated on seeded networks, hence not chosen by "auto"), "monomials"
+#: (the expanded system's coefficients, tracker.track).
 EVALUATORS = ("auto", "tape", "monomials")
 
 
-def _tapes(spec: dict, evaluator: str):
-    """The homotopy tapes (slp.HomotopyTapes) of the spec's system, or None (evaluator "monomials", or
-    no program)."""
+def _tapes(spec: dict, coefficients: Callable, evaluator: str):
+    """The homotopy tapes (slp.HomotopyTapes) of the spec's system for ``evaluator``, or None."""
     if evaluator not in EVALUATORS:
         raise ValueError(f"unknown evaluator {evaluator!r}; valid: {', '.join(EVALUATORS)}")
     if evaluator == "monomials":
@@ -205,7 +206,8 @@ def _tapes(spec: dict, evaluator: str):
     if tapes is not None and list(tapes.full.input_names) != names:
         tapes = None
     if tapes is None and evaluator == "tape":
-        raise HomotopyError(f"{spec['system']}: no straight-line program for this system (TDOA families A, B, C only)")
+        tapes = slp.homotopy_tapes(slp.expanded_equations(coefficients, spec["exponents"], spec["term_equation"]),
+                                   spec["unknowns"], spec["parameters"])
     return tapes
 
 
@@ -217,7 +219,7 @@ class HomotopySolver:
 
     def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
         self.coefficients = coefficients
-        self.tapes = _tapes(spec, evaluator)
+        self.tapes = _tapes(spec, coefficients, evaluator)
         self.structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
         self.degree = int(spec["coefficient_degree"])
         self.q0 = _complex_array(spec["start_parameters"])

@@ -26,8 +26,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["OPCODES", "HomotopyTapes", "Program", "Tape", "Value", "derivative", "homotopy_program",
-           "tdoa_equations", "tdoa_homotopy_tapes"]
+__all__ = ["OPCODES", "HomotopyTapes", "Program", "Tape", "Value", "derivative", "expanded_equations",
+           "homotopy_program", "homotopy_tapes", "tdoa_equations", "tdoa_homotopy_tapes"]
 
 from .tape_kernel import ADD, AXPY, CADD, CMUL, CONST, MUL, MULADD, NEG, OPCODES, OUT, SQR, SUB  # noqa: F401
 
@@ -442,6 +442,41 @@ def homotopy_program(equations: Callable[[list[Value], list[Value]], list[Value]
             J[e * len(x) + k] = col[e]
     Hs = derivative(H, s)
     return prog, H, J, Hs
+
+
+def expanded_equations(coefficients: Callable, exponents, term_equation) -> Callable[[list[Value], list[Value]], list[Value]]:
+    """``equations(x, q)`` of any homotopy solver's system from its generated parts: the coefficient
+    function (numpy code in the parameters, its shared subexpressions kept: it is run on an object
+    array of program values) and the terms' exponents and equations. The monomials are shared between
+    terms and equations (each is one more factor on a shorter one), but the system is expanded in the
+    unknowns: a program written from the formulas (:func:`tdoa_equations`) is shorter.
+    """
+    exponents = np.asarray(exponents, dtype=np.int64)
+    term_equation = np.asarray(term_equation, dtype=np.int64)
+    n_eq = int(term_equation.max()) + 1 if len(term_equation) else 0
+
+    def equations(x: list[Value], q: list[Value]) -> list[Value]:
+        prog = x[0].program
+        Q = np.empty((1, len(q)), dtype=object)
+        Q[0, :] = q
+        c = np.asarray(coefficients(Q), dtype=object).reshape(-1)
+        if len(c) != len(exponents):
+            raise ValueError(f"the coefficient function gives {len(c)} coefficients for {len(exponents)} terms")
+        monomials: dict[tuple, Value] = {(0,) * len(x): prog.constant(1.0)}
+
+        def monomial(a: tuple) -> Value:
+            if a not in monomials:
+                v = next(k for k, e in enumerate(a) if e)
+                monomials[a] = monomial(a[:v] + (a[v] - 1,) + a[v + 1:]) * x[v]
+            return monomials[a]
+
+        out = [prog.constant(0.0) for _ in range(n_eq)]
+        for ct, a, e in zip(c, exponents, term_equation):
+            ct = ct if isinstance(ct, Value) else prog.constant(float(ct))
+            out[e] = out[e] + ct * monomial(tuple(int(k) for k in a))
+        return out
+
+    return equations
 
 
 # --------------------------------------------------------------------------------------------------
