@@ -125,3 +125,21 @@ def test_expanded_tape_matches_tracker_kernel():
     np.testing.assert_allclose(out[:, :N], H, atol=1e-12 * np.abs(H).max())
     np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), J, atol=1e-12 * np.abs(J).max())
     np.testing.assert_allclose(out[:, N + N * N:], Hs, atol=1e-12 * np.abs(Hs).max())
+
+
+def test_solver_takes_a_program_only_for_its_own_equations():
+    """A spec whose system is labelled like a formulation but whose equations differ (here one term's
+    coefficient doubled) gets no program: the tapes are checked against the generated system."""
+    from solvers.generated import tdoa_9r3s_homotopy75 as module
+    from solvers.methods import homotopy
+
+    with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
+        spec = homotopy.load_spec(fh.read())
+    assert homotopy._tapes(spec, module.coefficients, "auto") is not None
+
+    def other(q):
+        c = module.coefficients(q)
+        c[:, 0] *= 2.0
+        return c
+
+    assert homotopy._tapes(spec, other, "auto") is None

@@ -203,12 +203,25 @@ def _tapes(spec: dict, coefficients: Callable, evaluator: str):
     except ValueError:
         tapes = None
     names = list(spec["unknowns"]) + ["s"] + [f"q0:{p}" for p in spec["parameters"]] + [f"dq:{p}" for p in spec["parameters"]]
-    if tapes is not None and list(tapes.full.input_names) != names:
-        tapes = None
+    if tapes is not None and (list(tapes.full.input_names) != names or not _agrees(tapes, spec, coefficients)):
+        tapes = None  # a system named like a formulation but not its equations
     if tapes is None and evaluator == "tape":
         tapes = slp.homotopy_tapes(slp.expanded_equations(coefficients, spec["exponents"], spec["term_equation"]),
                                    spec["unknowns"], spec["parameters"])
     return tapes
+
+
+def _agrees(tapes, spec: dict, coefficients: Callable) -> bool:
+    """Whether the residual tape equals the spec's expanded system at two random complex points."""
+    rng = np.random.default_rng(0)
+    N, P = len(spec["unknowns"]), len(spec["parameters"])
+    x = rng.normal(size=(2, N)) + 1j * rng.normal(size=(2, N))
+    q = rng.normal(size=P) + 1j * rng.normal(size=P)
+    structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
+    H, _, _ = tracker.evaluate(structure, tracker.segment_coefficients(coefficients, q[None], q[None], 0), x, np.zeros(2))
+    with np.errstate(all="ignore"):
+        diff = np.abs(tape_kernel.evaluate(tapes.residual, x, 0.0, q, q) - H)
+    return bool(np.all(diff <= 1e-9 * (1.0 + np.abs(H).max())))
 
 
 class HomotopySolver:
