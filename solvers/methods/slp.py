@@ -6,14 +6,17 @@ Every operation is hash-consed (the same operation on the same operands is one n
 subexpressions are shared) and constants are folded (x * 0, x + 0, x * 1, c1 * c2 ...).
 :func:`derivative` differentiates a set of nodes by forward accumulation on the graph, one input at a
 time, creating new nodes in the same program (so derivative nodes share subexpressions with each
-other and with the values). :meth:`Program.compile` keeps what the outputs need and allocates registers
-by liveness: the :class:`Tape` is an array of instructions ``(opcode, destination, a, b)`` with a real
-immediate, run for many points at once by :mod:`solvers.methods.tape_kernel`.
+other and with the values). :meth:`Program.compile` keeps what the outputs need, fuses a product read
+by one sum into it, schedules the outputs in a given order (depth first) and allocates registers by
+liveness: the :class:`Tape` is an array of instructions ``(opcode, destination, a, b, c)`` with a real
+immediate, run for many points at once by :mod:`solvers.methods.tape_kernel` (which owns the
+instruction set).
 
 :func:`homotopy_program` builds, for a parameter homotopy H(x, s) = F(x; q0 + s (q1 - q0)), the
-program of H, its Jacobian in x and dH/ds (and the shorter program of H alone for a corrector that
-reuses its Jacobian); :func:`tdoa_equations` writes the TDOA formulation's equations (analysis.
-formulations: compaction matrix, A/B/C families) on program values.
+program of H, its Jacobian in x and dH/ds; :func:`homotopy_tapes` compiles its three tapes
+(:class:`HomotopyTapes`). :func:`tdoa_equations` writes the TDOA formulation's equations (analysis.
+formulations: compaction matrix, A/B/C families) on program values; :func:`expanded_equations` any
+generated solver's system from its coefficient function and monomials.
 
 Reference: the straight-line programs of HomotopyContinuation.jl's ModelKit (Breiding & Timme, 2018)
 and Griewank & Walther, "Evaluating derivatives", 2nd ed. (2008), ch. 2-3.
