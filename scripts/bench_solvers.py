@@ -56,8 +56,6 @@ from solvers.subsystem import SUBSYSTEMS, module_for  # noqa: E402
 from solvers.synthetic import random_network, true_root  # noqa: E402
 from solvers.methods.spec import build_spec  # noqa: E402
 
-import bench_tape  # noqa: E402  (scripts/ is on the path of a script)
-
 FAIL_TOL = 1e-6
 #: Rounds of single-solve timing; the best round's median is reported (as bench_engine's best of 3).
 SINGLE_ROUNDS = 3
@@ -171,9 +169,11 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
     eig = min(_eig_ms(eig_n, rng) for _ in range(SINGLE_ROUNDS))
     evaluator, evals_per_s = "", ""
     if homotopy and label not in SUBSYSTEMS:  # the tracker's evaluations of H, dH/dx, dH/ds at |B| paths per call
+        from bench_tape import rates as tape_rates  # scripts/ is on the path of a script (tests import this file)
+
         solver = module.solver()
         evaluator = "tape" if solver.tapes is not None else "monomials"
-        rates = bench_tape.rates(solver, solver.n_paths, np.random.default_rng(seed + 1), repeat=3)
+        rates = tape_rates(solver, solver.n_paths, np.random.default_rng(seed + 1), repeat=3)
         evals_per_s = round(1.0 / rates["full" if solver.tapes is not None else "changing"])
     polished, batch_s = _solve_all(label, F, jobs)
     batch_s /= trials
