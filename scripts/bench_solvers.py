@@ -4,7 +4,10 @@ Per solver: construction method and the size of its numeric core (companion penc
 unknowns), the number of roots |B| (GF(p) degree), generation time (a fresh build into a temporary
 directory, not timed in tests), the first call in this process (loading the compiled tracker from its
 on-disk cache) apart, median runtime of one solve (best of three rounds), its ratio to numpy's ``eig`` of an
-eig_n x eig_n complex matrix timed in the same process (eig_n = |B|; a pencil solver's own pencil size), time per path, batched throughput, and, on N seeded
+eig_n x eig_n complex matrix timed in the same process (eig_n = |B|; a pencil solver's own pencil size), time per path,
+for homotopy solvers the evaluator of the tracker (``tape``: straight-line program, solvers.methods.tape_kernel;
+``monomials``: tracker.track) and its evaluations of H, dH/dx, dH/ds per second at |B| paths per call
+(scripts/bench_tape.py), batched throughput, and, on N seeded
 noiseless networks (positions
 N(0, 10^2), offsets N(0, 1), via solvers.synthetic.random_network): median / 90th / 99th percentile of the
 log10 relative error of the best candidate against the true root (H, b, o), the failure fraction (no
@@ -159,6 +162,14 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
     # a square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
     eig_n = module.PATHS if label in SUBSYSTEMS else (module.DEGREE if homotopy else module.SIZE[0])
     eig = min(_eig_ms(eig_n, rng) for _ in range(SINGLE_ROUNDS))
+    evaluator, evals_per_s = "", ""
+    if homotopy and label not in SUBSYSTEMS:  # the tracker's evaluations of H, dH/dx, dH/ds at |B| paths per call
+        from bench_tape import rates as tape_rates  # scripts/ is on the path of a script (tests import this file)
+
+        solver = module.solver()
+        evaluator = "tape" if solver.tapes is not None else "monomials"
+        rates = tape_rates(solver, solver.n_paths, np.random.default_rng(seed + 1), repeat=3)
+        evals_per_s = round(1.0 / rates["full" if solver.tapes is not None else "changing"])
     polished, batch_s = _solve_all(label, F, jobs)
     batch_s /= trials
     raw = polished if homotopy else module.solve_batch(F, polish=0)
@@ -177,6 +188,8 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
         "eig_ms": round(eig, 3),
         "x_eig": round(single_ms / eig, 2),
         "us_per_path": round(1e3 * single_ms / paths, 1) if paths else "",
+        "evaluator": evaluator,
+        "evals_per_s": evals_per_s,
         "batch_ms_per_instance": round(1e3 * batch_s, 3),
         "polish_iterations": 0 if homotopy else module.POLISH_ITERATIONS,
         "trials": trials,
@@ -275,6 +288,9 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
                       "candidates kept when the other transmitter's range equations hold, then polished on all "
                       "measurements (solvers.subsystem); mean_real counts the kept real candidates",
         "real": f"finite candidates with max |imag| <= {REAL_TOL} max |x|",
+        "evals_per_s": "evaluations of H, dH/dx and dH/ds per second at |B| paths per call (tape: one run of the "
+                       "full tape for all paths, per path; monomials: tracker._evaluate_many with s changing), best of "
+                       "3 interleaved rounds (scripts/bench_tape.rates)",
         "timing": f"single: best of {SINGLE_ROUNDS} medians of --single-calls solve() calls each; first_call_ms "
                   "apart (first solve in the process: spec, compiled tracker loaded from numba's disk cache); "
                   "batch: solve_batch on all trials / trials (with jobs > 1: the trials split into chunks "

@@ -14,7 +14,9 @@ A squared system's spec may name the start roots that satisfy the full (over-det
 (``full_system.tracked``, :func:`full_system_roots`); only those are tracked.
 
 Online (:class:`HomotopySolver`): for target parameters q1, every (tracked) start root is tracked along the
-complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`); paths that stall,
+complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`), or, for systems with
+an unexpanded straight-line program (the TDOA A/B/C formulations, :mod:`solvers.methods.slp`), by the
+batched tracker on its instruction tapes (:mod:`solvers.methods.tape_kernel`); paths that stall,
 and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
 step control. Because q0 is a generic complex point, the segment misses the discriminant with
 probability one (the gamma trick; Sommese & Wampler 2005, ch. 7).
@@ -33,7 +35,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from . import tracker
+from . import tape_kernel, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -180,11 +182,57 @@ def _pairs(z: np.ndarray) -> list:
     return [_pairs(row) for row in z]
 
 
-class HomotopySolver:
-    """Tracks the stored start roots from q0 to target parameters (the online half of the method)."""
+#: Evaluators of a solver's system: "auto" (the batched tracker on the straight-line program written from
+#: the formulation where the system has one: TDOA families A, B, C; else "monomials"), "tape" (that
+#: program, or else one traced from the generated coefficient function and the expanded monomials:
+#: slower to evaluate, not yet validated on seeded networks, hence not chosen by "auto"), "monomials"
+#: (the expanded system's coefficients, tracker.track).
+EVALUATORS = ("auto", "tape", "monomials")
 
-    def __init__(self, spec: dict, coefficients: Callable):
+
+def _tapes(spec: dict, coefficients: Callable, evaluator: str):
+    """The homotopy tapes (slp.HomotopyTapes) of the spec's system for ``evaluator``, or None."""
+    if evaluator not in EVALUATORS:
+        raise ValueError(f"unknown evaluator {evaluator!r}; valid: {', '.join(EVALUATORS)}")
+    if evaluator == "monomials":
+        return None
+    from . import slp
+
+    try:
+        tapes = slp.tdoa_homotopy_tapes(spec["system"])
+    except ValueError:
+        tapes = None
+    names = list(spec["unknowns"]) + ["s"] + [f"q0:{p}" for p in spec["parameters"]] + [f"dq:{p}" for p in spec["parameters"]]
+    if tapes is not None and (list(tapes.full.input_names) != names or not _agrees(tapes, spec, coefficients)):
+        tapes = None  # a system named like a formulation but not its equations
+    if tapes is None and evaluator == "tape":
+        tapes = slp.homotopy_tapes(slp.expanded_equations(coefficients, spec["exponents"], spec["term_equation"]),
+                                   spec["unknowns"], spec["parameters"])
+    return tapes
+
+
+def _agrees(tapes, spec: dict, coefficients: Callable) -> bool:
+    """Whether the residual tape equals the spec's expanded system at two random complex points."""
+    rng = np.random.default_rng(0)
+    N, P = len(spec["unknowns"]), len(spec["parameters"])
+    x = rng.normal(size=(2, N)) + 1j * rng.normal(size=(2, N))
+    q = rng.normal(size=P) + 1j * rng.normal(size=P)
+    structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
+    H, _, _ = tracker.evaluate(structure, tracker.segment_coefficients(coefficients, q[None], q[None], 0), x, np.zeros(2))
+    with np.errstate(all="ignore"):
+        diff = np.abs(tape_kernel.evaluate(tapes.residual, x, 0.0, q, q) - H)
+    return bool(np.all(diff <= 1e-9 * (1.0 + np.abs(H).max())))
+
+
+class HomotopySolver:
+    """Tracks the stored start roots from q0 to target parameters (the online half of the method).
+
+    ``evaluator`` (:data:`EVALUATORS`): how the tracker evaluates the system.
+    """
+
+    def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
         self.coefficients = coefficients
+        self.tapes = _tapes(spec, coefficients, evaluator)
         self.structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
         self.degree = int(spec["coefficient_degree"])
         self.q0 = _complex_array(spec["start_parameters"])
@@ -204,6 +252,8 @@ class HomotopySolver:
 
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         """Newton steps on the system at parameters q (B, P); x (P', N), path p on instance inst[p]."""
+        if self.tapes is not None:
+            return tape_kernel.newton(self.tapes, q, x, inst, steps)
         G = self.segment(q, q)
         for _ in range(steps):
             H, J, _ = tracker.evaluate(self.structure, G, x, np.zeros(len(x)), inst)
@@ -222,8 +272,11 @@ class HomotopySolver:
     def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
               options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats."""
+        options = options or self.options
+        if self.tapes is not None and options.predictor == "rk4":
+            return tape_kernel.track(self.tapes, q0, q1, x0, inst, options)
         G = self.segment(q0, q1)
-        return tracker.track(self.structure, G, x0, inst, options or self.options)
+        return tracker.track(self.structure, G, x0, inst, options)
 
     def _route(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Track the complete root set xa (K, N) of qa to every target q (B, P) along straight segments.

@@ -1,0 +1,635 @@
+"""The compiled side of straight-line programs: the tape interpreter and the batched path tracker.
+
+This module owns the instruction set of :class:`solvers.methods.slp.Tape` and everything numba compiles
+for it (in one file: numba's on-disk cache is invalidated by changes to the file that defines a
+function, not by changes to the functions it calls from other files).
+
+Interpreter (:func:`run_tape`). Registers hold complex numbers as two real arrays (real and
+imaginary parts) of shape (registers, points); every instruction runs over all points (live paths)
+in its inner loop, so the cost of dispatching an instruction (a few ns) is spread over the points and
+the loop over points is plain vectorisable arithmetic. One kernel for every system, compiled once and
+cached on disk: no system needs its own compile.
+
+Batched tracker (:func:`track`). The predictor-corrector of :mod:`solvers.methods.tracker` (classical
+RK4 on the tangent field, Newton corrector, step size from the first Newton correction; tight
+retracking by the caller), the step logic of ``tracker._track_one`` kept path by path but run in lock
+step: each round every live path makes one step attempt; each evaluation of H, dH/dx (and dH/ds) is
+one run of a tape over all live paths, followed by one batched LU with partial pivoting of the N x N
+Jacobians (paths in the inner loop). The Newton steps before the last use the tape without dH/ds
+(:class:`slp.HomotopyTapes`); the last one's factorisation gives the next tangent. Paths that end leave
+the batch at the end of the round (their columns are compacted away). Statuses as in the tracker: 0
+reached s = 1, 1 stalled (or out of steps, or singular Jacobian), 2 diverged.
+
+References: Sommese & Wampler (2005), ch. 2 and 7; Timme, "Mixed precision path tracking for polynomial
+homotopy continuation" (2021), for tracking many paths of one compiled program.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from .tracker import TrackerOptions
+
+if TYPE_CHECKING:
+    from .slp import HomotopyTapes, Tape
+
+__all__ = ["OPCODES", "evaluate", "newton", "run", "run_tape", "track", "workspace"]
+
+#: Instruction set of the tape: d = a + b, a - b, a b, -a, imm a, a + imm, a a, imm; fused: c + imm a b
+#: (imm = +-1), a + imm b; OUT copies register a to output row d. a, b, c are registers, imm the
+#: instruction's real immediate; the inputs' registers are written by the caller before a run.
+OPCODES = ("ADD", "SUB", "MUL", "NEG", "CMUL", "CADD", "SQR", "CONST", "OUT", "MULADD", "AXPY")
+ADD, SUB, MUL, NEG, CMUL, CADD, SQR, CONST, OUT, MULADD, AXPY = range(len(OPCODES))
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def run_tape(code, imm, Rr, Ri, Or, Oi, P):
+    """Run the tape on points 0..P-1: registers Rr, Ri (n_registers, capacity) with the inputs in
+    their first rows; output rows of Or, Oi (n_outputs, capacity) written."""
+    for k in range(code.shape[0]):
+        op = code[k, 0]
+        d = code[k, 1]
+        a = code[k, 2]
+        b = code[k, 3]
+        if op == MULADD:
+            c = code[k, 4]
+            w = imm[k]
+            for p in range(P):
+                ar = Rr[a, p]
+                ai = Ri[a, p]
+                br = Rr[b, p]
+                bi = Ri[b, p]
+                xr = Rr[c, p] + w * (ar * br - ai * bi)
+                xi = Ri[c, p] + w * (ar * bi + ai * br)
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == AXPY:
+            w = imm[k]
+            for p in range(P):
+                xr = Rr[a, p] + w * Rr[b, p]
+                xi = Ri[a, p] + w * Ri[b, p]
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == MUL:
+            for p in range(P):
+                ar = Rr[a, p]
+                ai = Ri[a, p]
+                br = Rr[b, p]
+                bi = Ri[b, p]
+                Rr[d, p] = ar * br - ai * bi
+                Ri[d, p] = ar * bi + ai * br
+        elif op == ADD:
+            for p in range(P):
+                xr = Rr[a, p] + Rr[b, p]
+                xi = Ri[a, p] + Ri[b, p]
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == SUB:
+            for p in range(P):
+                xr = Rr[a, p] - Rr[b, p]
+                xi = Ri[a, p] - Ri[b, p]
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == CMUL:
+            c = imm[k]
+            for p in range(P):
+                xr = c * Rr[a, p]
+                xi = c * Ri[a, p]
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == SQR:
+            for p in range(P):
+                ar = Rr[a, p]
+                ai = Ri[a, p]
+                Rr[d, p] = ar * ar - ai * ai
+                Ri[d, p] = 2.0 * ar * ai
+        elif op == CADD:
+            c = imm[k]
+            for p in range(P):
+                xr = Rr[a, p] + c
+                xi = Ri[a, p]
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == NEG:
+            for p in range(P):
+                xr = -Rr[a, p]
+                xi = -Ri[a, p]
+                Rr[d, p] = xr
+                Ri[d, p] = xi
+        elif op == CONST:
+            c = imm[k]
+            for p in range(P):
+                Rr[d, p] = c
+                Ri[d, p] = 0.0
+        elif op == OUT:
+            for p in range(P):
+                Or[d, p] = Rr[a, p]
+                Oi[d, p] = Ri[a, p]
+
+
+@njit(cache=True, nogil=True, boundscheck=False, inline="always")
+def _swap(Xr, Xi, u, v, p):
+    """Swap rows u and v of column p (complex numbers as two arrays)."""
+    t = Xr[u, p]
+    Xr[u, p] = Xr[v, p]
+    Xr[v, p] = t
+    t = Xi[u, p]
+    Xi[u, p] = Xi[v, p]
+    Xi[v, p] = t
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _lu(Ar, Ai, base, N, piv, ok, P):
+    """In-place LU with partial pivoting of the matrices in rows base + i N + j of Ar, Ai (one per
+    column p < P), the diagonal replaced by its reciprocal; piv (N, capacity) receives the pivots,
+    ok[p] is False where a matrix is singular (its column then holds inf or nan, the others not).
+
+    Interchanges as in LINPACK's zgefa: step k swaps rows k and piv[k] in columns k.. only (the
+    multipliers stay where they were computed; :func:`_solve` interleaves the swaps), and every loop
+    runs over the points, so it vectorises."""
+    best = np.empty(P)
+    for p in range(P):
+        ok[p] = True
+    for k in range(N):
+        kk = base + k * N + k
+        for p in range(P):
+            best[p] = Ar[kk, p] * Ar[kk, p] + Ai[kk, p] * Ai[kk, p]
+            piv[k, p] = k
+        for i in range(k + 1, N):
+            ik = base + i * N + k
+            for p in range(P):
+                a = Ar[ik, p] * Ar[ik, p] + Ai[ik, p] * Ai[ik, p]
+                if a > best[p]:
+                    best[p] = a
+                    piv[k, p] = i
+        for j in range(k, N):
+            for p in range(P):  # (a swap of row k with itself where piv[k, p] = k)
+                _swap(Ar, Ai, base + k * N + j, base + piv[k, p] * N + j, p)
+        for p in range(P):
+            b = best[p]
+            if not (b > 0.0) or not np.isfinite(b):
+                ok[p] = False
+                b = 1e-300
+            Ar[kk, p] = Ar[kk, p] / b
+            Ai[kk, p] = -Ai[kk, p] / b
+        for i in range(k + 1, N):
+            ik = base + i * N + k
+            _mul_row(Ar, Ai, ik, Ar, Ai, kk, P)
+            for j in range(k + 1, N):
+                _sub_product(Ar, Ai, base + i * N + j, base + k * N + j, Ar, Ai, ik, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _mul_row(Br, Bi, i, Fr, Fi, f, P):
+    """Row i of B *= row f of F, over the points."""
+    for p in range(P):
+        yr = Br[i, p] * Fr[f, p] - Bi[i, p] * Fi[f, p]
+        yi = Br[i, p] * Fi[f, p] + Bi[i, p] * Fr[f, p]
+        Br[i, p] = yr
+        Bi[i, p] = yi
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _sub_product(Br, Bi, i, j, Fr, Fi, f, P):
+    """Row i of B -= row f of F times row j of B, over the points (complex numbers as two arrays)."""
+    for p in range(P):
+        a = Fr[f, p]
+        b = Fi[f, p]
+        Br[i, p] -= a * Br[j, p] - b * Bi[j, p]
+        Bi[i, p] -= a * Bi[j, p] + b * Br[j, p]
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _solve(Ar, Ai, base, N, piv, br, bi, P):
+    """Solve A y = b in place in br, bi (N, capacity) with the factors of :func:`_lu`."""
+    for k in range(N):
+        for p in range(P):
+            _swap(br, bi, k, piv[k, p], p)
+        for i in range(k + 1, N):
+            _sub_product(br, bi, i, k, Ar, Ai, base + i * N + k, P)
+    for i in range(N - 1, -1, -1):
+        for j in range(i + 1, N):
+            _sub_product(br, bi, i, j, Ar, Ai, base + i * N + j, P)
+        _mul_row(br, bi, i, Ar, Ai, base + i * N + i, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _eval(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, P):
+    """Outputs of a homotopy tape at the points x (N, capacity) and path parameters s (capacity,)."""
+    for v in range(N):
+        for p in range(P):
+            Rr[v, p] = xr[v, p]
+            Ri[v, p] = xi[v, p]
+    for p in range(P):
+        Rr[N, p] = s[p]
+        Ri[N, p] = 0.0
+    run_tape(code, imm, Rr, Ri, Or, Oi, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _tangent(Or, Oi, N, piv, kr, ki, P):
+    """k = -J^-1 dH/ds with the factored Jacobian in the outputs."""
+    hs = N + N * N
+    for v in range(N):
+        for p in range(P):
+            kr[v, p] = -Or[hs + v, p]
+            ki[v, p] = -Oi[hs + v, p]
+    _solve(Or, Oi, N, N, piv, kr, ki, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _newton_step(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P):
+    """Newton correction dx = J^-1 H at (x, s) (not applied); the factored Jacobian stays in the outputs."""
+    _eval(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
+    _lu(Or, Oi, N, N, piv, ok, P)
+    _correction(Or, Oi, N, piv, dxr, dxi, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _correction(Or, Oi, N, piv, dxr, dxi, P):
+    """dx = J^-1 H with H and the factored J in the outputs."""
+    for v in range(N):
+        for p in range(P):
+            dxr[v, p] = Or[v, p]
+            dxi[v, p] = Oi[v, p]
+    _solve(Or, Oi, N, N, piv, dxr, dxi, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _load_segment(Rr, Ri, N, q0, dq, b, col):
+    """Segment b's start parameters and direction into the tape's input rows of column col."""
+    Q = q0.shape[1]
+    for k in range(Q):
+        Rr[N + 1 + k, col] = q0[b, k].real
+        Ri[N + 1 + k, col] = q0[b, k].imag
+        Rr[N + 1 + Q + k, col] = dq[b, k].real
+        Ri[N + 1 + Q + k, col] = dq[b, k].imag
+
+
+@njit(cache=True, nogil=True)
+def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q0, dq, inst, opts, x_out, stats):
+    """Track paths x0 (M, N) along the segments q0 + s dq (B, Q) (path m on inst[m]); endpoints to
+    x_out (M, N) and stats (M, 4): status, steps, rejected, last s (as tracker._track_one).
+
+    code, imm: the full tape (H, J, dH/ds); ncode, nimm: the Newton tape (H, J); rcode, rimm: the
+    residual tape (H). chord: the corrector's steps after the first reuse its Jacobian (see :func:`track`)."""
+    h0, hmin, hmax, target, accept, tol = opts[0], opts[1], opts[2], opts[3], opts[4], opts[5]
+    newton, final_newton, max_steps, big = int(opts[6]), int(opts[7]), int(opts[8]), opts[9]
+    contract = opts[10]
+    M, N = x0.shape
+    Q = q0.shape[1]
+    cap = max(M, 1)
+    Rr = np.zeros((n_reg, cap))
+    Ri = np.zeros((n_reg, cap))
+    Or = np.zeros((n_out, cap))
+    Oi = np.zeros((n_out, cap))
+    piv = np.zeros((N, cap), dtype=np.int64)
+    ok = np.zeros(cap, dtype=np.bool_)
+    # state per column (live path), compacted as paths end
+    ids = np.arange(M)
+    xr = np.empty((N, cap))
+    xi = np.empty((N, cap))
+    for m in range(M):
+        for v in range(N):
+            xr[v, m] = x0[m, v].real
+            xi[v, m] = x0[m, v].imag
+    s = np.zeros(cap)
+    h = np.full(cap, h0)
+    steps = np.zeros(cap, dtype=np.int64)
+    rejected = np.zeros(cap, dtype=np.int64)
+    status = np.full(cap, -1, dtype=np.int64)  # -1 running
+    k1r = np.empty((N, cap))
+    k1i = np.empty((N, cap))
+    k2r = np.empty((N, cap))
+    k2i = np.empty((N, cap))
+    k3r = np.empty((N, cap))
+    k3i = np.empty((N, cap))
+    k4r = np.empty((N, cap))
+    k4i = np.empty((N, cap))
+    ktr = np.empty((N, cap))
+    kti = np.empty((N, cap))
+    xtr = np.empty((N, cap))
+    xti = np.empty((N, cap))
+    xpr = np.empty((N, cap))
+    xpi = np.empty((N, cap))
+    dxr = np.empty((N, cap))
+    dxi = np.empty((N, cap))
+    st = np.empty(cap)
+    s1 = np.empty(cap)
+    scale = np.ones(cap)
+    e0 = np.empty(cap)
+    e = np.empty(cap)
+    good = np.empty(cap, dtype=np.bool_)  # predictor succeeded
+    done = np.empty(cap, dtype=np.bool_)  # corrector finished
+    # segment data in the tape's input rows (written again when columns move)
+    for m in range(M):
+        _load_segment(Rr, Ri, N, q0, dq, inst[m], m)
+    P = M
+    # tangent at the start
+    _eval(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
+    _lu(Or, Oi, N, N, piv, ok, P)
+    _tangent(Or, Oi, N, piv, k1r, k1i, P)
+    for p in range(P):
+        if not ok[p]:
+            status[p] = 1
+    while True:
+        # -- retire the paths that ended (write results, compact the live columns) -------------
+        w = 0
+        for p in range(P):
+            if status[p] == -1 and steps[p] + rejected[p] >= max_steps:
+                status[p] = 1
+            if status[p] != -1:
+                m = ids[p]
+                for v in range(N):
+                    x_out[m, v] = xr[v, p] + 1j * xi[v, p]
+                stats[m, 0] = status[p]
+                stats[m, 1] = steps[p]
+                stats[m, 2] = rejected[p]
+                stats[m, 3] = s[p]
+                continue
+            if w != p:
+                ids[w] = ids[p]
+                for v in range(N):
+                    xr[v, w] = xr[v, p]
+                    xi[v, w] = xi[v, p]
+                    k1r[v, w] = k1r[v, p]
+                    k1i[v, w] = k1i[v, p]
+                for k in range(N + 1, N + 1 + 2 * Q):
+                    Rr[k, w] = Rr[k, p]
+                    Ri[k, w] = Ri[k, p]
+                s[w] = s[p]
+                h[w] = h[p]
+                steps[w] = steps[p]
+                rejected[w] = rejected[p]
+                status[w] = -1
+            w += 1
+        P = w
+        if P == 0:
+            break
+        # -- RK4 predictor: three more tangents ----------------------------------------------------
+        for p in range(P):
+            if h[p] > 1.0 - s[p]:
+                h[p] = 1.0 - s[p]
+            good[p] = True
+        for stage in range(3):
+            if stage == 0:
+                kr, ki = k1r, k1i
+            elif stage == 1:
+                kr, ki = k2r, k2i
+            else:
+                kr, ki = k3r, k3i
+            for p in range(P):
+                c = 0.5 * h[p] if stage < 2 else h[p]
+                st[p] = s[p] + c
+                for v in range(N):
+                    xtr[v, p] = xr[v, p] + c * kr[v, p]
+                    xti[v, p] = xi[v, p] + c * ki[v, p]
+            _eval(code, imm, Rr, Ri, Or, Oi, N, xtr, xti, st, P)
+            _lu(Or, Oi, N, N, piv, ok, P)
+            if stage == 0:
+                _tangent(Or, Oi, N, piv, k2r, k2i, P)
+            elif stage == 1:
+                _tangent(Or, Oi, N, piv, k3r, k3i, P)
+            else:
+                _tangent(Or, Oi, N, piv, k4r, k4i, P)
+            for p in range(P):
+                if not ok[p]:
+                    good[p] = False
+        for p in range(P):
+            s1[p] = s[p] + h[p]
+            if 1.0 - s1[p] < 1e-14:
+                s1[p] = 1.0
+            hh = h[p] / 6.0
+            acc = 0.0
+            for v in range(N):
+                a = xr[v, p] + hh * (k1r[v, p] + 2.0 * k2r[v, p] + 2.0 * k3r[v, p] + k4r[v, p])
+                b = xi[v, p] + hh * (k1i[v, p] + 2.0 * k2i[v, p] + 2.0 * k3i[v, p] + k4i[v, p])
+                xpr[v, p] = a
+                xpi[v, p] = b
+                acc += a * a + b * b
+            scale[p] = 1.0 + np.sqrt(acc)
+            e0[p] = np.inf
+            e[p] = np.inf
+            done[p] = not good[p]
+        # -- corrector. Newton: the last iteration's factorisation gives the tangent at the new point (at
+        # the point before its correction; a path whose corrector finished earlier is evaluated there
+        # too, at its final point). Chord: the first iteration's factorisation (at the predicted point)
+        # serves every iteration and gives the tangent.
+        for it in range(newton):
+            if chord and it > 0:
+                _eval(rcode, rimm, Rr, Ri, Or, Oi, N, xpr, xpi, s1, P)
+                _correction(Or, Oi, N, piv, dxr, dxi, P)
+            elif it == newton - 1 or chord:
+                _newton_step(code, imm, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
+                _tangent(Or, Oi, N, piv, ktr, kti, P)
+            else:
+                _newton_step(ncode, nimm, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
+            for p in range(P):
+                if done[p]:
+                    continue
+                if not ok[p]:
+                    e[p] = np.inf
+                    done[p] = True
+                    continue
+                acc = 0.0
+                for v in range(N):
+                    xpr[v, p] -= dxr[v, p]
+                    xpi[v, p] -= dxi[v, p]
+                    acc += dxr[v, p] * dxr[v, p] + dxi[v, p] * dxi[v, p]
+                e[p] = np.sqrt(acc) / scale[p]
+                if it == 0:
+                    e0[p] = e[p]
+                    if not (e0[p] < accept):
+                        done[p] = True
+                        continue
+                if e[p] < tol or (it > 0 and e[p] < contract * e0[p] and e[p] < 1e-5):
+                    done[p] = True
+        # -- accept or reject, step size -------------------------------------------------------------
+        for p in range(P):
+            if good[p] and np.isfinite(e[p]) and e0[p] < accept and (e[p] < tol or e[p] < contract * e0[p]):
+                for v in range(N):
+                    xr[v, p] = xpr[v, p]
+                    xi[v, p] = xpi[v, p]
+                    k1r[v, p] = ktr[v, p]
+                    k1i[v, p] = kti[v, p]
+                s[p] = s1[p]
+                steps[p] += 1
+                if s[p] >= 1.0:
+                    status[p] = 0
+                    continue
+                if scale[p] > big:
+                    status[p] = 2
+                    continue
+                f = 2.0
+                if e0[p] > 0:
+                    f = 0.8 * (target / e0[p]) ** 0.2
+                f = min(max(f, 0.5), 2.0)
+                h[p] = min(h[p] * f, hmax)
+            else:
+                rejected[p] += 1
+                h[p] *= 0.5
+                if h[p] < hmin:
+                    status[p] = 2 if scale[p] > big else 1
+    # -- Newton steps on the target system for the paths that reached s = 1 ---------------------------
+    P = 0
+    for m in range(M):
+        if stats[m, 0] == 0:
+            ids[P] = m
+            for v in range(N):
+                xr[v, P] = x_out[m, v].real
+                xi[v, P] = x_out[m, v].imag
+            _load_segment(Rr, Ri, N, q0, dq, inst[m], P)
+            s[P] = 1.0
+            done[P] = False
+            P += 1
+    _newton_steps(ncode, nimm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, final_newton, 1e-15, P)
+    for p in range(P):
+        for v in range(N):
+            x_out[ids[p], v] = xr[v, p] + 1j * xi[v, p]
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _newton_steps(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, steps, stop, P):
+    """Up to ``steps`` Newton steps at the points x (columns with done False): a column stops after a
+    step smaller than stop (1 + |x|) or at a singular Jacobian (then unchanged)."""
+    for it in range(steps):
+        _newton_step(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P)
+        for p in range(P):
+            if done[p] or not ok[p]:
+                done[p] = True
+                continue
+            a = 0.0
+            b = 0.0
+            for v in range(N):
+                xr[v, p] -= dxr[v, p]
+                xi[v, p] -= dxi[v, p]
+                a += dxr[v, p] * dxr[v, p] + dxi[v, p] * dxi[v, p]
+                b += xr[v, p] * xr[v, p] + xi[v, p] * xi[v, p]
+            if np.sqrt(a) < stop * (1.0 + np.sqrt(b)):
+                done[p] = True
+
+
+@njit(cache=True, nogil=True)
+def _newton_batch(code, imm, n_reg, n_out, x, q, inst, steps, x_out):
+    """``steps`` Newton steps on the systems at parameters q (B, Q) from x (M, N), row m on inst[m]."""
+    M, N = x.shape
+    cap = max(M, 1)
+    Rr = np.zeros((n_reg, cap))
+    Ri = np.zeros((n_reg, cap))
+    Or = np.zeros((n_out, cap))
+    Oi = np.zeros((n_out, cap))
+    dq = np.zeros_like(q)
+    xr = np.empty((N, cap))
+    xi = np.empty((N, cap))
+    for m in range(M):
+        _load_segment(Rr, Ri, N, q, dq, inst[m], m)
+        for v in range(N):
+            xr[v, m] = x[m, v].real
+            xi[v, m] = x[m, v].imag
+    _newton_steps(code, imm, Rr, Ri, Or, Oi, N, xr, xi, np.zeros(cap), np.zeros((N, cap), dtype=np.int64),
+                  np.zeros(cap, dtype=np.bool_), np.empty((N, cap)), np.empty((N, cap)), np.zeros(cap, dtype=np.bool_),
+                  steps, 0.0, M)
+    for m in range(M):
+        for v in range(N):
+            x_out[m, v] = xr[v, m] + 1j * xi[v, m]
+
+
+def workspace(tape: "Tape", capacity: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Register and output arrays (real, imaginary) for up to ``capacity`` points."""
+    return (np.zeros((tape.n_registers, capacity)), np.zeros((tape.n_registers, capacity)),
+            np.zeros((tape.n_outputs, capacity)), np.zeros((tape.n_outputs, capacity)))
+
+
+def run(tape: "Tape", inputs: np.ndarray) -> np.ndarray:
+    """Outputs (n_outputs, P) complex of the tape at inputs (n_inputs, P) complex (a reference entry
+    point for tests; trackers keep their workspace and call :func:`run_tape`)."""
+    inputs = np.asarray(inputs, dtype=complex)
+    if inputs.shape[0] != tape.n_inputs:
+        raise ValueError(f"{inputs.shape[0]} input rows given; the tape has {tape.n_inputs}")
+    P = inputs.shape[1]
+    Rr, Ri, Or, Oi = workspace(tape, P)
+    Rr[: tape.n_inputs] = inputs.real
+    Ri[: tape.n_inputs] = inputs.imag
+    run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
+    return Or + 1j * Oi
+
+
+def evaluate(tape: "Tape", x: np.ndarray, s: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Outputs (P, n_outputs) of a homotopy tape (:func:`slp.homotopy_program`) at points x (P, N),
+    path parameters s (P,) on the segments q0 -> q1 (P, Q) or (Q,)."""
+    x = np.atleast_2d(np.asarray(x, dtype=complex))
+    P = len(x)
+    s = np.broadcast_to(np.asarray(s, dtype=float), (P,))
+    q0 = np.broadcast_to(np.asarray(q0, dtype=complex), (P, np.shape(q0)[-1]))
+    q1 = np.broadcast_to(np.asarray(q1, dtype=complex), (P, np.shape(q1)[-1]))
+    inputs = np.concatenate([x.T, s[None, :], q0.T, (q1 - q0).T], axis=0)
+    return run(tape, inputs).T
+
+
+def _segments(q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start points and directions (B, Q) of the segments q0 -> q1 (either broadcast)."""
+    q0 = np.atleast_2d(np.asarray(q0, dtype=np.complex128))
+    q1 = np.atleast_2d(np.asarray(q1, dtype=np.complex128))
+    B = max(len(q0), len(q1))
+    q0 = np.ascontiguousarray(np.broadcast_to(q0, (B, q0.shape[1])))
+    return q0, np.ascontiguousarray(np.broadcast_to(q1, q0.shape) - q0)
+
+
+def _check(tapes: "HomotopyTapes", N: int, Q: int) -> None:
+    if tapes.full.n_inputs != N + 1 + 2 * Q:
+        raise ValueError(f"the tapes have {tapes.full.n_inputs} inputs; {N} unknowns and {Q} parameters need {N + 1 + 2 * Q}")
+
+
+#: Paths per lock-step batch: the registers of a 9r/3s tape for 256 paths take 1 MB (L2-sized); a
+#: batch of 600 was slower per path than one of 300 (many instances solved at once are split).
+CHUNK = 256
+
+#: Correctors of :func:`track`: "newton" (every step factors the Jacobian at its point: the corrector of
+#: tracker._track_one) or "chord" (the steps after the first reuse its factorisation and evaluate H
+#: alone; the next tangent comes from the Jacobian at the predicted point).
+CORRECTORS = ("newton", "chord")
+
+
+def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
+          options: TrackerOptions = TrackerOptions(), corrector: str = "newton") -> tuple[np.ndarray, np.ndarray]:
+    """Track x0 (P, N) along q0 -> q1 ((B, Q) or (Q,), broadcast); path p on segment inst[p].
+
+    Returns endpoints (P, N) (NaN unless the path reached s = 1) and stats (P, 4), as
+    :func:`tracker.track`.
+    """
+    if corrector not in CORRECTORS:
+        raise ValueError(f"unknown corrector {corrector!r}; valid: {', '.join(CORRECTORS)}")
+    if options.predictor != "rk4":
+        raise ValueError(f"the batched tracker predicts by rk4 only, not {options.predictor!r}")
+    x0 = np.ascontiguousarray(np.atleast_2d(x0), dtype=np.complex128)
+    M, N = x0.shape
+    q0, dq = _segments(q0, q1)
+    _check(tapes, N, q0.shape[1])
+    inst = np.zeros(M, dtype=np.int64) if inst is None else np.ascontiguousarray(inst, dtype=np.int64)
+    x = np.empty_like(x0)
+    stats = np.zeros((M, 4))
+    for a in range(0, M, CHUNK):
+        b = min(a + CHUNK, M)
+        _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
+                     tapes.residual.imm, corrector == "chord", tapes.n_registers, tapes.full.n_outputs,
+                     x0[a:b], q0, dq, inst[a:b], options.as_array(), x[a:b], stats[a:b])
+    x[stats[:, 0] != 0] = np.nan
+    return x, stats
+
+
+def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
+    """``steps`` Newton steps on the systems at parameters q (B, Q) from x (P, N), row p on inst[p]; a row
+    whose Jacobian is singular keeps its last point."""
+    x = np.ascontiguousarray(np.atleast_2d(x), dtype=np.complex128)
+    M, N = x.shape
+    q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=np.complex128)))
+    _check(tapes, N, q.shape[1])
+    inst = np.zeros(M, dtype=np.int64) if inst is None else np.ascontiguousarray(inst, dtype=np.int64)
+    out = np.empty_like(x)
+    for a in range(0, M, CHUNK):
+        b = min(a + CHUNK, M)
+        _newton_batch(tapes.newton.code, tapes.newton.imm, tapes.n_registers, tapes.newton.n_outputs, x[a:b], q,
+                      inst[a:b], int(steps), out[a:b])
+    return out

@@ -1,0 +1,145 @@
+"""Straight-line programs and the tape interpreter: common subexpressions, constant folding, and the
+TDOA homotopy tapes against the tracker's monomial kernel and finite differences."""
+from __future__ import annotations
+
+import importlib
+import os
+
+import numpy as np
+import pytest
+
+from solvers.generate import GENERATED_DIR, SOLVERS
+from solvers.methods import slp, tape_kernel, tracker
+
+
+def test_program_shares_and_folds():
+    prog = slp.Program()
+    x, y = prog.inputs(["x", "y"])
+    a = x * y + 2.0 * x
+    b = y * x + x * 2.0
+    assert a.id == b.id  # hash-consed, commutative operands sorted
+    assert (x * 1.0).id == x.id and (x + 0.0).id == x.id and prog.is_zero(x * 0.0)
+    assert (-(-x)).id == x.id and (x - x).id == prog.constant(0.0).id
+    dx, dy = slp.derivative([x * x * y], x)[0], slp.derivative([x * x * y], y)[0]
+    tape = prog.compile([x * x * y, dx, dy])
+    out = tape_kernel.run(tape, np.array([[1.5 + 0.5j, -2.0], [0.25j, 3.0 - 1j]]))
+    X, Y = np.array([1.5 + 0.5j, -2.0]), np.array([0.25j, 3.0 - 1j])
+    np.testing.assert_allclose(out, [X * X * Y, 2 * X * Y, X * X], rtol=1e-14)
+
+
+def test_power_by_squaring():
+    prog = slp.Program()
+    (x,) = prog.inputs(["x"])
+    tape = prog.compile([x ** 5, x ** 0])
+    z = np.array([[0.3 - 1.1j]])
+    np.testing.assert_allclose(tape_kernel.run(tape, z)[:, 0], [z[0, 0] ** 5, 1.0], rtol=1e-14)
+    assert tape.n_instructions == 4  # x^2, x^4, x^5 and the constant 1
+
+
+@pytest.mark.parametrize("label", ["9r3s", "6r3s"])
+def test_tdoa_tape_matches_tracker_kernel(label):
+    """H, J, dH/ds of the unexpanded tape equal the generated solver's expanded system at random
+    complex points on a random segment; J and dH/ds agree with central finite differences."""
+    name = {"9r3s": "tdoa_9r3s_homotopy75", "6r3s": "tdoa_6r3s_homotopy180"}[label]
+    solver = importlib.import_module(f"solvers.generated.{name}").solver()
+    tapes = slp.tdoa_homotopy_tapes(SOLVERS[label])
+    rng = np.random.default_rng(7)
+    P, N = 12, solver.nvars
+    x = solver.x0[:P] + 0.3 * (rng.normal(size=(P, N)) + 1j * rng.normal(size=(P, N)))
+    q0 = solver.q0
+    q1 = rng.normal(size=len(q0)) + 0.1j * rng.normal(size=len(q0))
+    s = rng.uniform(size=P)
+    H, J, Hs = tracker.evaluate(solver.structure, solver.segment(q0[None], q1[None]), x, s)
+    out = tape_kernel.evaluate(tapes.full, x, s, q0, q1)
+    scale = np.abs(H).max() + np.abs(J).max()
+    np.testing.assert_allclose(out[:, :N], H, atol=1e-12 * scale)
+    np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), J, atol=1e-12 * scale)
+    np.testing.assert_allclose(out[:, N + N * N:], Hs, atol=1e-12 * (np.abs(Hs).max()))
+    np.testing.assert_allclose(tape_kernel.evaluate(tapes.residual, x, s, q0, q1), H, atol=1e-12 * scale)
+    np.testing.assert_allclose(tape_kernel.evaluate(tapes.newton, x, s, q0, q1), out[:, :N + N * N], atol=1e-12 * scale)
+    # finite differences (complex-analytic: a real step suffices)
+    eps = 1e-6
+    Jfd = np.empty((P, N, N), dtype=complex)
+    for k in range(N):
+        dxk = np.zeros(N)
+        dxk[k] = eps * (1.0 + np.abs(x[:, k]).max())
+        hp = tape_kernel.evaluate(tapes.residual, x + dxk, s, q0, q1)
+        hm = tape_kernel.evaluate(tapes.residual, x - dxk, s, q0, q1)
+        Jfd[:, :, k] = (hp - hm) / (2 * dxk[k])
+    np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), Jfd, atol=1e-6 * scale)
+    hp = tape_kernel.evaluate(tapes.residual, x, s + eps, q0, q1)
+    hm = tape_kernel.evaluate(tapes.residual, x, s - eps, q0, q1)
+    np.testing.assert_allclose(out[:, N + N * N:], (hp - hm) / (2 * eps), atol=1e-6 * np.abs(Hs).max())
+
+
+def test_tape_rejects_unsupported_families():
+    with pytest.raises(ValueError, match="no unexpanded program"):
+        slp.tdoa_equations("5r4s:A,B2,B3,C2-C5,minors")
+
+
+def test_batched_tracker_matches_tracker():
+    """The lock-step tape tracker and the per-path monomial tracker take the same steps to the same
+    endpoints (9r/3s, one seeded network; the tape tracker's last Newton step factors at the point of
+    the tangent, so a path whose corrector converged in one step may differ by a step)."""
+    from solvers.generated import tdoa_9r3s_homotopy75 as module
+    from solvers.synthetic import random_network
+
+    solver = module.solver()
+    assert solver.tapes is not None
+    F = random_network(9, 3, np.random.default_rng(3)).measurements().reshape(1, -1)
+    q = F / np.sqrt(np.mean(F ** 2))
+    x_old, s_old = tracker.track(solver.structure, solver.segment(solver.q0[None], q), solver.x0, None, solver.options)
+    x_new, s_new = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options)
+    np.testing.assert_array_equal(s_new[:, 0], s_old[:, 0])
+    assert np.mean(s_new[:, 1] == s_old[:, 1]) > 0.9
+    ok = s_old[:, 0] == 0
+    np.testing.assert_allclose(x_new[ok], x_old[ok], rtol=1e-7, atol=1e-7 * np.abs(x_old[ok]).max())
+    x_chord, s_chord = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options, corrector="chord")
+    np.testing.assert_array_equal(s_chord[:, 0], s_old[:, 0])
+    np.testing.assert_allclose(x_chord[ok], x_old[ok], rtol=1e-7, atol=1e-7 * np.abs(x_old[ok]).max())
+    # Newton on the tape (batched LU) = Newton on the monomials (numpy solve)
+    x = x_old[ok] * (1 + 1e-4)
+    G = solver.segment(q, q)
+    H, J, _ = tracker.evaluate(solver.structure, G, x, np.zeros(len(x)))
+    expected = x - np.linalg.solve(J, H[..., None])[..., 0]
+    np.testing.assert_allclose(tape_kernel.newton(solver.tapes, q, x), expected, rtol=1e-9, atol=1e-12)
+
+
+def test_expanded_tape_matches_tracker_kernel():
+    """A system without a program from its formulas (5r/4s: minors squared) gets one traced from its
+    generated coefficient function and monomials (evaluator "tape"); it equals the monomial kernel."""
+    from solvers.generated import tdoa_5r4s_homotopy152 as module
+    from solvers.methods import homotopy
+
+    solver = module.solver()
+    assert solver.tapes is None  # "auto": no program from the formulation
+    with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
+        tape_solver = homotopy.HomotopySolver(homotopy.load_spec(fh.read()), module.coefficients, "tape")
+    rng = np.random.default_rng(11)
+    P, N = 6, solver.nvars
+    x = solver.x0[:P] * (1 + 0.1 * rng.normal(size=(P, N)))
+    q1 = rng.normal(size=len(solver.q0)) + 0j
+    s = rng.uniform(size=P)
+    H, J, Hs = tracker.evaluate(solver.structure, solver.segment(solver.q0[None], q1[None]), x, s)
+    out = tape_kernel.evaluate(tape_solver.tapes.full, x, s, solver.q0, q1)
+    np.testing.assert_allclose(out[:, :N], H, atol=1e-12 * np.abs(H).max())
+    np.testing.assert_allclose(out[:, N:N + N * N].reshape(P, N, N), J, atol=1e-12 * np.abs(J).max())
+    np.testing.assert_allclose(out[:, N + N * N:], Hs, atol=1e-12 * np.abs(Hs).max())
+
+
+def test_solver_takes_a_program_only_for_its_own_equations():
+    """A spec whose system is labelled like a formulation but whose equations differ (here one term's
+    coefficient doubled) gets no program: the tapes are checked against the generated system."""
+    from solvers.generated import tdoa_9r3s_homotopy75 as module
+    from solvers.methods import homotopy
+
+    with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
+        spec = homotopy.load_spec(fh.read())
+    assert homotopy._tapes(spec, module.coefficients, "auto") is not None
+
+    def other(q):
+        c = module.coefficients(q)
+        c[:, 0] *= 2.0
+        return c
+
+    assert homotopy._tapes(spec, other, "auto") is None
