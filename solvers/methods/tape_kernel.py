@@ -25,15 +25,13 @@ homotopy continuation" (2021), for tracking many paths of one compiled program.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numba import njit
 
 from .tracker import TrackerOptions
 
-if TYPE_CHECKING:
-    from .slp import HomotopyTapes, Tape
+# The tapes' types (solvers.methods.slp.Tape, HomotopyTapes) are named in annotations only as strings:
+# slp imports this module's opcodes, and this module never imports slp (one direction of dependency).
 
 __all__ = ["OPCODES", "evaluate", "newton", "run", "run_tape", "track", "workspace"]
 
