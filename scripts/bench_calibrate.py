@@ -173,6 +173,10 @@ def main(argv=None) -> int:
         for (m, n) in SCALE:
             jobs.append(((m, n), 1e-2, SCALE_CONDITION[0], SCALE_CONDITION[1], SCALE_CONDITION[2], scale_networks))
 
+    # provenance read before anything is written (the outputs themselves would make the tree dirty)
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                                capture_output=True, text=True).stdout.strip())
     t_start = time.perf_counter()
     rows = []
     if args.jobs <= 1:
@@ -199,8 +203,6 @@ def main(argv=None) -> int:
         w.writerows(rows)
     with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
         handle.write(markdown(rows))
-    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    dirty = bool(subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True, text=True).stdout.strip())
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "commit": commit, "worktree_dirty": dirty, "networks_per_cell": networks, "scale_networks": scale_networks,
