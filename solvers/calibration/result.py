@@ -19,7 +19,7 @@ STATUSES = ("failed", "unconverged", "inconsistent", "partial", "ambiguous", "un
 
 @dataclass(frozen=True)
 class CalibrationOptions:
-    """Tuning of `calibrate`; the defaults are what the benchmark (scripts/bench_calibration.py) uses.
+    """Tuning of `calibrate`; the defaults are what the benchmark (scripts/bench_calibrate.py) uses.
 
     threshold_sigmas : inlier threshold in units of sigma (MSAC truncation and final classification)
     confidence : RANSAC stops when an all-inlier sample was drawn with this probability
