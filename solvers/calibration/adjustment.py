@@ -71,12 +71,9 @@ class Problem:
     def n_params(self) -> int:
         return 2 * len(self.rows) + 3 * len(self.cols) - 3
 
-    @property
-    def receiver_slots(self) -> np.ndarray:
-        """(len(rows), 2) parameter columns of each local receiver's x, y (n_params = fixed)."""
-        return self.slots_of(True)
-
     def slots_of(self, receivers: bool) -> np.ndarray:
+        """Parameter columns of each local receiver's (x, y), or each transmitter's (x, y, offset);
+        n_params marks a fixed gauge coordinate."""
         ma, na, u = len(self.rows), len(self.cols), self.n_params
         k0 = 1 + 2 * (ma - 2)
         if receivers:

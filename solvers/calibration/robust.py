@@ -115,26 +115,6 @@ def _polish(F, mask, R, S, O, thr, floor, opts: CalibrationOptions, rng, max_ite
     return _Polished(R, S, O, _classify(E, mask, t), sig, t, converged)
 
 
-def _refit_with_moderate_rejects(F, work, R, S, O, inl, sigma, floor, opts, converged):
-    """Refit with the rejected entries within 3k sigma added back; keep the refit if it keeps every
-    inlier and gains some (at the threshold k sigma).
-
-    The robust stage can settle a weakly determined node where a few good measurements look like
-    outliers, and least squares without them never comes back (a self-consistent split).
-    """
-    t = max(opts.threshold_sigmas * sigma, floor)
-    E = _residual_matrix(F, R, S, O)
-    cand = work & ~inl & (np.abs(E) <= 3.0 * t)
-    if not cand.any():
-        return R, S, O, inl, converged
-    fit = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl | cand)
-    new = _classify(_residual_matrix(F, fit.R, fit.S, fit.O), work, t)
-    if (new | ~inl).all() and new.sum() > inl.sum():
-        fit = robust_refine(F, work, fit.R, fit.S, fit.O, loss="linear", max_iter=opts.max_iterations, use=new)
-        return fit.R, fit.S, fit.O, new, fit.converged
-    return R, S, O, inl, converged
-
-
 def _drop_undetermined(F, work, R, S, O, inl, max_iter):
     """Unplace nodes with fewer inlier measurements than they need (3 / 4), repeatedly, and refit the
     rest by least squares on the inliers. A node the data do not fix would otherwise be reported at an

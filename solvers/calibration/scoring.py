@@ -50,10 +50,9 @@ def hypothesis_redundancy(mask: np.ndarray, rows, cols, R: np.ndarray, S: np.nda
     return rr
 
 
-def uniform_redundancy(mask: np.ndarray, R: np.ndarray, S: np.ndarray) -> np.ndarray:
+def uniform_redundancy(mask: np.ndarray, placed_r: np.ndarray, placed_t: np.ndarray) -> np.ndarray:
     """(m, n) the average redundancy (entries - unknowns) / entries of a fit on every entry between
     placed nodes, for each of them (0 elsewhere)."""
-    placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
     use = mask & placed_r[:, None] & placed_t[None, :]
     k = int(use.sum())
     u = 2 * int(placed_r.sum()) + 3 * int(placed_t.sum()) - 3
@@ -80,12 +79,8 @@ def _score(E: np.ndarray, mask: np.ndarray, thr: float | None, floor: float,
         return np.inf, 0.0, thr or floor
     if thr is None:
         rr = redundancy
-        if rr is None:
-            placed_r = np.isfinite(E).any(axis=1)
-            placed_t = np.isfinite(E).any(axis=0)
-            fake_R = np.where(placed_r[:, None], 0.0, np.nan) * np.ones((1, 2))
-            fake_S = np.where(placed_t[:, None], 0.0, np.nan) * np.ones((1, 2))
-            rr = uniform_redundancy(mask, fake_R, fake_S)
+        if rr is None:  # a node is placed when any of its residuals is finite
+            rr = uniform_redundancy(mask, np.isfinite(E).any(axis=1), np.isfinite(E).any(axis=0))
         sel = mask & ((rr > MIN_SCALE_REDUNDANCY) | ~np.isfinite(e2_all))
         if not sel.any():
             sel = mask
