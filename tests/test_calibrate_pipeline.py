@@ -117,6 +117,37 @@ def test_low_redundancy_without_sigma_keeps_everything_and_says_it_cannot_test(m
     assert calibration_errors(res, net).position < 0.1
 
 
+def _one_gross_error(m, n, sigma, seed, entry, size=1.0):
+    net, F = _uniform_network(m, n, sigma, seed)
+    F = F.copy()
+    F[entry] += size
+    return net, F
+
+
+def test_low_redundancy_gross_error_is_found_by_refitting_and_its_receiver_rejected_as_a_group():
+    # 9r/3s, sigma unknown, dof 3: receiver 3's three measurements carry its whole local redundancy, so
+    # their test statistics are equal and a gross error among them cannot be located. The linearised
+    # statistic of the all-data fit (pulled off by the error) stays far below its bound; refitting
+    # without each entry finds it.
+    net, F = _one_gross_error(9, 3, 1e-3, seed=2, entry=(2, 1))
+    res = calibrate(F, seed=0)
+    assert not res.inliers[2].any() and res.inliers[np.arange(9) != 2].all(), res.message
+    assert res.status == "partial" and np.isnan(res.receivers[2]).all()
+    assert any("cannot be located" in w and "r3-s2" in w for w in res.warnings), res.warnings
+    # the rest of the network is the clean 8r/3s answer
+    assert res.rms < 3e-3
+
+
+def test_gross_error_in_a_5r5s_network_with_sigma_given_is_rejected():
+    # No minimal solver fits a 5 x 5 network cheaply and no sub-network has two spare measurements: the
+    # search draws sub-networks with one (5r/4s) that leave the gross error out.
+    net, F = _one_gross_error(5, 5, 1e-3, seed=2, entry=(3, 1))
+    res = calibrate(F, sigma=1e-3, seed=0)
+    assert res.status != "failed", res.message
+    assert not res.inliers[3, 1] and res.inliers.sum() >= 23, res.message
+    assert calibration_errors(res, net).position < 0.05
+
+
 def test_reported_std_covers_the_true_error():
     # 2-D normal errors: a node beyond 3 sqrt(var_x + var_y) has probability 1e-4 to 3e-3
     from solvers.metrics import standardised_node_errors

@@ -16,7 +16,7 @@ from .adjustment import (
     make_problem,
     robust_refine,
 )
-from .flags import _flags, _repair_flips
+from .flags import _flags, _probe_basins, _repair_flips
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
@@ -250,7 +250,7 @@ def _snoop(F, work, R, S, O, inl, sigma, opts: CalibrationOptions):
     return R, S, O, inl, converged
 
 
-def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions, rng):
+def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions, rng, memo: dict | None = None):
     """(R, S, O, use, converged, robust scale, passed): least squares on every entry between the nodes
     placed by the model (unplaced ones placed first), and whether it shows no outlier.
 
@@ -258,7 +258,9 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
     the largest externally studentised residual, and - because two gross errors mask each other in
     that statistic (each inflates the other's leave-one-out sigma) - the largest residual of a
     robust fit standardised by the robust scale (`_robust_scale`), each against its Bonferroni bound
-    (the latter widened by 1.5 for the scale's own sampling error).
+    (the latter widened by 1.5 for the scale's own sampling error). Below min_dof_for_sigma the exact
+    leave-one-out test decides (`_leave_one_out`); `memo` keeps its verdict per minimum (the same
+    entries and SSR to 1e-9), which the search's successive hypotheses often share.
     """
     c = opts.threshold_sigmas * sigma if sigma is not None else floor
     R, S, O = _fill(F, work, model.R, model.S, model.O, max(c, floor), rng)
@@ -267,6 +269,15 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
     st = adjustment_statistics(F, work & placed, ls.R, ls.S, ls.O, sigma, alpha=opts.alpha, power=opts.power,
                                alpha_global=opts.alpha_global)
     passed = st is not None and ls.converged and _no_outlier(st, sigma, opts)
+    if passed and sigma is None and st.dof < opts.min_dof_for_sigma:
+        # little redundancy: the linearised statistic of a fit pulled by a gross error understates it
+        key = ((work & placed).tobytes(), float(f"{st.ssr:.9e}"))
+        if memo is None or key not in memo:
+            found = _leave_one_out(F, work, [(ls.R, ls.S, ls.O), (R, S, O)], work & placed, st, opts)
+            verdict = found is None or found[0] <= found[1]
+            if memo is not None:
+                memo[key] = verdict
+        passed = verdict if memo is None else memo[key]
     scale = sigma
     if sigma is None and st is not None and st.dof >= opts.min_dof_for_sigma:
         # (below that redundancy a robust scale means nothing, and only classic snooping is done)
@@ -279,10 +290,65 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
     return ls.R, ls.S, ls.O, work & placed, ls.converged, scale, passed
 
 
-def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions):
-    """Sigma unknown, little redundancy: reject the entry with the largest externally studentised
-    residual while it exceeds the Bonferroni bound (alpha over the testable entries) and the
-    fit keeps at least 2 degrees of freedom; least squares after each. Returns (R, S, O, inl, converged)."""
+def _leave_one_out(F, work, starts, inl, st: AdjustmentStatistics, opts: CalibrationOptions):
+    """The entry whose removal explains the misfit best, by refitting without it (nonlinear), and the
+    entries that explain it as well (their removal fits no significantly worse: an error there cannot be
+    told apart, e.g. the three measurements of a receiver with three transmitters).
+
+    The test statistic is the exact (nonlinear) externally studentised residual
+    t_k^2 = (SSR - SSR_k) / (SSR_k / (dof - 1)), t(dof - 1) under the null. With little redundancy and a
+    gross error the all-data fit is far from the truth, and the linearised statistic of that fit
+    (`st.w`) understates it by orders of magnitude (9r/3s, one 0.15 error at sigma 1e-3: 7.8 against
+    the exact 680). Candidates: every entry, largest |w| first, at most loo_candidates.
+    Each refit starts from every (R, S, O) of `starts` (the current fit, and the search's best
+    hypothesis: a fit pulled off by a gross error is often in another basin than the truth) and keeps
+    the smallest SSR. Returns (t, critical value, group (list of (i, j)), refit of the best) or None."""
+    if st.dof < 3 or len(st.entries) == 0:
+        return None
+    # every entry is a candidate: the redundancy numbers of a fit pulled off by a gross error can put
+    # the erroneous entry itself below min_redundancy (refitting without an entry of redundancy 0
+    # changes nothing and cannot be selected)
+    order = list(np.argsort(-np.abs(np.nan_to_num(st.w, nan=0.0)), kind="stable")[: opts.loo_candidates])
+    # a start that predicts every entry like the first one (within 3 a-posteriori sigmas) is in its basin
+    E0 = _residual_matrix(F, *starts[0])
+    s_post = math.sqrt(st.ssr / st.dof)
+    starts = starts[:1] + [x for x in starts[1:]
+                           if not np.nanmax(np.abs(_residual_matrix(F, *x) - E0)[inl], initial=0.0) <= 3.0 * s_post]
+    ssr_k, fits = [], []
+    for k in order:
+        use = inl.copy()
+        use[st.entries[k, 0], st.entries[k, 1]] = False
+        best_k = (math.inf, None)
+        for R, S, O in starts:
+            ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=use)
+            E = _residual_matrix(F, ls.R, ls.S, ls.O)
+            ssr = float(np.sum(E[use] ** 2))
+            if np.isfinite(ssr) and ssr < best_k[0]:
+                best_k = (ssr, ls)
+        ssr_k.append(best_k[0])
+        fits.append(best_k[1])
+    ssr_k = np.asarray(ssr_k)
+    best = int(np.argmin(ssr_k))
+    if not np.isfinite(ssr_k[best]):
+        return None
+    s2 = max(ssr_k[best], 1e-300) / (st.dof - 1)
+    t = math.sqrt(max(st.ssr - ssr_k[best], 0.0) / s2)
+    c = critical_value(opts.alpha / len(st.entries), st.dof - 1)
+    # told apart from the best when removing it instead leaves a significantly larger misfit
+    c1 = critical_value(opts.alpha, st.dof - 1)
+    group = [tuple(int(v) for v in st.entries[order[g]]) for g in range(len(order))
+             if (ssr_k[g] - ssr_k[best]) / s2 <= c1 ** 2]
+    return t, c, group, fits[best]
+
+
+def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions, notes: list | None = None,
+                          hypothesis: tuple | None = None):
+    """Sigma unknown, little redundancy: reject the entry whose removal explains the misfit best while its
+    exact externally studentised residual (`_leave_one_out`) exceeds the Bonferroni bound (alpha over
+    the testable entries) and the fit keeps at least 2 degrees of freedom; when other entries explain it
+    as well and all belong to one node, the error cannot be located among them and all of them are
+    rejected (said in `notes`); equally good entries of different nodes stop the snooping.
+    Returns (R, S, O, inl, converged)."""
     inl = inl.copy()
     converged = True
     while True:
@@ -290,22 +356,31 @@ def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions):
                                    alpha_global=opts.alpha_global)
         if st is None or st.dof < 3:
             break
-        testable = st.redundancy >= opts.min_redundancy
-        if not testable.any():
-            break
-        aw = np.where(testable, np.abs(st.w), 0.0)
-        k = int(np.argmax(aw))
+        found = _leave_one_out(F, work, [(R, S, O)] + ([hypothesis] if hypothesis is not None else []), inl, st, opts)
         # family-wise level alpha (0.001): with 2-9 degrees of freedom one false rejection costs a node
         # (a receiver with 3 measurements keeps 2 and cannot be placed), a gross error is far beyond it
-        if aw[k] <= critical_value(opts.alpha / testable.sum(), st.dof - 1):
+        if found is None or found[0] <= found[1]:
             break
-        inl[st.entries[k, 0], st.entries[k, 1]] = False
-        ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
-        R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
+        t, c, group, ls = found
+        if len({i for i, _ in group}) > 1 and len({j for _, j in group}) > 1:
+            # entries of different nodes that explain the misfit equally: nothing local to reject
+            # (a degenerate geometry or a fit in a wrong basin); the status reports the misfit
+            break
+        for i, j in group:
+            inl[i, j] = False
+        if len(group) > 1 and notes is not None:
+            names = ", ".join(f"r{i + 1}-s{j + 1}" for i, j in group)
+            notes.append(f"a gross error among {names} (t = {t:.3g} > {c:.3g}) cannot be located: all {len(group)} rejected")
+        if len(group) == 1:
+            R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
+        else:
+            ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
+            R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
     return R, S, O, inl, converged
 
 
-def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, all_data=None):
+def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, all_data=None,
+            notes: list | None = None):
     """The final adjustment from the best hypothesis: (R, S, O, inliers, converged, route).
 
     1. The all-data hypothesis: least squares on every entry between placed nodes; if the fit shows
@@ -323,7 +398,7 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
         # Too little redundancy to estimate sigma robustly: a robust fit would explain a subset exactly
         # and call the rest outliers. Only classic data snooping from the all-data fit remains: the
         # largest externally studentised residual, above its Bonferroni bound, one at a time.
-        R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts)
+        R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts, notes, (best.R, best.S, best.O))
         return R, S, O, inl, converged, "snooping"
     if scale is None:
         scale, _ = _robust_scale(F, work, best, floor, opts)
@@ -338,7 +413,7 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
     if sigma is None and kept_dof < opts.min_dof_for_sigma:
         # The robust route kept too little redundancy to say what the noise is: its rejections rest on a
         # scale it cannot estimate. Only classic snooping from the all-data fit is justified.
-        R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts)
+        R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts, notes, (best.R, best.S, best.O))
         return R, S, O, inl, converged, "snooping"
     return R2, S2, O2, inl, converged, "robust"
 
@@ -372,9 +447,10 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
     thr = None if sigma is None else max(opts.threshold_sigmas * sigma, floor)
 
     fits = {}
+    memo: dict = {}
 
     def accept(model: _Model) -> bool:
-        fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng)
+        fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng, memo)
         return fits[id(model)][-1]
 
     best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(), accept,
@@ -383,11 +459,16 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         return _failed(F, "no hypothesis: every minimal-solver sample and sub-network fit failed (degenerate geometry?)",
                        t0, seed, search, warnings)
 
-    R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)))
+    notes: list[str] = []
+    R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)), notes)
+    warnings += notes
     R, S, O, inl, dropped, ls = _drop_undetermined(F, work, R, S, O, inl, opts.max_iterations)
     warnings += dropped
     if ls is not None:
         converged = ls.converged
+    R, S, O, moved, other_minimum = _probe_basins(F, work, inl, R, S, O, sigma, opts)
+    if moved:
+        warnings.append("a better least-squares minimum was found by moving a node with rejected measurements")
     E = _residual_matrix(F, R, S, O)
     rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
 
@@ -455,6 +536,9 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
     if sigma is None and st is not None and np.isfinite(st.sigma_post) and st.sigma_post > 0.02 * max(spread_f, 1e-300):
         found.append(("inconsistent", f"the estimated noise {st.sigma_post:.3g} is {100 * st.sigma_post / spread_f:.0f} % "
                       "of the spread of the data: the model does not fit (transposed matrix, wrong units, not TDOA data?)"))
+    if other_minimum is not None:
+        found.append(("ambiguous", f"a second least-squares minimum on the same inliers (reached by moving "
+                      f"{other_minimum[1]}) fits within {other_minimum[0]:.2g} sigma^2: the data do not decide"))
     unplaced = int((~placed_r & mask.any(axis=1)).sum() + (~placed_t & mask.any(axis=0)).sum())
     if unplaced:
         found.append(("partial", f"{unplaced} node(s) with measurements could not be placed"))

@@ -60,6 +60,11 @@ class CalibrationOptions:
         (chi^2 with 10 degrees of freedom puts the estimate within a factor 2 of the truth 99 % of the
         time); the result then asks for sigma
     max_snooping_rounds : refits of the data snooping (rejection / readmission) loop
+    probe_nodes, probe_radii : after the adjustment, up to probe_nodes nodes with rejected measurements
+        jump by each radius (x the network's spread) in 8 directions and least squares follows: a better
+        minimum is taken, a distinct one about as good makes the answer ambiguous
+    loo_candidates : with sigma unknown and little redundancy (below min_dof_for_sigma), the entries
+        (largest linearised test statistic first) refitted without themselves to test them exactly
     unknown_sigma_outliers : with sigma unknown, the RANSAC sample count assumes at least this share of
         gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted)
     confirm_outliers : with sigma unknown, a model that passes the all-data test ends the search only
@@ -95,6 +100,9 @@ class CalibrationOptions:
     min_redundancy: float = 0.01
     min_dof_for_sigma: int = 10
     max_snooping_rounds: int = 60
+    loo_candidates: int = 30
+    probe_nodes: int = 4
+    probe_radii: tuple = (0.02, 0.05)
     stability_check: bool = True
     unknown_sigma_outliers: float = 0.1
     confirm_outliers: float = 0.05

@@ -231,9 +231,13 @@ def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | 
             rows[pick[by_row, 0]] = False
             cols[pick[~by_row, 1]] = False
             rows, cols, spare = pruned(rows, cols)
+            need = redundancy
         else:
-            target = redundancy + int(rng.integers(0, 2))
             rows, cols, spare = pruned(rows, cols)
+            # a network with little redundancy (5r/5s: 3) has no sub-network with `redundancy` spare
+            # entries; one with a single spare entry still exposes a misfit and leaves a gross error out
+            target = min(redundancy + int(rng.integers(0, 2)), max(1, spare - 2))
+            need = min(redundancy, target)
             for node in rng.permutation(m + n):
                 r2, c2 = rows.copy(), cols.copy()
                 if node < m:
@@ -243,7 +247,7 @@ def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | 
                 r2, c2, spare2 = pruned(r2, c2)
                 if spare2 >= target:
                     rows, cols, spare = r2, c2, spare2
-        if spare < redundancy:
+        if spare < need:
             continue
         key = ("subnetwork", tuple(np.flatnonzero(rows).tolist()), tuple(np.flatnonzero(cols).tolist()))
         if tried is not None and key in tried:
