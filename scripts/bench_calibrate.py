@@ -23,6 +23,7 @@ Columns per (cell, sigma, condition, mode):
   sec_med, sec_p95   seconds per call
 
 Usage: python scripts/bench_calibrate.py [--networks 200] [--jobs 2] [--quick] [--only 9r3s,8r5s]
+       python scripts/bench_calibrate.py --render   (calibration.md from calibration.csv, no computing)
 """
 from __future__ import annotations
 
@@ -138,7 +139,51 @@ def markdown(rows: list[dict]) -> str:
            "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         out.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
+    out += ["", "## Summary at sigma 1e-2 (the README's table)", "", summary(rows)]
+    return "\n".join(out)
+
+
+def summary(rows: list[dict]) -> str:
+    """The compact table of the README: per cell at sigma 1e-2, the clean default call, and the gross-error
+    cells with sigma given and estimated; then the scale rows. Rows may come from the CSV (strings)."""
+    def get(cell, cond, mode):
+        for r in rows:
+            if r["cell"] == cell and str(r["sigma"]) == "0.01" and r["condition"] == cond and r["sigma_mode"] == mode:
+                return r
+        return None
+
+    def other(r, *named):
+        return sum(int(r[s]) for s in STATUSES if s not in named)
+
+    out = ["| cell | clean, σ est.: kept / placed / σ̂/σ / ok·unc·other / s | 5 % gross, σ given: rejected / kept / "
+           "ok·unc·part·other | 5 % gross, σ est.: rejected / kept / ok·unc·inc·amb·other / s |", "|---|---|---|---|"]
+    cells = list(dict.fromkeys(r["cell"] for r in rows if r["condition"] in CONDITIONS))
+    for cell in cells:
+        c, g, e = get(cell, "clean", "estimated"), get(cell, "gross 5%", "given"), get(cell, "gross 5%", "estimated")
+        cols = [f"{c['kept']} / {c['placed']} / {c['sigma_ratio']} / {c['ok']}·{c['uncontrolled']}·"
+                f"{other(c, 'ok', 'uncontrolled')} / {c['sec_med']}" if c else "",
+                f"{g['gross_rejected']} / {g['kept']} / {g['ok']}·{g['uncontrolled']}·{g['partial']}·"
+                f"{other(g, 'ok', 'uncontrolled', 'partial')}" if g else "",
+                f"{e['gross_rejected']} / {e['kept']} / {e['ok']}·{e['uncontrolled']}·{e['inconsistent']}·"
+                f"{e['ambiguous']}·{other(e, 'ok', 'uncontrolled', 'inconsistent', 'ambiguous')} / {e['sec_med']}"
+                if e else ""]
+        out.append(f"| {cell} | " + " | ".join(cols) + " |")
+    for r in rows:
+        if r["condition"] == SCALE_CONDITION[0] and r["sigma_mode"] == "estimated":
+            given = next((x for x in rows if x["cell"] == r["cell"] and x["condition"] == r["condition"]
+                          and x["sigma_mode"] == "given"), None)
+            note = f" (σ given {given['sec_med']})" if given else ""
+            out.append(f"| {r['cell']}, {r['condition']} | {r['kept']} / {r['placed']} / {r['sigma_ratio']} / "
+                       f"{r['ok']}·{r['uncontrolled']}·{other(r, 'ok', 'uncontrolled')} / {r['sec_med']}{note} | | |")
     return "\n".join(out) + "\n"
+
+
+def render(out_dir: str) -> None:
+    """Rewrite calibration.md from calibration.csv (no computing)."""
+    with open(os.path.join(out_dir, "calibration.csv"), newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
+        handle.write(markdown(rows))
 
 
 def main(argv=None) -> int:
@@ -152,11 +197,15 @@ def main(argv=None) -> int:
     ap.add_argument("--gross-networks", type=int, help="networks per gross-error cell (default: --networks)")
     ap.add_argument("--quick", action="store_true", help="10 networks a cell, 1 per scale row, into tables/quick/")
     ap.add_argument("--out", help="output directory (default tables/, or tables/quick/ with --quick)")
+    ap.add_argument("--render", action="store_true", help="only rewrite calibration.md from calibration.csv")
     args = ap.parse_args(argv)
     networks = 10 if args.quick else args.networks
     scale_networks = 1 if args.quick else args.scale_networks
     out_dir = args.out or os.path.join(ROOT, "tables", "quick" if args.quick else "")
     os.makedirs(out_dir, exist_ok=True)
+    if args.render:
+        render(out_dir)
+        return 0
     only = set(args.only.split(",")) if args.only else None
 
     jobs = []
