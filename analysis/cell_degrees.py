@@ -10,8 +10,9 @@ otherwise). :func:`cell_degree_capped` runs one formulation in a child process u
 
 Degree counted. Compaction formulations multiply A and B by det H, which adds spurious solutions (in 3D
 even positive-dimensional ones: adj H = 0 when rank H <= 1). The degree reported is that of
-I + (t det H - 1) in grevlex with one more unknown t: the number of solutions with det H != 0, counted
-with multiplicity (Rabinowitsch; equal to deg I : (det H)^inf). Each such solution is one network up to
+I + (t g - 1) in grevlex with one more unknown t, g = det H (times det D~[:3, :3] when 3D TDOA's B_j,
+j >= 5, are used: :func:`analysis.formulations_kd.nonzero_conditions`): the number of solutions with
+g != 0, counted with multiplicity (Rabinowitsch; equal to deg I : g^inf). Each such solution is one network up to
 rotation, reflection and translation. Direct formulations need no saturation; their degree is divided by
 the gauge group's order 2^K (:attr:`TDOAConfig.gauge_group_order`), which must divide it.
 """
@@ -27,7 +28,7 @@ from .complexity import jacobian_rank
 from .degree import DEFAULT_PRIMES, EngineDisagreement, PrimeDisagreement, analyse
 from .f4 import F4Options
 from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
-from .formulations_kd import det_h_terms
+from .formulations_kd import nonzero_conditions
 from .linalg import MatrixTooLarge
 from .ring import Poly, Ring
 
@@ -105,10 +106,12 @@ def formulation_system(formulation: Formulation, seed: int = 0, saturate: bool |
             polys = [ring.from_terms({e + pad: c for e, c in eq.items()}) for eq in gf_equations(formulation, instance)]
             root = tuple(instance.root)
             if saturate:
-                det = ring.from_terms({e + (0,): c for e, c in det_h_terms(config).items()})
+                det = ring.one()
+                for cond in nonzero_conditions(formulation, [list(r) for r in instance.F], p):
+                    det = det * ring.from_terms({e + (0,): c for e, c in cond.items()})
                 value = det.evaluate(root + (0,)) % p
                 if value == 0:
-                    raise ArithmeticError(f"det H vanishes at the known root of {formulation.label} mod {p}")
+                    raise ArithmeticError(f"a nonzero condition vanishes at the known root of {formulation.label} mod {p}")
                 polys.append(ring.gen(SATURATION_VARIABLE) * det - ring.one())
                 root += (pow(value, -1, p),)
             cache[p] = (polys, root)
@@ -236,27 +239,31 @@ FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(CellDegree))
 """CSV columns of a cell-degree table, in :class:`CellDegree` order."""
 
 
-def cell_summary(record: CellDegree) -> str:
-    """What a grid cell shows: the count up to the gauge, or the status."""
-    if record.status == "ok":
-        return str(record.up_to_gauge)
-    if record.status == "positive-dimensional":
-        return f"dim>0 (tangent {record.tangent_dim})" if record.tangent_dim else "dim>0"
-    return record.status
+def cell_summary(records: Sequence[CellDegree]) -> str:
+    """What a grid cell shows: the smallest count up to the gauge over its zero-dimensional formulations (the
+    cell's complexity, as in Table 3), else the status of its first formulation."""
+    counts = [r.up_to_gauge for r in records if r.status == "ok"]
+    if counts:
+        return str(min(counts))
+    first = records[0]
+    if first.status == "positive-dimensional":
+        return f"dim>0 (tangent {first.tangent_dim})" if first.tangent_dim else "dim>0"
+    return "/".join(dict.fromkeys(r.status for r in records))
 
 
 def markdown_grid(records: Sequence[CellDegree], parametrization: str = "compaction") -> str:
-    """One m x n grid per (model, dimension) of the records of one parametrization (first record per cell)."""
+    """One m x n grid per (model, dimension) of the records of one parametrization (module docstring)."""
     out = []
-    groups: dict[tuple[str, int], dict[tuple[int, int], CellDegree]] = {}
+    groups: dict[tuple[str, int], dict[tuple[int, int], list[CellDegree]]] = {}
     for r in records:
         if r.parametrization == parametrization:
-            groups.setdefault((r.model, r.dim), {}).setdefault((r.m, r.n), r)
+            groups.setdefault((r.model, r.dim), {}).setdefault((r.m, r.n), []).append(r)
     for (model, dim), cells in groups.items():
         ms = sorted({m for m, _ in cells})
         ns = sorted({n for _, n in cells})
-        out.append(f"**{model.upper()} {dim}D ({parametrization}): solutions up to rotation, reflection and "
-                   "translation; blank: not in the table**\n")
+        out.append(f"**{model.upper()} {dim}D ({parametrization}): smallest number of solutions (up to rotation, "
+                   "reflection and translation) over the cell's zero-dimensional formulations, else the status; "
+                   "blank: not in the table**\n")
         out.append("| m/n | " + " | ".join(map(str, ns)) + " |")
         out.append("|---|" + "---|" * len(ns))
         for m in ms:
@@ -324,3 +331,59 @@ def write_table(records: Sequence[CellDegree], out_dir: str, stem: str, title: s
         json.dump(full, handle, indent=2)
         handle.write("\n")
     return paths
+
+
+def run_table_script(argv: Sequence[str] | None, doc: str, root: str, script: str, stem: str, title: str, notes: str,
+                     jobs: Callable[[], Sequence[tuple[Formulation, bool]]], meta_extra: dict,
+                     seconds: float = 120.0, max_cells: int = 30_000_000,
+                     check: Callable[[Sequence[CellDegree]], None] | None = None) -> int:
+    """The command line of a cell-degree table script (``scripts/toa_table.py``, ``scripts/table3d.py``).
+
+    Options --seconds (wall-time cap per formulation), --max-cells (F4 matrix cap), --out-dir (default
+    root/tables). ``jobs()`` gives the formulations in table order, each with whether msolve (when
+    installed) must confirm its degree; ``check`` may raise on the finished records (e.g. two
+    parametrizations disagreeing). Writes ``<stem>.{csv,md,meta.json}`` with provenance (commit and dirty
+    flag read before anything is written, primes, seed, caps, versions, machine, seconds).
+    """
+    import argparse
+    import datetime
+    import os
+    import sys
+
+    from .msolve import find_msolve, msolve_version
+
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=seconds, help=f"wall-time cap per formulation (default {seconds:g})")
+    parser.add_argument("--max-cells", type=int, default=max_cells,
+                        help=f"F4 matrix cap, rows x cols (default {max_cells})")
+    parser.add_argument("--out-dir", default=os.path.join(root, "tables"))
+    args = parser.parse_args(argv)
+    exe = find_msolve()
+    info = provenance(root)
+    t_start = time.perf_counter()
+    records = []
+    for formulation, confirm in jobs():
+        r = cell_degree_capped(formulation, args.seconds, DEFAULT_PRIMES, 0, args.max_cells, exe if confirm else None)
+        records.append(r)
+        print(f"{r.formulation:<45} {r.status:<22} degree {r.degree!s:<5} up to gauge {r.up_to_gauge!s:<5} "
+              f"{r.seconds:.1f} s", file=sys.stderr, flush=True)
+    if check is not None:
+        check(records)
+    command = f"python {script}" + "".join(
+        f" {flag} {value:g}" for flag, value, default in (("--seconds", args.seconds, seconds),
+                                                          ("--max-cells", args.max_cells, max_cells))
+        if value != default)
+    meta = {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        **info,
+        "command": command,
+        "primes": list(DEFAULT_PRIMES), "seed": 0,
+        **meta_extra,
+        "caps": {"seconds_per_formulation": args.seconds, "max_matrix_cells": args.max_cells},
+        "instances": "analysis.formulations.sample_gf_instance(config, prime, seed 0): gauge-frame positions over GF(p)",
+        "msolve": msolve_version(exe) or "not installed",
+        "seconds_total": round(time.perf_counter() - t_start, 1),
+    }
+    paths = write_table(records, args.out_dir, stem, title, command, meta, notes)
+    print("wrote " + ", ".join(paths), file=sys.stderr)
+    return 0

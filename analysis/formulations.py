@@ -308,15 +308,16 @@ def equation_names(config: TDOAConfig | str) -> tuple[str, ...]:
     """All equation names of a configuration in canonical order: A, B2, B3, C2..Cm, minors.
 
     Minors are ordered lexicographically by (rows, cols) with 1-based compaction-matrix indices.
-    Other models and dimensions (:class:`TDOAConfig`): TDOA in K dimensions has B2..B_{K+1} and the
-    (K+1) x (K+1) minors; TOA has B2..Bn (S~ is known from the data) and no minors; the direct
+    Other models and dimensions (:class:`TDOAConfig`): TOA has B2..Bn (S~ is known from the data) and no
+    minors; 3D TDOA has B2..Bn (B5..Bn with S~ solved from D~[:3, :3], affine in the offsets, and multiplied
+    by its squared determinant: :mod:`analysis.formulations_kd`) and the 4 x 4 minors; the direct
     parametrization has one range equation ``D<i>_<j>`` per measurement, receiver-major.
     Paper Sections 2.1 (A, B, C), 2.2 (rank constraints), 3.1-3.2 (which ones exist for TDOA).
     """
     config = _as_config(config)
     if config.parametrization == "direct":
         return tuple(f"D{i}_{j}" for i in range(1, config.m + 1) for j in range(1, config.n + 1))
-    last_b = config.dim + 1 if config.model == "tdoa" else config.n
+    last_b = 3 if config.is_planar_tdoa else config.n
     names = ["A"] + [f"B{j}" for j in range(2, last_b + 1)] + [f"C{i}" for i in range(2, config.m + 1)]
     names += [_minor_name(config, rows, cols) for rows, cols in _minor_index_sets(config)]
     return tuple(names)

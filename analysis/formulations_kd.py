@@ -15,6 +15,10 @@ for TDOA, the offsets. Equations (each "= 0"):
 
 * ``A``:  d11^2 det(H) - b^T adj(H) b;
 * ``Bj``: (d1j^2 - d11^2) det(H) - 1/4 s^T adj(H) s + b^T adj(H) s,  s = S~_{j-1} (a unit vector for j <= K+1);
+  for 3D TDOA and j >= K + 2, s = M^{-1} D~[:K, j-1] with M = D~[:K, :K] affine in the offsets, written
+  with u = adj(M) D~[:K, j-1] and multiplied by det(M)^2:
+  (d1j^2 - d11^2) det(M)^2 det(H) - 1/4 u^T adj(H) u + det(M) b^T adj(H) u (saturate by det M too;
+  the paper's 2D family has no such equations, and keeps none here);
 * ``Ci``: d_i1^2 - d11^2 - (r^T H r - 2 b^T r),  r = R~_{i-1} = row i-1 of D^;
 * minors (TDOA): the (K+1) x (K+1) minors of D~ (rank K), named as in 2D.
 
@@ -42,7 +46,7 @@ import numpy as np
 from .formulations import (RECEIVERS_FIRST_LIMIT, Formulation, Instance, SamplingFailed, TDOAConfig, _family,
                            _parse_minor, _residue_mask, _rng, sqrt_mod)
 
-__all__ = ["build_equations", "det_h_terms", "sample_gf_instance_kd", "sample_real_instance_kd", "solve_mod"]
+__all__ = ["build_equations", "det_h_terms", "nonzero_conditions", "sample_gf_instance_kd", "sample_real_instance_kd", "solve_mod"]
 
 Exponent = tuple[int, ...]
 
@@ -232,7 +236,9 @@ class _BuilderKD:
         out = []
         for name in names:
             fam = _family(name)
-            if fam == "A":
+            if fam == "B" and int(name[1:]) - 2 >= len(s_cols):
+                out.append(self.extended_b(int(name[1:]), h, b, det, adj))
+            elif fam == "A":
                 b_adj_b = fl.add(*(fl.mul(b[a], fl.mul(adj[a][c], b[c])) for a in range(k) for c in range(k)))
                 out.append(fl.add(fl.mul(self.d2(1, 1), det), fl.scale(b_adj_b, -1)))
             elif fam == "B":
@@ -253,6 +259,23 @@ class _BuilderKD:
                 rows, cols = _parse_minor(self.config, name)
                 out.append(fl.det([[self.compaction(r, c) for c in cols] for r in rows]))
         return out
+
+    def head(self) -> list[list[dict]]:
+        """M = D~[:K, :K] (rows and columns 1..K), affine in the offsets for TDOA."""
+        return [[self.compaction(a, c) for c in range(1, self.k + 1)] for a in range(1, self.k + 1)]
+
+    def extended_b(self, j: int, h, b, det: dict, adj) -> dict:
+        """B_j for TDOA transmitters j >= K + 2 (module docstring), multiplied by det(M)^2."""
+        fl, k = self.field, self.k
+        M = self.head()
+        adj_m, det_m = fl.adjugate(M), fl.det(M)
+        column = [self.compaction(a, j - 1) for a in range(1, k + 1)]
+        u = [fl.add(*(fl.mul(adj_m[a][c], column[c]) for c in range(k))) for a in range(k)]
+        u_adj_u = fl.add(*(fl.mul(u[a], fl.mul(adj[a][c], u[c])) for a in range(k) for c in range(k)))
+        b_adj_u = fl.add(*(fl.mul(b[a], fl.mul(adj[a][c], u[c])) for a in range(k) for c in range(k)))
+        lhs = fl.add(self.d2(1, j), fl.scale(self.d2(1, 1), -1))
+        return fl.add(fl.mul(fl.mul(lhs, fl.mul(det_m, det_m)), det), fl.scale(u_adj_u, -fl.quarter()),
+                      fl.mul(det_m, b_adj_u))
 
     # -- direct parametrization
     def position(self, prefix: str, index: int) -> list[dict]:
@@ -280,6 +303,17 @@ def build_equations(formulation: Formulation, rows: Sequence[Sequence], p: int |
     (p None, floats); one {exponent: coefficient} dict per equation in the formulation's order. Called by
     :func:`analysis.formulations.gf_equations` and :func:`~analysis.formulations.real_equations`."""
     return _BuilderKD(formulation.config, rows, p).build(formulation.equations)
+
+
+def nonzero_conditions(formulation: Formulation, rows: Sequence[Sequence], p: int) -> list[dict]:
+    """Polynomials that vanish only on spurious solutions of a compaction formulation over GF(p): det H
+    (A and B were multiplied by it) and, when 3D TDOA's B_j with j >= K + 2 are used, det D~[:K, :K]."""
+    builder = _BuilderKD(formulation.config, rows, p)
+    out = [builder.field.det(builder.h_matrix())]
+    if any(_family(x) == "B" and int(x[1:]) > formulation.config.dim + 1 for x in formulation.equations) \
+            and formulation.config.model == "tdoa":
+        out.append(builder.field.det(builder.head()))
+    return out
 
 
 def det_h_terms(config: TDOAConfig) -> dict[Exponent, int]:
@@ -335,12 +369,12 @@ def _root_real(config: TDOAConfig, receivers: np.ndarray, transmitters: np.ndarr
 
 
 def _gauge_ok(config: TDOAConfig, receivers: np.ndarray, p: int) -> bool:
-    """The gauge's pivots r_2x, r_3y (3D) are nonzero; for TOA compaction also det[r_2..r_{K+1}] != 0 (the
-    rows of D~ that S~ is solved from)."""
+    """The gauge's pivots r_2x, r_3y (3D) are nonzero; for compaction also det[r_2..r_{K+1}] != 0 (the rows
+    of D~ that S~ is solved from: D~[:K, :K] = -2 R[:, :K]^T S)."""
     k = config.dim
     if any(receivers[i, i - 1] % p == 0 for i in range(1, min(k, config.m))):
         return False
-    if config.model == "toa" and config.parametrization == "compaction":
+    if config.parametrization == "compaction":
         return _det_mod(receivers[1:k + 1].tolist(), p) != 0
     return True
 

@@ -79,10 +79,11 @@ def test_parse_conflicts_and_keywords():
 def test_equation_names_per_model():
     assert equation_names(TDOAConfig(3, 5, model="toa")) == ("A", "B2", "B3", "B4", "B5", "C2", "C3")
     names = equation_names(TDOAConfig(6, 6, dim=3))
-    assert names[:9] == ("A", "B2", "B3", "B4", "C2", "C3", "C4", "C5", "C6")
-    assert names[9] == "M1234_1234" and len(names) == 9 + 25
+    assert names[:11] == ("A", "B2", "B3", "B4", "B5", "B6", "C2", "C3", "C4", "C5", "C6")
+    assert names[11] == "M1234_1234" and len(names) == 11 + 25
+    assert equation_names(TDOAConfig(6, 6))[:3] == ("A", "B2", "B3")  # the paper's 2D family: no B4..Bn
     assert equation_names(TDOAConfig(2, 2, model="toa", parametrization="direct")) == ("D1_1", "D1_2", "D2_1", "D2_2")
-    assert parse_equations(TDOAConfig(6, 6, dim=3), "B*,C2-C3") == ("B2", "B3", "B4", "C2", "C3")
+    assert parse_equations(TDOAConfig(6, 6, dim=3), "B*,C2-C3") == ("B2", "B3", "B4", "B5", "B6", "C2", "C3")
     with pytest.raises(ValueError, match="TOA's rank constraints involve only the data"):
         parse_equations(TDOAConfig(5, 5, model="toa", dim=3), "minors")
 
@@ -146,18 +147,18 @@ def _reference_equations(formulation: Formulation, F, p: int) -> list[dict]:
     d2 = sympy.Matrix(m, n, lambda i, j: (sympy.Integer(F[i][j]) - o[j]) ** 2)
     D = sympy.Matrix(m - 1, n - 1, lambda i, j: d2[i + 1, j + 1] - d2[0, j + 1] - d2[i + 1, 0] + d2[0, 0])
     Dhat = D[:, :k]
-    if config.model == "toa":
-        S = Dhat[:k, :].inv() * D[:k, :]
-    else:
-        S = sympy.eye(k)
     adj, det = H.adjugate(), H.det()
     out = []
     for name in formulation.equations:
         if name == "A":
             expr = d2[0, 0] * det - (b.T * adj * b)[0, 0]
         elif name[0] == "B":
-            s = S[:, int(name[1:]) - 2]
+            j = int(name[1:])
+            # S~ = D~[:K, :K]^{-1} D~[:K, :]: the identity for j <= K + 1, rational in the offsets beyond (TDOA)
+            s = sympy.eye(k)[:, j - 2] if j <= k + 1 else Dhat[:k, :].inv() * D[:k, j - 2]
             expr = (d2[0, int(name[1:]) - 1] - d2[0, 0]) * det - (s.T * adj * s)[0, 0] / 4 + (b.T * adj * s)[0, 0]
+            if config.model == "tdoa" and int(name[1:]) > k + 1:  # cleared of its denominator det(D~[:K, :K])^2
+                expr = sympy.cancel(sympy.together(expr) * Dhat[:k, :].det() ** 2)
         elif name[0] == "C":
             i = int(name[1:])
             r = Dhat[i - 2, :].T
@@ -177,7 +178,8 @@ def _reference_equations(formulation: Formulation, F, p: int) -> list[dict]:
 
 
 @pytest.mark.parametrize("label, spec", [("4r5s-toa3d", "all"), ("3r4s-toa2d", "all"),
-                                         ("6r5s-tdoa3d", "A,B2-B4,C2,C6,M1234_1234,M2345_1234")])
+                                         ("6r5s-tdoa3d", "A,B2-B4,C2,C6,M1234_1234,M2345_1234"),
+                                         ("6r5s-tdoa3d", "B5")])
 def test_builder_matches_a_sympy_reference(label, spec):
     formulation = Formulation.from_spec(label, spec)
     instance = sample_gf_instance(formulation.config, P, 5)
