@@ -27,7 +27,8 @@ from typing import Callable, Sequence
 from .complexity import jacobian_rank
 from .degree import DEFAULT_PRIMES, EngineDisagreement, PrimeDisagreement, analyse
 from .f4 import F4Options
-from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
+from .formulations import (Formulation, as_formulation, check_root, equation_names, gf_equations,
+                           sample_gf_instance)
 from .formulations_kd import nonzero_conditions
 from .linalg import MatrixTooLarge
 from .ring import Poly, Ring
@@ -239,16 +240,26 @@ FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(CellDegree))
 """CSV columns of a cell-degree table, in :class:`CellDegree` order."""
 
 
+def _whole_cell(record: CellDegree) -> bool:
+    formulation = as_formulation(record.formulation)
+    return formulation.equations == equation_names(formulation.config)
+
+
 def cell_summary(records: Sequence[CellDegree]) -> str:
     """What a grid cell shows: the smallest count up to the gauge over its zero-dimensional formulations (the
-    cell's complexity, as in Table 3), else the status of its first formulation."""
+    cell's complexity, as in Table 3), written ``<=N`` when the whole cell's formulation has no count and
+    N > 1 (N then bounds the number of networks from above); else ``cap``/``timeout`` when a formulation ran out of budget
+    (the cell is open); else ``dim>0`` with the smallest tangent dimension at the known root."""
     counts = [r.up_to_gauge for r in records if r.status == "ok"]
     if counts:
-        return str(min(counts))
-    first = records[0]
-    if first.status == "positive-dimensional":
-        return f"dim>0 (tangent {first.tangent_dim})" if first.tangent_dim else "dim>0"
-    return "/".join(dict.fromkeys(r.status for r in records))
+        whole = any(r.status == "ok" and _whole_cell(r) for r in records)
+        # a subset with one solution leaves exactly one for the whole cell: the known root satisfies both
+        return str(min(counts)) if whole or min(counts) == 1 else f"<={min(counts)}"
+    stopped = [r.status for r in records if r.status in ("cap", "timeout")]
+    if stopped:
+        return "/".join(dict.fromkeys(stopped))
+    tangent = min(r.tangent_dim for r in records if r.tangent_dim is not None)
+    return f"dim>0 (tangent {tangent})"
 
 
 def markdown_grid(records: Sequence[CellDegree], parametrization: str = "compaction") -> str:
@@ -262,8 +273,9 @@ def markdown_grid(records: Sequence[CellDegree], parametrization: str = "compact
         ms = sorted({m for m, _ in cells})
         ns = sorted({n for _, n in cells})
         out.append(f"**{model.upper()} {dim}D ({parametrization}): smallest number of solutions (up to rotation, "
-                   "reflection and translation) over the cell's zero-dimensional formulations, else the status; "
-                   "blank: not in the table**\n")
+                   "reflection and translation) over the cell's zero-dimensional formulations (<=N: only a subset of "
+                   "the cell's equations has a count, N bounds the cell's), else cap/timeout (open), else dim>0 "
+                   "(smallest tangent dimension at the known root); blank: not in the table**\n")
         out.append("| m/n | " + " | ".join(map(str, ns)) + " |")
         out.append("|---|" + "---|" * len(ns))
         for m in ms:

@@ -11,11 +11,12 @@ a formulation equal to an earlier one is not repeated):
 * ``all``: also B5..Bn (the whole cell: every measurement enters);
 * ``C*,minors``: without A and B (when the cell has minors).
 
-Budget: each formulation runs in a child process with a wall-time cap (--seconds, default 120) and an F4
-matrix cap (--max-cells, default 30 000 000 rows x cols); a formulation that hits one is listed with it.
+Budget: each formulation runs in a child process with a wall-time cap (--seconds, default 180) and an F4
+matrix cap (--max-cells, default 150 000 000 rows x cols; F4's own 8 GiB memory cap also applies); a
+formulation that hits one is listed with it.
 msolve (when installed) recomputes each degree found on the first prime. Usage:
 OPENBLAS_NUM_THREADS=1 python scripts/table3d.py [--seconds S] [--max-cells N] [--out-dir DIR]
-(about 10 minutes with the defaults on one core).
+(about 15 minutes with the defaults on one core).
 """
 from __future__ import annotations
 
@@ -73,7 +74,7 @@ def main(argv=None) -> int:
                              "formulations": "A,B2-B4,C*,minors; all; C*,minors (each once per cell)",
                              "degree": "degree of I + (t g - 1) in grevlex, g = det H (times det D~[:3, :3] with "
                                        "B5..Bn): solutions with g != 0"},
-                            seconds=120.0, max_cells=30_000_000)
+                            seconds=180.0, max_cells=150_000_000)
 
 
 if __name__ == "__main__":

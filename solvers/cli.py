@@ -294,7 +294,7 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
     from analysis import formulations as tf
     from analysis.complexity import jacobian_rank
     from analysis.degree import DEFAULT_PRIMES
-    from analysis.formulations_kd import det_h_terms
+    from analysis.formulations_kd import det_h_terms, nonzero_conditions
     from analysis.ring import BadPrime, Ring, check_prime
 
     if args.equations is not None and not args.equations.strip():
@@ -323,8 +323,14 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
         return [ring.from_terms(eq) for eq in equations(p)[1]]
 
     def det_h(p: int):
+        """det H, times det D~[:3, :3] when 3D TDOA's B5..Bn were cleared of it (formulations_kd)."""
         ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
-        return ring.from_terms(det_h_terms(config))
+        if config.is_planar_tdoa:
+            return ring.from_terms(det_h_terms(config))
+        product = ring.one()
+        for condition in nonzero_conditions(formulation, [list(r) for r in equations(p)[0].F], p):
+            product = product * ring.from_terms(condition)
+        return product
 
     header = f"formulation {formulation.label} (seed {args.seed})"
     if args.export:
@@ -342,7 +348,9 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
                       saturation=method)
     out = {"formulation": formulation.label, "seed": args.seed, **report.as_dict()}
     if args.saturate_det_h:
-        out["saturated_by"] = "det H"
+        extended = not config.is_planar_tdoa and len(nonzero_conditions(formulation, [list(r) for r in instance.F],
+                                                                        primes[0])) > 1
+        out["saturated_by"] = "det H * det D~[:3,:3]" if extended else "det H"
     return _finish_report(out, report, args, header)
 
 

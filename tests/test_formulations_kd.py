@@ -291,3 +291,52 @@ def test_gf_evaluation_of_saturated_system_at_root():
     polys = system(P)
     assert polys[-1].ring.variables[-1] == cell_degrees.SATURATION_VARIABLE
     assert all(evaluate_gf(dict(f.terms()), root(P), P) == 0 for f in polys)
+
+
+# ---------------------------------------------------------------------------------------------- command line and networks
+
+
+def test_cli_degree_toa_3d_and_errors(capsys):
+    from solvers.cli import main
+
+    assert main(["degree", "--tdoa", "4r6s", "--model", "toa", "--dim", "3", "--saturate-det-h", "--json"]) == 0
+    import json
+
+    out = json.loads(capsys.readouterr().out)
+    assert out["formulation"] == "4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4" and out["degree"] == cell_degree("4r6s-toa3d:all").degree
+    for argv, fragment in ((["--tdoa", "4r6s", "--dim", "4"], "unsupported dimension 4; valid: 2, 3"),
+                           (["--tdoa", "4r6s", "--model", "foo"], "unknown model 'foo'; valid: tdoa, toa"),
+                           (["examples/katsura4.ms", "--model", "toa"], "need --tdoa CONFIG"),
+                           (["--tdoa", "3r3s", "--model", "toa", "--parametrization", "direct", "--saturate-det-h"],
+                            "--saturate-det-h needs the compaction parametrization")):
+        assert main(["degree", *argv]) == 2
+        assert fragment in capsys.readouterr().err
+
+
+def test_default_degree_command_is_unchanged(capsys):
+    from solvers.cli import main
+
+    assert main(["degree", "--tdoa", "6r4s", "--equations", "B2,C2-C6,minors"]) == 0
+    assert "degree 22  (zero-dimensional)" in capsys.readouterr().out
+
+
+def test_synthetic_3d_network_and_true_root():
+    from solvers.synthetic import DegenerateNetworkError, Network, random_network, true_root
+
+    net = random_network(6, 6, np.random.default_rng(11), dim=3)
+    assert net.dim == 3 and net.receivers.shape == (6, 3)
+    H, b, o = true_root(net)
+    # the root of the 3D compaction formulation: the real sampler's, for the same network in its gauge frame
+    config = TDOAConfig(6, 6, dim=3)
+    S = (net.transmitters[1:4] - net.transmitters[0]).T
+    np.testing.assert_allclose(np.linalg.inv(H), 4 * S.T @ S, rtol=1e-10)
+    root = tuple(H[a, c] for a in range(3) for c in range(a, 3)) + tuple(b) + tuple(o)
+    moved = type(sample_real_instance(config, 0))(config, None, tuple(map(tuple, net.measurements())),
+                                                  tuple(map(tuple, net.receivers - net.receivers[0])),
+                                                  tuple(map(tuple, net.transmitters - net.receivers[0])),
+                                                  tuple(o), root)
+    check_root(Formulation.from_spec(config, "all"), moved)
+    flat = Network(net.receivers, np.c_[net.transmitters[:, :2], np.zeros(6)], net.offsets)
+    with pytest.raises(DegenerateNetworkError, match="coplanar"):
+        true_root(flat)
+    assert random_network(4, 3, np.random.default_rng(1)).dim == 2  # the 2D default is unchanged
