@@ -2,6 +2,7 @@
 analysis.cell_degrees) checked against an independent sympy construction and sympy's groebner over GF(p)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 
@@ -340,3 +341,30 @@ def test_synthetic_3d_network_and_true_root():
     with pytest.raises(DegenerateNetworkError, match="coplanar"):
         true_root(flat)
     assert random_network(4, 3, np.random.default_rng(1)).dim == 2  # the 2D default is unchanged
+
+
+def _script(name: str):
+    import importlib.util
+    import os
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts", f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_table_scripts_cover_the_minimal_cells_and_check_the_cross_check():
+    toa = _script("toa_table")
+    labels = {c.label for c in toa.cells()}
+    assert {"3r3s-toa2d", "4r6s-toa3d", "6r4s-toa3d", "5r5s-toa3d"} <= labels
+    assert all(-1 <= c.excess <= 3 for c in toa.cells())
+    table3d = _script("table3d")
+    minimal = {c.label for c in table3d.cells() if c.excess == 0}
+    assert minimal == {"10r4s-tdoa3d", "7r5s-tdoa3d", "6r6s-tdoa3d", "5r9s-tdoa3d"}
+    assert {"9r5s-tdoa3d", "7r6s-tdoa3d", "6r8s-tdoa3d"} <= {c.label for c in table3d.cells()}
+    good = [cell_degree("3r3s-toa2d:all"), cell_degree("3r3s-toa2d-direct:all")]
+    toa.check(good)  # 8 networks both ways
+    wrong = [good[0], dataclasses.replace(good[1], degree=36, up_to_gauge=9)]
+    with pytest.raises(ArithmeticError, match="compaction gives 8 networks, direct 36 / 4 = 9"):
+        toa.check(wrong)
