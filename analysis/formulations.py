@@ -41,6 +41,11 @@ reflections of the network (L -> Q L leaves L^T L and L^{-1} s_1 unchanged), so 
 needed (the paper's r_2 = [r_2x, 0] gauge only matters when recovering positions); translation is fixed
 by r_1 = 0.
 
+Other models and dimensions: :class:`TDOAConfig` also takes ``model="toa"`` (no offsets), ``dim=3`` and
+``parametrization="direct"`` (positions as unknowns); their equations, samplers and roots live in
+:mod:`analysis.formulations_kd`, to which the public functions here dispatch. The symbolic reference,
+code generation and the relabeling symmetry stay with the paper's 2D TDOA formulation.
+
 The GF(p) and QQ[f] paths are exact. The float paths (:func:`real_equations`,
 :func:`sample_real_instance`) exist only to check numeric solvers at a real root. This module never
 imports ``solvers``.
@@ -62,6 +67,9 @@ from .ring import BadPrime, check_prime
 # and real equations, and with them `tdoa-workbench degree --tdoa`, do without its 0.4 s import.
 
 __all__ = [
+    "DIMENSIONS",
+    "MODELS",
+    "PARAMETRIZATIONS",
     "BadPrime",
     "EquationCounts",
     "Formulation",
@@ -80,6 +88,7 @@ __all__ = [
     "evaluate_gf",
     "evaluate_real",
     "gf_equations",
+    "require_planar_tdoa",
     "is_quadratic_residue",
     "parse_equations",
     "real_equations",
