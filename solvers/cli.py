@@ -137,7 +137,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
                    "(unknowns the gauge-fixed positions and offsets; degree = 2^K x the compaction count)")
     p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
                    help="with --tdoa: seed of the consistent random instance")
-    p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H = h11*h22 - h12^2")
+    p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H (times det D~[:3,:3] when 3D TDOA's B5..Bn are used)")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
         help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
