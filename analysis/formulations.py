@@ -41,6 +41,11 @@ reflections of the network (L -> Q L leaves L^T L and L^{-1} s_1 unchanged), so 
 needed (the paper's r_2 = [r_2x, 0] gauge only matters when recovering positions); translation is fixed
 by r_1 = 0.
 
+Other models and dimensions: :class:`TDOAConfig` also takes ``model="toa"`` (no offsets), ``dim=3`` and
+``parametrization="direct"`` (positions as unknowns); their equations, samplers and roots live in
+:mod:`analysis.formulations_kd`, to which the public functions here dispatch. The symbolic reference,
+code generation and the relabeling symmetry stay with the paper's 2D TDOA formulation.
+
 The GF(p) and QQ[f] paths are exact. The float paths (:func:`real_equations`,
 :func:`sample_real_instance`) exist only to check numeric solvers at a real root. This module never
 imports ``solvers``.
@@ -62,6 +67,9 @@ from .ring import BadPrime, check_prime
 # and real equations, and with them `tdoa-workbench degree --tdoa`, do without its 0.4 s import.
 
 __all__ = [
+    "DIMENSIONS",
+    "MODELS",
+    "PARAMETRIZATIONS",
     "BadPrime",
     "EquationCounts",
     "Formulation",
@@ -80,6 +88,7 @@ __all__ = [
     "evaluate_gf",
     "evaluate_real",
     "gf_equations",
+    "require_planar_tdoa",
     "is_quadratic_residue",
     "parse_equations",
     "real_equations",
@@ -107,64 +116,161 @@ class SamplingFailed(RuntimeError):
 # Configuration and equation names
 # --------------------------------------------------------------------------------------------------
 
-_CONFIG_RE = re.compile(r"^\s*(\d+)\s*r\s*/?\s*(\d+)\s*s\s*$", re.IGNORECASE)
+_CONFIG_RE = re.compile(
+    r"^\s*(\d+)\s*r\s*/?\s*(\d+)\s*s(?:\s*-\s*(tdoa|toa)\s*(\d+)\s*d)?(?:\s*-\s*(direct))?\s*$", re.IGNORECASE)
 
 # Index of each (H, b) unknown; the offset o_j (1-based j) sits at index 4 + j.
 _H11, _H12, _H22, _B1, _B2 = range(5)
 
+MODELS: tuple[str, ...] = ("tdoa", "toa")
+"""Measurement models: ``tdoa`` (synchronised receivers, unknown transmitter offsets o_j, paper Section 2.2)
+and ``toa`` (everything synchronised, no offsets, paper Section 2.1)."""
+
+DIMENSIONS: tuple[int, ...] = (2, 3)
+"""Spatial dimensions K the builder supports."""
+
+PARAMETRIZATIONS: tuple[str, ...] = ("compaction", "direct")
+"""Unknowns of a formulation: ``compaction`` (the paper's factorisation of the compaction matrix: H, b and,
+for TDOA, the offsets) or ``direct`` (the positions themselves in the gauge r_1 = 0, r_2 on the x axis,
+r_3 in the xy plane, and the offsets; equations |r_i - s_j|^2 = d_ij^2)."""
+
+_AXES = "xyz"
+
 
 @dataclass(frozen=True)
 class TDOAConfig:
-    """A 2D TDOA configuration with m receivers and n transmitters (paper Section 2.2).
+    """A self-calibration configuration with m receivers and n transmitters (paper Sections 2.1-2.2).
 
     Parameters
     ----------
-    m : number of receivers, m >= 4 (the compaction matrix has m-1 >= 3 rows).
-    n : number of transmitters, n >= 3 (transmitters 1-3 carry the factorisation of Section 3.1).
+    m : number of receivers.
+    n : number of transmitters.
+    model : ``"tdoa"`` (default, unknown offsets) or ``"toa"`` (no offsets); see :data:`MODELS`.
+    dim : spatial dimension K, 2 (default) or 3.
+    parametrization : ``"compaction"`` (default; unknowns H, b, offsets) or ``"direct"`` (unknowns the
+        gauge-fixed positions and offsets); see :data:`PARAMETRIZATIONS`.
 
+    Bounds (the factorisation D^ = D~[:, :K] = R~^T S~ with S~ = I needs K + 1 transmitters, and K + 1
+    receivers for TOA, whose S~ is solved from the first K rows of D~): TDOA compaction m >= K + 2,
+    n >= K + 1 (2D: m >= 4, n >= 3); TOA compaction m, n >= K + 1; direct m >= K, n >= 1.
     Underdetermined configurations such as 4r/3s are allowed: they are still well-defined systems.
+    The defaults are the paper's 2D TDOA formulation; its label has no suffix (``6r4s``), every other
+    configuration's label names model and dimension (``4r6s-toa3d``, ``6r6s-tdoa3d-direct``).
     """
 
     m: int
     n: int
+    model: str = "tdoa"
+    dim: int = 2
+    parametrization: str = "compaction"
 
     def __post_init__(self) -> None:
-        for name, value, low in (("m (receivers)", self.m, 4), ("n (transmitters)", self.n, 3)):
+        if self.model not in MODELS:
+            raise ValueError(f"unknown model {self.model!r}; valid: {', '.join(MODELS)}")
+        if not isinstance(self.dim, int) or isinstance(self.dim, bool) or self.dim not in DIMENSIONS:
+            raise ValueError(f"unsupported dimension {self.dim!r}; valid: {', '.join(map(str, DIMENSIONS))}")
+        if self.parametrization not in PARAMETRIZATIONS:
+            raise ValueError(f"unknown parametrization {self.parametrization!r}; valid: {', '.join(PARAMETRIZATIONS)}")
+        k = self.dim
+        if self.parametrization == "direct":
+            lows = (k, 1)
+        else:
+            lows = (k + 2, k + 1) if self.model == "tdoa" else (k + 1, k + 1)
+        for name, value, low in (("m (receivers)", self.m, lows[0]), ("n (transmitters)", self.n, lows[1])):
             if not isinstance(value, int) or isinstance(value, bool):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             if value < low:
-                raise ValueError(f"{name} must be >= {low}, got {value}")
+                raise ValueError(f"{name} must be >= {low} for {self.model} {self.parametrization} in {k}D, got {value}")
 
     @classmethod
-    def parse(cls, text: str) -> "TDOAConfig":
-        """Parse ``"6r4s"`` or ``"6r/4s"`` (case and spaces ignored)."""
+    def parse(cls, text: str, model: str | None = None, dim: int | None = None,
+              parametrization: str | None = None) -> "TDOAConfig":
+        """Parse ``"6r4s"``, ``"6r/4s"``, ``"4r6s-toa3d"`` or ``"6r6s-tdoa3d-direct"`` (case and spaces
+        ignored); the keyword arguments set what the text leaves out and must agree with what it says."""
         match = _CONFIG_RE.match(text)
         if match is None:
-            raise ValueError(f"cannot parse configuration {text!r}; expected e.g. '6r4s' or '6r/4s'")
-        return cls(int(match.group(1)), int(match.group(2)))
+            raise ValueError(f"cannot parse configuration {text!r}; expected e.g. '6r4s', '6r/4s' or '4r6s-toa3d'")
+        said_model = match.group(3).lower() if match.group(3) else None
+        said_dim = int(match.group(4)) if match.group(4) else None
+        said_param = "direct" if match.group(5) else None
+        values = {}
+        for what, said, given, default in (("model", said_model, model, "tdoa"), ("dim", said_dim, dim, 2),
+                                           ("parametrization", said_param, parametrization, "compaction")):
+            if said is not None and given is not None and said != given:
+                raise ValueError(f"configuration {text!r} says {what} {said}, but {given} was asked for")
+            values[what] = said if said is not None else given if given is not None else default
+        return cls(int(match.group(1)), int(match.group(2)), **values)
+
+    @property
+    def is_planar_tdoa(self) -> bool:
+        """True for the paper's own formulation (2D TDOA, compaction unknowns)."""
+        return (self.model, self.dim, self.parametrization) == ("tdoa", 2, "compaction")
 
     @property
     def label(self) -> str:
-        """Short label, e.g. ``"6r4s"``."""
-        return f"{self.m}r{self.n}s"
+        """Short label, e.g. ``"6r4s"`` (paper's 2D TDOA), ``"4r6s-toa3d"``, ``"3r3s-toa2d-direct"``."""
+        if self.is_planar_tdoa:
+            return f"{self.m}r{self.n}s"
+        suffix = "-direct" if self.parametrization == "direct" else ""
+        return f"{self.m}r{self.n}s-{self.model}{self.dim}d{suffix}"
 
     @property
     def unknowns(self) -> tuple[str, ...]:
-        """Unknown names in the fixed order h11, h12, h22, b1, b2, o1..on."""
-        return ("h11", "h12", "h22", "b1", "b2") + tuple(f"o{j}" for j in range(1, self.n + 1))
+        """Unknown names in a fixed order.
+
+        compaction: the upper triangle of H row by row (h11, h12, h22 in 2D; h11, h12, h13, h22, h23, h33
+        in 3D), b1..bK, then (TDOA) o1..on. direct: the free receiver coordinates r2x, r3x, r3y, ...
+        (gauge r_1 = 0, r_k has its first k - 1 coordinates free for k <= K), the transmitters s1x, s1y, ...,
+        then (TDOA) o1..on.
+        """
+        k = self.dim
+        offsets = tuple(f"o{j}" for j in range(1, self.n + 1)) if self.model == "tdoa" else ()
+        if self.parametrization == "direct":
+            rec = tuple(f"r{i}{_AXES[a]}" for i in range(2, self.m + 1) for a in range(min(i - 1, k)))
+            tra = tuple(f"s{j}{_AXES[a]}" for j in range(1, self.n + 1) for a in range(k))
+            return rec + tra + offsets
+        h = tuple(f"h{a}{c}" for a in range(1, k + 1) for c in range(a, k + 1))
+        return h + tuple(f"b{a}" for a in range(1, k + 1)) + offsets
 
     @property
     def n_unknowns(self) -> int:
-        """Number of unknowns, 5 + n."""
-        return 5 + self.n
+        """Number of unknowns (5 + n for the paper's 2D TDOA)."""
+        return len(self.unknowns)
 
     @property
     def n_minors(self) -> int:
-        """Number of 3 x 3 minors of the (m-1) x (n-1) compaction matrix."""
-        return math.comb(self.m - 1, 3) * math.comb(self.n - 1, 3)
+        """Number of (K+1) x (K+1) minors of the (m-1) x (n-1) compaction matrix (TDOA compaction only)."""
+        if self.model != "tdoa" or self.parametrization != "compaction":
+            return 0
+        return math.comb(self.m - 1, self.dim + 1) * math.comb(self.n - 1, self.dim + 1)
+
+    @property
+    def degrees_of_freedom(self) -> int:
+        """K (m + n) + n - G (TDOA) or K (m + n) - G (TOA), G = K (K + 1) / 2 the Euclidean gauge (paper
+        Section 1)."""
+        k = self.dim
+        return k * (self.m + self.n) + (self.n if self.model == "tdoa" else 0) - k * (k + 1) // 2
+
+    @property
+    def excess(self) -> int:
+        """Measurements minus degrees of freedom, m n - DoF: 0 minimal, > 0 over-determined, < 0 under."""
+        return self.m * self.n - self.degrees_of_freedom
+
+    @property
+    def gauge_group_order(self) -> int:
+        """How many solutions in the unknowns represent one network up to rotation, reflection and
+        translation: 2^K for direct (sign changes of the coordinate axes keep the gauge), 1 for compaction
+        (H, b and the offsets are invariant under the orthogonal group)."""
+        return 2 ** self.dim if self.parametrization == "direct" else 1
 
     def __str__(self) -> str:
         return self.label
+
+
+def require_planar_tdoa(config: "TDOAConfig", what: str) -> None:
+    """Raise ValueError unless ``config`` is the paper's 2D TDOA compaction formulation."""
+    if not config.is_planar_tdoa:
+        raise ValueError(f"{what} supports the paper's 2D TDOA formulation only, not {config.label}")
 
 
 def _as_config(config: TDOAConfig | str) -> TDOAConfig:
@@ -180,15 +286,22 @@ def _minor_separator(config: TDOAConfig) -> str:
     return "." if max(config.m - 1, config.n - 1) > 9 else ""
 
 
+def _minor_size(config: TDOAConfig) -> int:
+    return config.dim + 1
+
+
 def _minor_name(config: TDOAConfig, rows: Sequence[int], cols: Sequence[int]) -> str:
     sep = _minor_separator(config)
     return f"M{sep.join(map(str, rows))}_{sep.join(map(str, cols))}"
 
 
 def _minor_index_sets(config: TDOAConfig) -> Iterator[tuple[tuple[int, ...], tuple[int, ...]]]:
-    """1-based (rows, cols) of every minor, rows-major lexicographic."""
-    for rows in itertools.combinations(range(1, config.m), 3):
-        for cols in itertools.combinations(range(1, config.n), 3):
+    """1-based (rows, cols) of every minor, rows-major lexicographic (none unless TDOA compaction)."""
+    if not config.n_minors:
+        return
+    size = _minor_size(config)
+    for rows in itertools.combinations(range(1, config.m), size):
+        for cols in itertools.combinations(range(1, config.n), size):
             yield rows, cols
 
 
@@ -204,10 +317,17 @@ def equation_names(config: TDOAConfig | str) -> tuple[str, ...]:
     """All equation names of a configuration in canonical order: A, B2, B3, C2..Cm, minors.
 
     Minors are ordered lexicographically by (rows, cols) with 1-based compaction-matrix indices.
+    Other models and dimensions (:class:`TDOAConfig`): TOA has B2..Bn (S~ is known from the data) and no
+    minors; 3D TDOA has B2..Bn (B5..Bn with S~ solved from D~[:3, :3], affine in the offsets, and multiplied
+    by its squared determinant: :mod:`analysis.formulations_kd`) and the 4 x 4 minors; the direct
+    parametrization has one range equation ``D<i>_<j>`` per measurement, receiver-major.
     Paper Sections 2.1 (A, B, C), 2.2 (rank constraints), 3.1-3.2 (which ones exist for TDOA).
     """
     config = _as_config(config)
-    names = ["A", "B2", "B3"] + [f"C{i}" for i in range(2, config.m + 1)]
+    if config.parametrization == "direct":
+        return tuple(f"D{i}_{j}" for i in range(1, config.m + 1) for j in range(1, config.n + 1))
+    last_b = 3 if config.is_planar_tdoa else config.n
+    names = ["A"] + [f"B{j}" for j in range(2, last_b + 1)] + [f"C{i}" for i in range(2, config.m + 1)]
     names += [_minor_name(config, rows, cols) for rows, cols in _minor_index_sets(config)]
     return tuple(names)
 
@@ -219,14 +339,24 @@ def _family(name: str) -> str:
 def _describe_names(config: TDOAConfig) -> str:
     """A short human-readable list of the valid names and groups (used in error messages)."""
     names = equation_names(config)
+    if config.parametrization == "direct":
+        return (f"valid names for {config.label}: D<i>_<j> (receiver i, transmitter j), D1_1..{names[-1]}; "
+                "groups: all, D*, D2_*")
     minors = [x for x in names if x.startswith("M")]
-    text = f"A, B2, B3, C2..C{config.m}"
+    bs = [x for x in names if x.startswith("B")]
+    text = f"A, {bs[0]}..{bs[-1]}, C2..C{config.m}" if len(bs) > 1 else f"A, {bs[0]}, C2..C{config.m}"
     if minors:
         text += f", {len(minors)} minors {minors[0]}..{minors[-1]}"
     else:
-        text += " (no minors: they need n >= 4)"
+        text += f" ({_no_minors(config)})"
     groups = "all, B*, C*" + (", minors, minors(N), M*" if minors else "")
-    return f"valid names for {config.label}: {text}; groups: {groups}; ranges like C2-C{config.m}, B2-B3"
+    return f"valid names for {config.label}: {text}; groups: {groups}; ranges like C2-C{config.m}, {bs[0]}-{bs[-1]}"
+
+
+def _no_minors(config: TDOAConfig) -> str:
+    if config.model == "toa":
+        return "no minors: TOA's rank constraints involve only the data"
+    return f"no minors: they need n >= {config.dim + 2}"
 
 
 _RANGE_RE = re.compile(r"^([BC])(\d+)\s*-\s*([BC])?(\d+)$", re.IGNORECASE)
@@ -262,7 +392,7 @@ def parse_equations(config: TDOAConfig | str, spec: str) -> tuple[str, ...]:
             chosen.update(names)
         elif low == "minors" or _MINORS_COUNT_RE.match(token):
             if not minors:
-                raise ValueError(f"token {token!r}: {config.label} has no minors (they need n >= 4)")
+                raise ValueError(f"token {token!r}: {config.label} has {_no_minors(config)}")
             count = _MINORS_COUNT_RE.match(token)
             if count and int(count.group(1)) != len(minors):
                 raise ValueError(f"token {token!r}: {config.label} has {len(minors)} minors, not {count.group(1)}")
@@ -370,8 +500,12 @@ class Formulation:
         """Compact round-trippable label, e.g. ``"6r4s:B2,C2-C6,minors(10)"``.
 
         C runs of two or more consecutive receivers are written as ranges; the full set of minors is
-        written ``minors(N)``, a proper subset by explicit names.
+        written ``minors(N)``, a proper subset by explicit names; every range equation of a direct
+        formulation is ``all``.
         """
+        if self.config.parametrization == "direct":
+            whole = len(self.equations) == self.config.m * self.config.n
+            return f"{self.config.label}:{'all' if whole else ','.join(self.equations)}"
         parts = [x for x in self.equations if _family(x) in ("A", "B")]
         cs = [int(x[1:]) for x in self.equations if _family(x) == "C"]
         for _, run in itertools.groupby(enumerate(cs), key=lambda t: t[1] - t[0]):
@@ -419,6 +553,7 @@ def symbolic_equations(formulation: Formulation) -> dict[str, sympy.Expr]:
     import sympy
 
     config = formulation.config
+    require_planar_tdoa(config, "symbolic_equations")
     m, n = config.m, config.n
     h11, h12, h22, b1, b2, *offsets = unknown_symbols(config)
     f = sympy.Matrix(data_symbols(config))
@@ -470,6 +605,7 @@ def factored_equations(formulation: Formulation) -> tuple[list[sympy.Poly], dict
     import sympy
 
     config = formulation.config
+    require_planar_tdoa(config, "factored_equations")
     m, n = config.m, config.n
     unknowns = unknown_symbols(config)
     h11, h12, h22, b1, b2, *offsets = unknowns
@@ -762,6 +898,10 @@ def gf_equations(formulation: Formulation, data: "Instance | Sequence[Sequence[i
         raise BadPrime("gf_equations needs a prime p when data is a plain matrix")
     p = check_prime(p)
     rows = [[int(x) % p for x in r] for r in _data_matrix(formulation.config, data)]
+    if not formulation.config.is_planar_tdoa:
+        from .formulations_kd import build_equations
+
+        return build_equations(formulation, rows, p)
     return _Builder(formulation.config, rows, _Coefficients("gf", p)).build(formulation.equations)
 
 
@@ -774,6 +914,10 @@ def real_equations(formulation: Formulation, data: "Instance | Sequence[Sequence
     if isinstance(data, Instance) and data.prime is not None:
         raise ValueError("real_equations needs a real instance; this one is over GF(p) (use gf_equations)")
     rows = [[float(x) for x in r] for r in _data_matrix(formulation.config, data)]
+    if not formulation.config.is_planar_tdoa:
+        from .formulations_kd import build_equations
+
+        return build_equations(formulation, rows, None)
     return _Builder(formulation.config, rows, _Coefficients("real")).build(formulation.equations)
 
 
@@ -796,6 +940,7 @@ def coefficient_expressions(formulation: Formulation, form: Literal["expr", "rin
     from sympy.polys.rings import ring as poly_ring
 
     config = formulation.config
+    require_planar_tdoa(config, "coefficient_expressions")
     symbols = data_symbols(config)
     qq_ring, *gens = poly_ring(list(itertools.chain.from_iterable(symbols)), sympy.QQ)
     data = [gens[i * config.n:(i + 1) * config.n] for i in range(config.m)]
@@ -844,9 +989,10 @@ class Instance:
     config : the configuration.
     prime : p for a GF(p) instance, None for a real one.
     F : m x n measurements f_ij (python ints in [0, p) or floats), nested tuples.
-    receivers, transmitters : positions as (x, y) tuples; receivers[0] == (0, 0).
-    offsets : o_1..o_n.
-    root : the known root in unknown order (h11, h12, h22, b1, b2, o1..on).
+    receivers, transmitters : positions as coordinate tuples (K per point); receivers[0] is the origin.
+    offsets : o_1..o_n (zeros for TOA).
+    root : the known root in the configuration's unknown order (h11, h12, h22, b1, b2, o1..on for the
+        paper's 2D TDOA; :attr:`TDOAConfig.unknowns` in general).
     """
 
     config: TDOAConfig
@@ -946,9 +1092,8 @@ probability about 2^-min(m, n)."""
 
 def _residue_mask(points: np.ndarray, anchors: np.ndarray, p: int) -> np.ndarray:
     """Rows of points whose squared distance to every anchor is a nonzero quadratic residue mod p."""
-    dx = (points[:, None, 0] - anchors[None, :, 0]) % p
-    dy = (points[:, None, 1] - anchors[None, :, 1]) % p
-    d2 = (dx * dx % p + dy * dy % p) % p  # (batch, anchors)
+    diff = (points[:, None, :] - anchors[None, :, :]) % p  # (batch, anchors, K)
+    d2 = (diff * diff % p).sum(axis=2) % p  # (batch, anchors); K p^2 < 2^63 for p < 2^31, K <= 3
     return np.all((d2 != 0) & (_powmod_vec(d2, (p - 1) // 2, p) == 1), axis=1)
 
 
@@ -979,6 +1124,10 @@ def sample_gf_instance(config: TDOAConfig | str, p: int, rng: "np.random.Generat
     """
     config = _as_config(config)
     p = check_prime(p)
+    if not config.is_planar_tdoa:
+        from .formulations_kd import sample_gf_instance_kd
+
+        return sample_gf_instance_kd(config, p, rng, max_batches=max_batches)
     gen, seed_text = _rng(rng)
     m, n = config.m, config.n
     if min(m, n) > REJECTION_LIMIT:
@@ -1061,6 +1210,10 @@ def sample_real_instance(config: TDOAConfig | str, rng: "np.random.Generator | i
     scale, offset_scale : standard deviations of positions and offsets.
     """
     config = _as_config(config)
+    if not config.is_planar_tdoa:
+        from .formulations_kd import sample_real_instance_kd
+
+        return sample_real_instance_kd(config, rng, scale, offset_scale)
     gen, _ = _rng(rng)
     m, n = config.m, config.n
     receivers = gen.normal(0.0, scale, size=(m, 2))
@@ -1140,6 +1293,7 @@ class Relabeling:
     transmitters: tuple[int, ...]
 
     def __post_init__(self) -> None:
+        require_planar_tdoa(self.config, "Relabeling")
         m, n = self.config.m, self.config.n
         if sorted(self.receivers) != list(range(1, m + 1)) or self.receivers[0] != 1:
             raise ValueError(f"receivers must be a permutation of 1..{m} fixing 1, got {self.receivers}")
@@ -1293,6 +1447,7 @@ def canonical_form(formulation: Formulation) -> Formulation:
     uses C2..C_{k+1} for k C-equations and B2 when exactly one B-equation is present.
     """
     config = formulation.config
+    require_planar_tdoa(config, "canonical_form")
     has_a = "A" in formulation.equations
     b_cols = [int(x[1:]) - 1 for x in formulation.equations if _family(x) == "B"]
     c_rows = frozenset(int(x[1:]) - 1 for x in formulation.equations if _family(x) == "C")
@@ -1328,7 +1483,7 @@ def _minor_candidates(config: TDOAConfig, minor_sets: MinorSets, limit: int) -> 
             return [()]
         if minor_sets == "all":
             if not minors:
-                raise ValueError(f"{config.label} has no minors (they need n >= 4)")
+                raise ValueError(f"{config.label} has {_no_minors(config)}")
             return [tuple(minors)]
         raise ValueError(f"minor_sets {minor_sets!r} not understood; use 'none', 'all', a size k, sizes, or explicit sets")
     if isinstance(minor_sets, int):
@@ -1375,6 +1530,7 @@ def enumerate_formulations(config: TDOAConfig | str, nA: int | Iterable[int] | N
     order of increasing (A, B, C) counts, then candidate order. Paper Section 3 (Table 2's abc).
     """
     config = _as_config(config)
+    require_planar_tdoa(config, "enumerate_formulations")
     candidates = _minor_candidates(config, minor_sets, limit)
     seen: set[tuple[str, ...]] = set()
     for a in _as_counts(nA, 1, "A"):

@@ -3,7 +3,8 @@
 Subcommands
 -----------
 degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
-           or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``)
+           or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``; ``--model toa``,
+           ``--dim 3``, ``--parametrization direct`` for TOA, 3D and the positions as unknowns)
 tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
 generate   build a numeric solver (spec over GF(p) + module) into --out DIR and print its statistics
 template-check  how many action-matrix relations single elimination templates of a formulation or of
@@ -128,9 +129,15 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="with --tdoa: equations, e.g. 'B2,C2-C6,minors', 'C*', 'A,B2,B3,C2-C6', 'M123_123,...', 'all'",
     )
+    p.add_argument("--model", metavar="MODEL", default=None,
+                   help="with --tdoa: measurement model tdoa (default; unknown transmitter offsets) or toa (synchronised)")
+    p.add_argument("--dim", type=int, metavar="K", default=None, help="with --tdoa: spatial dimension 2 (default) or 3")
+    p.add_argument("--parametrization", metavar="P", default=None,
+                   help="with --tdoa: compaction (default; unknowns H, b and offsets, the paper's) or direct "
+                   "(unknowns the gauge-fixed positions and offsets; degree = 2^K x the compaction count)")
     p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
                    help="with --tdoa: seed of the consistent random instance")
-    p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H = h11*h22 - h12^2")
+    p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H (times det D~[:3,:3] when 3D TDOA's B5..Bn are used)")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
         help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
@@ -207,8 +214,8 @@ def cmd_degree(args: argparse.Namespace) -> int:
         if args.file:
             raise UserError("give either FILE or --tdoa, not both")
         return _degree_tdoa(args)
-    if args.equations or args.saturate_det_h:
-        raise UserError("--equations and --saturate-det-h need --tdoa CONFIG")
+    if args.equations or args.saturate_det_h or args.model or args.dim is not None or args.parametrization:
+        raise UserError("--equations, --model, --dim, --parametrization and --saturate-det-h need --tdoa CONFIG")
     if args.file is None:
         raise UserError("give a FILE in msolve format, or --tdoa CONFIG --equations SPEC")
     try:
@@ -287,12 +294,15 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
     from analysis import formulations as tf
     from analysis.complexity import jacobian_rank
     from analysis.degree import DEFAULT_PRIMES
+    from analysis.formulations_kd import det_h_terms, nonzero_conditions
     from analysis.ring import BadPrime, Ring, check_prime
 
     if args.equations is not None and not args.equations.strip():
         raise UserError("--equations is empty; give e.g. 'C2-C6', 'B2,C2-C6,minors' or 'all'")
     try:
-        config = tf.TDOAConfig.parse(args.tdoa)
+        config = tf.TDOAConfig.parse(args.tdoa, model=args.model, dim=args.dim, parametrization=args.parametrization)
+        if args.saturate_det_h and config.parametrization != "compaction":
+            raise ValueError("--saturate-det-h needs the compaction parametrization (the direct one has no H)")
         formulation = tf.Formulation(config, tf.parse_equations(config, args.equations or "all"))
         primes = tuple(check_prime(p) for p in args.prime) if args.prime else DEFAULT_PRIMES
     except (ValueError, BadPrime) as e:
@@ -313,8 +323,14 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
         return [ring.from_terms(eq) for eq in equations(p)[1]]
 
     def det_h(p: int):
+        """det H, times det D~[:3, :3] when 3D TDOA's B5..Bn were cleared of it (formulations_kd)."""
         ring = rings.setdefault(p, Ring(config.unknowns, p, args.order))
-        return ring.gen("h11") * ring.gen("h22") - ring.gen("h12") ** 2
+        if config.is_planar_tdoa:
+            return ring.from_terms(det_h_terms(config))
+        product = ring.one()
+        for condition in nonzero_conditions(formulation, [list(r) for r in equations(p)[0].F], p):
+            product = product * ring.from_terms(condition)
+        return product
 
     header = f"formulation {formulation.label} (seed {args.seed})"
     if args.export:
@@ -332,7 +348,9 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
                       saturation=method)
     out = {"formulation": formulation.label, "seed": args.seed, **report.as_dict()}
     if args.saturate_det_h:
-        out["saturated_by"] = "det H"
+        extended = not config.is_planar_tdoa and len(nonzero_conditions(formulation, [list(r) for r in instance.F],
+                                                                        primes[0])) > 1
+        out["saturated_by"] = "det H * det D~[:3,:3]" if extended else "det H"
     return _finish_report(out, report, args, header)
 
 

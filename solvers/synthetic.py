@@ -1,4 +1,4 @@
-"""Synthetic 2D TDOA networks and their known algebraic roots.
+"""Synthetic 2D and 3D TDOA (and TOA) networks and their known algebraic roots.
 
 This module owns the ground truth used by validation and tests: a `Network` (receivers,
 transmitters, transmitter clock offsets), the TDOA measurements it produces, the paper's random
@@ -6,7 +6,8 @@ sampler and `true_root`, the point (H, b, o) of the algebraic formulation that t
 corresponds to in the gauge r_1 = 0.
 
 Measurement model (paper Sec. 1, eq. (2)): f_ij = ||r_i - s_j|| + o_j, receivers synchronised,
-one unknown offset o_j per transmitter. Only numpy is used.
+one unknown offset o_j per transmitter (TOA: all offsets zero). Positions have K = 2 or 3 coordinates.
+Only numpy is used.
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ class DegenerateNetworkError(ValueError):
     """The network has no well-defined algebraic root (e.g. s_1, s_2, s_3 collinear)."""
 
 
+DIMENSIONS = (2, 3)
+"""Spatial dimensions a network may have."""
+
+
 def _frozen_array(values: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
     """Return a read-only float64 copy of `values`, checking its shape (None = any length)."""
     array = np.array(values, dtype=float)
@@ -43,14 +48,14 @@ def _frozen_array(values: object, shape: tuple[int | None, ...], name: str) -> n
 
 @dataclass(frozen=True, eq=False)
 class Network:
-    """A 2D TDOA sensor network: m synchronised receivers, n transmitters with clock offsets.
+    """A TDOA sensor network in 2D or 3D: m synchronised receivers, n transmitters with clock offsets.
 
     Parameters
     ----------
-    receivers : (m, 2) array
+    receivers : (m, K) array, K = 2 or 3
         Receiver positions r_i.
-    transmitters : (n, 2) array
-        Transmitter positions s_j.
+    transmitters : (n, K) array
+        Transmitter positions s_j (the same K).
     offsets : (n,) array
         Transmitter clock offsets o_j (in distance units).
 
@@ -62,12 +67,19 @@ class Network:
     offsets: np.ndarray
 
     def __post_init__(self) -> None:
-        receivers = _frozen_array(self.receivers, (None, 2), "receivers")
-        transmitters = _frozen_array(self.transmitters, (None, 2), "transmitters")
+        receivers = _frozen_array(self.receivers, (None, None), "receivers")
+        if receivers.shape[1] not in DIMENSIONS:
+            raise ValueError(f"positions must have 2 or 3 coordinates, got {receivers.shape[1]}")
+        transmitters = _frozen_array(self.transmitters, (None, receivers.shape[1]), "transmitters")
         offsets = _frozen_array(self.offsets, (transmitters.shape[0],), "offsets")
         object.__setattr__(self, "receivers", receivers)
         object.__setattr__(self, "transmitters", transmitters)
         object.__setattr__(self, "offsets", offsets)
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension K (2 or 3)."""
+        return self.receivers.shape[1]
 
     @property
     def m(self) -> int:
@@ -118,8 +130,9 @@ def random_network(
     rng: np.random.Generator,
     position_sigma: float = 10.0,
     offset_sigma: float = 1.0,
+    dim: int = 2,
 ) -> Network:
-    """Sample a network as in the paper's experiments.
+    """Sample a network as in the paper's experiments (in 2D; ``dim=3`` for a 3D network).
 
     Parameters
     ----------
@@ -130,7 +143,9 @@ def random_network(
     position_sigma : float
         Standard deviation of the zero-mean normal node coordinates (paper: 10).
     offset_sigma : float
-        Standard deviation of the zero-mean normal offsets (paper: 1).
+        Standard deviation of the zero-mean normal offsets (paper: 1; 0 gives a TOA network).
+    dim : int
+        Spatial dimension K, 2 (default) or 3.
 
     Returns
     -------
@@ -140,8 +155,10 @@ def random_network(
     """
     if m < 1 or n < 1:
         raise ValueError(f"need m >= 1 and n >= 1, got m={m}, n={n}")
-    receivers = position_sigma * rng.standard_normal((m, 2))
-    transmitters = position_sigma * rng.standard_normal((n, 2))
+    if dim not in DIMENSIONS:
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    receivers = position_sigma * rng.standard_normal((m, dim))
+    transmitters = position_sigma * rng.standard_normal((n, dim))
     offsets = offset_sigma * rng.standard_normal(n)
     return Network(receivers, transmitters, offsets)
 
@@ -149,38 +166,40 @@ def random_network(
 def true_root(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the root (H, b, o) of the algebraic formulation that `network` corresponds to.
 
-    After translating so that r_1 = 0, the factorisation D~ = R~^T S~ with R~ = D~[:, :2]^T and
-    S~ = I (first two columns of the compaction matrix) is matched by L = -2 S, where
-    S = [s_2 - s_1, s_3 - s_1]. Hence H = (L^T L)^{-1} = (4 S^T S)^{-1} and
+    After translating so that r_1 = 0, the factorisation D~ = R~^T S~ with R~ = D~[:, :K]^T and
+    S~ = I (first K columns of the compaction matrix) is matched by L = -2 S, where
+    S = [s_2 - s_1, ..., s_{K+1} - s_1]. Hence H = (L^T L)^{-1} = (4 S^T S)^{-1} and
     b = L^{-1} s_1 = -1/2 S^{-1} s_1. Any L' = Q L with Q orthogonal gives the same H; that is the
     rotation/reflection gauge.
 
     Parameters
     ----------
     network : Network
-        Needs n >= 3 with s_1, s_2, s_3 not collinear.
+        Needs n >= K + 1 with s_1..s_{K+1} affinely independent (not collinear in 2D, not coplanar in 3D).
 
     Returns
     -------
-    H : (2, 2) symmetric positive-definite array
-    b : (2,) array
+    H : (K, K) symmetric positive-definite array
+    b : (K,) array
     o : (n,) array, the offsets (a copy)
 
     Raises
     ------
     DegenerateNetworkError
-        If n < 3 or s_1, s_2, s_3 are (numerically) collinear.
+        If n < K + 1 or s_1..s_{K+1} are (numerically) affinely dependent.
 
     Reference: paper Sec. 2.1 eq. (4)-(5) and Sec. 3.1 eq. (6).
     """
-    if network.n < 3:
-        raise DegenerateNetworkError(f"the parametrisation needs n >= 3 transmitters, got {network.n}")
+    k = network.dim
+    if network.n < k + 1:
+        raise DegenerateNetworkError(f"the {k}D parametrisation needs n >= {k + 1} transmitters, got {network.n}")
     r1 = network.receivers[0]
     s1 = network.transmitters[0] - r1
-    S = (network.transmitters[1:3] - network.transmitters[0]).T  # columns s_2 - s_1, s_3 - s_1
+    S = (network.transmitters[1:k + 1] - network.transmitters[0]).T  # columns s_2 - s_1, ..., s_{K+1} - s_1
     singular_values = np.linalg.svd(S, compute_uv=False)
-    if not singular_values[1] > 1e-12 * singular_values[0]:
-        raise DegenerateNetworkError("transmitters s_1, s_2, s_3 are collinear or coincident")
+    if not singular_values[k - 1] > 1e-12 * singular_values[0]:
+        what = "collinear or coincident" if k == 2 else "coplanar"
+        raise DegenerateNetworkError(f"transmitters s_1..s_{k + 1} are {what}")
     S_inv = np.linalg.inv(S)
     H = 0.25 * S_inv @ S_inv.T  # (4 S^T S)^{-1}
     H = 0.5 * (H + H.T)

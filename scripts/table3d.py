@@ -1,0 +1,81 @@
+"""3D TDOA complexity: tables/table3d.csv, tables/table3d.md, tables/table3d.meta.json.
+
+Cells: every m/n with 5 <= m <= 11, 4 <= n <= 10 (the 3D compaction parametrization needs m >= 5,
+n >= 4) whose excess mn - (3m + 4n - 6) lies in EXCESS: the minimal cells (excess 0: 10r/4s, 7r/5s,
+6r/6s, 5r/9s) and their neighbours, which include the cells of the published stratified 3D solvers
+(9r/5s, 7r/6s, 6r/8s). Unknowns H (6), b (3), o1..on, saturated by det H (and det D~[:3, :3] with the
+B_j, j >= 5). Per cell, in this order (analysis.cell_degrees.cell_degree, primes 65521 and 32749, seed 0;
+a formulation equal to an earlier one is not repeated):
+
+* ``A,B2-B4,C*,minors``: the paper's family carried to 3D (B only for the transmitters of S~ = I);
+* ``all``: also B5..Bn (the whole cell: every measurement enters);
+* ``C*,minors``: without A and B (when the cell has minors).
+
+Budget: each formulation runs in a child process with a wall-time cap (--seconds, default 180) and an F4
+matrix cap (--max-cells, default 150 000 000 rows x cols; F4's own 8 GiB memory cap also applies); a
+formulation that hits one is listed with it.
+msolve (when installed) recomputes each degree found on the first prime. Usage:
+OPENBLAS_NUM_THREADS=1 python scripts/table3d.py [--seconds S] [--max-cells N] [--out-dir DIR]
+(about 15 minutes with the defaults on one core).
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import sys  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from analysis.cell_degrees import run_table_script  # noqa: E402
+from analysis.formulations import Formulation, TDOAConfig  # noqa: E402
+
+EXCESS = (-2, 6)
+M_RANGE = range(5, 12)
+N_RANGE = range(4, 11)
+
+NOTES = """Unknowns H (symmetric 3 x 3), b in R^3 and the offsets; gauge r_1 = 0 (the compaction unknowns are
+invariant under rotations and reflections, so each solution is one network up to the Euclidean group).
+A degree 1 from any formulation means the cell has one solution; a larger degree from a subset of the
+cell's equations bounds the count from above and is the size of that formulation's solver.
+cap/timeout: the budget in the meta file was not enough. Comparison with the published 3D solvers and the
+open cells: tables/NOTES.md, section "3D TDOA".
+"""
+
+
+def cells() -> list[TDOAConfig]:
+    """The 3D TDOA configurations of the table, in (m, n) order."""
+    return [TDOAConfig(m, n, dim=3) for m in M_RANGE for n in N_RANGE
+            if EXCESS[0] <= TDOAConfig(m, n, dim=3).excess <= EXCESS[1]]
+
+
+def jobs() -> list[tuple[Formulation, bool]]:
+    """The formulations of every cell, in table order, each confirmed by msolve where installed."""
+    out = []
+    for config in cells():
+        minors = ",minors" if config.n_minors else ""
+        seen = set()
+        for spec in (f"A,B2-B4,C*{minors}", "all", f"C*{minors}" if minors else ""):
+            if spec:
+                formulation = Formulation.from_spec(config, spec)
+                if formulation.equations not in seen:
+                    seen.add(formulation.equations)
+                    out.append((formulation, True))
+    return out
+
+
+def main(argv=None) -> int:
+    return run_table_script(argv, __doc__, ROOT, "scripts/table3d.py", "table3d",
+                            "3D TDOA self-calibration: complexity per m/n cell", NOTES, jobs,
+                            {"cells": f"3D TDOA, m in [{M_RANGE.start}, {M_RANGE.stop - 1}], n in "
+                                      f"[{N_RANGE.start}, {N_RANGE.stop - 1}], excess in [{EXCESS[0]}, {EXCESS[1]}]",
+                             "formulations": "A,B2-B4,C*,minors; all; C*,minors (each once per cell)",
+                             "degree": "degree of I + (t g - 1) in grevlex, g = det H (times det D~[:3, :3] with "
+                                       "B5..Bn): solutions with g != 0"},
+                            seconds=180.0, max_cells=150_000_000)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
