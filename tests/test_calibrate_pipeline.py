@@ -148,6 +148,15 @@ def test_gross_error_in_a_5r5s_network_with_sigma_given_is_rejected():
     assert calibration_errors(res, net).position < 0.05
 
 
+def test_seed_check_without_any_noise_estimate_compares_at_the_floor():
+    # 7r/3s, sigma unknown (bench network 19 of sigma 1e-2): both searches end without redundancy, sigma 0
+    # or NaN; comparing their costs divided by that scale raised ZeroDivisionError
+    net, F = _uniform_network(7, 3, 1e-2, seed=19007)
+    res = calibrate(F, seed=19007)
+    assert res.status != "ok", res.message
+    assert res.message.startswith(res.status)
+
+
 def test_reported_std_covers_the_true_error():
     # 2-D normal errors: a node beyond 3 sqrt(var_x + var_y) has probability 1e-4 to 3e-3
     from solvers.metrics import standardised_node_errors

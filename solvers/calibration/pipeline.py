@@ -86,7 +86,9 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
         other = _calibrate_once(F, sigma, seed2, opts, t0)
         if other.status != "failed" and _differs(result, other):
-            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts)
+            finite = np.abs(F[np.isfinite(F)])
+            floor = 1e-9 * (float(finite.max()) if finite.size and finite.max() > 0 else 1.0)
+            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, floor)
             unusable = ("failed", "unconverged", "inconsistent")
             key_r = (result.status in unusable, cost_r, -result.inliers.sum())
             key_o = (other.status in unusable, cost_o, -other.inliers.sum())
@@ -107,11 +109,13 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
     return replace(result, seconds=time.perf_counter() - t0, seed=seed)
 
 
-def _truncated_costs(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions):
+def _truncated_costs(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions, floor: float):
     """(cost of a, cost of b, scale s): sum over every measured entry of min(e^2, (k s)^2) (an entry
     of an unplaced node counts (k s)^2) at one scale s, the given sigma or the larger estimate (the
     smaller could be that of a fit that explains a subset exactly and call everything else an outlier)."""
     s = sigma if sigma is not None else float(np.nanmax([a.sigma, b.sigma]))
+    if not (np.isfinite(s) and s > floor):
+        s = floor  # neither fit has a noise estimate (no redundancy left): the search's floor
     cap = (opts.threshold_sigmas * s) ** 2
 
     def cost(r):
