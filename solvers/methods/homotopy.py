@@ -183,11 +183,21 @@ def _pairs(z: np.ndarray) -> list:
 
 
 #: Evaluators of a solver's system: "auto" (the batched tracker on the straight-line program written from
-#: the formulation where the system has one: TDOA families A, B, C; else "monomials"), "tape" (that
-#: program, or else one traced from the generated coefficient function and the expanded monomials:
-#: slower to evaluate, not yet validated on seeded networks, hence not chosen by "auto"), "monomials"
-#: (the expanded system's coefficients, tracker.track).
+#: the formulation where the system has one and it is validated: TDOA families A, B, C, and the systems
+#: of :data:`VALIDATED_PROGRAMS`; else "monomials"), "tape" (that program, or else one traced from the
+#: generated coefficient function and the expanded monomials: slower to evaluate, not validated on seeded
+#: networks, hence not chosen by "auto"), "monomials" (the expanded system's coefficients, tracker.track).
 EVALUATORS = ("auto", "tape", "monomials")
+
+#: Systems with minors (squared) or in a positions formulation whose programs (slp.system_equations)
+#: "auto" uses: each was validated on seeded networks (failures and error quantiles no worse than the
+#: monomial tracker's on the same networks, tables/NOTES.md).
+VALIDATED_PROGRAMS = frozenset()
+
+
+def _validated(name: str) -> bool:
+    """Whether "auto" may track the system ``name`` on its program (see :data:`VALIDATED_PROGRAMS`)."""
+    return name in VALIDATED_PROGRAMS or not ("minors" in name or ":positions-" in name)
 
 
 def _tapes(spec: dict, coefficients: Callable, evaluator: str):
@@ -198,10 +208,12 @@ def _tapes(spec: dict, coefficients: Callable, evaluator: str):
         return None
     from . import slp
 
-    try:
-        tapes = slp.tdoa_homotopy_tapes(spec["system"])
-    except ValueError:
-        tapes = None
+    tapes = None
+    if evaluator == "tape" or _validated(spec["system"]):
+        try:
+            tapes = slp.system_homotopy_tapes(spec["system"])
+        except ValueError:
+            pass
     names = list(spec["unknowns"]) + ["s"] + [f"q0:{p}" for p in spec["parameters"]] + [f"dq:{p}" for p in spec["parameters"]]
     if tapes is not None and (list(tapes.full.input_names) != names or not _agrees(tapes, spec, coefficients)):
         tapes = None  # a system named like a formulation but not its equations
