@@ -15,7 +15,8 @@ A squared system's spec may name the start roots that satisfy the full (over-det
 
 Online (:class:`HomotopySolver`): for target parameters q1, every (tracked) start root is tracked along the
 complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`), or, for systems with
-an unexpanded straight-line program (the TDOA A/B/C formulations, :mod:`solvers.methods.slp`), by the
+an unexpanded straight-line program (TDOA formulations, with minors squared, and the 4r/5s positions
+formulation: :func:`solvers.methods.slp.system_equations`; see :data:`VALIDATED_PROGRAMS`), by the
 batched tracker on its instruction tapes (:mod:`solvers.methods.tape_kernel`); paths that stall,
 and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
 step control. Because q0 is a generic complex point, the segment misses the discriminant with

@@ -15,8 +15,10 @@ instruction set).
 :func:`homotopy_program` builds, for a parameter homotopy H(x, s) = F(x; q0 + s (q1 - q0)), the
 program of H, its Jacobian in x and dH/ds; :func:`homotopy_tapes` compiles its three tapes
 (:class:`HomotopyTapes`). :func:`tdoa_equations` writes the TDOA formulation's equations (analysis.
-formulations: compaction matrix, A/B/C families) on program values; :func:`expanded_equations` any
-generated solver's system from its coefficient function and monomials.
+formulations: compaction matrix, A/B/C families, minors) on program values, :func:`squared_equations` a
+system squared by random combinations, :func:`positions_equations` the 4r/5s positions formulation;
+:func:`system_equations` finds the program of a committed solver's system by its name;
+:func:`expanded_equations` any generated solver's system from its coefficient function and monomials.
 
 Reference: the straight-line programs of HomotopyContinuation.jl's ModelKit (Breiding & Timme, 2018)
 and Griewank & Walther, "Evaluating derivatives", 2nd ed. (2008), ch. 2-3.
@@ -654,7 +656,7 @@ def homotopy_tapes(equations: Callable[[list[Value], list[Value]], list[Value]],
 
 
 def tdoa_homotopy_tapes(formulation) -> HomotopyTapes:
-    """The homotopy tapes of a TDOA formulation (families A, B, C; ValueError for others)."""
+    """The homotopy tapes of a TDOA formulation (ValueError for a non-square one)."""
     from analysis.formulations import as_formulation, data_symbols
 
     formulation = as_formulation(formulation)
