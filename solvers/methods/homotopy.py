@@ -193,7 +193,11 @@ EVALUATORS = ("auto", "tape", "monomials")
 #: Systems with minors (squared) or in a positions formulation whose programs (slp.system_equations)
 #: "auto" uses: each was validated on seeded networks (failures and error quantiles no worse than the
 #: monomial tracker's on the same networks, tables/NOTES.md).
-VALIDATED_PROGRAMS = frozenset()
+VALIDATED_PROGRAMS = frozenset({
+    "5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0)",
+    "5r5s:B2,B3,C2-C5,minors(16) (minors squared, seed 0)",
+    "4r5s:positions-receivers-orbits",
+})
 
 
 def _validated(name: str) -> bool:
