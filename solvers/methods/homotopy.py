@@ -376,11 +376,7 @@ class HomotopySolver:
                 continue
             xk, ok = self._route(qm, xm, q[jumped])
             better = np.array([np.sum(_unresolved(xk[j])) < np.sum(_unresolved(x[b])) for j, b in enumerate(jumped)], dtype=bool)
-            # the route's endpoints first, the slots it left unresolved filled with the distinct endpoints of
-            # the set it replaces: an incomplete route can miss a root the direct paths had (4r/5s network
-            # 518 of the seeded sequence lost its true root to a route with fewer unresolved endpoints)
-            for j in np.flatnonzero(better):
-                x[jumped[j]] = _pool(xk[j], x[jumped[j]])
+            x[jumped[better]] = xk[better]
             jumped = jumped[~ok]
         # Where no midpoint's root set is complete (4r/5s: 5-40 of its 344 paths stall near roots that go
         # to infinity, on every segment), an instance still short of K distinct roots sends every path
