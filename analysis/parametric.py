@@ -439,13 +439,35 @@ def square(system: ParametricSystem, keep: int, seed: int = 0, name: str | None 
     if keep > N or N - keep > len(rest):
         raise ParametricError(f"{system.name}: cannot square {len(system.equations)} equations in {N} unknowns "
                               f"keeping {keep}")
-    rng = np.random.default_rng(seed)
-    combos = []
-    for _ in range(N - keep):
-        c = rng.integers(1, 10, size=len(rest)) * rng.choice([-1, 1], size=len(rest))
-        combos.append(" + ".join(f"({int(a)})*({e})" for a, e in zip(c, rest)))
+    combos = [" + ".join(f"({int(a)})*({e})" for a, e in zip(c, rest))
+              for c in square_combinations(len(rest), N - keep, seed)]
     return replace(system, name=name or f"{system.name} squared (seed {seed})",
                    equations=tuple(system.equations[:keep]) + tuple(combos))
+
+
+def square_combinations(n_rest: int, n_new: int, seed: int = 0) -> np.ndarray:
+    """The integer coefficients (n_new, n_rest) of :func:`square`'s combinations: nonzero, |c| <= 9,
+    deterministic given ``seed`` (also used to write a squared system as a straight-line program)."""
+    rng = np.random.default_rng(seed)
+    out = np.empty((n_new, n_rest), dtype=np.int64)
+    for k in range(n_new):
+        out[k] = rng.integers(1, 10, size=n_rest) * rng.choice([-1, 1], size=n_rest)
+    return out
+
+
+#: Name of a system squared by :func:`square` (the committed 5r/4s and 5r/5s solvers' ``SYSTEM``).
+_SQUARED_NAME = re.compile(r"^(?P<name>.+) \(minors squared, seed (?P<seed>\d+)\)$")
+
+
+def squared_name(name: str, seed: int) -> str:
+    """The name of the system ``name`` with its minors squared by :func:`square` (seed ``seed``)."""
+    return f"{name} (minors squared, seed {seed})"
+
+
+def parse_squared_name(text: str) -> tuple[str, int] | None:
+    """Inverse of :func:`squared_name`: (name, seed), or None for a name of another form."""
+    m = _SQUARED_NAME.match(text)
+    return (m.group("name"), int(m.group("seed"))) if m else None
 
 
 def from_positions(m: int, n: int, variant: str = "receivers-orbits") -> ParametricSystem:

@@ -96,7 +96,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
-from typing import Literal, Sequence
+from typing import Callable, Literal, Sequence
 
 import numpy as np
 import sympy
@@ -305,19 +305,13 @@ def _build(m: int, n: int, variant: str) -> PositionsSystem:
                 names.append(f"K{i}_{j}")
                 polys.append(x(i) * y3 * c(2) + y(i) * (x2 * c(3) - x3 * c(2)) - x2 * y3 * c(i))
         elif variant == "receivers-orbits":
-            X, Y = sym["X"], sym["Y"]
-            A = [[xi(i), eta(i), -delta(i, j)] for i in (2, 3, 4)]  # A_j = A'_j diag(x2, y3, 1)
-            g2 = [norm2(i) - a(i, j) for i in (2, 3, 4)]
-            D = _det3(A)
-            adj = _adjugate3(A)
-            M2 = [sum((adj[k][l] * g2[l] for l in range(3)), zero) for k in range(3)]  # 2 D' (x2 u, y3 v, o)
-            names.append(f"W{j}")
-            polys.append(X * Y * (2 * f(1, j) * D - M2[2]) ** 2 - Y * M2[0] ** 2 - X * M2[1] ** 2)
-            for i in range(5, m + 1):
-                names.append(f"V{i}_{j}")
-                polys.append(xi(i) * M2[0] + eta(i) * M2[1] - delta(i, j) * M2[2] - D * (norm2(i) - a(i, j)))
-            sat.append(D)
-            sat_names.append(f"D~{j}")
+            if j == 1:
+                orbit_names, orbit_polys, orbit_sat = receivers_orbits_equations(
+                    m, n, [sym[u] for u in unknowns], lambda i, k: sym[f"f{i}_{k}"], zero, one)
+                names += orbit_names
+                polys += orbit_polys
+                sat += orbit_sat
+                sat_names += [f"D~{k}" for k in range(1, n + 1)]
         else:  # receivers
             A = [[x(i), y(i), -delta(i, j)] for i in (2, 3, 4)]
             g2 = [norm2(i) - a(i, j) for i in (2, 3, 4)]  # 2 g_ij
@@ -391,6 +385,43 @@ def _dual_equations(m, n, sym, f, a, delta, names, polys, sat, orbits: bool) -> 
     else:
         sat.append(P)
         sat.append(ut[1])
+
+
+def receivers_orbits_equations(m: int, n: int, unknowns: Sequence, f: Callable, zero, one) -> tuple[list[str], list, list]:
+    """The ``receivers-orbits`` equations on any values with ring arithmetic (+, -, *, integer powers
+    and integer factors): sympy ring elements, or the values of a straight-line program (which keeps
+    the determinants and adjugates unexpanded).
+
+    ``unknowns``: values of X, Y, xi3, then xi_i, eta_i (i = 4..m), the variant's order; ``f(i, j)``:
+    the datum f_ij (1-based); ``zero``, ``one``: the constants. Returns the equation names
+    (W_j, V_ij per transmitter j), the equations and the denominators D~_j (module docstring).
+    """
+    X, Y, xi3, *rest = unknowns
+    xi = {2: one, 3: xi3, **{i: rest[2 * (i - 4)] for i in range(4, m + 1)}}  # x_i / x2
+    eta = {2: zero, 3: one, **{i: rest[2 * (i - 4) + 1] for i in range(4, m + 1)}}  # y_i / y3
+    norm2 = {i: X * xi[i] ** 2 + Y * eta[i] ** 2 for i in range(2, m + 1)}
+    names: list[str] = []
+    polys: list = []
+    dets: list = []
+    for j in range(1, n + 1):
+        def delta(i: int):
+            return f(i, j) - f(1, j)
+
+        def a(i: int):
+            return f(i, j) ** 2 - f(1, j) ** 2
+
+        A = [[xi[i], eta[i], -delta(i)] for i in (2, 3, 4)]  # A_j = A'_j diag(x2, y3, 1)
+        g2 = [norm2[i] - a(i) for i in (2, 3, 4)]
+        D = _det3(A)
+        adj = _adjugate3(A)
+        M2 = [sum((adj[k][l] * g2[l] for l in range(3)), zero) for k in range(3)]  # 2 D' (x2 u, y3 v, o)
+        names.append(f"W{j}")
+        polys.append(X * Y * (2 * f(1, j) * D - M2[2]) ** 2 - Y * M2[0] ** 2 - X * M2[1] ** 2)
+        for i in range(5, m + 1):
+            names.append(f"V{i}_{j}")
+            polys.append(xi[i] * M2[0] + eta[i] * M2[1] - delta(i) * M2[2] - D * (norm2[i] - a(i)))
+        dets.append(D)
+    return names, polys, dets
 
 
 def _det3(A) -> PolyElement:

@@ -25,7 +25,6 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-from solvers.generate import SOLVERS  # noqa: E402
 from solvers.methods import slp, tape_kernel, tracker  # noqa: E402
 
 
@@ -92,18 +91,19 @@ def rates(S, P: int, rng: np.random.Generator, repeat: int = 7) -> dict[str, flo
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--systems", nargs="+", default=["9r3s", "6r3s"])
+    ap.add_argument("--systems", nargs="+", default=["9r3s", "6r3s"], help="configuration labels of committed homotopy solvers")
     ap.add_argument("--paths", type=int, default=0, help="paths per call (default: the root count)")
     ap.add_argument("--repeat", type=int, default=7)
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
     for label in args.systems:
-        t0 = time.perf_counter()
-        tapes = slp.tdoa_homotopy_tapes(SOLVERS[label])
-        build = time.perf_counter() - t0
         name = [m for m in os.listdir(os.path.join(os.path.dirname(tracker.__file__), "..", "generated"))
                 if m.startswith(f"tdoa_{label}_homotopy") and m.endswith(".py")][0][:-3]
-        S = importlib.import_module(f"solvers.generated.{name}").solver()
+        module = importlib.import_module(f"solvers.generated.{name}")
+        t0 = time.perf_counter()
+        tapes = slp.system_homotopy_tapes(module.SYSTEM)
+        build = time.perf_counter() - t0
+        S = module.solver()
         P = args.paths or S.n_paths
         row = rates(S, P, rng, args.repeat)
         t_old, t_old_fixed, t_eig = row["changing"], row["fixed"], row["eig"]

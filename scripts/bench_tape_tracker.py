@@ -1,6 +1,7 @@
 """Benchmark the batched tape tracker against the per-path monomial tracker (issue 20, items 2 and 7).
 
-Per solver (the 3-transmitter cells, whose systems have an unexpanded straight-line program): on N
+Per solver (a committed homotopy solver whose system has an unexpanded straight-line program,
+solvers.methods.slp.system_equations; positions solvers compared in their own unknowns): on N
 seeded noiseless networks (solvers.synthetic.random_network, as scripts/bench_solvers.py), each
 evaluator ("monomials": tracker.track; "tape": tape_kernel.track) solves every network through the
 generated module's solve path (solve_scaled: scaling, tracking, retracking, detours, Newton on the
@@ -31,9 +32,10 @@ from numba import njit  # noqa: E402
 
 from solvers.generate import GENERATED_DIR  # noqa: E402
 from solvers.methods import homotopy, tape_kernel  # noqa: E402
-from solvers.synthetic import random_network, true_root  # noqa: E402
+from solvers.synthetic import random_network  # noqa: E402
 
-from bench_tape import best as _best  # noqa: E402  (scripts/ is on the path of a script)
+from bench_solvers import _truth  # noqa: E402  (scripts/ is on the path of a script)
+from bench_tape import best as _best  # noqa: E402
 
 FAIL_TOL = 1e-6
 ROUNDS = 5
@@ -47,11 +49,6 @@ def _module(label: str):
 def _solver(module, evaluator: str) -> homotopy.HomotopySolver:
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         return homotopy.HomotopySolver(homotopy.load_spec(fh.read()), module.coefficients, evaluator)
-
-
-def _truth(net) -> np.ndarray:
-    H, b, o = true_root(net)
-    return np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
 
 
 @njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them
@@ -103,7 +100,7 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
     rng = np.random.default_rng(seed)
     nets = [random_network(m, n, rng) for _ in range(trials)]
     F = np.stack([net.measurements() for net in nets])
-    truths = np.array([_truth(net) for net in nets])
+    truths = np.array([_truth(module, net) for net in nets])
     K = module.PATHS
     A = rng.normal(size=(K, K)) + 1j * rng.normal(size=(K, K))
     solvers, first = {}, {}

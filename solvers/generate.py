@@ -35,7 +35,7 @@ from typing import Callable, Protocol, Union
 import numpy as np
 
 from analysis.formulations import Formulation
-from analysis.parametric import ParametricSystem, from_formulation, from_positions, square
+from analysis.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
 
 from . import codegen
 from .methods import homotopy, pencil, tracker
@@ -82,7 +82,7 @@ def solver_system(label: str) -> ParametricSystem:
         return from_positions(m, n, POSITIONS[label])
     system = from_formulation(SOLVERS[label], saturate_det_h=True)
     if label in SQUARED:
-        system = square(system, SQUARED[label], seed=0, name=f"{system.name} (minors squared, seed 0)")
+        system = square(system, SQUARED[label], seed=0, name=squared_name(system.name, 0))
     return system
 
 

@@ -15,7 +15,8 @@ A squared system's spec may name the start roots that satisfy the full (over-det
 
 Online (:class:`HomotopySolver`): for target parameters q1, every (tracked) start root is tracked along the
 complex segment q0 -> q1 by the compiled tracker (:mod:`solvers.methods.tracker`), or, for systems with
-an unexpanded straight-line program (the TDOA A/B/C formulations, :mod:`solvers.methods.slp`), by the
+an unexpanded straight-line program (TDOA formulations, with minors squared, and the 4r/5s positions
+formulation: :func:`solvers.methods.slp.system_equations`; see :data:`VALIDATED_PROGRAMS`), by the
 batched tracker on its instruction tapes (:mod:`solvers.methods.tape_kernel`); paths that stall,
 and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
 step control. Because q0 is a generic complex point, the segment misses the discriminant with
@@ -183,11 +184,24 @@ def _pairs(z: np.ndarray) -> list:
 
 
 #: Evaluators of a solver's system: "auto" (the batched tracker on the straight-line program written from
-#: the formulation where the system has one: TDOA families A, B, C; else "monomials"), "tape" (that
-#: program, or else one traced from the generated coefficient function and the expanded monomials:
-#: slower to evaluate, not yet validated on seeded networks, hence not chosen by "auto"), "monomials"
-#: (the expanded system's coefficients, tracker.track).
+#: the formulation where the system has one and it is validated: TDOA families A, B, C, and the systems
+#: of :data:`VALIDATED_PROGRAMS`; else "monomials"), "tape" (that program, or else one traced from the
+#: generated coefficient function and the expanded monomials: slower to evaluate, not validated on seeded
+#: networks, hence not chosen by "auto"), "monomials" (the expanded system's coefficients, tracker.track).
 EVALUATORS = ("auto", "tape", "monomials")
+
+#: Systems with minors (squared) or in a positions formulation whose programs (slp.system_equations)
+#: "auto" uses: each was validated on seeded networks (failures and error quantiles no worse than the
+#: monomial tracker's on the same networks, tables/NOTES.md).
+VALIDATED_PROGRAMS = frozenset({
+    "5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0)",
+    "5r5s:B2,B3,C2-C5,minors(16) (minors squared, seed 0)",
+})  # not 4r5s:positions-receivers-orbits: one more failure than the monomials on 251 seeded networks
+
+
+def _validated(name: str) -> bool:
+    """Whether "auto" may track the system ``name`` on its program (see :data:`VALIDATED_PROGRAMS`)."""
+    return name in VALIDATED_PROGRAMS or not ("minors" in name or ":positions-" in name)
 
 
 def _tapes(spec: dict, coefficients: Callable, evaluator: str):
@@ -198,10 +212,12 @@ def _tapes(spec: dict, coefficients: Callable, evaluator: str):
         return None
     from . import slp
 
-    try:
-        tapes = slp.tdoa_homotopy_tapes(spec["system"])
-    except ValueError:
-        tapes = None
+    tapes = None
+    if evaluator == "tape" or _validated(spec["system"]):
+        try:
+            tapes = slp.system_homotopy_tapes(spec["system"])
+        except ValueError:
+            pass
     names = list(spec["unknowns"]) + ["s"] + [f"q0:{p}" for p in spec["parameters"]] + [f"dq:{p}" for p in spec["parameters"]]
     if tapes is not None and (list(tapes.full.input_names) != names or not _agrees(tapes, spec, coefficients)):
         tapes = None  # a system named like a formulation but not its equations

@@ -15,8 +15,10 @@ instruction set).
 :func:`homotopy_program` builds, for a parameter homotopy H(x, s) = F(x; q0 + s (q1 - q0)), the
 program of H, its Jacobian in x and dH/ds; :func:`homotopy_tapes` compiles its three tapes
 (:class:`HomotopyTapes`). :func:`tdoa_equations` writes the TDOA formulation's equations (analysis.
-formulations: compaction matrix, A/B/C families) on program values; :func:`expanded_equations` any
-generated solver's system from its coefficient function and monomials.
+formulations: compaction matrix, A/B/C families, minors) on program values, :func:`squared_equations` a
+system squared by random combinations, :func:`positions_equations` the 4r/5s positions formulation;
+:func:`system_equations` finds the program of a committed solver's system by its name;
+:func:`expanded_equations` any generated solver's system from its coefficient function and monomials.
 
 Reference: the straight-line programs of HomotopyContinuation.jl's ModelKit (Breiding & Timme, 2018)
 and Griewank & Walther, "Evaluating derivatives", 2nd ed. (2008), ch. 2-3.
@@ -24,13 +26,15 @@ and Griewank & Walther, "Evaluating derivatives", 2nd ed. (2008), ch. 2-3.
 from __future__ import annotations
 
 import numbers
+import re
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 
 __all__ = ["OPCODES", "HomotopyTapes", "Program", "Tape", "Value", "derivative", "expanded_equations",
-           "homotopy_program", "homotopy_tapes", "tdoa_equations", "tdoa_homotopy_tapes"]
+           "homotopy_program", "homotopy_tapes", "positions_equations", "squared_equations", "system_equations",
+           "system_homotopy_tapes", "tdoa_equations", "tdoa_homotopy_tapes"]
 
 from .tape_kernel import ADD, AXPY, CADD, CMUL, CONST, MUL, MULADD, NEG, OPCODES, OUT, SQR, SUB  # noqa: F401
 
@@ -488,21 +492,23 @@ def expanded_equations(coefficients: Callable, exponents, term_equation) -> Call
 
 
 def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Value]]:
-    """``equations(x, q)`` of a TDOA formulation (families A, B, C) written from its formulas.
+    """``equations(x, q)`` of a TDOA formulation (families A, B, C, minors) written from its formulas.
 
     Same equations as :func:`analysis.formulations.factored_equations` (and the generated solvers'
     coefficients): unknowns h11, h12, h22, b1, b2, o1..on; parameters f_ij row by row. e_ij = f_ij -
     f_1j, p_ij = f_ij + f_1j; compaction matrix D~_ij = c_ij + 2 e_{i+1,1} o1 - 2 e_{i+1,j+1} o_{j+1}
-    with c_ij = e p - e p; d_ij^2 - d_1j^2 = e_ij (p_ij - 2 o_j); d_11^2 = (f_11 - o1)^2.
+    with c_ij = e p - e p; d_ij^2 - d_1j^2 = e_ij (p_ij - 2 o_j); d_11^2 = (f_11 - o1)^2; a minor is the
+    determinant of its 3 x 3 submatrix of D~ by cofactors of the first row (the 2 x 2 minors of its last
+    two rows are shared between minors with the same rows and columns).
     """
-    from analysis.formulations import _family, as_formulation
+    from analysis.formulations import _family, _parse_minor, as_formulation
 
     formulation = as_formulation(formulation)
     config = formulation.config
     m, n = config.m, config.n
     for name in formulation.equations:
-        if _family(name) not in ("A", "B", "C"):
-            raise ValueError(f"{formulation.label}: equation {name} has no unexpanded program (families A, B, C)")
+        if _family(name) not in ("A", "B", "C", "minors"):
+            raise ValueError(f"{formulation.label}: equation {name} has no unexpanded program (families A, B, C, minors)")
 
     def equations(x: list[Value], q: list[Value]) -> list[Value]:
         h11, h12, h22, b1, b2, *o = x
@@ -526,6 +532,12 @@ def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Val
                 e_adj_e, b_adj_e = (h22, b1 * h22 - b2 * h12) if j == 2 else (h11, b2 * h11 - b1 * h12)
                 lhs = (f[0][j - 1] - o[j - 1]) ** 2 - d2_11
                 out.append(lhs * det - 0.25 * e_adj_e + b_adj_e)
+            elif name.startswith("M"):
+                rows, cols = _parse_minor(config, name)
+                a = [[comp(r, c) for c in cols] for r in rows]
+                out.append(a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+                           - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+                           + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]))
             else:
                 i = int(name[1:])
                 r1, r2 = comp(i - 1, 1), comp(i - 1, 2)
@@ -536,6 +548,83 @@ def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Val
         return out
 
     return equations
+
+
+def squared_equations(equations: Callable[[list[Value], list[Value]], list[Value]], keep: int,
+                      combinations: np.ndarray) -> Callable[[list[Value], list[Value]], list[Value]]:
+    """``equations(x, q)`` of a system squared by :func:`analysis.parametric.square`: the first ``keep``
+    equations, then the combinations (rows of integer coefficients) of the others."""
+    combinations = np.asarray(combinations, dtype=np.int64)
+
+    def squared(x: list[Value], q: list[Value]) -> list[Value]:
+        F = list(equations(x, q))
+        rest = F[keep:]
+        if combinations.shape[1] != len(rest):
+            raise ValueError(f"{combinations.shape[1]} coefficients per combination for {len(rest)} equations")
+        out = F[:keep]
+        for row in combinations:
+            acc = x[0].program.constant(0.0)
+            for c, v in zip(row, rest):
+                acc = acc + float(c) * v
+            out.append(acc)
+        return out
+
+    return squared
+
+
+def positions_equations(m: int, n: int, variant: str) -> Callable[[list[Value], list[Value]], list[Value]]:
+    """``equations(x, q)`` of a positions formulation (:mod:`analysis.positions`) written from its formulas
+    (determinants and adjugates of the 3 x 3 matrices A~_j unexpanded): the ``receivers-orbits`` variant
+    (the committed 4r/5s solver's); parameters f_ij row by row."""
+    from analysis.positions import receivers_orbits_equations
+
+    if variant != "receivers-orbits":
+        raise ValueError(f"positions variant {variant!r} has no unexpanded program (receivers-orbits)")
+
+    def equations(x: list[Value], q: list[Value]) -> list[Value]:
+        prog = x[0].program
+        return receivers_orbits_equations(m, n, x, lambda i, j: q[(i - 1) * n + (j - 1)], prog.constant(0.0),
+                                          prog.constant(1.0))[1]
+
+    return equations
+
+
+_POSITIONS_LABEL = re.compile(r"^(\d+)r(\d+)s:positions-([a-z-]+)$")
+
+
+def system_equations(name: str) -> tuple[Callable[[list[Value], list[Value]], list[Value]], list[str], list[str]]:
+    """``(equations(x, q), unknowns, parameters)`` of a committed solver's system, written from its formulas,
+    by the system's name (a generated spec's ``system``): a TDOA formulation (``9r3s:C2-C9``), one with
+    its minors squared (``5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0)``: the equations that
+    are not minors are kept, as solvers.generate squares them) or a positions formulation
+    (``4r5s:positions-receivers-orbits``). ValueError for a name of none of these forms or without a
+    program. A caller checks the program against the system it stands for (homotopy._agrees).
+    """
+    from analysis.formulations import _family, as_formulation, data_symbols
+    from analysis.parametric import parse_squared_name, square_combinations
+    from analysis.positions import positions_system
+
+    match = _POSITIONS_LABEL.match(name)
+    if match:
+        m, n, variant = int(match.group(1)), int(match.group(2)), match.group(3)
+        equations = positions_equations(m, n, variant)
+        system = positions_system(m, n, variant)
+        return equations, list(system.unknowns), list(system.parameters)
+    squared = parse_squared_name(name)
+    formulation = as_formulation(squared[0] if squared else name)
+    config = formulation.config
+    equations = tdoa_equations(formulation)
+    if squared:
+        keep = sum(_family(e) != "minors" for e in formulation.equations)
+        N = len(config.unknowns)
+        combos = square_combinations(len(formulation.equations) - keep, N - keep, squared[1])
+        equations = squared_equations(equations, keep, combos)
+    return equations, list(config.unknowns), [s.name for row in data_symbols(config) for s in row]
+
+
+def system_homotopy_tapes(name: str) -> "HomotopyTapes":
+    """The homotopy tapes of a committed solver's system by its name (:func:`system_equations`)."""
+    return homotopy_tapes(*system_equations(name))
 
 
 @dataclass(frozen=True)
@@ -567,7 +656,7 @@ def homotopy_tapes(equations: Callable[[list[Value], list[Value]], list[Value]],
 
 
 def tdoa_homotopy_tapes(formulation) -> HomotopyTapes:
-    """The homotopy tapes of a TDOA formulation (families A, B, C; ValueError for others)."""
+    """The homotopy tapes of a TDOA formulation (ValueError for a non-square one)."""
     from analysis.formulations import as_formulation, data_symbols
 
     formulation = as_formulation(formulation)
