@@ -18,8 +18,9 @@ The family of a cell m/n (N = 5 + n unknowns, M minors), stated in every output:
   5r/5s formulations).
 
 k_max is the largest k with C(M, j) <= ``SearchBound.subset_limit`` for every j <= k (all k when every
-C(M, j) is below the limit). Classes with more minors than k_max (other than all of them) are outside
-the family; the table says so per cell.
+C(M, j) is below the limit). Classes with more minors than k_max (other than all of them), and classes
+with k <= k_max minors and more than N + excess equations, are outside the family; the table states
+the bound per cell.
 
 Decisions per class (both primes, one consistent instance each; a disagreement is recomputed on two
 instances per prime and decided by the majority rule of :func:`analysis.complexity.combine`):
@@ -54,6 +55,7 @@ from .degree import PrimeDisagreement
 from .formulations import Formulation, TDOAConfig, enumerate_formulations
 from .paths import cache_dir as user_cache_dir
 from .paths import write_if_changed
+from .tables import PAPER_TABLE3, _paper_table3_numbers, _same_results, paper_reference, reduce_formulation
 
 __all__ = [
     "CellCandidates",
@@ -80,7 +82,7 @@ class SearchBound:
     all_minors: include every A/B/C subset together with all minors.
     """
 
-    subset_limit: int = 3000
+    subset_limit: int = 1500
     excess: int = 2
     all_minors: bool = True
 
@@ -116,8 +118,6 @@ class CellCandidates:
 
 def enumerate_cell(m: int, n: int, bound: SearchBound = SearchBound()) -> CellCandidates:
     """Every symmetry class of the cell's family, sorted by label (a stable order)."""
-    from .tables import reduce_formulation  # tables imports this module's users, not the other way round
-
     config = TDOAConfig(m, n)
     unknowns = config.n_unknowns
     k_max = minor_bound(config, bound)
@@ -127,7 +127,7 @@ def enumerate_cell(m: int, n: int, bound: SearchBound = SearchBound()) -> CellCa
             family = "square" if total == unknowns else "over-determined"
             for f in enumerate_formulations(config, minor_sets=k if k else "none", total=total):
                 found.setdefault(f.label, family)
-    if bound.all_minors and config.n_minors > k_max:
+    if bound.all_minors and config.n_minors:
         for f in enumerate_formulations(config, minor_sets="all"):
             found.setdefault(f.label, "all-minors")
     labels = tuple(sorted(found))
@@ -135,12 +135,18 @@ def enumerate_cell(m: int, n: int, bound: SearchBound = SearchBound()) -> CellCa
                           tuple(reduce_formulation(Formulation.parse(x)).label for x in labels))
 
 
+ENUMERATION_VERSION = "search-enumeration/1"
+"""Part of the key of a cached enumeration: bump it when :func:`enumerate_cell` changes what it lists."""
+
+
 def _cell_key(m: int, n: int, bound: SearchBound) -> str:
+    """The key of a cached enumeration: the bound, :data:`ENUMERATION_VERSION` and the source of the
+    modules that canonicalise and reduce (a changed canonical form gives a new key)."""
     here = Path(__file__).resolve().parent
     digest = hashlib.sha256()
-    for name in ("search.py", "formulations.py", "tables.py"):
+    for name in ("formulations.py", "tables.py"):
         digest.update((here / name).read_bytes())
-    digest.update(json.dumps([m, n, dataclasses.asdict(bound), ENGINE_VERSION]).encode())
+    digest.update(json.dumps([m, n, dataclasses.asdict(bound), ENGINE_VERSION, ENUMERATION_VERSION]).encode())
     return digest.hexdigest()[:20]
 
 
@@ -243,3 +249,189 @@ def candidate_rows(cell: CellCandidates, results: Mapping[str, FormulationResult
                      "cap": r.message if classify(r) in ("capped", "open") else ""})
     return rows
 
+
+
+# --------------------------------------------------------------------------------------------------
+# Driver and outputs
+# --------------------------------------------------------------------------------------------------
+
+SEARCH_PRIMES = (65521, 32749)
+SEARCH_SEEDS = (0,)
+"""One consistent instance per prime; a class whose two primes disagree is recomputed on
+:data:`ESCALATION_SEEDS` (reference/NOTES.md: a single instance can be non-generic)."""
+ESCALATION_SEEDS = (0, 1)
+
+CANDIDATE_COLUMNS = ("cell", "formulation", "family", "computed_as", "decision", "status", "degree",
+                     "saturated_degree", "independent_equations", "tangent_dim", "instance_degrees", "cap")
+CAPPED_COLUMNS = ("cell", "formulation", "computed_as", "decision", "status", "cap")
+
+
+@dataclass(frozen=True)
+class SearchLimits:
+    """Per-class caps: wall-clock seconds, F4 matrix cells (rows x cols), F4 working memory (bytes)."""
+
+    timeout: float = 60.0
+    max_matrix_cells: int = 20_000_000
+    max_memory: int = 2 << 30
+
+
+@dataclass
+class SearchSummary:
+    """What :func:`run_search` found: one row per cell, one per class, and the capped / open classes."""
+
+    cells: list[dict]
+    candidates: list[dict]
+    capped: list[dict]
+    paths: list[Path]
+    seconds: float
+    computed: int
+    cached: int
+
+
+def _paper_entries() -> dict[tuple[int, int], str]:
+    numbers = _paper_table3_numbers(paper_reference())
+    return {key: str(numbers.get(key, mark)) for key, mark in PAPER_TABLE3.items()}
+
+
+def run_search(cells: Sequence[tuple[int, int]], bound: SearchBound = SearchBound(),
+               limits: SearchLimits = SearchLimits(), *, jobs: int = 1, executor=None, use_cache: bool = True,
+               cache_dir: Path | str | None = None, progress: bool = True,
+               out_dir: Path | str | None = None) -> SearchSummary:
+    """Enumerate, compute and tabulate the given cells (module docstring); writes the outputs when
+    ``out_dir`` is given (``tables/search.{csv,md}``, ``search_candidates.csv``, ``search_capped.csv``,
+    ``search.meta.json``)."""
+    import sys
+    import time
+
+    from .complexity import sweep
+    from .f4 import F4Options
+
+    t0 = time.perf_counter()
+    cells = sorted(set(cells))  # the tables' rows in Table 3 order whatever order the cells were given in
+    cache = Path(cache_dir) if cache_dir is not None else user_cache_dir("search")
+    plans = []
+    for m, n in cells:
+        plan = cached_cell(m, n, bound, use_cache)
+        if progress:
+            print(f"search: cell {m}/{n}: {len(plan.labels)} classes (k_max {plan.k_max})", file=sys.stderr, flush=True)
+        plans.append(plan)
+    labels = list(dict.fromkeys(x for plan in plans for x in plan.computed_as))
+    options = F4Options(max_matrix_cells=limits.max_matrix_cells, max_memory=limits.max_memory)
+    cached: set[str] = set()
+    common = dict(options=options, jobs=jobs, cache_dir=cache, use_cache=use_cache, progress=progress,
+                  timeout=limits.timeout, positive_dimensional_cells=0, executor=executor,
+                  on_result=lambda r, from_cache: cached.add(r.label) if from_cache else None)
+    results = {r.label: r for r in sweep(labels, primes=SEARCH_PRIMES, seeds=SEARCH_SEEDS,
+                                          phase="search: two primes", **common)}
+    disagree = [x for x, r in results.items() if r.status == "disagree"]
+    if disagree:
+        for r in sweep(disagree, primes=SEARCH_PRIMES, seeds=ESCALATION_SEEDS,
+                       phase="search: disagreements on two seeds per prime", **common):
+            results[r.label] = r
+    paper = _paper_entries()
+    rows = [summarise_cell(plan, results, paper.get((plan.m, plan.n), "")) for plan in plans]
+    candidates = [row for plan in plans for row in candidate_rows(plan, results)]
+    capped = [{k: row[k] for k in CAPPED_COLUMNS} for row in candidates if row["decision"] in ("capped", "open")]
+    seconds = time.perf_counter() - t0
+    summary = SearchSummary(rows, candidates, capped, [], seconds, len(results) - len(cached), len(cached))
+    if out_dir is not None:
+        meta = _meta(bound, limits, cells, plans, summary, jobs, executor)
+        summary.paths = write_search_outputs(Path(out_dir), summary, bound, limits, meta)
+    return summary
+
+
+VOLATILE_META = ("date", "commit", "worktree_dirty", "versions", "machine", "timings", "executor")
+
+
+def _meta(bound: SearchBound, limits: SearchLimits, cells, plans, summary: SearchSummary, jobs, executor) -> dict:
+    from .provenance import run_facts
+
+    facts = run_facts()
+    return {
+        "generated_by": "scripts/search_formulations.py (analysis.search.run_search)",
+        "date": facts["date"],
+        "commit": facts["commit"],
+        "worktree_dirty": facts["worktree_dirty"],
+        "engine_version": ENGINE_VERSION,
+        "cells": [f"{m}/{n}" for m, n in cells],
+        "bound": {**dataclasses.asdict(bound), "text": bound.describe(),
+                  "k_max": {plan.cell: plan.k_max for plan in plans}},
+        "limits": dataclasses.asdict(limits),
+        "primes": list(SEARCH_PRIMES), "seeds": list(SEARCH_SEEDS), "escalation_seeds": list(ESCALATION_SEEDS),
+        "instances": "one consistent instance per (prime, seed): sample_gf_instance(config, prime, seed); a class "
+                     "whose primes disagree is recomputed on the escalation seeds (majority rule, every prime "
+                     "must give the majority)",
+        "decisions": "singular: Jacobian rank-deficient at the known root on both primes (no Groebner basis); "
+                     "square: independent equations (A + B + C + minors' Jacobian rank) = unknowns, full rank",
+        "executor": type(executor).__name__ if executor is not None else f"LocalPool(jobs={jobs})",
+        "versions": facts["versions"],
+        "machine": facts["machine"],
+        "timings": {"wall_seconds": round(summary.seconds, 1), "classes_computed": summary.computed,
+                    "classes_from_cache": summary.cached,
+                    "worker_seconds": round(sum(r["seconds"] for r in summary.cells), 1)},
+    }
+
+
+def _rows_csv(rows: Sequence[Mapping], columns: Sequence[str]) -> str:
+    import csv
+    import io
+
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow(["" if row[c] is None else row[c] for c in columns])
+    return buf.getvalue()
+
+
+def search_markdown(summary: SearchSummary, bound: SearchBound, limits: SearchLimits, header: str) -> str:
+    """``tables/search.md``: the bound, the per-cell table and what is open."""
+    cols = ("cell", "paper", "k_max", "candidates", "computed", "capped", "open", "complete", "best_formulation",
+            "best_degree", "best_saturated_degree", "seconds")
+    lines = [f"<!-- {header} -->", "", "**Exhaustive search of the Table 3 cells up to relabeling symmetry** "
+             f"(within the bound: {bound.describe()}; caps per class: {limits.timeout:g} s, "
+             f"{limits.max_matrix_cells} F4 matrix cells, {limits.max_memory >> 20} MiB F4 working memory; "
+             f"each class on primes {' and '.join(map(str, SEARCH_PRIMES))}). "
+             "best: smallest |B| (as generated; saturated by det H beside it) over the square zero-dimensional "
+             "classes; complete: computed + capped = candidates.", "",
+             "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for row in summary.cells:
+        lines.append("| " + " | ".join(str(row[c]) for c in cols) + " |")
+    lines.append("")
+    notes = []
+    for row in summary.cells:
+        left = row["candidates"] - row["computed"]
+        if left:
+            notes.append(f"* {row['cell']}: {left} of {row['candidates']} classes without a decision "
+                         f"({row['capped']} capped, {row['open']} open): listed in search_capped.csv.")
+        if row["candidates"] == 0:
+            notes.append(f"* {row['cell']}: no subset of its equations has {5 + int(row['cell'].split('/')[1])} "
+                         "equations (underdetermined in this formulation family).")
+    if notes:
+        lines += ["Open:", ""] + notes + [""]
+    return "\n".join(lines)
+
+
+def write_search_outputs(out_dir: Path, summary: SearchSummary, bound: SearchBound, limits: SearchLimits,
+                         meta: dict) -> list[Path]:
+    """Write the search tables; a file whose results did not change is left alone (only timings or the
+    header would differ), so a rerun from the cache keeps a checkout clean."""
+    from .paths import same_json_apart_from
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    header = (f"generated by scripts/search_formulations.py; commit {meta['commit'][:12] or 'unknown'}"
+              f"{' (dirty worktree)' if meta['worktree_dirty'] else ''}, {meta['date']}; see search.meta.json")
+    files = {
+        "search.csv": _rows_csv(summary.cells, SEARCH_COLUMNS),
+        "search_candidates.csv": _rows_csv(summary.candidates, CANDIDATE_COLUMNS),
+        "search_capped.csv": _rows_csv(summary.capped, CAPPED_COLUMNS),
+        "search.md": search_markdown(summary, bound, limits, header),
+    }
+    paths = []
+    for name, text in files.items():
+        write_if_changed(out_dir / name, text, _same_results(name))
+        paths.append(out_dir / name)
+    text = json.dumps(meta, indent=2) + "\n"
+    write_if_changed(out_dir / "search.meta.json", text, same_json_apart_from(VOLATILE_META))
+    paths.append(out_dir / "search.meta.json")
+    return paths
