@@ -201,7 +201,7 @@ def is_square(result: FormulationResult) -> bool:
     return result.independent_equations == result.n_unknowns and result.tangent_dim == 0
 
 
-SEARCH_COLUMNS = ("cell", "paper", "k_max", "candidates", "computed", "capped", "open", "complete",
+SEARCH_COLUMNS = ("cell", "config", "paper", "k_max", "candidates", "computed", "capped", "open", "complete",
                   "zero_dimensional", "square_zero_dimensional", "singular", "positive_dimensional",
                   "best_formulation", "best_degree", "best_saturated_degree", "best_computed_as", "seconds")
 
@@ -226,7 +226,7 @@ def summarise_cell(cell: CellCandidates, results: Mapping[str, FormulationResult
         seconds += results[target].seconds
     computed = counts["zero-dimensional"] + counts["singular"] + counts["positive-dimensional"]
     return {
-        "cell": cell.cell, "paper": paper, "k_max": cell.k_max, "candidates": len(cell.labels),
+        "cell": cell.cell, "config": f"{cell.m}r{cell.n}s", "paper": paper, "k_max": cell.k_max, "candidates": len(cell.labels),
         "computed": computed, "capped": counts["capped"], "open": counts["open"],
         "complete": "yes" if computed + counts["capped"] == len(cell.labels) else "no",
         "zero_dimensional": counts["zero-dimensional"], "square_zero_dimensional": square,
