@@ -219,7 +219,7 @@ def summarise_cell(cell: CellCandidates, results: Mapping[str, FormulationResult
         if kind == "zero-dimensional" and is_square(r):
             square += 1
             degree = two_prime_degree(r)
-            key = (degree, label)
+            key = (degree, r.n_equations, label)  # at equal |B| the smallest system, then the label
             if best is None or key < best[0]:
                 best = (key, label, r)
     for target in dict.fromkeys(cell.computed_as):
@@ -363,7 +363,7 @@ def _meta(bound: SearchBound, limits: SearchLimits, cells, plans, summary: Searc
                      "must give the majority)",
         "decisions": "singular: Jacobian rank-deficient at the known root on both primes (no Groebner basis); "
                      "square: independent equations (A + B + C + minors' Jacobian rank) = unknowns, full rank",
-        "executor": type(executor).__name__ if executor is not None else f"LocalPool(jobs={jobs})",
+        "executor": repr(executor) if executor is not None else f"LocalPool(jobs={jobs})",
         "versions": facts["versions"],
         "machine": facts["machine"],
         "timings": {"wall_seconds": round(summary.seconds, 1), "classes_computed": summary.computed,
