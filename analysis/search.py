@@ -404,11 +404,15 @@ def search_markdown(summary: SearchSummary, bound: SearchBound, limits: SearchLi
         if left:
             notes.append(f"* {row['cell']}: {left} of {row['candidates']} classes without a decision "
                          f"({row['capped']} capped, {row['open']} open): listed in search_capped.csv.")
+        if row["candidates"] and row["best_degree"] == "" and not left:
+            notes.append(f"* {row['cell']}: none of its {row['candidates']} classes is a square zero-dimensional "
+                         f"system ({row['singular']} singular at the known root, {row['positive_dimensional']} "
+                         f"positive-dimensional, {row['zero_dimensional']} zero-dimensional but over-determined).")
         if row["candidates"] == 0:
             notes.append(f"* {row['cell']}: no subset of its equations has {5 + int(row['cell'].split('/')[1])} "
                          "equations (underdetermined in this formulation family).")
     if notes:
-        lines += ["Open:", ""] + notes + [""]
+        lines += ["Per cell:", ""] + notes + [""]
     return "\n".join(lines)
 
 
