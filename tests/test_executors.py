@@ -78,3 +78,11 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path):
     executor = DaskExecutor("tcp://127.0.0.1:9", connect_timeout=2)
     with pytest.raises(ExecutorError, match="cannot reach a Dask scheduler"):
         sweep([F9], seeds=(0,), timeout=60, cache_dir=tmp_path, progress=False, executor=executor)
+
+
+def test_the_cli_refuses_a_bad_dask_address_in_one_line(capsys):
+    from solvers.cli import main
+
+    assert main(["tables", "--dask", "tcp://nohost"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--dask 'tcp://nohost' is not a scheduler address" in err[0]
