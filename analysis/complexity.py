@@ -609,7 +609,7 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
           jobs: int = 2, cache_dir: Path | str | None = None, use_cache: bool = True, progress: bool = True,
           timeout: float | None = 600.0, positive_dimensional_cells: int = POSITIVE_DIMENSIONAL_CELLS,
           on_result: Callable[[FormulationResult, bool], None] | None = None,
-          phase: str = "complexity sweep") -> list[FormulationResult]:
+          phase: str = "complexity sweep", executor=None) -> list[FormulationResult]:
     """:func:`compute_formulation` for many formulations, in parallel, cached on disk.
 
     Parameters
@@ -626,6 +626,8 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
         result has status "timeout" (the instances finished before it are kept).
     on_result : called as ``on_result(result, from_cache)`` with each result as it becomes known (cached
         ones first).
+    executor : where to compute (:mod:`analysis.executors`): default a local pool of ``jobs`` processes;
+        a :class:`analysis.executors.DaskExecutor` runs the same tasks on a Dask cluster.
 
     Returns the results in input order.
     """
@@ -657,13 +659,11 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
         else:
             todo.append(label)
     try:
-        if todo and jobs <= 1 and timeout is None:
-            for label in todo:
-                finish(compute_formulation(label, primes, seeds, options, saturate,
-                                           positive_dimensional_cells=positive_dimensional_cells))
-        elif todo:
-            _run_pool(todo, primes, seeds, options, saturate, max(1, jobs), timeout, positive_dimensional_cells,
-                      finish)
+        if todo:
+            from .executors import LocalPool, SweepTask  # executors builds on this module
+
+            task = SweepTask(primes, seeds, dataclasses.asdict(options), saturate, positive_dimensional_cells, timeout)
+            (executor or LocalPool(jobs)).run(todo, task, finish)
     finally:
         bar.close()
     return [results[label] for label in labels]

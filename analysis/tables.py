@@ -34,15 +34,11 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import datetime as _dt
 import hashlib
 import io
 import json
 import math
-import os
-import platform
 import re
-import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,13 +53,13 @@ from .complexity import (
     DEFAULT_SEEDS,
     ENGINE_VERSION,
     FormulationResult,
-    repo_root,
     root_ranks,
     sweep,
 )
 from .f4 import F4Options
 from .paths import DATA_DIR, HEADER_PREFIXES, default_output_dir, same_json_apart_from, write_if_changed
 from .paths import cache_dir as user_cache_dir
+from .provenance import run_facts
 from .formulations import Formulation, TDOAConfig, canonical_form, enumerate_formulations
 
 __all__ = [
@@ -496,7 +492,7 @@ def build_table3(plan: TablePlan, results: Mapping[str, FormulationResult],
     numbers = _paper_table3_numbers(ref)
     plans = {(c.m, c.n): c for c in plan.cells}
     rows = []
-    for cell in plan.cells:
+    for cell in sorted(plan.cells, key=lambda c: (c.m, c.n)):  # Table 3 order, whatever order --cells gave
         key = (cell.m, cell.n)
         paper_entry = str(numbers.get(key, PAPER_TABLE3[key]))
         best, own = _cell_best(cell, plans, results)
@@ -661,24 +657,11 @@ def _grid(table3: pd.DataFrame, tex: bool) -> str:
 
 def _provenance(primes, seeds, options: F4Options, timeout, budget: Budget, mode: str,
                 seconds: float, computed: int, cached: int, jobs: int) -> dict:
-    root = repo_root()
-
-    def git(*args: str) -> str:
-        try:
-            return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=10).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return ""
-
-    versions = {"python": platform.python_version()}
-    for module in ("numpy", "flint", "sympy", "pandas", "tqdm"):
-        try:
-            versions[module] = getattr(__import__(module), "__version__", "?")
-        except ImportError:
-            versions[module] = None
+    facts = run_facts(("numpy", "flint", "sympy", "pandas", "tqdm"))
     return {
-        "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
-        "commit": git("rev-parse", "HEAD"),
-        "worktree_dirty": bool(git("status", "--porcelain")),
+        "date": facts["date"],
+        "commit": facts["commit"],
+        "worktree_dirty": facts["worktree_dirty"],
         "engine_version": ENGINE_VERSION,
         "mode": mode,
         "primes": list(primes),
@@ -689,8 +672,8 @@ def _provenance(primes, seeds, options: F4Options, timeout, budget: Budget, mode
         "timeout_seconds": timeout,
         "budget": dataclasses.asdict(budget),
         "jobs": jobs,
-        "versions": versions,
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        "versions": facts["versions"],
+        "machine": facts["machine"],
         "timings": {"wall_seconds": round(seconds, 1), "formulations_computed": computed,
                     "formulations_from_cache": cached},
     }
@@ -856,7 +839,7 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
                 progress: bool = True, timeout: float | None = 300.0,
                 max_matrix_cells: int = DEFAULT_CELLS, primes: Sequence[int] = DEFAULT_PRIMES,
                 seeds: Sequence[int] = DEFAULT_SEEDS, budget: Budget | None = None,
-                cache_dir: Path | str | None = None) -> TablesSummary:
+                cache_dir: Path | str | None = None, executor=None) -> TablesSummary:
     """Compute and write Tables 2 and 3 (and the full list of formulations) with provenance.
 
     Parameters
@@ -871,6 +854,7 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     timeout, max_matrix_cells : per-formulation limits (wall-clock seconds, F4 matrix rows*cols).
     primes, seeds : instances per formulation.
     budget : override the budget.
+    executor : where the sweep computes (:mod:`analysis.executors`; default a local pool of ``jobs``).
 
     Returns a :class:`TablesSummary` (``.report()`` prints the comparison with the paper).
     """
@@ -891,7 +875,7 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
               "secondary": "sweep 2/2: Table 3 cells marked X or *"}
     for part, limit in (("primary", timeout), ("secondary", other_timeout)):
         for r in sweep(plan.labels(part), primes=primes, seeds=seeds, options=options, jobs=jobs,
-                       cache_dir=cache_dir, use_cache=use_cache, progress=progress, timeout=limit,
+                       cache_dir=cache_dir, use_cache=use_cache, progress=progress, timeout=limit, executor=executor,
                        on_result=lambda r, cached: from_cache.add(r.label) if cached else None, phase=phases[part]):
             results[r.label] = r
     ref = paper_reference()

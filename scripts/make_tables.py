@@ -7,7 +7,7 @@ number beside the paper's. A quick run or a run over some cells writes to the us
 unless --out-dir is given, so the full tables are never overwritten by a partial run.
 
 Usage: python scripts/make_tables.py [--quick] [--jobs 2] [--no-cache] [--cells 6/4,5/5]
-       [--timeout 300] [--max-cells 60000000] [--out-dir DIR] [--no-progress]
+       [--timeout 300] [--max-cells 60000000] [--out-dir DIR] [--dask ADDRESS|local] [--no-progress]
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from analysis.complexity import DEFAULT_CELLS  # noqa: E402  (after the thread settings)
+from analysis.executors import make_executor  # noqa: E402
 from analysis.tables import make_tables  # noqa: E402
 
 
@@ -40,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--max-cells", type=int, default=DEFAULT_CELLS,
                         help=f"cap on rows*cols of an F4 matrix (default {DEFAULT_CELLS})")
     parser.add_argument("--out-dir", type=Path, help="output directory (default tables/ for a full run)")
+    parser.add_argument("--dask", metavar="ADDRESS",
+                        help="compute on a Dask scheduler at ADDRESS, or 'local' for a LocalCluster (--jobs threads)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     return parser
 
@@ -49,8 +52,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         summary = make_tables(quick=args.quick, jobs=args.jobs, use_cache=not args.no_cache, cells=args.cells,
                               out_dir=args.out_dir, progress=not args.no_progress, timeout=args.timeout,
-                              max_matrix_cells=args.max_cells)
-    except ValueError as e:
+                              max_matrix_cells=args.max_cells, executor=make_executor(args.dask, args.jobs))
+    except ValueError as e:  # ExecutorError (a bad --dask address) is a ValueError
         print(f"error: {e}", file=sys.stderr)
         return 2
     print(summary.report())

@@ -446,21 +446,43 @@ def _add_tables(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help=f"Table 2 and two formulations per cell, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--no-cache", action="store_true", help="recompute instead of reading the cache")
+    _add_dask_option(p)
     _add_output_options(p)
     p.set_defaults(func=cmd_tables)
 
 
-def _run_tables(quick: bool, jobs: int, out_dir, use_cache: bool = True) -> None:
+def _add_dask_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dask", metavar="ADDRESS",
+                   help="compute the sweep on a Dask cluster: a scheduler address (tcp://host:8786) or 'local' "
+                   "(a LocalCluster here, --jobs threads); needs pip install -e \".[dask]\"")
+
+
+def _executor(args: argparse.Namespace):
+    """The sweep's executor for --dask / --jobs (a bad --dask address is a one-line error)."""
+    from analysis.executors import ExecutorError, make_executor
+
+    if args.jobs < 1:
+        raise UserError("--jobs must be at least 1")
+    try:
+        return make_executor(getattr(args, "dask", None), args.jobs)
+    except ExecutorError as e:
+        raise UserError(str(e)) from None
+
+
+def _run_tables(quick: bool, jobs: int, out_dir, use_cache: bool = True, executor=None) -> None:
+    from analysis.executors import ExecutorError
     from analysis.tables import make_tables
 
-    summary = make_tables(quick=quick, jobs=jobs, use_cache=use_cache, out_dir=out_dir)
+    try:
+        summary = make_tables(quick=quick, jobs=jobs, use_cache=use_cache, out_dir=out_dir, executor=executor)
+    except ExecutorError as e:
+        raise UserError(str(e)) from None
     print(summary.report())
 
 
 def cmd_tables(args: argparse.Namespace) -> int:
-    if args.jobs < 1:
-        raise UserError("--jobs must be at least 1")
-    _run_tables(args.quick, args.jobs, _output_dir(args), use_cache=not args.no_cache)
+    executor = _executor(args)
+    _run_tables(args.quick, args.jobs, _output_dir(args), use_cache=not args.no_cache, executor=executor)
     return 0
 
 
@@ -681,6 +703,7 @@ def _add_reproduce(sub: argparse._SubParsersAction) -> None:
                        f"the {QUICK_DIR}/ subdirectory.")
     p.add_argument("--quick", action="store_true", help=f"a few minutes: fewer formulations and trials, into {QUICK_DIR}/")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    _add_dask_option(p)
     _add_output_options(p)
     p.set_defaults(func=cmd_reproduce)
 
@@ -688,14 +711,13 @@ def _add_reproduce(sub: argparse._SubParsersAction) -> None:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    if args.jobs < 1:
-        raise UserError("--jobs must be at least 1")
+    executor = _executor(args)
     out = _output_dir(args)
     from solvers.experiments import reproduce  # after _output_dir: its cache directory comes from the environment
 
     t0 = time.perf_counter()
     print("== Tables 2 and 3: complexity sweep ==", flush=True)
-    _run_tables(args.quick, args.jobs, out)
+    _run_tables(args.quick, args.jobs, out, executor=executor)
     print("== Table 4 and Figures 1, 2: synthetic experiments ==", flush=True)
     reproduce(quick=args.quick, jobs=args.jobs, tables_dir=out)
     print(f"reproduce: done in {time.perf_counter() - t0:.0f} s; outputs under {out}")
