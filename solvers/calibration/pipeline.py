@@ -276,12 +276,13 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
     if passed and sigma is None and st.dof < opts.min_dof_for_sigma:
         # little redundancy: the linearised statistic of a fit pulled by a gross error understates it
         key = ((work & placed).tobytes(), float(f"{st.ssr:.9e}"))
-        if memo is None or key not in memo:
+        verdict = memo.get(key) if memo is not None else None
+        if verdict is None:
             found = _leave_one_out(F, work, [(ls.R, ls.S, ls.O), (R, S, O)], work & placed, st, opts)
             verdict = found is None or found[0] <= found[1]
             if memo is not None:
                 memo[key] = verdict
-        passed = verdict if memo is None else memo[key]
+        passed = verdict
     scale = sigma
     if sigma is None and st is not None and st.dof >= opts.min_dof_for_sigma:
         # (below that redundancy a robust scale means nothing, and only classic snooping is done)
@@ -349,7 +350,7 @@ def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions, notes
                           hypothesis: tuple | None = None):
     """Sigma unknown, little redundancy: reject the entry whose removal explains the misfit best while its
     exact externally studentised residual (`_leave_one_out`) exceeds the Bonferroni bound (alpha over
-    the testable entries) and the fit keeps at least 2 degrees of freedom; when other entries explain it
+    the entries) and the fit keeps at least 2 degrees of freedom; when other entries explain it
     as well and all belong to one node, the error cannot be located among them and all of them are
     rejected (said in `notes`); equally good entries of different nodes stop the snooping.
     Returns (R, S, O, inl, converged)."""
