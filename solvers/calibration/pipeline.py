@@ -38,6 +38,12 @@ def _failed(F, message, t0, seed, search: _Search | None = None, warnings=()) ->
     )
 
 
+def _data_scale(F, mask) -> float:
+    """Largest |F| over the entries of mask (1 when there are none or all are 0): the unit of the floors."""
+    values = np.abs(F[mask])
+    return float(values.max()) if values.size and values.max() > 0 else 1.0
+
+
 def _check_input(F) -> np.ndarray:
     try:
         arr = np.array(F, dtype=float)
@@ -86,9 +92,7 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
         other = _calibrate_once(F, sigma, seed2, opts, t0)
         if other.status != "failed" and _differs(result, other):
-            finite = np.abs(F[np.isfinite(F)])
-            floor = 1e-9 * (float(finite.max()) if finite.size and finite.max() > 0 else 1.0)
-            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, floor)
+            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, 1e-9 * _data_scale(F, np.isfinite(F)))
             unusable = ("failed", "unconverged", "inconsistent")
             key_r = (result.status in unusable, cost_r, -result.inliers.sum())
             key_o = (other.status in unusable, cost_o, -other.inliers.sum())
@@ -447,7 +451,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
                        f"receivers and {int(cols_ok.sum())} transmitters for {max(n_params, 0)} unknowns{hint}",
                        t0, seed, warnings=warnings)
 
-    data_scale = float(np.max(np.abs(F[work]))) or 1.0
+    data_scale = _data_scale(F, work)
     floor = 1e-9 * data_scale
     thr = None if sigma is None else max(opts.threshold_sigmas * sigma, floor)
 
