@@ -131,6 +131,8 @@ def _positions_calibration(system, block: np.ndarray, x: np.ndarray, tol: float 
 
 #: The first unknowns of every (H, b, o) formulation; the offsets o_1..o_n follow.
 HBO_UNKNOWNS = ("h11", "h12", "h22", "b1", "b2")
+#: The same in 3D: H's upper triangle, then b.
+HBO_UNKNOWNS_3D = ("h11", "h12", "h13", "h22", "h23", "h33", "b1", "b2", "b3")
 
 
 def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration]:
@@ -138,11 +140,12 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
 
     module: a generated solver module (``SYSTEM``, ``CONFIG``, ``UNKNOWNS``, ``solve``), whether
     committed or written by ``solvers.generate.generate``; F: its (m, n) = ``CONFIG`` data; roots: its
-    candidates (default ``module.solve(F)``). (H, b, o) roots go through :func:`solvers.recovery.recover`,
-    positions roots (4r/5s) through :func:`analysis.positions.network_from_root`. Returns the real,
-    geometrically valid calibrations sorted by RMS residual (best first), in the gauge r_1 = 0,
-    r_2 = (r_2x > 0, 0); a reflection of the plane is a second solution the data cannot tell apart,
-    one representative is returned. Nothing is refined (:func:`solve_network` and
+    candidates (default ``module.solve(F)``). (H, b, o) roots, 2D or 3D, go through
+    :func:`solvers.recovery.recover`, positions roots (4r/5s) through
+    :func:`analysis.positions.network_from_root`. Returns the real, geometrically valid calibrations
+    sorted by RMS residual (best first), in the gauge r_1 = 0, r_2 = (r_2x > 0, 0) (3D: r_2 =
+    (r_2x > 0, 0, 0), r_3 = (r_3x, r_3y > 0, 0)); a reflection of the plane (3D: of space in the
+    plane of r_1, r_2, r_3) is a second solution the data cannot tell apart, one representative is returned. Nothing is refined (:func:`solve_network` and
     :func:`solvers.calibration.calibrate` do). Raises ValueError for a module whose unknowns are not a
     TDOA formulation's, or for data of another shape.
     """
@@ -152,16 +155,19 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
         raise ValueError(f"{module.__name__}: data of shape {F.shape} given; the solver needs ({m}, {n})")
     roots = module.solve(F) if roots is None else np.asarray(roots)
     system = None
+    offsets = tuple(f"o{j}" for j in range(1, n + 1))
     if "positions-" in module.SYSTEM:
         from analysis.positions import positions_system
 
         system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
-    elif tuple(module.UNKNOWNS) != HBO_UNKNOWNS + tuple(f"o{j}" for j in range(1, n + 1)):
+    elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets):
         raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b, o) nor a positions formulation's")
+    h, k = (6, 3) if tuple(module.UNKNOWNS[:9]) == HBO_UNKNOWNS_3D else (3, 2)
     out = []
     with np.errstate(all="ignore"):
         for x in roots[np.all(np.isfinite(roots), axis=1)]:
-            cal = _positions_calibration(system, F, x) if system is not None else recover(F, x[:3], x[3:5], x[5:])
+            cal = (_positions_calibration(system, F, x) if system is not None
+                   else recover(F, x[:h], x[h:h + k], x[h + k:]))
             if cal is not None:
                 out.append(cal)
     return sorted(out, key=lambda c: c.residual)

@@ -503,12 +503,13 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
         description="Certify the root count over GF(p) (two primes, two seeds), build the solver and write "
         "<name>_<method><size>.json (spec) and .py (module with solve(F)) into DIR, and nowhere else. TARGET is "
         "a committed configuration (6r4s: eigenvalue pencil; 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s: parameter "
-        "homotopy; 4r6s is solved by the 4r5s solver, the sixth transmitter filtering; the committed copies in "
+        "homotopy; 4r6s is solved by the 4r5s solver, the sixth transmitter filtering; 9r5s3d: the 3D offset kernel "
+        "of 9r5s-tdoa3d, one root; the committed copies in "
         "solvers/generated/ are written by scripts/generate_solvers.py), a TDOA formulation label such as "
         "7r3s:B2,B3,C2-C7, or a FILE with a parametric system (lines 'unknowns: x, y', 'parameters: a, b', "
         "optional 'nonzero: x', then 'equations:' and one polynomial per line). A system whose coefficients are "
         "not linear in its parameters needs --start.")
-    p.add_argument("target", help="configuration (6r4s, 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s, 4r6s), "
+    p.add_argument("target", help="configuration (6r4s, 9r3s, 8r3s, 7r3s, 6r3s, 5r4s, 5r5s, 4r5s, 4r6s, 9r5s3d), "
                    "formulation label or system FILE")
     p.add_argument("--out", metavar="DIR", required=True, help="output directory (created if needed)")
     p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")

@@ -36,7 +36,7 @@ from .methods import homotopy
 from .methods.spec import load_spec, spec_sha256
 
 __all__ = ["MODULE_TEMPLATE", "METHOD_PARTS", "POLISH_ITERATIONS", "emit_module", "factored_equations", "read_spec",
-           "module_name", "pencil_coefficients", "scale_powers"]
+           "module_name", "offset_kernel_coefficients", "pencil_coefficients", "scale_powers"]
 
 #: Default Gauss-Newton polishing steps on the input equations of a pencil solver. The homotopy
 #: endpoints already get Newton steps on the exact system, so they are not polished again.
@@ -103,9 +103,12 @@ class ModuleParts:
 
 
 def module_name(name: str, spec: dict) -> str:
-    """File stem: the solver's name, method and size, e.g. ``tdoa_6r4s_pencil37``, ``tdoa_9r3s_homotopy75``."""
+    """File stem: the solver's name, method and size, e.g. ``tdoa_6r4s_pencil37``, ``tdoa_9r3s_homotopy75``,
+    ``tdoa_9r5s3d_kernel1`` (size: the pencil's rows, the homotopy's paths, the offset kernel's roots)."""
     if spec["kind"] == "curve-pencil":
         return f"{name}_pencil{spec['size'][0]}"
+    if spec["kind"] == "offset-kernel":
+        return f"{name}_kernel{spec['degree']}"
     return f"{name}_homotopy{spec['paths']}"
 
 
@@ -236,8 +239,43 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
                f"    return solve_batch(np.asarray(F)[None])[0]"))
 
 
+def offset_kernel_coefficients(spec: dict) -> str:
+    """The coefficient function of an offset-kernel module: the compaction pieces its kernel starts from."""
+    m, n = spec["config"]
+    return (f"def coefficients(F):\n"
+            f'    """Compaction pieces (c, alpha, beta, g) of data F (..., {m}, {n}): D~ = c + alpha o_1 + beta o_(j+1)\n'
+            f'    (the offset kernel computes them from the normalised data itself; here for inspection)."""\n'
+            f"    return _method.compaction_pieces(np.asarray(F, dtype=float))")
+
+
+def _offset_kernel_parts(spec: dict) -> ModuleParts:
+    m, n = spec["config"]
+    nvars = len(spec["unknowns"])
+    cert = spec["certified"]
+    return ModuleParts(
+        summary=f"offset kernel, {spec['degree']} root certified over GF(p) ({', '.join(map(str, cert['primes']))}).",
+        description=(f"Offsets from the one-dimensional kernel of [c | alpha | beta] ({m - 1} x 9), (H, b) on the line of\n"
+                     f"C2-C{m} solutions where A and B2-B4 have their common root (solvers.methods.offset_kernel).\n"
+                     f"Positions: solvers.api.calibrations (3D gauge r_1 = 0, r_2 on the x axis, r_3 in the xy plane)."),
+        rows=int(spec["degree"]), pshape=(m, n), config=(m, n),
+        imports="import json\nimport os\n\nimport numpy as np\n\nfrom solvers.methods import offset_kernel as _method",
+        method_constants=f"DIM = {spec['dim']}\nSIZE = ({spec['size'][0]}, {spec['size'][1]})",
+        scale_powers=scale_powers(spec["unknowns"]),
+        load=("        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), SPEC_FILE), encoding=\"utf-8\") as fh:\n"
+              "            _SOLVER.append(_method.OffsetKernelSolver(json.load(fh)))"),
+        solve=(f"def solve_batch(F):\n"
+               f'    """Candidate roots for a batch of data F (..., {m}, {n}) -> (..., 1, {nvars}) complex."""\n'
+               f"    return _method.solve_scaled(solver(), F, SCALE_POWERS)\n\n\n"
+               f"def solve(F):\n"
+               f'    """Candidate roots (1, {nvars}) for one data matrix F ({m}, {n})."""\n'
+               f"    F = np.asarray(F, dtype=float)\n"
+               f"    if F.ndim != 2:\n"
+               f"        raise ValueError(f\"solve takes one ({m}, {n}) matrix; use solve_batch for {{F.shape}}\")\n"
+               f"    return solve_batch(F)"))
+
+
 #: Method (spec kind) -> the text it puts into the template's holes.
-METHOD_PARTS = {"curve-pencil": _pencil_parts, "homotopy": _homotopy_parts}
+METHOD_PARTS = {"curve-pencil": _pencil_parts, "homotopy": _homotopy_parts, "offset-kernel": _offset_kernel_parts}
 
 
 def read_spec(spec_text: str) -> dict:
@@ -261,7 +299,7 @@ def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str)
     unknowns = tuple(spec["unknowns"])
     return MODULE_TEMPLATE.format(
         method=kind, spec_file=spec_file, command=command, spec_sha=spec_sha256(spec_text),
-        system=spec["formulation"] if kind == "curve-pencil" else spec["system"],
+        system=spec["system"] if kind == "homotopy" else spec["formulation"],
         summary=parts.summary, description=parts.description, rows=parts.rows, nvars=len(unknowns),
         unknown_list=", ".join(unknowns), pshape=", ".join(map(str, parts.pshape)),
         imports=parts.imports, config=repr(parts.config), unknowns=repr(unknowns), degree=int(spec["degree"]),

@@ -9,7 +9,9 @@ directory ``out``, and nowhere else. Methods are strategies behind one interface
 
 * ``curve-pencil`` (6r4s, paper Section 3.2): the eigenvalue construction of :mod:`solvers.methods.pencil`;
 * ``homotopy``: parameter homotopy (:mod:`solvers.methods.homotopy`), the general method: every
-  square system with a certified root count gets one.
+  square system with a certified root count gets one;
+* ``offset-kernel`` (3D TDOA mr/5s, m >= 9, one solution): the linear construction of
+  :mod:`solvers.methods.offset_kernel`.
 
 Every homotopy solver's root count is certified over GF(p) first (two primes, two seeds, known root
 checked); monodromy must reach exactly that count. Its start pair (generic complex parameters with
@@ -38,7 +40,7 @@ from analysis.formulations import Formulation
 from analysis.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
 
 from . import codegen
-from .methods import homotopy, pencil, tracker
+from .methods import homotopy, offset_kernel, pencil, tracker
 from .methods.spec import METHODS as METHOD_NAMES
 from .methods.spec import TemplateOptions, dump_spec, solver_method
 
@@ -58,6 +60,7 @@ SOLVERS = {
     "5r4s": "5r4s:A,B2,B3,C2-C5,minors",
     "5r5s": "5r5s:B2,B3,C2-C5,minors",
     "4r5s": "4r5s:positions-receivers-orbits",
+    "9r5s3d": offset_kernel.offset_kernel_formulation(9),
 }
 
 #: Configurations solved in a positions formulation (analysis.positions) instead of (H, b, o).
@@ -228,22 +231,33 @@ class Method(Protocol):
     def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built: ...
 
 
-class PencilMethod:
-    """The 6r4s eigenvalue pencil (:mod:`solvers.methods.pencil`); needs the pencil's formulation."""
+@dataclass(frozen=True)
+class FormulationMethod:
+    """A method built from a TDOA formulation by its module's ``build`` (no parametric system): the
+    curve pencil (:mod:`solvers.methods.pencil`) and the 3D offset kernel (:mod:`solvers.methods.offset_kernel`).
 
-    kind = "curve-pencil"
+    kind: the spec kind; example: a formulation it builds (named when a parametric system is given);
+    doing: what the build does (the progress line); builder: formulation, options -> TemplateResult;
+    coefficients: spec -> the module's coefficient source (:mod:`solvers.codegen`).
+    """
+
+    kind: str
+    example: str
+    doing: str
+    builder: Callable
+    coefficients: Callable[[dict], str]
 
     def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built:
         if job.formulation is None:
-            raise GenerationError(f"{job.name}: the curve pencil is built from its TDOA formulation, "
-                                  f"{SOLVERS['6r4s']}, not from a parametric system")
+            raise GenerationError(f"{job.name}: the {self.kind} method is built from its TDOA formulation, such as "
+                                  f"{self.example}, not from a parametric system")
         if progress:
-            progress(f"{job.formulation}: certifying the root count over GF(p) and building the pencil")
-        result = pencil.build(job.formulation, TemplateOptions())
+            progress(f"{job.formulation}: {self.doing}")
+        result = self.builder(job.formulation, TemplateOptions())
         spec = result.spec
         report = dict(result.candidates[0]) if result.candidates else {}
         report["size"] = "x".join(map(str, spec["size"]))
-        return Built(spec, codegen.pencil_coefficients(spec), int(spec["degree"]), int(spec["degree"]), report)
+        return Built(spec, self.coefficients(spec), int(spec["degree"]), int(spec["degree"]), report)
 
 
 class HomotopyMethod:
@@ -300,7 +314,14 @@ class HomotopyMethod:
 
 
 #: Method name -> strategy (names as in solvers.methods.spec.METHODS).
-METHODS: dict[str, Method] = {"curve-pencil": PencilMethod(), "homotopy": HomotopyMethod()}
+METHODS: dict[str, Method] = {
+    "curve-pencil": FormulationMethod("curve-pencil", SOLVERS["6r4s"], "certifying the root count over GF(p) and "
+                                      "building the pencil", pencil.build, codegen.pencil_coefficients),
+    "homotopy": HomotopyMethod(),
+    "offset-kernel": FormulationMethod("offset-kernel", SOLVERS["9r5s3d"], "certifying the root count over GF(p) "
+                                       "(two primes x 2 seeds), checking the kernel on seeded room networks",
+                                       offset_kernel.build, codegen.offset_kernel_coefficients),
+}
 assert tuple(METHODS) == METHOD_NAMES
 
 
@@ -344,8 +365,11 @@ def committed_command(label: str) -> str:
 
 
 def _config(label: str) -> tuple[int, int]:
-    m, n = (int(v) for v in label.split(":")[0][:-1].split("r"))
-    return m, n
+    """(m, n) of a configuration or formulation label, any model and dimension (``7r3s:...``, ``9r5s-tdoa3d:...``)."""
+    found = re.match(r"(\d+)r(\d+)s", label)
+    if found is None:
+        raise GenerationError(f"{label!r} does not start with a configuration such as 7r3s")
+    return int(found.group(1)), int(found.group(2))
 
 
 def _job(target, name: str | None, start: Start | None, method: str | None,
@@ -379,7 +403,7 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
         return (Job(name, formulation, system, config, _positions_start(*config, variant),
                     _positions_trials(*config, variant, system.scale_powers)), "homotopy", label)
     chosen = method or solver_method(Formulation.parse(formulation))
-    if chosen == "curve-pencil":
+    if chosen in ("curve-pencil", "offset-kernel"):
         return Job(name, formulation, config=config), chosen, label
     system = solver_system(label) if label else from_formulation(formulation, saturate_det_h=True)
     full = from_formulation(formulation, saturate_det_h=True) if label in SQUARED else None
@@ -394,7 +418,7 @@ def _identifier(text: str) -> str:
 
 def _remove_stale(out: str, name: str, keep: str) -> None:
     """Remove this solver's older modules and specs in ``out`` (other sizes or methods); nothing else."""
-    stale = re.compile(re.escape(name) + r"_(pencil|homotopy)\d+")
+    stale = re.compile(re.escape(name) + r"_(pencil|homotopy|kernel)\d+")
     for f in os.listdir(out):
         stem, ext = os.path.splitext(f)
         if ext in (".py", ".json") and stem != keep and stale.fullmatch(stem):
@@ -461,6 +485,8 @@ def emit_committed(json_path: str) -> tuple[str, str]:
         raise GenerationError(f"{json_path}: not a committed configuration ({', '.join(SOLVERS)})")
     if "_pencil" in stem:
         coefficients = codegen.pencil_coefficients(codegen.read_spec(text))
+    elif "_kernel" in stem:
+        coefficients = codegen.offset_kernel_coefficients(codegen.read_spec(text))
     else:
         coefficients = homotopy.coefficient_source(solver_system(label))
     return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients, committed_command(label))

@@ -8,7 +8,9 @@ result by its RMS measurement residual. It also owns `Calibration`, the numeric 
 `solvers.refine` and `solvers.metrics`, and the gauge/residual helpers they use.
 
 Conventions (paper Sec. 2-3): F[i, j] = ||r_i - s_j|| + o_j; gauge r_1 = 0, r_2 = (r_2x, 0) with
-r_2x > 0; the remaining reflection ambiguity is left as recovered (metrics align it away).
+r_2x > 0; the remaining reflection ambiguity is left as recovered (metrics align it away). The same
+steps recover a 3D network (K = 3: H 3 x 3, b in R^3, gauge r_1 = 0, r_2 = (r_2x > 0, 0, 0),
+r_3 = (r_3x, r_3y > 0, 0)).
 Only numpy is used; degenerate inputs give None, never numpy.linalg.LinAlgError.
 """
 
@@ -39,8 +41,8 @@ class Calibration:
 
     Parameters
     ----------
-    receivers : (m, 2) array
-    transmitters : (n, 2) array
+    receivers : (m, K) array, K = 2 or 3
+    transmitters : (n, K) array
     offsets : (n,) array
     residual : float
         RMS over all m*n measurements of F_ij - o_j - ||r_i - s_j||.
@@ -86,21 +88,25 @@ def rms_residual(
 def to_gauge(
     receivers: np.ndarray, transmitters: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Move positions into the paper's gauge r_1 = 0, r_2 = (r_2x, 0) with r_2x > 0.
+    """Move positions into the paper's gauge r_1 = 0, r_2 = (r_2x, 0) with r_2x > 0 (3D: r_1 = 0,
+    r_2 = (r_2x > 0, 0, 0), r_3 = (r_3x, r_3y > 0, 0)).
 
     A translation by -r_1 and a rotation (never a reflection) are applied to all nodes.
 
     Parameters
     ----------
-    receivers : (m, 2) array, m >= 2
-    transmitters : (n, 2) array
+    receivers : (m, K) array, m >= K
+    transmitters : (n, K) array
 
     Returns
     -------
-    (receivers, transmitters) in the gauge, or None if r_2 coincides with r_1 (rotation undefined).
+    (receivers, transmitters) in the gauge, or None if r_2 coincides with r_1 (3D: or r_1, r_2, r_3 are
+    collinear; the rotation is then undefined).
 
     Reference: paper Sec. 3 (gauge freedom).
     """
+    if receivers.shape[1] == 3:
+        return _to_gauge_3d(receivers, transmitters)
     r1 = receivers[0]
     rec = receivers - r1
     tra = transmitters - r1
@@ -115,6 +121,26 @@ def to_gauge(
     tra = tra @ rotation.T
     rec[0] = 0.0
     rec[1, 1] = 0.0
+    return rec, tra
+
+
+def _to_gauge_3d(receivers: np.ndarray, transmitters: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`to_gauge` in 3D: the rotation is Q^T of the QR factorisation of [r_2 - r_1, r_3 - r_1], with
+    the signs of Q's columns chosen so that r_2x, r_3y > 0 and det Q = +1."""
+    rec = receivers - receivers[0]
+    tra = transmitters - receivers[0]
+    scale = max(float(np.max(np.abs(rec))), float(np.max(np.abs(tra), initial=0.0)), 1e-300)
+    q, r = np.linalg.qr(rec[1:3].T, mode="complete")
+    if not (abs(r[0, 0]) > RANK_TOL * scale and abs(r[1, 1]) > RANK_TOL * scale):
+        return None
+    signs = np.sign(np.array([r[0, 0], r[1, 1], 1.0]))
+    q = q * signs[None, :]
+    if np.linalg.det(q) < 0:
+        q[:, 2] = -q[:, 2]
+    rec, tra = rec @ q, tra @ q
+    rec[0] = 0.0
+    rec[1, 1:] = 0.0
+    rec[2, 2] = 0.0
     return rec, tra
 
 
@@ -142,12 +168,15 @@ def _real_part(value: np.ndarray, tol: float) -> np.ndarray | None:
     return np.asarray(value, dtype=float)
 
 
-def _as_symmetric_2x2(H: np.ndarray) -> np.ndarray:
-    """Accept H as a (2, 2) matrix or as the vector (h11, h12, h22); return the (2, 2) form."""
+def _as_symmetric(H: np.ndarray) -> np.ndarray:
+    """Accept H as a (2, 2) or (3, 3) matrix or as its upper triangle, (h11, h12, h22) or
+    (h11, h12, h13, h22, h23, h33); return the square form."""
     if H.shape == (3,):
         return np.array([[H[0], H[1]], [H[1], H[2]]])
-    if H.shape != (2, 2):
-        raise ValueError(f"H must have shape (2, 2) or (3,) = (h11, h12, h22), got {H.shape}")
+    if H.shape == (6,):
+        return np.array([[H[0], H[1], H[2]], [H[1], H[3], H[4]], [H[2], H[4], H[5]]])
+    if H.shape not in ((2, 2), (3, 3)):
+        raise ValueError(f"H must have shape (2, 2), (3, 3) or be its upper triangle (3,) or (6,), got {H.shape}")
     return 0.5 * (H + H.T)
 
 
@@ -163,19 +192,20 @@ def _trilaterate(
 
     Parameters
     ----------
-    receivers : (m, 2) array with receivers[0] = 0 and rank-2 receivers[1:] (checked by caller)
+    receivers : (m, K) array with receivers[0] = 0 and rank-K receivers[1:] (checked by caller)
     ranges : (m,) array of d_i = F_ij - o_j
 
     Returns
     -------
-    (2,) array, or None if the linear system is singular.
+    (K,) array, or None if the linear system is singular.
 
     Reference: paper Sec. 3.2 (last transmitter by trilateration).
     """
     A = 2.0 * receivers[1:]
     rhs = np.einsum("ij,ij->i", receivers[1:], receivers[1:]) - ranges[1:] ** 2 + ranges[0] ** 2
+    k = receivers.shape[1]
     s, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=RANK_TOL)
-    if rank < 2 or not np.all(np.isfinite(s)):
+    if rank < k or not np.all(np.isfinite(s)):
         return None
 
     def cost(point: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -189,7 +219,7 @@ def _trilaterate(
             break
         J = diff / dist[:, None]
         step, _, rank, _ = np.linalg.lstsq(J, ranges - dist, rcond=RANK_TOL)
-        if rank < 2:
+        if rank < k:
             break
         candidate = s + step
         new, new_diff, new_dist = cost(candidate)
@@ -212,16 +242,18 @@ def recover(
 
     Steps: reject non-real candidates and non positive-definite H; L = Cholesky factor with
     L^T L = H^{-1} (L upper triangular, one representative of the rotation/reflection gauge);
-    compaction matrix D~ with the candidate offsets, R~ = D~[:, :2]^T, S~ = I;
-    r_1 = 0, r_i = L^{-T} R~[:, i-2] (i = 2..m), s_1 = L b, s_j = L(b - e_{j-1}/2) (j = 2, 3);
-    transmitters j >= 4 by trilateration; finally rotate into the gauge r_2 = (r_2x > 0, 0).
+    compaction matrix D~ with the candidate offsets, R~ = D~[:, :K]^T, S~ = I;
+    r_1 = 0, r_i = L^{-T} R~[:, i-2] (i = 2..m), s_1 = L b, s_j = L(b - e_{j-1}/2) (j = 2..K+1);
+    transmitters j >= K + 2 by trilateration; finally rotate into the gauge r_2 = (r_2x > 0, 0)
+    (3D: also r_3 = (r_3x, r_3y > 0, 0)). K = 2 or 3 is H's size.
 
     Parameters
     ----------
     F : (m, n) array
-        All measurements f_ij = ||r_i - s_j|| + o_j, m >= 3, n >= 3.
-    H : (2, 2) array or (3,) array (h11, h12, h22), possibly complex
-    b : (2,) array, possibly complex
+        All measurements f_ij = ||r_i - s_j|| + o_j, m >= K + 1, n >= K + 1.
+    H : (K, K) array or its upper triangle, (h11, h12, h22) or (h11, h12, h13, h22, h23, h33);
+        possibly complex
+    b : (K,) array, possibly complex
     o : (n,) array, possibly complex, candidate offsets of all transmitters
     tol : float
         A group (H, b or o) is non-real if its largest imaginary magnitude exceeds tol times its
@@ -232,7 +264,7 @@ def recover(
     Returns
     -------
     Calibration, or None for a non-real / non positive-definite candidate or a degenerate
-    configuration (collinear receivers, r_2 = r_1, singular matrices, non-finite values).
+    configuration (collinear receivers (3D: coplanar), r_2 = r_1, singular matrices, non-finite values).
 
     Raises
     ------
@@ -242,13 +274,14 @@ def recover(
     Reference: paper Sec. 2.1 eq. (5), Sec. 3.1 eq. (6), Sec. 3.2 (trilateration).
     """
     F = np.asarray(F, dtype=float)
-    if F.ndim != 2 or F.shape[0] < 3 or F.shape[1] < 3:
-        raise ValueError(f"F must be an (m, n) array with m >= 3, n >= 3, got shape {F.shape}")
-    m, n = F.shape
     H_arr, b_arr, o_arr = np.asarray(H), np.asarray(b), np.asarray(o)
-    if b_arr.shape != (2,) or o_arr.shape != (n,):
-        raise ValueError(f"b must have shape (2,) and o shape ({n},), got {b_arr.shape}, {o_arr.shape}")
-    H_arr = _as_symmetric_2x2(H_arr)
+    H_arr = _as_symmetric(H_arr)
+    k = H_arr.shape[0]
+    if F.ndim != 2 or F.shape[0] < k + 1 or F.shape[1] < k + 1:
+        raise ValueError(f"F must be an (m, n) array with m >= {k + 1}, n >= {k + 1} for a {k}D root, got shape {F.shape}")
+    m, n = F.shape
+    if b_arr.shape != (k,) or o_arr.shape != (n,):
+        raise ValueError(f"b must have shape ({k},) and o shape ({n},), got {b_arr.shape}, {o_arr.shape}")
     if not np.all(np.isfinite(F)):
         return None
     # Spurious solver roots may be huge; overflow just makes them fail the finiteness checks.
@@ -274,30 +307,35 @@ def _recover_real(
 ) -> Calibration | None:
     """`recover` for a real candidate; see there. May return None for degenerate input."""
     m, n = F.shape
+    k = H.shape[0]
     eigenvalues = np.linalg.eigvalsh(H)
-    if not (eigenvalues[0] > 0.0 and eigenvalues[0] > RANK_TOL * eigenvalues[1]):
+    if not (eigenvalues[0] > 0.0 and eigenvalues[0] > RANK_TOL * eigenvalues[-1]):
         return None
-    # (2x2) inverse in closed form: cannot raise, and is exact enough for a PD matrix.
-    det = H[0, 0] * H[1, 1] - H[0, 1] ** 2
-    H_inv = np.array([[H[1, 1], -H[0, 1]], [-H[0, 1], H[0, 0]]]) / det
+    if k == 2:
+        # (2x2) inverse in closed form: cannot raise, and is exact enough for a PD matrix.
+        det = H[0, 0] * H[1, 1] - H[0, 1] ** 2
+        H_inv = np.array([[H[1, 1], -H[0, 1]], [-H[0, 1], H[0, 0]]]) / det
+    else:
+        H_inv = np.linalg.inv(H)  # well conditioned: eigenvalues checked above
+        H_inv = 0.5 * (H_inv + H_inv.T)
     try:
         L = np.linalg.cholesky(H_inv).T  # upper triangular, L^T L = H^{-1}
     except np.linalg.LinAlgError:
         return None
 
     D = compaction_matrix(F, o)
-    R_tilde = D[:, :2].T  # (2, m-1)
-    receivers = np.zeros((m, 2))
+    R_tilde = D[:, :k].T  # (K, m-1)
+    receivers = np.zeros((m, k))
     receivers[1:] = np.linalg.solve(L.T, R_tilde).T
 
     singular_values = np.linalg.svd(receivers[1:], compute_uv=False)
-    if not (np.all(np.isfinite(singular_values)) and singular_values[1] > RANK_TOL * singular_values[0]):
-        return None  # collinear/coincident receivers: transmitters not identifiable (reflections)
+    if not (np.all(np.isfinite(singular_values)) and singular_values[k - 1] > RANK_TOL * singular_values[0]):
+        return None  # collinear (3D: coplanar) receivers: transmitters not identifiable (reflections)
 
-    transmitters = np.empty((n, 2))
-    S_tilde = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])  # columns 0, e_1, e_2
-    transmitters[:3] = (L @ (b[:, None] - 0.5 * S_tilde)).T
-    for j in range(3, n):
+    transmitters = np.empty((n, k))
+    S_tilde = np.hstack([np.zeros((k, 1)), np.eye(k)])  # columns 0, e_1, ..., e_K
+    transmitters[: k + 1] = (L @ (b[:, None] - 0.5 * S_tilde)).T
+    for j in range(k + 1, n):
         s = _trilaterate(receivers, F[:, j] - o[j], gauss_newton_steps)
         if s is None:
             return None

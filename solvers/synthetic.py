@@ -21,6 +21,7 @@ __all__ = [
     "Network",
     "corrupt_measurements",
     "random_network",
+    "room_network",
     "true_root",
 ]
 
@@ -159,6 +160,43 @@ def random_network(
         raise ValueError(f"dim must be 2 or 3, got {dim!r}")
     receivers = position_sigma * rng.standard_normal((m, dim))
     transmitters = position_sigma * rng.standard_normal((n, dim))
+    offsets = offset_sigma * rng.standard_normal(n)
+    return Network(receivers, transmitters, offsets)
+
+
+#: A room's extent in metres (x, y, z): the box :func:`room_network` places the nodes in.
+ROOM = (8.0, 6.0, 3.0)
+
+
+def room_network(
+    m: int,
+    n: int,
+    rng: np.random.Generator,
+    room: tuple[float, float, float] = ROOM,
+    offset_sigma: float = 1.0,
+) -> Network:
+    """Sample a 3D network in a room-sized box: receivers and transmitters uniform in the box, offsets normal.
+
+    Parameters
+    ----------
+    m, n, rng :
+        As for :func:`random_network` (the same order of draws).
+    room : (3,) floats
+        The box [0, room[0]] x [0, room[1]] x [0, room[2]] in metres (default :data:`ROOM`, 8 x 6 x 3 m).
+    offset_sigma : float
+        Standard deviation of the zero-mean normal offsets in metres (0 gives a TOA network).
+
+    Returns
+    -------
+    Network with dim 3.
+    """
+    if m < 1 or n < 1:
+        raise ValueError(f"need m >= 1 and n >= 1, got m={m}, n={n}")
+    box = np.asarray(room, dtype=float)
+    if box.shape != (3,) or not np.all(box > 0):
+        raise ValueError(f"room must be three positive extents (x, y, z), got {room!r}")
+    receivers = rng.uniform(0.0, 1.0, (m, 3)) * box
+    transmitters = rng.uniform(0.0, 1.0, (n, 3)) * box
     offsets = offset_sigma * rng.standard_normal(n)
     return Network(receivers, transmitters, offsets)
 

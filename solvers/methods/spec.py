@@ -8,8 +8,8 @@ tag, :class:`TemplateOptions` and :class:`TemplateResult`, the term structure of
 (the layout of the generated coefficient vector), the choice of method for a formulation
 (:func:`solver_method`) and the byte-stable JSON text (:func:`dump_spec`, :func:`load_spec`,
 :func:`spec_sha256`). Methods: :mod:`solvers.methods.pencil` (``curve-pencil``) and
-:mod:`solvers.methods.homotopy` (``homotopy``; its spec format is its own); :mod:`solvers.generate`
-runs them. This module imports no method (the methods import it), so there is no import circle.
+:mod:`solvers.methods.homotopy` (``homotopy``; its spec format is its own) and
+:mod:`solvers.methods.offset_kernel` (``offset-kernel``, 3D); :mod:`solvers.generate` runs them. This module imports no method (the methods import it), so there is no import circle.
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ __all__ = [
 #: Format of the curve-pencil specs.
 SPEC_FORMAT = "tdoa-solver/2"
 #: Solver construction methods (solvers.generate runs them).
-METHODS = ("curve-pencil", "homotopy")
+METHODS = ("curve-pencil", "homotopy", "offset-kernel")
 
 
 class TemplateError(RuntimeError):
@@ -124,11 +124,18 @@ def term_structure(formulation: Formulation | str) -> tuple[list[list[int]], lis
 
 def solver_method(formulation: Formulation | str) -> str:
     """The construction used for a formulation: ``curve-pencil`` (6r4s with B2, C2-C6 and its ten
-    minors, paper Section 3.2) or ``homotopy`` (every other formulation; it must be square)."""
+    minors, paper Section 3.2), ``offset-kernel`` (3D TDOA mr/5s, m >= 9, with A, B2-B4, C2-Cm and all
+    4 x 4 minors) or ``homotopy`` (every other formulation; it must be square)."""
+    from math import comb
+
     formulation = as_formulation(formulation)
     config, eqs = formulation.config, tuple(formulation.equations)
     c_eqs = tuple(f"C{i}" for i in range(2, config.m + 1))
     minors = tuple(e for e in eqs if e.startswith("M"))
+    if (config.dim == 3 and config.model == "tdoa" and config.parametrization == "compaction" and config.n == 5
+            and config.m >= 9 and set(eqs) == {"A", "B2", "B3", "B4", *c_eqs, *minors}
+            and len(set(minors)) == comb(config.m - 1, 4)):
+        return "offset-kernel"
     if (config.m == 6 and config.n == 4 and set(eqs) == {"B2", *c_eqs, *minors} and len(minors) == 10):
         return "curve-pencil"
     return "homotopy"
