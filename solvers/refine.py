@@ -7,6 +7,8 @@ scipy.optimize.least_squares, and the random initialisation used as the paper's 
 
 Parameter layout (size 2m + 3n - 3, the number of degrees of freedom of 2D TDOA):
     [r_2x, r_3x, r_3y, ..., r_mx, r_my, s_1x, s_1y, ..., s_nx, s_ny, o_1, ..., o_n].
+In 3D (gauge r_1 = 0, r_2 = (r_2x, 0, 0), r_3 = (r_3x, r_3y, 0); size 3m + 4n - 6):
+    [r_2x, r_3x, r_3y, r_4x, r_4y, r_4z, ..., s_1x, s_1y, s_1z, ..., o_1, ..., o_n].
 Residuals are flattened row-major: index i * n + j.
 """
 
@@ -66,34 +68,42 @@ class RefineResult:
     initial_residual: float
 
 
-def parameter_count(m: int, n: int) -> int:
-    """Return 2m + 3n - 3, the length of the parameter vector (paper Sec. 1, DoF of 2D TDOA)."""
-    return 2 * m + 3 * n - 3
+def parameter_count(m: int, n: int, dim: int = 2) -> int:
+    """Return 2m + 3n - 3 (3D: 3m + 4n - 6), the length of the parameter vector (paper Sec. 1, DoF of TDOA)."""
+    return 2 * m + 3 * n - 3 if dim == 2 else 3 * m + 4 * n - 6
+
+
+def _free_receiver_coordinates(m: int, dim: int) -> list[int]:
+    """Indices into receivers.ravel() of the coordinates the gauge leaves free (r_2x; 3D also r_3x, r_3y)."""
+    return [i * dim + a for i in range(1, m) for a in range(min(i, dim))]
 
 
 def pack(receivers: np.ndarray, transmitters: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Return the parameter vector of a calibration already in the gauge (r_1 = 0, r_2y = 0).
+    """Return the parameter vector of a calibration already in the gauge (r_1 = 0, r_2y = 0; 3D also
+    r_2z = r_3z = 0).
 
-    The gauge-fixed coordinates r_1x, r_1y, r_2y are dropped; they are not checked here.
+    The gauge-fixed coordinates (r_1x, r_1y, r_2y in 2D) are dropped; they are not checked here.
     """
-    return np.concatenate(
-        [receivers[1:2, 0], receivers[2:].ravel(), transmitters.ravel(), offsets]
-    ).astype(float)
+    m, dim = receivers.shape
+    free = receivers.ravel()[_free_receiver_coordinates(m, dim)]
+    return np.concatenate([free, transmitters.ravel(), offsets]).astype(float)
 
 
-def unpack(params: np.ndarray, m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return (receivers (m, 2), transmitters (n, 2), offsets (n,)) from a parameter vector."""
+def unpack(params: np.ndarray, m: int, n: int, dim: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (receivers (m, dim), transmitters (n, dim), offsets (n,)) from a parameter vector."""
     params = np.asarray(params, dtype=float)
-    if params.shape != (parameter_count(m, n),):
+    if params.shape != (parameter_count(m, n, dim),):
         raise ValueError(
-            f"params must have length 2m + 3n - 3 = {parameter_count(m, n)}, got {params.shape}"
+            f"params must have length {'2m + 3n - 3' if dim == 2 else '3m + 4n - 6'} = "
+            f"{parameter_count(m, n, dim)}, got {params.shape}"
         )
-    receivers = np.zeros((m, 2))
-    receivers[1, 0] = params[0]
-    k = 1 + 2 * (m - 2)
-    receivers[2:] = params[1:k].reshape(m - 2, 2)
-    transmitters = params[k : k + 2 * n].reshape(n, 2)
-    offsets = params[k + 2 * n :]
+    free = _free_receiver_coordinates(m, dim)
+    receivers = np.zeros(m * dim)
+    receivers[free] = params[: len(free)]
+    receivers = receivers.reshape(m, dim)
+    k = len(free)
+    transmitters = params[k : k + dim * n].reshape(n, dim)
+    offsets = params[k + dim * n :]
     return receivers, transmitters, offsets
 
 
@@ -103,57 +113,59 @@ def _shape(F: np.ndarray) -> tuple[int, int]:
     return F.shape
 
 
-def residuals(params: np.ndarray, F: np.ndarray) -> np.ndarray:
+def residuals(params: np.ndarray, F: np.ndarray, dim: int = 2) -> np.ndarray:
     """Return the m*n residuals e_ij = F_ij - o_j - ||r_i - s_j|| (row-major, index i*n + j).
 
     Parameters
     ----------
-    params : (2m + 3n - 3,) parameter vector (see module docstring)
+    params : (2m + 3n - 3,) parameter vector (3D: 3m + 4n - 6; see module docstring)
     F : (m, n) measurements
+    dim : 2 or 3
 
     Reference: paper Sec. 1 eq. (2), Sec. 3.1 step 4.
     """
     F = np.asarray(F, dtype=float)
     m, n = _shape(F)
-    receivers, transmitters, offsets = unpack(params, m, n)
+    receivers, transmitters, offsets = unpack(params, m, n, dim)
     diff = receivers[:, None, :] - transmitters[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
     return (F - offsets[None, :] - dist).ravel()
 
 
-def jacobian(params: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Return the analytic (m*n, 2m + 3n - 3) Jacobian of `residuals`.
+def jacobian(params: np.ndarray, F: np.ndarray, dim: int = 2) -> np.ndarray:
+    """Return the analytic (m*n, 2m + 3n - 3) Jacobian of `residuals` (3D: (m*n, 3m + 4n - 6)).
 
     With u_ij = (r_i - s_j) / ||r_i - s_j||: de_ij/dr_i = -u_ij, de_ij/ds_j = +u_ij,
-    de_ij/do_j = -1; columns of the gauge-fixed r_1x, r_1y, r_2y are dropped. Where r_i = s_j
-    the distance is not differentiable and u_ij is set to 0. Dense; each row has at most 5
-    non-zeros.
+    de_ij/do_j = -1; columns of the gauge-fixed coordinates (r_1x, r_1y, r_2y in 2D) are dropped.
+    Where r_i = s_j the distance is not differentiable and u_ij is set to 0. Dense; each row has at
+    most 2 dim + 1 non-zeros.
 
     Parameters
     ----------
-    params : (2m + 3n - 3,) parameter vector
+    params : parameter vector
     F : (m, n) measurements (only its shape is used)
+    dim : 2 or 3
 
     Reference: paper Sec. 3.1 step 4 (Levenberg-Marquardt).
     """
     F = np.asarray(F)
     m, n = _shape(F)
-    receivers, transmitters, _ = unpack(params, m, n)
+    receivers, transmitters, _ = unpack(params, m, n, dim)
     diff = receivers[:, None, :] - transmitters[None, :, :]
     dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
     safe = np.where(dist > 0.0, dist, 1.0)
-    u = np.where((dist > 0.0)[:, :, None], diff / safe[:, :, None], 0.0)  # (m, n, 2)
+    u = np.where((dist > 0.0)[:, :, None], diff / safe[:, :, None], 0.0)  # (m, n, dim)
 
     rows_m, rows_n = np.arange(m), np.arange(n)
-    J_r = np.zeros((m, n, m, 2))
+    J_r = np.zeros((m, n, m, dim))
     J_r[rows_m, :, rows_m, :] = -u
-    J_s = np.zeros((m, n, n, 2))
+    J_s = np.zeros((m, n, n, dim))
     J_s[:, rows_n, rows_n, :] = u
     J_o = np.zeros((m, n, n))
     J_o[:, rows_n, rows_n] = -1.0
 
-    J_r = J_r.reshape(m * n, 2 * m)[:, [2] + list(range(4, 2 * m))]  # drop r_1x, r_1y, r_2y
-    return np.hstack([J_r, J_s.reshape(m * n, 2 * n), J_o.reshape(m * n, n)])
+    J_r = J_r.reshape(m * n, dim * m)[:, _free_receiver_coordinates(m, dim)]  # drop the gauge-fixed ones
+    return np.hstack([J_r, J_s.reshape(m * n, dim * n), J_o.reshape(m * n, n)])
 
 
 def _initial_arrays(initial: object) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -183,19 +195,20 @@ def refine(
 ) -> RefineResult:
     """Minimise sum_ij (F_ij - o_j - ||r_i - s_j||)^2 starting from `initial`.
 
-    The initial positions are first moved into the gauge r_1 = 0, r_2 = (r_2x, 0) (translation
-    and rotation; if r_2 = r_1 only the translation is applied). Offsets are unaffected by the
-    gauge.
+    The initial positions are first moved into the gauge r_1 = 0, r_2 = (r_2x, 0) (3D: also
+    r_3 = (r_3x, r_3y, 0); translation and rotation; if the rotation is undefined only the
+    translation is applied). Offsets are unaffected by the gauge. The dimension (2 or 3) is that
+    of the initial positions.
 
     Parameters
     ----------
-    initial : Calibration or (receivers (m, 2), transmitters (n, 2), offsets (n,))
+    initial : Calibration or (receivers (m, K), transmitters (n, K), offsets (n,)), K = 2 or 3
     F : (m, n) measurements
     max_iter : int
         Budget of residual evaluations (scipy's max_nfev); it bounds the number of iterations.
     method : "lm" | "trf" | "dogbox"
         scipy.optimize.least_squares method; "lm" (MINPACK Levenberg-Marquardt, the paper's
-        choice) needs m*n >= 2m + 3n - 3, i.e. not an underdetermined configuration.
+        choice) needs m*n >= 2m + 3n - 3 (3D: 3m + 4n - 6), i.e. not an underdetermined configuration.
     tol : float
         ftol = xtol = gtol passed to scipy.
 
@@ -216,17 +229,18 @@ def refine(
     F = np.asarray(F, dtype=float)
     m, n = _shape(F)
     receivers, transmitters, offsets = _initial_arrays(initial)
-    if receivers.shape != (m, 2) or transmitters.shape != (n, 2) or offsets.shape != (n,):
+    dim = receivers.shape[1] if receivers.ndim == 2 and receivers.shape[1] in (2, 3) else 2
+    if receivers.shape != (m, dim) or transmitters.shape != (n, dim) or offsets.shape != (n,):
         raise ValueError(
             f"initial shapes {receivers.shape}, {transmitters.shape}, {offsets.shape} do not "
             f"match F of shape {F.shape}"
         )
     if not all(np.all(np.isfinite(a)) for a in (receivers, transmitters, offsets, F)):
         raise ValueError("initial calibration and F must be finite")
-    if method == "lm" and m * n < parameter_count(m, n):
+    if method == "lm" and m * n < parameter_count(m, n, dim):
         raise ValueError(
             f"method 'lm' needs at least as many measurements ({m * n}) as parameters "
-            f"({parameter_count(m, n)}); use 'trf' for underdetermined configurations"
+            f"({parameter_count(m, n, dim)}); use 'trf' for underdetermined configurations"
         )
 
     gauged = to_gauge(receivers, transmitters)
@@ -241,14 +255,14 @@ def refine(
         residuals,
         x0,
         jac=jacobian,
-        args=(F,),
+        args=(F, dim),
         method=method,
         max_nfev=max_iter,
         ftol=tol,
         xtol=tol,
         gtol=tol,
     )
-    receivers, transmitters, offsets = unpack(solution.x, m, n)
+    receivers, transmitters, offsets = unpack(solution.x, m, n, dim)
     calibration = Calibration(
         receivers, transmitters, offsets, rms_residual(F, receivers, transmitters, offsets)
     )
