@@ -851,7 +851,9 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     cells : restrict Table 3 to these cells (``"6/4,5/5"``).
     out_dir : where to write. Default: ``tables/`` for a full run over all cells; a partial run (quick
         or a subset of cells) writes to the user cache's ``tables-partial/`` so it never overwrites the full tables.
-    timeout, max_matrix_cells : per-formulation limits (wall-clock seconds, F4 matrix rows*cols).
+    timeout, max_matrix_cells : per-formulation limits (wall-clock seconds, F4 matrix rows*cols). A
+        formulation stopped by the wall-clock limit is computed again without it after the sweeps, so
+        that no table entry depends on the machine's speed or load (only the matrix cap bounds it).
     primes, seeds : instances per formulation.
     budget : override the budget.
     executor : where the sweep computes (:mod:`analysis.executors`; default a local pool of ``jobs``).
@@ -873,10 +875,24 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     other_timeout = budget.other_timeout if timeout is None else min(timeout, budget.other_timeout)
     phases = {"primary": "sweep 1/2: Table 2, numbered Table 3 cells, Section 3.2",
               "secondary": "sweep 2/2: Table 3 cells marked X or *"}
+    def record(result: FormulationResult, cached: bool) -> None:
+        if cached:
+            from_cache.add(result.label)
+
     for part, limit in (("primary", timeout), ("secondary", other_timeout)):
         for r in sweep(plan.labels(part), primes=primes, seeds=seeds, options=options, jobs=jobs,
                        cache_dir=cache_dir, use_cache=use_cache, progress=progress, timeout=limit, executor=executor,
-                       on_result=lambda r, cached: from_cache.add(r.label) if cached else None, phase=phases[part]):
+                       on_result=record, phase=phases[part]):
+            results[r.label] = r
+    # The wall-clock limit keeps the parallel sweeps moving; it must not decide a result, or the tables
+    # would depend on the machine's load (a formulation that finishes in 200 s on an idle machine times out
+    # at 300 s on a loaded one). What it stopped is computed again without it, the F4 matrix cap (a
+    # deterministic limit) still in force.
+    timed_out = [label for label, r in results.items() if r.status == "timeout"]
+    if timed_out:
+        for r in sweep(timed_out, primes=primes, seeds=seeds, options=options, jobs=jobs, cache_dir=cache_dir,
+                       use_cache=use_cache, progress=progress, timeout=None, executor=executor, on_result=record,
+                       phase=f"sweep: {len(timed_out)} formulation(s) past the wall-clock limit, without it"):
             results[r.label] = r
     ref = paper_reference()
     table2 = build_table2({k: results[k] for k in plan.table2}, ref)

@@ -58,6 +58,37 @@ def test_tables_do_not_depend_on_the_order_results_arrive_in(tmp_path, monkeypat
         assert [(r["m"], r["n"]) for r in csv.DictReader(fh)] == [("6", "4"), ("9", "3")]
 
 
+def test_a_formulation_stopped_by_the_wall_clock_limit_is_computed_again_without_it(tmp_path, monkeypatch):
+    """A timeout depends on the machine's load, so it never reaches a table: make_tables computes what the
+    limit stopped again with timeout=None, and the tables equal those of a run without timeouts."""
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "user-cache"))
+    monkeypatch.setattr(tables, "sweep", _fake_sweep(None))
+    make_tables(quick=True, jobs=1, cells="6/4,9/3", out_dir=tmp_path / "a", progress=False)
+    calm = _fake_sweep(None)
+    calls = []
+
+    def loaded(labels, *, primes, seeds, timeout=None, **kwargs):
+        labels = list(labels)
+        calls.append((labels, timeout))
+        out = calm(labels, primes=primes, seeds=seeds, **kwargs)
+        if timeout is None:
+            return out
+        slow = [r for r in out if r.m == 6]  # every 6-receiver formulation "takes too long" under load
+        for r in slow:
+            f = Formulation.parse(r.label)
+            marks = [InstanceOutcome(p, s, "timeout", message="wall-clock limit of 300 s exceeded") for p in primes
+                     for s in seeds]
+            out[out.index(r)] = combine(f, marks, primes, seeds, F4Options(), timeout)
+        return out
+
+    monkeypatch.setattr(tables, "sweep", loaded)
+    summary = make_tables(quick=True, jobs=1, cells="6/4,9/3", out_dir=tmp_path / "b", progress=False)
+    retried, limit = calls[-1]
+    assert limit is None and retried and all(Formulation.parse(x).config.m == 6 for x in retried)
+    assert "timeout" not in summary.statuses
+    assert _outputs(tmp_path / "a") == _outputs(tmp_path / "b")
+
+
 def _rows(name):
     path = repo_root() / "tables" / name
     if not path.exists():
