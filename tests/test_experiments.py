@@ -226,6 +226,12 @@ def test_a_rerun_with_the_same_results_rewrites_no_table(tmp_path):
     assert {p: p.read_bytes() for p in paths.values()} == before
     other = slower.assign(failure_rate=slower["failure_rate"] + 0.5)
     assert not keep_timings(other, paths["csv"])["median_runtime_ms"].equals(first["median_runtime_ms"])
+    # one row's results changed: only that row takes the new runtimes, the others keep the written ones
+    one = slower.copy()
+    one.loc[0, "failure_rate"] += 0.5
+    mixed = keep_timings(one, paths["csv"])
+    assert mixed["median_runtime_ms"].iloc[0] != first["median_runtime_ms"].iloc[0]
+    assert mixed["median_runtime_ms"].iloc[1:].equals(first["median_runtime_ms"].iloc[1:])
 
 
 def test_summary_counts_missing_estimates_as_infinite():

@@ -85,14 +85,16 @@ def is_timing_column(name: str) -> bool:
 
 
 def keep_timings(frame: "pd.DataFrame", path: Path) -> "pd.DataFrame":
-    """``frame`` with the timing columns of the CSV at ``path`` when every other cell is unchanged.
+    """``frame`` with the timing columns of the CSV at ``path`` in every row whose other cells are unchanged.
 
     A rerun that computes again (fresh caches, a clean checkout) measures other runtimes but the same
     results; with the committed timings kept, it writes the same bytes, so ``git status`` stays clean.
-    The run's own timings are in the untracked ``experiments_provenance.timing.json``. A frame whose
-    results changed (or a missing or unreadable file) keeps its own timings. Either way the timings
-    are returned at the precision the CSV holds, so that the provenance record, which lists them,
-    does not change between a first run and a rerun.
+    The run's own timings are in the untracked ``experiments_provenance.timing.json``. Rows are matched
+    by position (same header and number of rows); a row whose results changed keeps its own timings,
+    so a change in one row does not rewrite the runtimes of the others (all rows keep their own when
+    the file is missing, unreadable or of another shape). Either way the timings are returned at the
+    precision the CSV holds, so that the provenance record, which lists them, does not change between
+    a first run and a rerun.
     """
     text = frame.to_csv(index=False, float_format=CSV_FLOAT_FORMAT)
     new = list(csv.reader(io.StringIO(text)))
@@ -101,10 +103,9 @@ def keep_timings(frame: "pd.DataFrame", path: Path) -> "pd.DataFrame":
     except (OSError, UnicodeDecodeError):
         old = []
     timing = [k for k, name in enumerate(new[0]) if is_timing_column(name)]
-    if old and old[0] == new[0] and len(old) == len(new) and all(
-            len(a) == len(b) and all(x == y for k, (x, y) in enumerate(zip(a, b)) if k not in timing)
-            for a, b in zip(old[1:], new[1:])):
-        new = old
+    if old and old[0] == new[0] and len(old) == len(new):
+        new = [new[0]] + [a if len(a) == len(b) and all(x == y for k, (x, y) in enumerate(zip(a, b)) if k not in timing)
+                          else b for a, b in zip(old[1:], new[1:])]
     out = frame.copy()
     for k in timing:
         out[new[0][k]] = [float(row[k]) if row[k] else float("nan") for row in new[1:]]
