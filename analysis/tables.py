@@ -889,6 +889,7 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     # at 300 s on a loaded one). What it stopped is computed again without it, the F4 matrix cap (a
     # deterministic limit) still in force.
     timed_out = [label for label, r in results.items() if r.status == "timeout"]
+    from_cache.difference_update(timed_out)  # computed now, whether or not their timeout came from the cache
     if timed_out:
         for r in sweep(timed_out, primes=primes, seeds=seeds, options=options, jobs=jobs, cache_dir=cache_dir,
                        use_cache=use_cache, progress=progress, timeout=None, executor=executor, on_result=record,
