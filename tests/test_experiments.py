@@ -270,3 +270,16 @@ def test_paper_values_are_package_data():
         ("9r3s", "random"): (0.31, 1.63), ("9r3s", "solver"): (-15.0, -14.0),
         ("6r4s", "random"): (0.55, 1.93), ("6r4s", "solver"): (-15.0, -14.0),
     }
+
+def test_the_solver_fingerprint_covers_the_experiments_solvers_and_nothing_else():
+    """The cache key of solver batches (and the provenance) changes with the 9r/3s and 6r/4s solvers and the
+    kernels they import, not with another committed solver (the 3D offset kernel, the homotopies of other cells)."""
+    from pathlib import Path
+
+    import solvers
+    from solvers.experiments.batches import _solver_sources
+
+    names = {p.name for p in _solver_sources(Path(solvers.__file__).resolve().parent)}
+    assert {"tdoa_9r3s_homotopy75.py", "tdoa_9r3s_homotopy75.json", "tdoa_6r4s_pencil37.py", "homotopy.py",
+            "tracker.py", "tape_kernel.py", "slp.py", "pencil.py", "runtime.py"} <= names
+    assert not {n for n in names if "9r5s3d" in n or n.startswith(("tdoa_5r5s", "tdoa_4r5s")) or n == "offset_kernel.py"}

@@ -42,21 +42,53 @@ def _file_digest(paths: Iterable[Path]) -> str:
     return h.hexdigest()
 
 
+def _solver_sources(package: Path) -> list[Path]:
+    """The files the experiments' solvers are made of: the generated modules and specs of :data:`CONFIGS`
+    (``solvers/generated/tdoa_<config>_*``) and the modules of ``solvers/methods`` and ``solvers/runtime.py``
+    they import, directly or through each other (read from the source, imports inside functions included).
+    Other solvers (a 3D one, another cell's) are not among them: changing them leaves the batches' cache
+    and the experiments' provenance alone."""
+    import ast
+
+    generated = package / "generated"
+    modules = sorted(p for p in generated.glob("tdoa_*") if p.is_file() and p.suffix in (".py", ".json")
+                     and p.name.split("_")[1] in CONFIGS) if generated.is_dir() else []
+    kernels = {*(package / "methods").glob("*.py"), package / "runtime.py"}
+    found: set[Path] = set()
+    todo = [p for p in modules if p.suffix == ".py"]
+    while todo:
+        path = todo.pop()
+        here = path.relative_to(package.parent).with_suffix("").parts[:-1]  # the module's package
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                base = list(here[: len(here) - node.level + 1]) if node.level else []
+                base += node.module.split(".") if node.module else []
+                names = [base + [a.name] for a in node.names] + [base]  # a submodule, or the module itself
+            elif isinstance(node, ast.Import):
+                names = [a.name.split(".") for a in node.names]
+            else:
+                continue
+            for parts in names:
+                target = package.parent.joinpath(*parts).with_suffix(".py")
+                if target in kernels and target not in found:
+                    found.add(target)
+                    todo.append(target)
+    return modules + sorted(found)
+
+
 def code_fingerprint(init: str) -> str:
     """SHA-256 of the source files the numbers of a batch depend on.
 
     The numeric pipeline (synthetic, recovery, refine, metrics) always; for init="solver" also
-    ``solvers/api.py``, ``solvers/runtime.py``, the method kernels ``solvers/methods/*.py`` and
-    ``solvers/generated/*`` (when present), so that a new solver invalidates cached results. Edits
-    to the trial itself (:mod:`solvers.experiments.trial`) are covered by CACHE_VERSION.
+    ``solvers/api.py`` and the experiments' solvers (:func:`_solver_sources`: their generated modules
+    and specs, the method kernels and runtime they import), so that a changed solver invalidates
+    cached results and an unrelated one does not. Edits to the trial itself
+    (:mod:`solvers.experiments.trial`) are covered by CACHE_VERSION.
     """
     here = Path(__file__).resolve().parents[1]
     paths = [here / f"{name}.py" for name in ("synthetic", "recovery", "refine", "metrics")]
     if init == "solver":
-        paths += [here / "api.py", here / "runtime.py", *sorted((here / "methods").glob("*.py"))]
-        generated = here / "generated"
-        if generated.is_dir():
-            paths += [p for p in generated.iterdir() if p.is_file() and p.suffix in (".py", ".json")]
+        paths += [here / "api.py", *_solver_sources(here)]
     return _file_digest(paths)
 
 
