@@ -16,17 +16,19 @@ from analysis.tables import make_tables, paper_reference
 SEED = 7
 
 
-def _fake_sweep(order_seed):
+def _fake_sweep(order_seed, seconds=0.5, bump=None):
     """A stand-in for analysis.complexity.sweep: a deterministic made-up result per label (degree = label
-    length), handed back in input order (order_seed None) or shuffled by the given seed."""
+    length, one more for the label ``bump``), each instance taking ``seconds``, handed back in input order
+    (order_seed None) or shuffled by the given seed."""
 
     def sweep(labels, *, primes, seeds, on_result=None, **kwargs):
         out = []
         for label in dict.fromkeys(labels):
             f = Formulation.parse(label)
             n = f.config.n_unknowns
-            marks = [InstanceOutcome(p, s, "ok", degree=len(label), dimension=0, jacobian_rank=n,
-                                     minor_rank=n - f.counts.A - f.counts.B - f.counts.C, seconds=0.5)
+            degree = len(label) + (label == bump)
+            marks = [InstanceOutcome(p, s, "ok", degree=degree, dimension=0, jacobian_rank=n,
+                                     minor_rank=n - f.counts.A - f.counts.B - f.counts.C, seconds=seconds)
                      for p in primes for s in seeds]
             out.append(combine(f, marks, primes, seeds, F4Options()))
         if order_seed is not None:
@@ -93,6 +95,27 @@ def test_a_formulation_stopped_by_the_wall_clock_limit_is_computed_again_without
     assert limit is None and retried and all(Formulation.parse(x).config.m == 6 for x in retried)
     assert "timeout" not in summary.statuses
     assert _outputs(tmp_path / "a") == _outputs(tmp_path / "b")
+
+
+def test_a_changed_row_rewrites_its_own_seconds_only(tmp_path, monkeypatch):
+    """A rerun that measures other times keeps every table file; one whose result changed in one row
+    rewrites that row, its seconds included, and the other rows keep the seconds they were written with."""
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "user-cache"))
+    monkeypatch.setattr(tables, "sweep", _fake_sweep(None))
+    out = tmp_path / "t"
+    make_tables(quick=True, jobs=1, cells="6/4,9/3", out_dir=out, progress=False)
+    before = _outputs(out)
+    slow = _fake_sweep(None, seconds=2.0)
+    monkeypatch.setattr(tables, "sweep", slow)
+    make_tables(quick=True, jobs=1, cells="6/4,9/3", out_dir=out, progress=False)
+    assert _outputs(out) == before
+    changed = "9r3s:C2-C9"
+    monkeypatch.setattr(tables, "sweep", _fake_sweep(None, seconds=2.0, bump=changed))
+    make_tables(quick=True, jobs=1, cells="6/4,9/3", out_dir=out, progress=False)
+    with open(out / "formulations.csv", newline="") as fh:
+        rows = {r["label"]: r for r in csv.DictReader(fh)}
+    assert rows[changed]["seconds"] == "8.0"  # 4 instances x 2.0 s: measured now
+    assert {r["seconds"] for label, r in rows.items() if label != changed} == {"2.0"}  # 4 x 0.5 s: as written
 
 
 def _rows(name):

@@ -12,7 +12,7 @@ import io
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
-from analysis.paths import HEADER_PREFIXES, default_output_dir, write_if_changed
+from analysis.paths import HEADER_PREFIXES, default_output_dir, keep_row_timings, write_if_changed
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -103,9 +103,7 @@ def keep_timings(frame: "pd.DataFrame", path: Path) -> "pd.DataFrame":
     except (OSError, UnicodeDecodeError):
         old = []
     timing = [k for k, name in enumerate(new[0]) if is_timing_column(name)]
-    if old and old[0] == new[0] and len(old) == len(new):
-        new = [new[0]] + [a if len(a) == len(b) and all(x == y for k, (x, y) in enumerate(zip(a, b)) if k not in timing)
-                          else b for a, b in zip(old[1:], new[1:])]
+    new = keep_row_timings(new, old, is_timing_column)
     out = frame.copy()
     for k in timing:
         out[new[0][k]] = [float(row[k]) if row[k] else float("nan") for row in new[1:]]
