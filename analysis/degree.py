@@ -107,7 +107,9 @@ def _groebner(polys: Sequence[Poly], options: F4Options, engine: Engine = "own",
               ) -> GroebnerResult:
     """Reduced Gröbner basis in the ring's order; for orders other than grevlex, through grevlex and FGLM
     when the ideal is zero-dimensional (F4 in lex can swell far beyond the ideal's degree: katsura-4,
-    16 solutions, outgrew 24 GB), else directly (own engine only). msolve computes the grevlex basis."""
+    16 solutions, outgrew 24 GB), a positive-dimensional lex basis through homogenization
+    (:mod:`analysis.homogenize`: F4 in lex stopped at a 400M-cell cap on two cubics in 3 unknowns), other
+    orders directly (own engine only). msolve computes the grevlex basis."""
     ring = polys[0].ring
     if engine == "msolve":
         from .msolve import groebner_msolve
@@ -127,9 +129,13 @@ def _groebner(polys: Sequence[Poly], options: F4Options, engine: Engine = "own",
         return groebner(polys, options)
     graded = ring.with_order("grevlex")
     gb = groebner([graded.from_terms(f.terms()) for f in polys], options)
-    if not is_zero_dimensional(gb):
-        return groebner(polys, options)
-    return fglm(gb, ring)
+    if is_zero_dimensional(gb):
+        return fglm(gb, ring)
+    if ring.order.name == "lex":
+        from .homogenize import lex_by_homogenization
+
+        return lex_by_homogenization(polys, options)
+    return groebner(polys, options)
 
 
 def analyse_prime(polys: Sequence[Poly], options: F4Options = F4Options(), saturate_by: Poly | None = None,

@@ -143,7 +143,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
     )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
-    p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, block:k (default grevlex)")
+    p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, deglex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
     p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
     p.add_argument("--basis-limit", type=_nonnegative("--basis-limit"), default=BASIS_LIMIT, metavar="N",
