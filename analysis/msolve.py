@@ -110,7 +110,7 @@ def to_msolve_input(polys: Sequence[Poly]) -> str:
     return f"{','.join(names)}\n{ring.prime}\n{body}\n"
 
 
-_FACTOR = re.compile(r"([A-Za-z][A-Za-z0-9_]*)(?:\^(\d+))?\Z")
+_FACTOR = re.compile(r"([^\s+\-*/^(),#0-9.][^\s+\-*/^(),#]*)(?:\^(\d+))?\Z")  # a name as msolve reads it
 
 
 def parse_msolve_basis(text: str, ring: Ring, names: Sequence[str] | None = None) -> list[Poly]:
