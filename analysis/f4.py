@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend
+from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend, sparse_pays
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
@@ -32,14 +32,15 @@ DEFAULT_MAX_MEMORY = 8 << 30
 class F4Options:
     """Options of an F4 run.
 
-    backend: linear algebra backend ("numpy" fast, "python" reference).
+    backend: linear algebra backend ("auto": the compiled sparse kernel on large sparse matrices, numpy
+        otherwise; "numpy", "sparse", or "python", the reference).
     max_matrix_cells: stop with :class:`MatrixTooLarge` when rows*cols of a matrix exceeds this.
     max_memory: stop with :class:`MatrixTooLarge` before reducing a matrix whose estimated working
         memory (:func:`matrix_memory`) exceeds this many bytes.
     verbose: print one line per round to stderr.
     """
 
-    backend: str = "numpy"
+    backend: str = "auto"
     max_matrix_cells: int = 400_000_000
     max_memory: int = DEFAULT_MAX_MEMORY
     verbose: bool = False
@@ -53,11 +54,12 @@ def format_bytes(n: float) -> str:
     return f"{int(n)} B"
 
 
-def matrix_memory(reduce_rows: int, cols: int, nonzeros: int) -> int:
+def matrix_memory(reduce_rows: int, cols: int, nonzeros: int, dense: bool = True) -> int:
     """Estimated peak bytes of reducing one F4 matrix: the rows to reduce as a dense float64 matrix and
-    its two reduced copies (see :func:`analysis.linalg._eliminate`), plus the sparse matrix (column and
-    value arrays, int64) and its pivot / non-pivot copies."""
-    return 24 * reduce_rows * cols + 48 * nonzeros
+    its two reduced copies (see :func:`analysis.linalg._eliminate`; with dense=False, the sparse
+    kernel's, one accumulator row), plus the sparse matrix (column and value arrays, int64) and its
+    pivot / non-pivot copies."""
+    return (24 * reduce_rows * cols if dense else 8 * cols) + 48 * nonzeros
 
 
 @dataclass(frozen=True)
@@ -560,15 +562,22 @@ def _f4(
                 f"F4 matrix {nrows} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
             )
         matrix = _assemble(state, rows, columns)
+        del rows  # the matrix's terms: held only by the matrix from here on
+        nonzeros = len(matrix.cols)
         pivot_rows, reduce_rows = _split_pivots(matrix.leads, matrix.lengths)
-        need = matrix_memory(len(reduce_rows), ncols, len(matrix.cols))
+        dense = backend.name == "numpy" or (backend.name == "auto" and not sparse_pays(
+            len(pivot_rows), int(matrix.lengths[pivot_rows].sum()), len(reduce_rows), ncols))
+        need = matrix_memory(len(reduce_rows), ncols, nonzeros, dense)
         if need > options.max_memory:
             raise MatrixTooLarge(
                 f"F4 matrix {nrows} x {ncols} at degree {d} needs about {format_bytes(need)}, above the memory cap "
                 f"of {format_bytes(options.max_memory)}"
             )
         pivot_rows = pivot_rows[matrix.leads[pivot_rows].argsort()]  # by lead: the backend need not sort
-        new_rows = backend.reduce_sparse(matrix.take(pivot_rows), matrix.take(reduce_rows), ncols, p)
+        pivots, to_reduce = matrix.take(pivot_rows), matrix.take(reduce_rows)
+        del matrix  # one copy of the entries at a time
+        new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p)
+        del pivots, to_reduce
         if _insert_rows(state, new_rows, columns[::-1]):
             return (ring.one(),), tuple(rounds)
         stats = RoundStats(
@@ -576,7 +585,7 @@ def _f4(
             pairs=npairs,
             rows=nrows,
             cols=ncols,
-            density=len(matrix.cols) / max(1, nrows * ncols),
+            density=nonzeros / max(1, nrows * ncols),
             new=len(new_rows),
             zero_reductions=len(reduce_rows) - len(new_rows),
             seconds=time.perf_counter() - t0,

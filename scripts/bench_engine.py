@@ -110,7 +110,7 @@ if sys.argv[3] == "baseline":
 from analysis.linalg import MatrixTooLarge
 t0 = time.perf_counter()
 try:
-    gb = groebner_in_order(polys, F4Options())
+    gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10))
 except MatrixTooLarge as e:
     print(json.dumps(dict(error=str(e), seconds=time.perf_counter() - t0)))
     sys.exit(0)
