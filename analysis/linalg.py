@@ -332,57 +332,62 @@ def _eliminate(
     inverses = _unit_upper_inverses(diagonal, p, in_float, levels) if levels else None
 
     def reduce_chunk(rows: SparseRows) -> np.ndarray:
-        work = _scratch("work", (len(rows), ncols), dtype)
+        # transposed, one row per matrix column: the columns a block reads and writes are then
+        # contiguous rows (gathering and scattering strided matrix columns cost more than the products)
+        n = len(rows)
+        work = _scratch("work", (ncols, n), dtype)
         work.fill(0)
-        work[np.repeat(np.arange(len(rows)), rows.lengths), rows.cols] = rows.vals
+        work[rows.cols, np.repeat(np.arange(n), rows.lengths)] = rows.vals
         for b, start in enumerate(range(0, npiv, block)):
             stop = min(start + block, npiv)
+            k = stop - start
             cols = pcols[start:stop]
-            x = _balanced(work[:, cols], p) if in_float else work[:, cols] % p
-            live = x.any(axis=1).nonzero()[0]
+            x = _balanced(work[cols], p) if in_float else work[cols] % p
+            live = x.any(axis=0).nonzero()[0]
             if not len(live):
                 continue
-            if len(live) < len(work):
-                x = x[live]
+            few = 4 * len(live) < n  # then only the live rows are multiplied and written back
+            if few:
+                x = x[:, live]
             if inverses is not None:  # else every block is the identity
-                inverse = inverses[b, : stop - start, : stop - start]
-                x = _balanced(x @ inverse, p) if in_float else matmul_mod(x.astype(np.int64), inverse, p)
+                inverse = inverses[b, :k, :k].T
+                x = _balanced(inverse @ x, p) if in_float else matmul_mod(np.ascontiguousarray(inverse), x.astype(np.int64), p)
             first = int(cols[0])
             lo, hi = indptr[start], indptr[stop]
             width = ncols - first
-            if in_float and len(x) * (stop - start) * width > _SPARSE_WORK and (hi - lo) * _SPARSE_DENSITY < (stop - start) * width:
+            if in_float and x.shape[1] * k * width > _SPARSE_WORK and (hi - lo) * _SPARSE_DENSITY < k * width:
                 # wide, sparse pivot rows and many rows to reduce: the product with the block restricted to
                 # the columns its rows use costs rows x block x used instead of rows x block x width (a
                 # scipy.sparse product was as fast, but importing scipy.sparse cost every process 0.1 s)
                 used, local = np.unique(pivots.cols[lo:hi], return_inverse=True)
-                compact = _scratch("compact", (stop - start, len(used)), dtype)
+                compact = _scratch("compact", (len(used), k), dtype)
                 compact.fill(0)
-                compact[owner[lo:hi] - start, local] = pivots.vals[lo:hi]
-                update = x @ compact
-                if len(live) == len(work):
-                    work[:, used] -= update
+                compact[local, owner[lo:hi] - start] = pivots.vals[lo:hi]
+                update = compact @ x
+                if few:
+                    work[np.ix_(used, live)] -= update
                 else:
-                    work[np.ix_(live, used)] -= update
+                    work[used] -= update
                 continue
-            dense = _scratch("dense", (stop - start, width), dtype)
+            dense = _scratch("dense", (width, k), dtype)
             dense.fill(0)
-            dense[owner[lo:hi] - start, pivots.cols[lo:hi] - first] = pivots.vals[lo:hi]
-            update = _scratch("product", (len(x), width), dtype)
+            dense[pivots.cols[lo:hi] - first, owner[lo:hi] - start] = pivots.vals[lo:hi]
+            update = _scratch("product", (width, x.shape[1]), dtype)
             if in_float:
-                np.matmul(x, dense, out=update)
+                np.matmul(dense, x, out=update)
             else:
-                update[...] = matmul_mod(x.astype(np.int64), dense, p)
-            if len(live) == len(work):
-                work[:, first:] -= update
+                update[...] = matmul_mod(dense, x.astype(np.int64), p)
+            if few:
+                work[first:, live] -= update
             else:
-                work[live, first:] -= update
+                work[first:] -= update
         if columns is not None:
-            work = work[:, columns]
+            work = work[columns]
         if not in_float:
-            return work % p
+            return np.ascontiguousarray((work % p).T)
         out = _balanced(work, p)
         np.add(out, p, out=out, where=out < 0)
-        return out.astype(np.int64)
+        return np.ascontiguousarray(out.T, dtype=np.int64)
 
     chunk = max(1, _ROW_CHUNK_CELLS // ncols)
     if len(rows) <= chunk:
@@ -532,9 +537,9 @@ SPARSE_MAX_DENSITY = 0.05
 """``auto`` reduces a matrix with the compiled sparse kernel only when its pivot rows fill at most this
 share of their columns: above it the dense BLAS products of the numpy backend were faster (random
 quadrics, pivot density 8 %: 1.1-1.6x; katsura-9 and eco-10/11, 1-3 %: sparse 2-4x faster)."""
-SPARSE_MIN_WORK = 3_000_000_000
+SPARSE_MIN_WORK = 20_000_000_000
 """... and, until the kernel is loaded, when the dense elimination would cost more than this many
-multiply-adds (rows to reduce x pivots x columns, about 0.2 s): loading numba and the cached kernel
+multiply-adds (rows to reduce x pivots x columns, about 1 s of dense products): loading numba and the cached kernel
 costs about 0.8 s of a process's time, which small systems never pay."""
 SPARSE_MIN_WORK_LOADED = 20_000_000
 """Once the kernel is loaded, the dense path is kept only for matrices below this much work, where
