@@ -24,6 +24,10 @@ from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend, sparse_pay
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
+CUBE_CELLS = 1 << 24
+"""Up to this many divisibility tests (new elements x partners^2) the pair update of a round tests all
+pairs of partners at once; above it, degree by degree against the minimal lcms (same pairs)."""
+
 DEFAULT_MAX_MEMORY = 8 << 30
 """Default memory cap of one F4 matrix reduction (8 GiB), well inside a 16-24 GB machine."""
 
@@ -285,7 +289,34 @@ class _State:
         new_words = words[k : k + m]
         covered = _divides_words(new_words, words[partners], guard) & (np.arange(m)[None, :] > born[:, None])
         dies = np.where(covered.any(axis=1), covered.argmax(axis=1), m)
-        # new pairs (g, h_t), a few t at a time: span[t, c] says partner c is active at time t
+        # new pairs (g, h_t): all t at once through cubes of divisibility tests while they are small,
+        # else t by t through the minimal lcms (see _new_pairs_by_degree)
+        if m * len(partners) ** 2 <= CUBE_CELLS:
+            new_pairs, new_lcms, new_born = self._new_pairs_cube(k, m, partners, born, dies, guard)
+        else:
+            new_pairs, new_lcms, new_born = self._new_pairs_by_degree(k, m, partners, born, dies, guard)
+        # criterion B over the existing and the new pairs, by every h_u inserted after the pair
+        pairs = np.vstack([self.pairs, *new_pairs])
+        lcms = np.vstack([self.pL, *new_lcms])
+        pair_born = np.concatenate([np.full(len(self.pairs), -1), *new_born])
+        hit = _divides_words(new_words, lcms.view(np.uint64), guard) & (np.arange(m)[None, :] > pair_born[:, None])
+        pp, uu = np.nonzero(hit)
+        if len(pp):
+            lead_u = self.E[k + uu]
+            same_i = np.maximum(self.E[pairs[pp, 0]], lead_u).sum(axis=1, dtype=np.int64) == pairs[pp, 2]
+            same_j = np.maximum(self.E[pairs[pp, 1]], lead_u).sum(axis=1, dtype=np.int64) == pairs[pp, 2]
+            keep = np.ones(len(pairs), dtype=bool)
+            keep[pp[~(same_i | same_j)]] = False
+            pairs, lcms = pairs[keep], lcms[keep]
+        self.pairs, self.pL = pairs, lcms
+        self.active[partners] = dies == m
+
+    def _new_pairs_cube(self, k: int, m: int, partners: np.ndarray, born: np.ndarray, dies: np.ndarray,
+                        guard: np.ndarray) -> tuple[list, list, list]:
+        """The new pairs (g, h_t) of :meth:`insert` for all t, a few t at a time: span[t, c] says partner c
+        is active at time t; every partner's lcm with h_t is tested against every other's (m x P^2 tests).
+        Returns lists of (pairs, lcms, insertion times t) arrays."""
+        words = self.E.view(np.uint64)
         new_pairs, new_lcms, new_born = [], [], []
         step = max(1, (1 << 18) // len(partners) ** 2)
         for t0 in range(0, m, step):
@@ -312,21 +343,45 @@ class _State:
             new_pairs.append(np.column_stack([cand[cc], k + t[tt], degrees[tt, cc]]))
             new_lcms.append(L[tt, cc])
             new_born.append(t[tt])
-        # criterion B over the existing and the new pairs, by every h_u inserted after the pair
-        pairs = np.vstack([self.pairs, *new_pairs])
-        lcms = np.vstack([self.pL, *new_lcms])
-        pair_born = np.concatenate([np.full(len(self.pairs), -1), *new_born])
-        hit = _divides_words(new_words, lcms.view(np.uint64), guard) & (np.arange(m)[None, :] > pair_born[:, None])
-        pp, uu = np.nonzero(hit)
-        if len(pp):
-            lead_u = self.E[k + uu]
-            same_i = np.maximum(self.E[pairs[pp, 0]], lead_u).sum(axis=1, dtype=np.int64) == pairs[pp, 2]
-            same_j = np.maximum(self.E[pairs[pp, 1]], lead_u).sum(axis=1, dtype=np.int64) == pairs[pp, 2]
-            keep = np.ones(len(pairs), dtype=bool)
-            keep[pp[~(same_i | same_j)]] = False
-            pairs, lcms = pairs[keep], lcms[keep]
-        self.pairs, self.pL = pairs, lcms
-        self.active[partners] = dies == m
+        return new_pairs, new_lcms, new_born
+
+    def _new_pairs_by_degree(self, k: int, m: int, partners: np.ndarray, born: np.ndarray, dies: np.ndarray,
+                             guard: np.ndarray) -> tuple[list, list, list]:
+        """The same new pairs as :meth:`_new_pairs_cube`, t by t: the lcms of h_t with its partners by
+        increasing degree, each degree's tested only against the minimal lcms of lower degrees (a proper
+        divisor of an lcm has lower degree and is a multiple of a minimal one), so a round costs about
+        m x P x (minimal lcms) tests instead of m x P^2."""
+        new_pairs, new_lcms, new_born = [], [], []
+        nbytes = 8 * self.E.view(np.uint64).shape[1]
+        for t in range(m):
+            cand = partners[(born < t) & (dies >= t)]
+            if not len(cand):
+                continue
+            L = np.maximum(self.E[cand], self.E[k + t])
+            degrees = L.sum(axis=1, dtype=np.int64)
+            coprime = degrees == self.lm_degrees[cand] + self.lm_degrees[k + t]
+            L_words = L.view(np.uint64)
+            minimal = L_words[:0]
+            kept = []
+            for d in np.unique(degrees):
+                sel = np.flatnonzero(degrees == d)
+                if len(minimal):
+                    sel = sel[~_divides_words(minimal, L_words[sel], guard).any(axis=1)]
+                    if not len(sel):
+                        continue
+                # equal lcms (criterion F): the first partner's pair, none if one of them is coprime
+                keys = np.ascontiguousarray(L_words[sel]).view(np.dtype((np.void, nbytes))).ravel()
+                _, first, group = np.unique(keys, return_index=True, return_inverse=True)
+                has_coprime = np.bincount(group.ravel(), weights=coprime[sel], minlength=len(first)) > 0
+                kept.append(sel[first[~has_coprime]])
+                minimal = np.vstack([minimal, L_words[sel[first]]])
+            if not kept:
+                continue
+            keep = np.sort(np.concatenate(kept))
+            new_pairs.append(np.column_stack([cand[keep], np.full(len(keep), k + t), degrees[keep]]))
+            new_lcms.append(L[keep])
+            new_born.append(np.full(len(keep), t))
+        return new_pairs, new_lcms, new_born
 
     def find_reducer(self, m: int) -> int:
         """Index of the sparsest active basis element whose leading monomial divides m, or -1."""
