@@ -138,9 +138,15 @@ def _guard(field: np.dtype, nwords: int) -> np.ndarray:
     return guard
 
 
+_DIVIDES_CELLS = 1 << 20
+
+
 def _divides_words(a: np.ndarray, b: np.ndarray, guard: np.ndarray) -> np.ndarray:
     """out[i, j] = (packed row a[j] divides packed row b[i]): ((b | guard) - a) & guard == guard in every
     word, as the guard bits stop borrows between fields."""
+    step = max(1, _DIVIDES_CELLS // max(1, len(a)))
+    if len(b) > step:  # a block of rows at a time: its temporaries stay in cache (5x faster at 26M cells)
+        return np.concatenate([_divides_words(a, b[s : s + step], guard) for s in range(0, len(b), step)])
     out = ((b[:, None, 0] | guard[0]) - a[None, :, 0]) & guard[0] == guard[0]
     for w in range(1, a.shape[1]):
         out &= ((b[:, None, w] | guard[w]) - a[None, :, w]) & guard[w] == guard[w]
