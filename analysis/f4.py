@@ -24,6 +24,9 @@ from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend, sparse_pay
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
+_ASSEMBLE_BLOCK = 1 << 20
+"""Matrix entries converted at a time by :func:`_assemble`."""
+
 CUBE_CELLS = 1 << 24
 """Up to this many divisibility tests (new elements x partners^2) the pair update of a round tests all
 pairs of partners at once; above it, degree by degree against the minimal lcms (same pairs)."""
@@ -524,12 +527,39 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
     return _Rows.concat(parts), seen
 
 
-def _assemble(state: _State, rows: _Rows, columns: np.ndarray) -> SparseRows:
-    """The rows as sparse rows over the column codes (ascending; column 0 is the largest monomial)."""
-    indptr = np.zeros(len(rows.index) + 1, dtype=np.int64)
-    np.cumsum(rows.lengths, out=indptr[1:])
-    cols = len(columns) - 1 - np.searchsorted(columns, rows.terms)
-    return SparseRows(indptr, cols.astype(np.int64), state.pool_coeffs[rows.positions])
+def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None) -> SparseRows:
+    """The rows (those at index, in that order, if given) as sparse rows over the column codes (ascending;
+    column 0 is the largest monomial), with int32 columns and values (p < 2**31): a third of the int64
+    layout's memory on the large matrices. The entries are converted a block at a time (_ASSEMBLE_BLOCK),
+    so that the int64 temporaries stay small."""
+    lengths = rows.lengths if index is None else rows.lengths[index]
+    indptr = np.zeros(len(lengths) + 1, dtype=np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    total = int(indptr[-1])
+    if index is not None:
+        starts = np.zeros(len(rows.lengths), dtype=np.int64)
+        np.cumsum(rows.lengths[:-1], out=starts[1:])
+        offsets = starts[index] - indptr[:-1]  # entry e of the result is entry e + offsets[row] of rows
+    cols = np.empty(total, dtype=np.int32)
+    vals = np.empty(total, dtype=np.int32)
+    last = len(columns) - 1
+    for lo in range(0, total, _ASSEMBLE_BLOCK):
+        hi = min(lo + _ASSEMBLE_BLOCK, total)
+        if index is None:
+            at = slice(lo, hi)
+        else:
+            first, stop = np.searchsorted(indptr, [lo, hi], side="right") - 1
+            at = np.repeat(offsets[first : stop + 1], np.diff(np.clip(indptr[first : stop + 2], lo, hi))) + np.arange(lo, hi)
+        cols[lo:hi] = last - np.searchsorted(columns, rows.terms[at])
+        vals[lo:hi] = state.pool_coeffs[rows.positions[at]]
+    return SparseRows(indptr, cols, vals)
+
+
+def _lead_columns(rows: _Rows, columns: np.ndarray) -> np.ndarray:
+    """The column of every row's leading term (its first: the terms of an element are decreasing)."""
+    starts = np.zeros(len(rows.lengths), dtype=np.int64)
+    np.cumsum(rows.lengths[:-1], out=starts[1:])
+    return len(columns) - 1 - np.searchsorted(columns, rows.terms[starts])
 
 
 def _split_pivots(leads: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -622,21 +652,21 @@ def _f4(
             raise MatrixTooLarge(
                 f"F4 matrix {nrows} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
             )
-        matrix = _assemble(state, rows, columns)
-        del rows  # the matrix's terms: held only by the matrix from here on
-        nonzeros = len(matrix.cols)
-        pivot_rows, reduce_rows = _split_pivots(matrix.leads, matrix.lengths)
+        nonzeros = int(rows.lengths.sum())
+        leads = _lead_columns(rows, columns)
+        pivot_rows, reduce_rows = _split_pivots(leads, rows.lengths)
         dense = backend.name == "numpy" or (backend.name == "auto" and not sparse_pays(
-            len(pivot_rows), int(matrix.lengths[pivot_rows].sum()), len(reduce_rows), ncols))
+            len(pivot_rows), int(rows.lengths[pivot_rows].sum()), len(reduce_rows), ncols))
         need = matrix_memory(len(reduce_rows), ncols, nonzeros, dense)
         if need > options.max_memory:
             raise MatrixTooLarge(
                 f"F4 matrix {nrows} x {ncols} at degree {d} needs about {format_bytes(need)}, above the memory cap "
                 f"of {format_bytes(options.max_memory)}"
             )
-        pivot_rows = pivot_rows[matrix.leads[pivot_rows].argsort()]  # by lead: the backend need not sort
-        pivots, to_reduce = matrix.take(pivot_rows), matrix.take(reduce_rows)
-        del matrix  # one copy of the entries at a time
+        pivot_rows = pivot_rows[leads[pivot_rows].argsort()]  # by lead: the backend need not sort
+        # the two blocks straight from the rows' terms (no whole matrix and copies of it)
+        pivots, to_reduce = _assemble(state, rows, columns, pivot_rows), _assemble(state, rows, columns, reduce_rows)
+        del rows
         new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p)
         del pivots, to_reduce
         if _insert_rows(state, new_rows, columns[::-1]):
@@ -685,9 +715,9 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     idx = np.flatnonzero(state.active[: len(state.polys)])
     elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
     rows, columns = _preprocess(state, elements, leads_done=False, ordered=False)
-    matrix = _assemble(state, rows, columns)
-    pivots = matrix.take(np.arange(len(idx), len(rows.index)))
-    heads = matrix.take(np.arange(len(idx)))
+    pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)))
+    heads = _assemble(state, rows, columns, np.arange(len(idx)))
+    del rows
     tail = np.ones(len(heads.cols), dtype=bool)
     tail[heads.indptr[:-1]] = False
     tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])

@@ -42,7 +42,8 @@ class MatrixTooLarge(RuntimeError):
 @dataclass(frozen=True)
 class SparseRows:
     """Sparse rows in compressed form: row i has columns ``cols[indptr[i]:indptr[i + 1]]`` (strictly
-    increasing) with values ``vals[indptr[i]:indptr[i + 1]]`` in [1, p). All arrays are int64."""
+    increasing) with values ``vals[indptr[i]:indptr[i + 1]]`` in [1, p). ``indptr`` is int64, the columns
+    and values int64 or int32 (F4's matrices: half the memory)."""
 
     indptr: np.ndarray
     cols: np.ndarray
@@ -262,7 +263,7 @@ def _unit_upper_inverses(t: np.ndarray, p: int, in_float: bool, levels: int = -1
 
 _SPARSE_WORK = 2_000_000  # rows x block x width above which sparse pivot blocks may pay ...
 _SPARSE_DENSITY = 8  # ... when at most 1/8 of their entries are nonzero
-_ROW_CHUNK_CELLS = 1 << 23  # rows x columns of the dense working matrix (64 MiB of float64) ...
+_ROW_CHUNK_CELLS = 1 << 21  # rows x columns of the dense working matrix (16 MiB of float64) ...
 # ... above which the rows to reduce are reduced a chunk at a time (the block inverses are shared)
 _SCRATCH = threading.local()
 _SCRATCH_MAX = 1 << 22  # elements (32 MiB of float64)
@@ -512,9 +513,11 @@ def numpy_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p
 def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool) -> SparseRows:
     from .sparse_kernels import sparse_echelon
 
-    arrays = (np.ascontiguousarray(a, dtype=np.int64)
-              for a in (pivots.indptr, pivots.cols, pivots.vals, rows.indptr, rows.cols, rows.vals))
-    return SparseRows(*sparse_echelon(*arrays, ncols, p, echelon))
+    def arrays(block: SparseRows) -> tuple[np.ndarray, ...]:  # one compiled signature
+        return (np.ascontiguousarray(block.indptr, dtype=np.int64), np.ascontiguousarray(block.cols, dtype=np.int32),
+                np.ascontiguousarray(block.vals, dtype=np.int32))
+
+    return SparseRows(*sparse_echelon(*arrays(pivots), *arrays(rows), ncols, p, echelon))
 
 
 def sparse_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:

@@ -410,3 +410,16 @@ def test_pair_update_by_degree_matches_cube(name, monkeypatch):
     assert by_degree.basis == cube.basis
     shape = [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in cube.rounds]
     assert [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in by_degree.rounds] == shape
+
+
+def test_matrices_assembled_in_blocks_give_the_same_basis(monkeypatch):
+    """F4 matrices converted a few entries at a time (block edges inside rows) give the same rounds."""
+    import analysis.f4 as f4
+    from analysis.benchmarks import benchmark_system
+
+    polys = benchmark_system("katsura-5")
+    whole = groebner(polys)
+    monkeypatch.setattr(f4, "_ASSEMBLE_BLOCK", 7)
+    blocks = groebner(polys)
+    assert blocks.basis == whole.basis
+    assert [(r.rows, r.cols, r.new) for r in blocks.rounds] == [(r.rows, r.cols, r.new) for r in whole.rounds]
