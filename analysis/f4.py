@@ -27,7 +27,7 @@ from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 _ASSEMBLE_BLOCK = 1 << 20
 """Matrix entries converted at a time by :func:`_assemble`."""
 
-CUBE_CELLS = 1 << 24
+CUBE_CELLS = 1 << 21
 """Up to this many divisibility tests (new elements x partners^2) the pair update of a round tests all
 pairs of partners at once; above it, degree by degree against the minimal lcms (same pairs)."""
 

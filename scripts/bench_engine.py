@@ -266,7 +266,8 @@ def _version(module: str) -> str:
 
 def provenance() -> dict:
     """Commit and dirty flag, read before the run writes its outputs."""
-    return {"commit": _git("rev-parse", "HEAD"), "worktree_dirty": bool(_git("status", "--porcelain", "--", "analysis", "scripts"))}
+    return {"commit": _git("rev-parse", "HEAD"), "worktree_dirty": bool(_git("status", "--porcelain", "--", "analysis", "scripts")),
+            "load_average_at_start": os.getloadavg()}
 
 
 def metadata(args, exe: str | None, startup: float | None, baseline: float | None, prov: dict, seconds: float) -> dict:
