@@ -335,19 +335,25 @@ def _eliminate(
     def reduce_chunk(rows: SparseRows) -> np.ndarray:
         # transposed, one row per matrix column: the columns a block reads and writes are then
         # contiguous rows (gathering and scattering strided matrix columns cost more than the products)
+        # the rows come by increasing leading column: a block can only touch those that start at or
+        # before its last column, a prefix of them
         n = len(rows)
         work = _scratch("work", (ncols, n), dtype)
         work.fill(0)
         work[rows.cols, np.repeat(np.arange(n), rows.lengths)] = rows.vals
+        leads = _row_leads(rows, ncols)
         for b, start in enumerate(range(0, npiv, block)):
             stop = min(start + block, npiv)
             k = stop - start
             cols = pcols[start:stop]
-            x = _balanced(work[cols], p) if in_float else work[cols] % p
+            reach = int(np.searchsorted(leads, cols[-1], side="right"))
+            if not reach:
+                continue
+            x = _balanced(work[cols, :reach], p) if in_float else work[cols, :reach] % p
             live = x.any(axis=0).nonzero()[0]
             if not len(live):
                 continue
-            few = 4 * len(live) < n  # then only the live rows are multiplied and written back
+            few = 4 * len(live) < reach  # then only the live rows are multiplied and written back
             if few:
                 x = x[:, live]
             if inverses is not None:  # else every block is the identity
@@ -368,7 +374,7 @@ def _eliminate(
                 if few:
                     work[np.ix_(used, live)] -= update
                 else:
-                    work[used] -= update
+                    work[used, :reach] -= update
                 continue
             dense = _scratch("dense", (width, k), dtype)
             dense.fill(0)
@@ -381,7 +387,7 @@ def _eliminate(
             if few:
                 work[first:, live] -= update
             else:
-                work[first:] -= update
+                work[first:, :reach] -= update
         if columns is not None:
             work = work[columns]
         if not in_float:
@@ -390,11 +396,26 @@ def _eliminate(
         np.add(out, p, out=out, where=out < 0)
         return np.ascontiguousarray(out.T, dtype=np.int64)
 
+    order = np.argsort(_row_leads(rows, ncols), kind="stable")
+    rows = rows.take(order)
     chunk = max(1, _ROW_CHUNK_CELLS // ncols)
     if len(rows) <= chunk:
-        return reduce_chunk(rows)
-    return np.vstack([reduce_chunk(rows.take(np.arange(start, min(start + chunk, len(rows)))))
-                      for start in range(0, len(rows), chunk)])
+        reduced = reduce_chunk(rows)
+    else:
+        reduced = np.vstack([reduce_chunk(rows.take(np.arange(start, min(start + chunk, len(rows)))))
+                             for start in range(0, len(rows), chunk)])
+    out = np.empty_like(reduced)
+    out[order] = reduced
+    return out
+
+
+def _row_leads(rows: SparseRows, ncols: int) -> np.ndarray:
+    """The leading column of every row, ncols for an empty one."""
+    lengths = rows.lengths
+    leads = np.full(len(rows), ncols, dtype=np.int64)
+    nonempty = lengths > 0
+    leads[nonempty] = rows.cols[rows.indptr[:-1][nonempty]]
+    return leads
 
 
 def _rref_chunk(m: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
