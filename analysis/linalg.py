@@ -263,10 +263,10 @@ def _unit_upper_inverses(t: np.ndarray, p: int, in_float: bool, levels: int = -1
 
 _SPARSE_WORK = 2_000_000  # rows x block x width above which sparse pivot blocks may pay ...
 _SPARSE_DENSITY = 8  # ... when at most 1/8 of their entries are nonzero
-_ROW_CHUNK_CELLS = 1 << 21  # rows x columns of the dense working matrix (16 MiB of float64) ...
+_ROW_CHUNK_CELLS = 1 << 20  # rows x columns of the dense working matrix (8 MiB of float64) ...
 # ... above which the rows to reduce are reduced a chunk at a time (the block inverses are shared)
 _SCRATCH = threading.local()
-_SCRATCH_MAX = 1 << 22  # elements (32 MiB of float64)
+_SCRATCH_MAX = 1 << 20  # elements (8 MiB of float64)
 
 
 def _scratch(slot: str, shape: tuple[int, ...], dtype) -> np.ndarray:
