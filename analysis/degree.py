@@ -103,7 +103,7 @@ class DegreeReport:
         return out
 
 
-def _groebner(polys: Sequence[Poly], options: F4Options, engine: Engine = "own", msolve: str | None = None
+def groebner_in_order(polys: Sequence[Poly], options: F4Options, engine: Engine = "own", msolve: str | None = None
               ) -> GroebnerResult:
     """Reduced Gröbner basis in the ring's order; for orders other than grevlex, through grevlex and FGLM
     when the ideal is zero-dimensional (F4 in lex can swell far beyond the ideal's degree: katsura-4,
@@ -153,7 +153,7 @@ def analyse_prime(polys: Sequence[Poly], options: F4Options = F4Options(), satur
     t0 = time.perf_counter()
     gb = None
     if saturate_by is None or saturation == "rank":
-        gb = _groebner(polys, options, engine, msolve)
+        gb = groebner_in_order(polys, options, engine, msolve)
     if saturate_by is not None and gb is not None and is_zero_dimensional(gb):
         deg = saturated_degree(gb, saturate_by.ring.with_order(gb.ring.order).from_terms(saturate_by.terms()))
         dim = 0 if deg else -1
