@@ -24,7 +24,7 @@ from typing import Callable, Literal, Sequence
 import numpy as np
 
 from .ring import Poly, Ring
-from .systems import cyclic, katsura
+from .systems import cyclic, eco, katsura
 
 SystemKind = Literal["square", "overdetermined", "underdetermined", "inconsistent", "junk"]
 SYSTEM_KINDS: tuple[str, ...] = ("square", "overdetermined", "underdetermined", "inconsistent", "junk")
@@ -185,8 +185,41 @@ BENCHMARK_SYSTEMS: dict[str, SystemBuilder] = {
     "cyclic-7": lambda p: cyclic(7, p),
     "dense-3x(2,3,3)": lambda p: dense_random_system(3, (2, 3, 3), p, seed=0),
     "dense-4x(2,2,3,3)": lambda p: dense_random_system(4, (2, 2, 3, 3), p, seed=0),
+    "katsura-9": lambda p: katsura(9, p),
+    "katsura-10": lambda p: katsura(10, p),
+    "eco-10": lambda p: eco(10, p),
+    "eco-11": lambda p: eco(11, p),
+    **{f"quadrics-{n}": (lambda n: lambda p: dense_random_system(n, (2,) * n, p, seed=0))(n) for n in range(8, 12)},
 }
 """Name -> builder(prime). Extend with :func:`register_system`."""
+
+
+def positions_direct_system(m: int, n: int, prime: int = 65521, seed: int = 0) -> list[Poly]:
+    """The direct formulation of the m r / n s problem (unknowns: gauge-fixed receiver and transmitter
+    positions and offsets; :func:`analysis.positions.positions_system` ``"full"``) on its seed's
+    consistent random instance, unsaturated (6r/3s: 18 unknowns, degree 720 = 4 x 180)."""
+    from .positions import gf_system, positions_system, sample_gf_positions
+
+    system = positions_system(m, n, "full")
+    data, _root = sample_gf_positions(m, n, prime, seed, "full")
+    return gf_system(system, data, prime)[0]
+
+
+def in_order(polys: Sequence[Poly], order: str) -> list[Poly]:
+    """The polynomials in the same variables under another monomial order."""
+    ring = polys[0].ring.with_order(order)
+    return [ring.from_terms(f.terms()) for f in polys]
+
+
+LEX_SYSTEMS = {
+    "lex-katsura-6": lambda p: in_order(katsura(6, p), "lex"),
+    "lex-cyclic-5": lambda p: in_order(cyclic(5, p), "lex"),
+    "lex-curve-3x(3,3)": lambda p: in_order(dense_random_system(3, (3, 3), p, seed=0), "lex"),
+}
+"""Lex bases: two zero-dimensional ideals (grevlex then FGLM) and a curve (two dense cubics in three
+unknowns: positive-dimensional, F4 in lex)."""
+BENCHMARK_SYSTEMS.update(LEX_SYSTEMS)
+BENCHMARK_SYSTEMS["positions-6r3s"] = lambda p: positions_direct_system(6, 3, p)
 
 
 def tdoa_system(label: str, prime: int = 65521, seed: int = 0) -> list[Poly]:
@@ -221,6 +254,14 @@ def register_system(name: str, builder: SystemBuilder, replace: bool = False) ->
     if name in BENCHMARK_SYSTEMS and not replace:
         raise ValueError(f"benchmark system {name!r} already registered")
     BENCHMARK_SYSTEMS[name] = builder
+
+
+def basis_digest(basis: Sequence[Poly]) -> str:
+    """SHA-256 of a basis's terms (exponents and coefficients), elements in the given order: two reduced
+    bases sorted by leading monomial are equal iff their digests are."""
+    import hashlib
+
+    return hashlib.sha256(repr([f.terms() for f in basis]).encode()).hexdigest()
 
 
 def benchmark_system(name: str, prime: int = 65521) -> list[Poly]:

@@ -61,6 +61,7 @@ from .degree import DEFAULT_PRIMES
 from .f4 import F4Options, GroebnerResult, groebner
 from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
 from .linalg import MatrixTooLarge
+from .msolve import MsolveRun, MsolveTimeout
 from .paths import cache_dir
 from .progress import Progress
 from .quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
@@ -132,7 +133,8 @@ class InstanceOutcome:
     minor_rank: rank of the Jacobian of the minors alone at the known root (their number of independent
     constraints; 3 for the 10 minors of 6r/4s, as the paper counts them).
     saturated_degree: |B| of I : (det H)^inf (None when not computed). max_rows/max_cols: the largest
-    F4 matrix (0 when F4 did not finish). seconds: wall time of this instance.
+    F4 matrix (0 when F4 did not finish). seconds: wall time of this instance. engine: what computed
+    the Gröbner basis (``"own"``: :func:`analysis.f4.groebner`; ``"msolve"``: the msolve executable).
     """
 
     prime: int
@@ -148,6 +150,7 @@ class InstanceOutcome:
     max_cols: int = 0
     seconds: float = 0.0
     message: str = ""
+    engine: str = "own"
 
     @property
     def token(self) -> str:
@@ -201,6 +204,7 @@ class FormulationResult:
     max_matrix_cells, timeout: the limits in force (a cached too-large/timeout result is reused only
         under limits no larger than these).
     instances: the per-instance outcomes.
+    engine: the Gröbner engine of the instances (``"own"`` or ``"msolve"``; not a CSV column).
     """
 
     label: str
@@ -235,6 +239,7 @@ class FormulationResult:
     timeout: float | None = None
     saturation_requested: bool = False
     instances: tuple[InstanceOutcome, ...] = field(default=(), repr=False)
+    engine: str = "own"
 
     @property
     def formulation(self) -> Formulation:
@@ -314,18 +319,23 @@ def _det_h(ring: Ring) -> Poly:
 
 
 def _instance(formulation: Formulation, prime: int, seed: int, options: F4Options, saturate: bool,
-              positive_dimensional_cells: int, skip_f4: str | None = None) -> InstanceOutcome:
+              positive_dimensional_cells: int, skip_f4: str | None = None,
+              msolve: MsolveRun | None = None) -> InstanceOutcome:
     """Everything about one consistent instance; exceptions become status "error" (never raised).
 
     skip_f4: when set (an earlier instance exceeded the cap), only the Jacobian ranks are computed and
-    this text becomes the message.
+    this text becomes the message. msolve: compute the Gröbner basis with the msolve executable instead
+    of the own engine (no matrix cap; its wall-clock limit gives status "timeout"); saturation, when
+    requested, still runs on the own engine.
     """
     t0 = time.perf_counter()
     n = formulation.config.n_unknowns
     ranks: dict = {}
 
+    engine = "own" if msolve is None else "msolve"
+
     def outcome(status: InstanceStatus, **kw) -> InstanceOutcome:
-        return InstanceOutcome(prime, seed, status, **ranks, seconds=time.perf_counter() - t0, **kw)
+        return InstanceOutcome(prime, seed, status, **ranks, seconds=time.perf_counter() - t0, engine=engine, **kw)
 
     try:
         instance = sample_gf_instance(formulation.config, prime, seed)
@@ -343,9 +353,11 @@ def _instance(formulation: Formulation, prime: int, seed: int, options: F4Option
         cap = min(options.max_matrix_cells, positive_dimensional_cells) if singular else options.max_matrix_cells
         capped = dataclasses.replace(options, max_matrix_cells=cap)
         try:
-            gb = groebner(polys, capped)
+            gb = groebner(polys, capped) if msolve is None else msolve.groebner(polys)
         except MatrixTooLarge as e:
             return outcome(over_cap, message=str(e))
+        except MsolveTimeout as e:
+            return outcome("timeout", message=str(e))
         if any(g.evaluate(instance.root) for g in gb.basis):
             raise ArithmeticError("the known root does not vanish on the Gröbner basis")
         sizes = dict(gb_size=len(gb.basis), max_rows=gb.max_matrix[0], max_cols=gb.max_matrix[1])
@@ -440,7 +452,7 @@ def combine(formulation: Formulation, outcomes: Sequence[InstanceOutcome], prime
         max_cols=chosen.max_cols if chosen else max((o.max_cols for o in outcomes), default=0),
         seconds=sum(o.seconds for o in outcomes), primes=tuple(primes), seeds=tuple(seeds), message=message,
         max_matrix_cells=options.max_matrix_cells, timeout=timeout, saturation_requested=saturation_requested,
-        instances=tuple(outcomes),
+        instances=tuple(outcomes), engine="msolve" if any(o.engine == "msolve" for o in outcomes) else "own",
     )
 
 
@@ -448,7 +460,8 @@ def compute_formulation(formulation: Formulation | str, primes: Sequence[int] = 
                         seeds: Sequence[int] = DEFAULT_SEEDS, options: F4Options | None = None,
                         saturate: bool = False, *,
                         positive_dimensional_cells: int = POSITIVE_DIMENSIONAL_CELLS,
-                        on_instance: Callable[[InstanceOutcome], None] | None = None) -> FormulationResult:
+                        on_instance: Callable[[InstanceOutcome], None] | None = None,
+                        msolve: MsolveRun | None = None) -> FormulationResult:
     """Degree |B| (and more) of one formulation over every (prime, seed) instance.
 
     Parameters
@@ -460,6 +473,8 @@ def compute_formulation(formulation: Formulation | str, primes: Sequence[int] = 
         get their saturated degree anyway when |B| <= :data:`SATURATION_CHEAP_LIMIT` (cheap).
     positive_dimensional_cells : matrix cap for instances rank-deficient at the known root.
     on_instance : called with each :class:`InstanceOutcome` as soon as it is known (used by workers).
+    msolve : compute the Gröbner bases with this msolve executable instead of the own engine (no
+        matrix cap; a run over its wall-clock limit gives "timeout"); the result's ``engine`` says so.
 
     After the first instance exceeds the cap, the remaining ones only get their Jacobian rank.
     Returns the combined :class:`FormulationResult`. Paper Section 3, Tables 2-3; reference/NOTES.md.
@@ -474,13 +489,15 @@ def compute_formulation(formulation: Formulation | str, primes: Sequence[int] = 
     skip: str | None = None
     for prime in primes:
         for seed in seeds:
-            outcome = _instance(formulation, prime, seed, options, saturate, positive_dimensional_cells, skip)
-            if skip is None and outcome.status in ("too-large", "positive-dimensional") and outcome.gb_size is None:
-                skip = f"F4 skipped: instance (prime {prime}, seed {seed}) exceeded the cap"
+            outcome = _instance(formulation, prime, seed, options, saturate, positive_dimensional_cells, skip, msolve)
+            if skip is None and outcome.status in ("too-large", "positive-dimensional", "timeout") \
+                    and outcome.gb_size is None:
+                skip = f"Gröbner basis skipped: instance (prime {prime}, seed {seed}) exceeded the cap"
             outcomes.append(outcome)
             if on_instance is not None:
                 on_instance(outcome)
-    return combine(formulation, outcomes, primes, seeds, options, saturation_requested=saturate)
+    return combine(formulation, outcomes, primes, seeds, options, None if msolve is None else msolve.timeout,
+                   saturation_requested=saturate)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -488,13 +505,15 @@ def compute_formulation(formulation: Formulation | str, primes: Sequence[int] = 
 # --------------------------------------------------------------------------------------------------
 
 
-def _cache_key(label: str, primes: Sequence[int], seeds: Sequence[int]) -> str:
-    return json.dumps({"label": label, "primes": list(primes), "seeds": list(seeds), "engine": ENGINE_VERSION},
-                      sort_keys=True)
+def _cache_key(label: str, primes: Sequence[int], seeds: Sequence[int], backend: str = "own") -> str:
+    key = {"label": label, "primes": list(primes), "seeds": list(seeds), "engine": ENGINE_VERSION}
+    if backend != "own":  # the own engine's keys predate backends: unchanged, so existing caches stay valid
+        key["backend"] = backend
+    return json.dumps(key, sort_keys=True)
 
 
-def _cache_path(cache_dir: Path, label: str, primes: Sequence[int], seeds: Sequence[int]) -> Path:
-    digest = hashlib.sha256(_cache_key(label, primes, seeds).encode()).hexdigest()[:20]
+def _cache_path(cache_dir: Path, label: str, primes: Sequence[int], seeds: Sequence[int], backend: str = "own") -> Path:
+    digest = hashlib.sha256(_cache_key(label, primes, seeds, backend).encode()).hexdigest()[:20]
     return cache_dir / f"{label.split(':', 1)[0]}-{digest}.json"
 
 
@@ -512,15 +531,16 @@ def _usable(result: FormulationResult, options: F4Options, timeout: float | None
 
 
 def load_cached(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_PRIMES,
-                seeds: Sequence[int] = DEFAULT_SEEDS, cache_dir: Path | str | None = None) -> FormulationResult | None:
-    """The cached result of a formulation, or None."""
+                seeds: Sequence[int] = DEFAULT_SEEDS, cache_dir: Path | str | None = None,
+                backend: str = "own") -> FormulationResult | None:
+    """The cached result of a formulation (computed by ``backend``: "own" or "msolve"), or None."""
     label = formulation if isinstance(formulation, str) else formulation.label
-    path = _cache_path(Path(cache_dir) if cache_dir else default_cache_dir(), label, primes, seeds)
+    path = _cache_path(Path(cache_dir) if cache_dir else default_cache_dir(), label, primes, seeds, backend)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if data.get("key") != json.loads(_cache_key(label, primes, seeds)):
+    if data.get("key") != json.loads(_cache_key(label, primes, seeds, backend)):
         return None
     try:
         return FormulationResult.from_dict(data["result"])
@@ -530,8 +550,9 @@ def load_cached(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_
 
 def _store(cache_dir: Path, result: FormulationResult) -> None:
     cache_dir.mkdir(parents=True, exist_ok=True)
-    path = _cache_path(cache_dir, result.label, result.primes, result.seeds)
-    payload = {"key": json.loads(_cache_key(result.label, result.primes, result.seeds)), "result": result.to_dict()}
+    path = _cache_path(cache_dir, result.label, result.primes, result.seeds, result.engine)
+    payload = {"key": json.loads(_cache_key(result.label, result.primes, result.seeds, result.engine)),
+               "result": result.to_dict()}
     tmp = path.with_suffix(f".tmp{os.getpid()}")
     tmp.write_text(json.dumps(payload, indent=1, sort_keys=True), encoding="utf-8")
     os.replace(tmp, path)  # atomic: an interrupted sweep never leaves a half-written entry

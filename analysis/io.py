@@ -54,8 +54,10 @@ Coefficients = dict[tuple[int, ...], Fraction]
 MAX_DEGREE = (1 << FIELD_BITS) - 1
 """Largest total degree the ring's packed monomial keys support; larger exponents are input errors."""
 
-_VARIABLE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
-_VARIABLE_RULE = "a letter followed by letters, digits or '_'"
+_OPERATORS = r"\s+\-*/^(),#"
+_VARIABLE_NAME = re.compile(rf"[^{_OPERATORS}0-9.][^{_OPERATORS}]*\Z")
+_VARIABLE_RULE = ("as msolve reads them: any characters but blanks, the operators + - * / ^ ( ), commas and '#', "
+                  "not starting with a digit or '.' (e.g. x1, x_1, x', x[1], a.b)")
 
 
 _CHUNK = 4000
@@ -268,7 +270,7 @@ class System:
 
     Parameters
     ----------
-    variables: distinct variable names (letters, digits, '_', starting with a letter).
+    variables: distinct variable names (as msolve reads them: see ``_VARIABLE_RULE``).
     characteristic: 0 (coefficients in Q) or a prime 2 < p < 2^31. For p > 0 the coefficients are
         normalised to integers in (-p/2, p/2].
     polynomials: one ``{exponent tuple: coefficient}`` per polynomial; zero coefficients are dropped, so
@@ -436,7 +438,12 @@ def _normalise(poly: Mapping, nvars: int, p: int, name: str) -> Coefficients:
 
 # -- tokenizer and recursive-descent parser ------------------------------------------------------
 
-_TOKEN = re.compile(r"\s*(?:(?P<num>[0-9]+)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^(),])|(?P<bad>\S))")
+_TOKEN = re.compile(rf"\s*(?:(?P<num>[0-9]+)|(?P<name>[^{_OPERATORS}0-9.][^{_OPERATORS}]*)|(?P<op>\*\*|[-+*/^(),])"
+                    r"|(?P<bad>\S))")
+_IDENTIFIER_TOKEN = re.compile(r"\s*(?:(?P<num>[0-9]+)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^(),])"
+                               r"|(?P<bad>\S))")
+"""Tokens of formats whose names are identifiers (the parametric systems: their names become Python
+names in a generated solver); anything else in a name is an unexpected character."""
 
 
 class _Token(NamedTuple):
@@ -449,11 +456,11 @@ class _Token(NamedTuple):
         return "end of polynomial" if self.kind == "end" else repr(self.text)
 
 
-def _tokenize(lines: Sequence[tuple[int, str]], source: str) -> list[_Token]:
+def _tokenize(lines: Sequence[tuple[int, str]], source: str, pattern: re.Pattern = _TOKEN) -> list[_Token]:
     """Tokens of (line number, text with comments removed) pairs."""
     out: list[_Token] = []
     for lineno, text in lines:
-        for m in _TOKEN.finditer(text):
+        for m in pattern.finditer(text):
             kind = m.lastgroup
             if kind == "bad":
                 ch = m.group(kind)
@@ -507,6 +514,8 @@ class _Parser:
             prev = self.tokens[self.pos - 1]
             if tok.text == ")":
                 raise self.fail(tok, "unmatched ')'")
+            if tok.kind == "name" and tok.text not in self.index:
+                raise self.fail(tok, f"unknown {self.kind} {tok.text!r}; {self.kind}s are {', '.join(self.variables)}")
             if tok.kind in ("num", "name") or tok.text == "(":
                 if tok.line > prev.line:
                     hint = f"missing ',' at the end of line {prev.line}?"
@@ -639,17 +648,19 @@ def _split_polynomials(tokens: list[_Token], source: str) -> list[list[_Token]]:
 
 def parse_polynomial(
     text: str, variables: Sequence[str], characteristic: int = 0, source: str = "<string>", line: int = 1,
-    kind: str = "variable",
+    kind: str = "variable", identifiers: bool = False,
 ) -> Coefficients:
     """One polynomial in msolve syntax as ``{exponents: Fraction}`` (not reduced mod the characteristic).
 
     ``line`` is the line number of the text's first line in its source (for error messages); ``kind``
     is the word for the names in the message about an unknown one (e.g. ``"name"`` where parameters
-    are read as further variables, :mod:`analysis.parametric`).
+    are read as further variables, :mod:`analysis.parametric`). ``identifiers``: names are
+    identifiers (letters, digits, '_'), not msolve's wider names.
     """
     variables = _check_variables(variables, source)
     p = _check_characteristic(characteristic, source)
-    tokens = _tokenize([(line + k, _strip_comment(t)) for k, t in enumerate(text.split("\n"))], source)
+    tokens = _tokenize([(line + k, _strip_comment(t)) for k, t in enumerate(text.split("\n"))], source,
+                       _IDENTIFIER_TOKEN if identifiers else _TOKEN)
     if not tokens:
         raise InputError(f"{_where(source, line)}: empty polynomial")
     groups = _split_polynomials(tokens, source)
@@ -818,7 +829,12 @@ utf8substring value values vars vector wait when while width wrap xor zero zeta
 
 
 def _singular_ok(name: str) -> bool:
-    return name not in _SINGULAR_RESERVED
+    return re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name) is not None and name not in _SINGULAR_RESERVED
+
+
+def _identifier(name: str, keep: str = "") -> str:
+    """The letters and digits of a name (and the characters in ``keep``), from its first letter on."""
+    return re.sub(r"^[^A-Za-z]+", "", "".join(ch for ch in name if ch.isascii() and (ch.isalnum() or ch in keep)))
 
 
 def _m2_ok(name: str) -> bool:
@@ -866,7 +882,7 @@ def _renaming_note(names: dict[str, str], comment: str, target: str) -> list[str
 
 def to_macaulay2(system: System) -> str:
     """A Macaulay2 script: the ring (GRevLex), the ideal, then ``print degree I; print dim I``."""
-    names = _rename(system.variables, _m2_ok, clean=lambda s: s.replace("_", ""))
+    names = _rename(system.variables, _m2_ok, clean=_identifier)
     new = list(names.values())
     ring = _fresh("R", set(new), _m2_ok)
     ideal = _fresh("I", set(new) | {ring}, _m2_ok)
@@ -888,7 +904,7 @@ def to_macaulay2(system: System) -> str:
 
 def to_singular(system: System) -> str:
     """A Singular script: ``ring r = p,(x,y),dp;`` the ideal, ``std``, then ``vdim`` and ``dim``."""
-    names = _rename(system.variables, _singular_ok)
+    names = _rename(system.variables, _singular_ok, clean=lambda v: _identifier(v, "_"))
     new = list(names.values())
     taken = set(new)
     r = _fresh("r", taken, _singular_ok)

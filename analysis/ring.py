@@ -75,6 +75,7 @@ class Ring:
     _exps: dict = field(repr=False, default_factory=dict)
     _nrows: int = field(repr=False, default=0)
     _winv_t: object = field(repr=False, default=None)
+    _winv: tuple = field(repr=False, default=())
 
     def __init__(self, variables: Sequence[str], prime: int, order: "str | MonomialOrder" = "grevlex"):
         variables = tuple(str(v) for v in variables)
@@ -97,6 +98,7 @@ class Ring:
         if not np.array_equal(W @ winv, np.eye(len(variables), dtype=np.int64)):
             raise ValueError(f"order {order} has no integer inverse weight matrix")
         object.__setattr__(self, "_winv_t", np.ascontiguousarray(winv.T[::-1]))
+        object.__setattr__(self, "_winv", tuple(tuple(int(x) for x in row) for row in winv))
 
     # -- identity ---------------------------------------------------------------------------
     def __eq__(self, other: object) -> bool:
@@ -153,19 +155,8 @@ class Ring:
         nrows = self._nrows
         mask = (1 << FIELD_BITS) - 1
         fields = [(key >> (FIELD_BITS * (nrows - 1 - r))) & mask for r in range(nrows)]
-        # every supported order is block grevlex: rows of a block are partial sums, longest first
-        out = [0] * self.nvars
-        r = 0
-        offset = 0
-        for size in self.order.blocks or ((self.nvars,) if self.order.name == "grevlex" else (1,) * self.nvars):
-            sums = fields[r : r + size]  # s_size, ..., s_1
-            for k in range(size):
-                hi = sums[k]
-                lo = sums[k + 1] if k + 1 < size else 0
-                out[offset + size - 1 - k] = hi - lo
-            r += size
-            offset += size
-        return tuple(out)
+        # the exponents are the integer inverse of the weight matrix applied to the row values
+        return tuple(sum(w * f for w, f in zip(row, fields) if w) for row in self._winv)
 
     def decode_many(self, keys: Sequence[int]) -> np.ndarray:
         """Exponent vectors (len(keys) x nvars, int64) of many keys at once, through their bytes."""

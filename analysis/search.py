@@ -34,7 +34,11 @@ instances per prime and decided by the majority rule of :func:`analysis.complexi
 ``capped``            a time, matrix-size or memory cap stopped the computation (listed with its cap);
 ``open``              primes disagree or an error: neither computed nor capped (listed).
 
-A cell is complete when computed (the first three) + capped == candidates. The best formulation is the
+A class the own engine's caps stop is computed again by msolve when an executable is given
+(:class:`analysis.msolve.MsolveRun`, run as an external program: no matrix cap, a wall-clock limit),
+on the same two primes and instances, the known root checked on its basis; msolve's decision is then
+the class's, and its row says ``engine msolve``. A cell is complete when every class is decided:
+computed (the first three decisions, by either engine) == candidates. The best formulation is the
 smallest |B| over the *square* zero-dimensional classes: those whose independent equations (A + B + C
 + rank of the minors' Jacobian at the root, the paper's count) number N with a full-rank Jacobian.
 Classes with more independent equations than unknowns are computed and listed, but on exact data they
@@ -53,6 +57,7 @@ from typing import Mapping, Sequence
 from .complexity import ENGINE_VERSION, FormulationResult
 from .degree import PrimeDisagreement
 from .formulations import Formulation, TDOAConfig, enumerate_formulations
+from .msolve import MsolveRun
 from .paths import cache_dir as user_cache_dir
 from .paths import write_if_changed
 from .tables import PAPER_TABLE3, _paper_table3_numbers, _same_results, paper_reference, reduce_formulation
@@ -201,7 +206,7 @@ def is_square(result: FormulationResult) -> bool:
     return result.independent_equations == result.n_unknowns and result.tangent_dim == 0
 
 
-SEARCH_COLUMNS = ("cell", "config", "paper", "k_max", "candidates", "computed", "capped", "open", "complete",
+SEARCH_COLUMNS = ("cell", "config", "paper", "k_max", "candidates", "computed", "by_msolve", "capped", "open", "complete",
                   "zero_dimensional", "square_zero_dimensional", "singular", "positive_dimensional",
                   "best_formulation", "best_degree", "best_saturated_degree", "best_computed_as", "seconds")
 
@@ -225,10 +230,12 @@ def summarise_cell(cell: CellCandidates, results: Mapping[str, FormulationResult
     for target in dict.fromkeys(cell.computed_as):
         seconds += results[target].seconds
     computed = counts["zero-dimensional"] + counts["singular"] + counts["positive-dimensional"]
+    by_msolve = sum(1 for target in cell.computed_as if results[target].engine == "msolve"
+                    and classify(results[target]) not in ("capped", "open"))
     return {
         "cell": cell.cell, "config": f"{cell.m}r{cell.n}s", "paper": paper, "k_max": cell.k_max, "candidates": len(cell.labels),
-        "computed": computed, "capped": counts["capped"], "open": counts["open"],
-        "complete": "yes" if computed + counts["capped"] == len(cell.labels) else "no",
+        "computed": computed, "by_msolve": by_msolve, "capped": counts["capped"], "open": counts["open"],
+        "complete": "yes" if computed == len(cell.labels) else "no",
         "zero_dimensional": counts["zero-dimensional"], "square_zero_dimensional": square,
         "singular": counts["singular"], "positive_dimensional": counts["positive-dimensional"],
         "best_formulation": best[1] if best else "", "best_degree": best[0][0] if best else "",
@@ -246,7 +253,8 @@ def candidate_rows(cell: CellCandidates, results: Mapping[str, FormulationResult
                      "decision": classify(r), "status": r.status, "degree": r.degree,
                      "saturated_degree": r.saturated_degree, "independent_equations": r.independent_equations,
                      "tangent_dim": r.tangent_dim, "instance_degrees": r.instance_degrees,
-                     "cap": r.message if classify(r) in ("capped", "open") else ""})
+                     "cap": r.message if classify(r) in ("capped", "open") or r.engine != "own" else "",
+                     "engine": r.engine})
     return rows
 
 
@@ -262,7 +270,7 @@ SEARCH_SEEDS = (0,)
 ESCALATION_SEEDS = (0, 1)
 
 CANDIDATE_COLUMNS = ("cell", "formulation", "family", "computed_as", "decision", "status", "degree",
-                     "saturated_degree", "independent_equations", "tangent_dim", "instance_degrees", "cap")
+                     "saturated_degree", "independent_equations", "tangent_dim", "instance_degrees", "cap", "engine")
 CAPPED_COLUMNS = ("cell", "formulation", "computed_as", "decision", "status", "cap")
 
 
@@ -296,10 +304,11 @@ def _paper_entries() -> dict[tuple[int, int], str]:
 def run_search(cells: Sequence[tuple[int, int]], bound: SearchBound = SearchBound(),
                limits: SearchLimits = SearchLimits(), *, jobs: int = 1, executor=None, use_cache: bool = True,
                cache_dir: Path | str | None = None, progress: bool = True,
-               out_dir: Path | str | None = None) -> SearchSummary:
+               out_dir: Path | str | None = None, msolve: MsolveRun | None = None) -> SearchSummary:
     """Enumerate, compute and tabulate the given cells (module docstring); writes the outputs when
     ``out_dir`` is given (``tables/search.{csv,md}``, ``search_candidates.csv``, ``search_capped.csv``,
-    ``search.meta.json``)."""
+    ``search.meta.json``). With ``msolve``, the classes the own engine's caps stop are computed again
+    by msolve (``jobs`` runs at a time)."""
     import sys
     import time
 
@@ -328,6 +337,8 @@ def run_search(cells: Sequence[tuple[int, int]], bound: SearchBound = SearchBoun
         for r in sweep(disagree, primes=SEARCH_PRIMES, seeds=ESCALATION_SEEDS,
                        phase="search: disagreements on two seeds per prime", **common):
             results[r.label] = r
+    if msolve is not None:
+        _decide_capped_by_msolve(results, msolve, jobs, cache, use_cache, progress)
     paper = _paper_entries()
     rows = [summarise_cell(plan, results, paper.get((plan.m, plan.n), "")) for plan in plans]
     candidates = [row for plan in plans for row in candidate_rows(plan, results)]
@@ -335,15 +346,58 @@ def run_search(cells: Sequence[tuple[int, int]], bound: SearchBound = SearchBoun
     seconds = time.perf_counter() - t0
     summary = SearchSummary(rows, candidates, capped, [], seconds, len(results) - len(cached), len(cached))
     if out_dir is not None:
-        meta = _meta(bound, limits, cells, plans, summary, jobs, executor)
+        meta = _meta(bound, limits, cells, plans, summary, jobs, executor, msolve)
         summary.paths = write_search_outputs(Path(out_dir), summary, bound, limits, meta)
     return summary
+
+
+def _decide_capped_by_msolve(results: dict[str, FormulationResult], msolve: MsolveRun, jobs: int, cache: Path,
+                             use_cache: bool, progress: bool) -> None:
+    """Compute every capped class again with msolve (same primes and instances; escalation seeds when
+    the primes disagree) and take msolve's result where it decides the class. Cached like the sweep's
+    results, under a key that names the engine."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .complexity import _store, _usable, compute_formulation, load_cached
+    from .f4 import F4Options
+    from .progress import Progress
+
+    todo = sorted(label for label, r in results.items() if classify(r) == "capped")
+    if not todo:
+        return
+    options = F4Options()  # only saturation would use it; msolve has no matrix cap
+
+    def decide(label: str) -> FormulationResult:
+        for seeds in (SEARCH_SEEDS, ESCALATION_SEEDS):
+            r = load_cached(label, SEARCH_PRIMES, seeds, cache, "msolve") if use_cache else None
+            if r is None or not _usable(r, options, msolve.timeout, False):
+                r = compute_formulation(label, SEARCH_PRIMES, seeds, options, msolve=msolve)
+                _store(cache, r)
+            if r.status != "disagree":
+                break
+        return r
+
+    bar = Progress("search: capped classes by msolve", len(todo), progress, "classes")
+    try:
+        # msolve runs as a separate process, so threads suffice to keep `jobs` of them busy
+        with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+            for label, r in zip(todo, pool.map(decide, todo)):
+                own = results[label]
+                if classify(r) in ("capped", "open"):
+                    results[label] = dataclasses.replace(own, message=f"{own.message}; msolve: {r.message}")
+                else:
+                    results[label] = dataclasses.replace(r, message=f"own engine: {own.message}")
+                bar.update(1, f"{label[:50]} {classify(r)} {r.degree if r.degree is not None else ''}")
+    finally:
+        bar.close()
 
 
 VOLATILE_META = ("date", "commit", "worktree_dirty", "versions", "machine", "timings", "executor")
 
 
-def _meta(bound: SearchBound, limits: SearchLimits, cells, plans, summary: SearchSummary, jobs, executor) -> dict:
+def _meta(bound: SearchBound, limits: SearchLimits, cells, plans, summary: SearchSummary, jobs, executor,
+          msolve: MsolveRun | None = None) -> dict:
+    from .msolve import msolve_version
     from .provenance import run_facts
 
     facts = run_facts()
@@ -363,6 +417,10 @@ def _meta(bound: SearchBound, limits: SearchLimits, cells, plans, summary: Searc
                      "must give the majority)",
         "decisions": "singular: Jacobian rank-deficient at the known root on both primes (no Groebner basis); "
                      "square: independent equations (A + B + C + minors' Jacobian rank) = unknowns, full rank",
+        "capped_by_msolve": None if msolve is None else {
+            "version": msolve_version(msolve.exe), "threads": msolve.threads, "timeout": msolve.timeout,
+            "what": "classes stopped by the own engine's caps, computed again by msolve (external program) on the "
+                    "same primes and instances, the known root checked on its basis"},
         "executor": repr(executor) if executor is not None else f"LocalPool(jobs={jobs})",
         "versions": facts["versions"],
         "machine": facts["machine"],
@@ -386,14 +444,16 @@ def _rows_csv(rows: Sequence[Mapping], columns: Sequence[str]) -> str:
 
 def search_markdown(summary: SearchSummary, bound: SearchBound, limits: SearchLimits, header: str) -> str:
     """``tables/search.md``: the bound, the per-cell table and what is open."""
-    cols = ("cell", "paper", "k_max", "candidates", "computed", "capped", "open", "complete", "best_formulation",
-            "best_degree", "best_saturated_degree", "seconds")
+    cols = ("cell", "paper", "k_max", "candidates", "computed", "by_msolve", "capped", "open", "complete",
+            "best_formulation", "best_degree", "best_saturated_degree", "seconds")
     lines = [f"<!-- {header} -->", "", "**Exhaustive search of the Table 3 cells up to relabeling symmetry** "
              f"(within the bound: {bound.describe()}; caps per class: {limits.timeout:g} s, "
              f"{limits.max_matrix_cells} F4 matrix cells, {limits.max_memory >> 20} MiB F4 working memory; "
              f"each class on primes {' and '.join(map(str, SEARCH_PRIMES))}). "
              "best: smallest |B| (as generated; saturated by det H beside it) over the square zero-dimensional "
-             "classes; complete: computed + capped = candidates.", "",
+             "classes; by_msolve: classes the own engine's caps stopped, decided by msolve on the same primes "
+             "and instances (search_candidates.csv names the engine of every class); complete: every class "
+             "decided (computed = candidates).", "",
              "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for row in summary.cells:
         lines.append("| " + " | ".join(str(row[c]) for c in cols) + " |")

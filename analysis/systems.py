@@ -40,3 +40,20 @@ def cyclic(n: int, prime: int = 65521) -> list[Poly]:
         prod = prod * xi
     eqs.append(prod - ring.one())
     return eqs
+
+
+def eco(n: int, prime: int = 65521) -> list[Poly]:
+    """eco-n (Morgan's economics problem): n variables x1..xn, degree 2^(n-2).
+
+    (x_k + sum_{i=1}^{n-k-1} x_i x_{i+k}) x_n - k for k = 1..n-1, and x_1 + ... + x_{n-1} + 1.
+    """
+    ring = Ring([f"x{i}" for i in range(1, n + 1)], prime)
+    x = [None] + ring.gens()  # x[1] .. x[n]
+    eqs = []
+    for k in range(1, n):
+        acc = x[k]
+        for i in range(1, n - k):
+            acc = acc + x[i] * x[i + k]
+        eqs.append(acc * x[n] - ring.one() * k)
+    eqs.append(sum((x[i] for i in range(1, n)), ring.zero()) + ring.one())
+    return eqs

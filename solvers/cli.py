@@ -143,7 +143,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
     )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
-    p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, block:k (default grevlex)")
+    p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, deglex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
     p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
     p.add_argument("--basis-limit", type=_nonnegative("--basis-limit"), default=BASIS_LIMIT, metavar="N",
@@ -154,7 +154,9 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
                    help="cap on F4 matrix rows*cols")
     p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
                    help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
-    p.add_argument("--backend", default="numpy", help="linear algebra backend: numpy (fast) or python (reference)")
+    p.add_argument("--backend", default="auto",
+                   help="linear algebra backend: auto (default: a compiled sparse kernel on large sparse matrices, "
+                   "else numpy), numpy, sparse or python (reference)")
     p.add_argument("--engine", default="own", choices=("auto", "own", "msolve"),
                    help="Groebner engine: own (default), msolve (an msolve executable, run as an external program, "
                    "checked by the own engine on the second prime where affordable) or auto (msolve when present "

@@ -393,3 +393,33 @@ def test_memory_cap_stops_before_allocating():
     lex = katsura(4)[0].ring.with_order("lex")
     with pytest.raises(MatrixTooLarge, match="MiB, above the memory cap of 100 MiB"):
         groebner([lex.from_terms(f.terms()) for f in katsura(4)], F4Options(max_memory=100 << 20))
+
+
+@pytest.mark.parametrize("name", ["katsura-6", "cyclic-6", "tdoa-9r3s-C8", "dense-4x(2,2,3,3)"])
+def test_pair_update_by_degree_matches_cube(name, monkeypatch):
+    """The two ways of choosing the new pairs of a round (all partner pairs at once, or degree by degree
+    against the minimal lcms) give the same pairs: same rounds, same basis."""
+    import analysis.f4 as f4
+    from analysis.benchmarks import benchmark_system
+
+    polys = benchmark_system(name)
+    monkeypatch.setattr(f4, "CUBE_CELLS", 1 << 62)
+    cube = groebner(polys)
+    monkeypatch.setattr(f4, "CUBE_CELLS", 0)
+    by_degree = groebner(polys)
+    assert by_degree.basis == cube.basis
+    shape = [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in cube.rounds]
+    assert [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in by_degree.rounds] == shape
+
+
+def test_matrices_assembled_in_blocks_give_the_same_basis(monkeypatch):
+    """F4 matrices converted a few entries at a time (block edges inside rows) give the same rounds."""
+    import analysis.f4 as f4
+    from analysis.benchmarks import benchmark_system
+
+    polys = benchmark_system("katsura-5")
+    whole = groebner(polys)
+    monkeypatch.setattr(f4, "_ASSEMBLE_BLOCK", 7)
+    blocks = groebner(polys)
+    assert blocks.basis == whole.basis
+    assert [(r.rows, r.cols, r.new) for r in blocks.rounds] == [(r.rows, r.cols, r.new) for r in whole.rounds]

@@ -216,7 +216,9 @@ ERRORS = [
     ("x,y\n0\n(x, y)\n", ["',' inside parentheses"]),
     ("x,y\n0\nx +\n", ["unexpected end of polynomial"]),
     ("x,y\n0\n1.5*x\n", ["decimal numbers are not supported"]),
-    ("x,y\n0\nx $ y\n", ["column 3", "unexpected character '$'"]),
+    ("x,y\n0\nx $ y\n", ["column 3", "unknown variable '$'"]),
+    ("x,y\n0\nx y\n", ["column 3", "unexpected 'y' after 'x' (missing '*'?)"]),
+    ("x,y\n0\n2.5*x\n", ["column 2", "decimal numbers are not supported"]),
     ("x,y\n0\nx,,y\n", ["empty polynomial"]),
     # characteristic
     ("x\n65520\nx\n", ["line 2", "not prime"]),
@@ -236,7 +238,7 @@ ERRORS = [
     ("x,y,x\n0\nx\n", ["line 1", "duplicate variable name 'x'"]),
     ("x,2y\n0\nx\n", ["invalid variable name '2y'"]),
     ("x,y z\n0\nx\n", ["invalid variable name 'y z'"]),
-    ("x,_y\n0\nx\n", ["invalid variable name '_y'"]),
+    ("x,.y\n0\nx\n", ["invalid variable name '.y'"]),
     ("x,y^2\n0\nx\n", ["invalid variable name 'y^2'"]),
     ("x,\n0\nx\n", ["empty variable name"]),
     ("x,1\n0\nx\n", ["variable name '1' collides with a number"]),
@@ -335,6 +337,15 @@ def test_writers_rename_reserved_names():
     assert "ideal g0 = std(i);" in sing
 
 
+def test_msolve_names_are_read_and_renamed_for_the_other_systems():
+    system = parse_msolve(MSOLVE_NAMES)
+    assert system.variables == ("x[1]", "x'", "a.b", "_t", "\u03b1")
+    assert parse_msolve(to_msolve(system)) == system
+    m2 = to_macaulay2(system)
+    assert "R = QQ[x1, x, ab, t, v, MonomialOrder => GRevLex];" in m2
+    assert "ring r = 0,(x1,x,ab,t,v),dp;" in to_singular(system)
+
+
 def test_write_system(tmp_path):
     system = parse_msolve("x,y\n0\nx^2 - 1/2, y - x\n")
     assert read_system(write_system(system, tmp_path / "s.ms", "msolve")) == system
@@ -350,12 +361,15 @@ KATSURA3_Q = to_msolve(System.from_polys(katsura(3)[0].ring, katsura(3))).replac
 # reserved names in both systems, char p with rationals: 6 * 2 * 2 = 24 points, dimension 0
 RENAMED_P = "dim, x_1, r, R, I, g, ord\n32003\ndim^2 - x_1, x_1^3 - 1/2, r - R^2, R^2 - 3, I*g - 1, g^2 - 5, ord - dim\n"
 # (text, Singular's vdim and dim, Macaulay2's degree and dim); vdim is -1 off dimension 0
+# names as msolve reads them (brackets, primes, dots, a leading '_', non-ASCII letters): 2 * 2 = 4 points
+MSOLVE_NAMES = "x[1], x', a.b, _t, \u03b1\n0\nx[1]^2 - 2, x' - x[1], a.b*_t - 1, _t^2 - 3, \u03b1 - a.b\n"
 CROSS_CHECKS = [
     (KATSURA3_Q, ["8", "0"], ["8", "0"]),
     (RENAMED_P, ["24", "0"], ["24", "0"]),
     ("x,y\n0\nx*y - 1/3, 0\n", ["-1", "1"], ["2", "1"]),
+    (MSOLVE_NAMES, ["4", "0"], ["4", "0"]),
 ]
-CROSS_IDS = ["katsura3", "reserved-names-char-p", "positive-dimensional"]
+CROSS_IDS = ["katsura3", "reserved-names-char-p", "positive-dimensional", "msolve-names"]
 
 
 @pytest.mark.skipif(shutil.which("Singular") is None, reason="Singular not installed")

