@@ -22,9 +22,11 @@ from .summary import median_log10
 _COLORS = {"solver": "#1f77b4", "random": "#d62728"}
 _LINESTYLES = {"9r3s": "-", "6r4s": "--"}
 _MARKERS = {"9r3s": "o", "6r4s": "s"}
-#: Histogram x-range (log10 error); the upper end grows with the data up to HIST_MAX.
+#: Histogram x-range (log10 error), fixed: errors outside it are drawn in the end bins. Above 1e4 a run
+#: has diverged, and where a diverged LM trajectory ends is chaotic: scipy's MINPACK LM can end elsewhere
+#: from the same start in another process (tables/NOTES.md, clean reruns), so bins beyond 1e4 would make
+#: the figure's counts differ from run to run without saying anything.
 HIST_RANGE = (-17.0, 4.0)
-HIST_MAX = 10
 
 
 def _figure_metadata(title: str, description: str, meta: dict) -> tuple[dict, dict]:
@@ -74,14 +76,7 @@ def plot_histograms(
     import matplotlib.pyplot as plt
 
     meta = meta or {}
-    finite_logs = [
-        log10_error(v[np.isfinite(v) & (v > 0)])
-        for f in frames.values() if not isinstance(f, str)
-        for v in (np.asarray(f["position_error"], float), np.asarray(f["offset_error"], float))
-    ]
-    top = max([HIST_RANGE[1]] + [float(np.max(x)) for x in finite_logs if np.size(x)])
-    hi = min(math.ceil(top), HIST_MAX)
-    edges = np.arange(HIST_RANGE[0], hi + 1e-9, 0.25)
+    edges = np.arange(HIST_RANGE[0], HIST_RANGE[1] + 1e-9, 0.25)
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True, constrained_layout=True)
     count_rows = []
     trials_seen = set()
