@@ -234,8 +234,7 @@ def _agrees(tapes, spec: dict, coefficients: Callable) -> bool:
     N, P = len(spec["unknowns"]), len(spec["parameters"])
     x = rng.normal(size=(2, N)) + 1j * rng.normal(size=(2, N))
     q = rng.normal(size=P) + 1j * rng.normal(size=P)
-    structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
-    H, _, _ = tracker.evaluate(structure, tracker.segment_coefficients(coefficients, q[None], q[None], 0), x, np.zeros(2))
+    H, _ = _expanded(coefficients, np.array(spec["exponents"]), np.array(spec["term_equation"]), N, x, q)
     with np.errstate(all="ignore"):
         diff = np.abs(tape_kernel.evaluate(tapes.residual, x, 0.0, q, q) - H)
     return bool(np.all(diff <= 1e-9 * (1.0 + np.abs(H).max())))
@@ -597,16 +596,24 @@ def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray]
 def system_residuals(system: ParametricSystem, x: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Largest relative residual over the equations of ``system`` (any shape, e.g. over-determined) at
     points x (K, N) and parameters q (P,): |f_e(x)| / sum of the moduli of f_e's terms."""
-    coefficients = load_coefficients(coefficient_source(system))
     exps, eq = structure(system)
+    H, size = _expanded(load_coefficients(coefficient_source(system)), exps, eq, len(system.equations), x, q)
+    return np.max(np.abs(H) / np.maximum(size, np.finfo(float).tiny), axis=1)
+
+
+def _expanded(coefficients: Callable, exps: np.ndarray, eq: np.ndarray, n_eq: int, x: np.ndarray,
+              q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values (K, n_eq) of an expanded system (term coefficients from ``coefficients``, exponents (T, N),
+    equation of each term (T,)) at points x (K, N) and parameters q (P,), and the sums of its terms'
+    moduli; numpy alone (a solver's first call compiles no monomial kernel to check its program)."""
     c = coefficients(np.asarray(q, dtype=complex)[None])[0]
     x = np.asarray(x, dtype=complex)
     terms = c[None, :] * np.prod(x[:, None, :] ** exps[None, :, :], axis=2)  # (K, T)
-    H = np.zeros((len(x), len(system.equations)), dtype=complex)
+    H = np.zeros((len(x), n_eq), dtype=complex)
     size = np.zeros(H.shape)
     np.add.at(H.T, eq, terms.T)
     np.add.at(size.T, eq, np.abs(terms).T)
-    return np.max(np.abs(H) / np.maximum(size, np.finfo(float).tiny), axis=1)
+    return H, size
 
 
 #: A start root of a squared system is a root of the full system when its relative residual there is

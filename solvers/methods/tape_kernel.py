@@ -288,37 +288,23 @@ def _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, 
     then). The outputs' H rows are overwritten, the factorisation (rows N..) is kept."""
     for p in range(P):
         dl[p] = min(TAYLOR_DELTA, 0.1 * h[p])
-    H0r, H0i, Cr, Ci, Tr, Ti = work[0], work[1], work[2], work[3], work[4], work[5]
+    Cr, Ci, Tr, Ti = work[0], work[1], work[2], work[3]
     _eval(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
     for v in range(N):
         for p in range(P):
-            H0r[v, p] = Or[v, p]
-            H0i[v, p] = Oi[v, p]
             Cr[v, p] = -2.0 * Or[v, p]
             Ci[v, p] = -2.0 * Oi[v, p]
-    for sign in (1.0, -1.0):
-        for p in range(P):
-            t = sign * dl[p]
-            st[p] = s[p] + t
-            for v in range(N):
-                xtr[v, p] = xr[v, p] + t * k1r[v, p]
-                xti[v, p] = xi[v, p] + t * k1i[v, p]
-        _eval(rcode, rimm, Rr, Ri, Or, Oi, N, xtr, xti, st, P)
-        for v in range(N):
-            for p in range(P):
-                Cr[v, p] += Or[v, p]
-                Ci[v, p] += Oi[v, p]
+    # t = d, -d on x + t x1 (c2 -> x2, into T), then t = d, -d, 2d, -2d on x + t x1 + t^2 x2 (c3 with
+    # weights -2, 2, 1, -1 -> x3, in C): one evaluation site (T is zero for the first two points)
     for v in range(N):
         for p in range(P):
-            c = -0.5 / (dl[p] * dl[p])
-            Tr[v, p] = c * Cr[v, p]
-            Ti[v, p] = c * Ci[v, p]
-            Cr[v, p] = 0.0
-            Ci[v, p] = 0.0
-    _solve(Or, Oi, N, N, piv, Tr, Ti, P)  # x2
-    for k, w in ((1, -2.0), (-1, 2.0), (2, 1.0), (-2, -1.0)):
+            Tr[v, p] = 0.0
+            Ti[v, p] = 0.0
+    for k in range(6):
+        m = (1.0 if k % 2 == 0 else -1.0) * (2.0 if k >= 4 else 1.0)
+        w = 1.0 if k < 2 else (-2.0 * m if k < 4 else 0.5 * m)
         for p in range(P):
-            t = k * dl[p]
+            t = m * dl[p]
             st[p] = s[p] + t
             for v in range(N):
                 xtr[v, p] = xr[v, p] + t * (k1r[v, p] + t * Tr[v, p])
@@ -328,12 +314,21 @@ def _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, 
             for p in range(P):
                 Cr[v, p] += w * Or[v, p]
                 Ci[v, p] += w * Oi[v, p]
-    for v in range(N):
+        if k == 1:  # x2 = -J^-1 c2, c2 = (H(d) + H(-d) - 2 H(0)) / (2 d^2)
+            for v in range(N):
+                for p in range(P):
+                    c = -0.5 / (dl[p] * dl[p])
+                    Tr[v, p] = c * Cr[v, p]
+                    Ti[v, p] = c * Ci[v, p]
+                    Cr[v, p] = 0.0
+                    Ci[v, p] = 0.0
+            _solve(Or, Oi, N, N, piv, Tr, Ti, P)
+    for v in range(N):  # x3 = -J^-1 c3, c3 = (H(2d) - 2 H(d) + 2 H(-d) - H(-2d)) / (12 d^3)
         for p in range(P):
             c = -1.0 / (12.0 * dl[p] * dl[p] * dl[p])
             Cr[v, p] *= c
             Ci[v, p] *= c
-    _solve(Or, Oi, N, N, piv, Cr, Ci, P)  # x3
+    _solve(Or, Oi, N, N, piv, Cr, Ci, P)
     for p in range(P):
         if fresh[p]:
             for v in range(N):
@@ -429,7 +424,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
     x2i = np.zeros((N, cap))
     x3r = np.zeros((N, cap))
     x3i = np.zeros((N, cap))
-    work = np.empty((6, N, cap))
+    work = np.empty((4, N, cap))
     fresh = np.empty(cap, dtype=np.bool_)
     # segment data in the tape's input rows (written again when columns move)
     for m in range(M):
@@ -717,7 +712,7 @@ def taylor(tapes: "HomotopyTapes", x: np.ndarray, s: np.ndarray, q0: np.ndarray,
     _tangent(Or, Oi, N, piv, k[0], k[1], P)
     _taylor(tapes.residual.code, tapes.residual.imm, Rr, Ri, Or, Oi, N, xr, xi, s, np.full(P, float(h)), k[0], k[1],
             piv, np.ones(P, dtype=np.bool_), k[2], k[3], k[4], k[5], np.empty((N, P)), np.empty((N, P)), np.empty(P),
-            np.empty(P), np.empty((6, N, P)), P)
+            np.empty(P), np.empty((4, N, P)), P)
     return tuple((k[2 * j] + 1j * k[2 * j + 1]).T for j in range(3))
 
 
@@ -726,7 +721,7 @@ def _segments(q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q0 = np.atleast_2d(np.asarray(q0, dtype=np.complex128))
     q1 = np.atleast_2d(np.asarray(q1, dtype=np.complex128))
     B = max(len(q0), len(q1))
-    q0 = np.ascontiguousarray(np.broadcast_to(q0, (B, q0.shape[1])))
+    q0 = np.array(np.broadcast_to(q0, (B, q0.shape[1])))  # a writable copy: numba compiles readonly arrays apart
     return q0, np.ascontiguousarray(np.broadcast_to(q1, q0.shape) - q0)
 
 
@@ -759,7 +754,7 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
         raise ValueError(f"unknown corrector {corrector!r}; valid: {', '.join(CORRECTORS)}")
     if options.predictor not in PREDICTORS:
         raise ValueError(f"the batched tracker predicts by {' or '.join(PREDICTORS)}, not {options.predictor!r}")
-    x0 = np.ascontiguousarray(np.atleast_2d(x0), dtype=np.complex128)
+    x0 = np.array(np.atleast_2d(x0), dtype=np.complex128)  # a writable copy (see _segments)
     M, N = x0.shape
     q0, dq = _segments(q0, q1)
     _check(tapes, N, q0.shape[1])
@@ -778,9 +773,9 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
 def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
     """``steps`` Newton steps on the systems at parameters q (B, Q) from x (P, N), row p on inst[p]; a row
     whose Jacobian is singular keeps its last point."""
-    x = np.ascontiguousarray(np.atleast_2d(x), dtype=np.complex128)
+    x = np.array(np.atleast_2d(x), dtype=np.complex128)
     M, N = x.shape
-    q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=np.complex128)))
+    q = np.array(q, dtype=np.complex128, ndmin=2)  # a writable copy (a broadcast view would compile apart)
     _check(tapes, N, q.shape[1])
     inst = np.zeros(M, dtype=np.int64) if inst is None else np.ascontiguousarray(inst, dtype=np.int64)
     out = np.empty_like(x)
