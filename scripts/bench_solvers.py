@@ -227,7 +227,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--jobs must be at least 1")
     if unknown:
         parser.error(f"unknown solvers {', '.join(unknown)}; valid: {', '.join(DEFAULT_SOLVERS)}")
-    commit, dirty = _git("rev-parse", "--short", "HEAD"), bool(_git("status", "--porcelain", "--untracked-files=no"))
+    # dirty: changes beside this script's own outputs (rows of an earlier run not yet committed are not code)
+    outputs = [":(exclude)tables/solvers.csv", ":(exclude)tables/solvers.md", ":(exclude)tables/solvers.meta.json",
+               ":(exclude)README.md"]
+    commit = _git("rev-parse", "--short", "HEAD")
+    dirty = bool(_git("status", "--porcelain", "--untracked-files=no", "--", ".", *outputs))
     rows = []
     for label in args.solvers:
         row = bench(label, args.trials, args.seed, not args.no_generate, args.single_calls, args.jobs)

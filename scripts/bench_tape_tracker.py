@@ -67,9 +67,9 @@ def _lu_loop(J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P, reps, factor):
                 tape_kernel._solve(Or, Oi, N, N, piv, br, bi, P)
 
 
-def _kernel_costs(solver, P: int, rng) -> tuple[float, float, float]:
-    """Seconds per path of one evaluation of the full and of the Newton tape and of one LU with two
-    solves, at P paths per call."""
+def _kernel_costs(solver, P: int, rng) -> tuple[float, float, float, float]:
+    """Seconds per path of one evaluation of the full, the Newton and the residual tape and of one LU
+    with two solves, at P paths per call."""
     N = solver.nvars
     x = np.resize(solver.x0, (P, N))
     q1 = rng.normal(size=len(solver.q0)) + 0j
@@ -77,11 +77,14 @@ def _kernel_costs(solver, P: int, rng) -> tuple[float, float, float]:
                              np.tile((q1 - solver.q0)[:, None], (1, P))])
     reps = max(1, 20000 // P)
     costs = []
-    for tape in (solver.tapes.full, solver.tapes.newton):
+    for tape in (solver.tapes.full, solver.tapes.newton, solver.tapes.residual):
         Rr, Ri, Or, Oi = tape_kernel.workspace(tape, P)
         Rr[: tape.n_inputs], Ri[: tape.n_inputs] = inputs.real, inputs.imag
         tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
         costs.append(_best(lambda: [tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P) for _ in range(reps)]) / (reps * P))
+    Rr, Ri, Or, Oi = tape_kernel.workspace(solver.tapes.full, P)  # the full tape's outputs: J after H
+    Rr[: solver.tapes.full.n_inputs], Ri[: solver.tapes.full.n_inputs] = inputs.real, inputs.imag
+    tape_kernel.run_tape(solver.tapes.full.code, solver.tapes.full.imm, Rr, Ri, Or, Oi, P)
     J0r, J0i = np.ascontiguousarray(Or), np.ascontiguousarray(Oi)
     piv, ok = np.zeros((N, P), dtype=np.int64), np.zeros(P, dtype=bool)
     b0r, b0i = np.ascontiguousarray(J0r[:N]), np.ascontiguousarray(J0i[:N])
@@ -91,7 +94,7 @@ def _kernel_costs(solver, P: int, rng) -> tuple[float, float, float]:
     _lu_loop(*args, 1, False)
     t_lu = _best(lambda: _lu_loop(*args, reps, True)) / (reps * P)
     t_copy = _best(lambda: _lu_loop(*args, reps, False)) / (reps * P)
-    return costs[0], costs[1], t_lu - t_copy
+    return costs[0], costs[1], costs[2], t_lu - t_copy
 
 
 def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomials", "tape")) -> list[dict]:
@@ -141,7 +144,7 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
             opts = solver.options
             sc = np.sqrt(np.mean(np.abs(F[:single].reshape(len(F[:single]), -1)) ** 2, axis=1))
             # rounds interleave the plain tracks and the kernels' timings (minimum of each over rounds)
-            attempts, t_track, costs = [], [], []
+            attempts, accepted, t_track, costs = [], [], [], []
             for _ in range(ROUNDS):
                 round_track = []
                 for f, s in zip(F[:single], sc):
@@ -150,15 +153,23 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
                     _, stats = tape_kernel.track(solver.tapes, solver.q0[None], q, solver.x0, None, opts)
                     round_track.append(time.perf_counter() - t)
                     attempts.append(float(np.mean(stats[:, 1] + stats[:, 2])))
+                    accepted.append(float(np.mean(stats[:, 1])))
                 t_track.append(float(np.median(round_track)))
                 costs.append(_kernel_costs(solver, K, rng))
-            t_full, t_newton, t_lu = np.min(costs, axis=0)
-            a = float(np.median(attempts))
-            n_full, n_newton = 4 * a + 1, (opts.newton - 1) * a + opts.final_newton
-            row.update({"attempts_per_path": a, "evals_per_path": n_full + n_newton, "us_eval": 1e6 * t_full,
-                        "us_eval_newton": 1e6 * t_newton, "us_lu": 1e6 * t_lu,
+            t_full, t_newton, t_res, t_lu = np.min(costs, axis=0)
+            a, acc = float(np.median(attempts)), float(np.median(accepted))
+            # per attempt: RK4 three full-tape stages, the corrector's Newton-tape steps and its last step on
+            # the full tape; Pade: no stage, and per accepted point (and the start) seven residual-tape runs
+            # for the Taylor coefficients (their two solves reuse a factorisation: not counted)
+            pade = opts.predictor == "pade"
+            n_full = (1 if pade else 4) * a + 1
+            n_newton = (opts.newton - 1) * a + opts.final_newton
+            n_res = 7 * (acc + 1) if pade else 0.0
+            row.update({"predictor": opts.predictor, "attempts_per_path": a, "accepted_per_path": acc,
+                        "evals_per_path": n_full + n_newton + n_res, "us_eval": 1e6 * t_full,
+                        "us_eval_newton": 1e6 * t_newton, "us_eval_residual": 1e6 * t_res, "us_lu": 1e6 * t_lu,
                         "us_path_track": 1e6 * min(t_track) / K,
-                        "us_path_eval": 1e6 * (n_full * t_full + n_newton * t_newton),
+                        "us_path_eval": 1e6 * (n_full * t_full + n_newton * t_newton + n_res * t_res),
                         "us_path_lu": 1e6 * (n_full + n_newton) * t_lu})
         rows.append(row)
     return rows
@@ -182,9 +193,10 @@ def main(argv=None) -> None:
         t = rows[-1]
         if t["evaluator"] != "tape":
             continue
-        print(f"  tape tracker, one plain track: {t['us_path_track']:.0f} us/path; {t['evals_per_path']:.0f} evaluations "
-              f"per path ({t['attempts_per_path']:.0f} step attempts); evaluation {t['us_eval']:.2f} us (full tape), "
-              f"{t['us_eval_newton']:.2f} us (Newton tape): "
+        print(f"  tape tracker ({t['predictor']}), one plain track: {t['us_path_track']:.0f} us/path; "
+              f"{t['evals_per_path']:.0f} evaluations per path ({t['attempts_per_path']:.0f} step attempts, "
+              f"{t['accepted_per_path']:.0f} accepted); evaluation {t['us_eval']:.2f} us (full tape), "
+              f"{t['us_eval_newton']:.2f} us (Newton tape), {t['us_eval_residual']:.2f} us (residual tape): "
               f"{t['us_path_eval']:.0f} us, LU + 2 solves {t['us_lu']:.2f} us x evals = {t['us_path_lu']:.0f} us, "
               f"rest (bookkeeping) {t['us_path_track'] - t['us_path_eval'] - t['us_path_lu']:.0f} us; "
               f"solve beyond tracking {t['us_per_path'] - t['us_path_track']:.0f} us/path")

@@ -28,6 +28,7 @@ homotopy continuation).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import time
@@ -196,7 +197,8 @@ EVALUATORS = ("auto", "tape", "monomials")
 VALIDATED_PROGRAMS = frozenset({
     "5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0)",
     "5r5s:B2,B3,C2-C5,minors(16) (minors squared, seed 0)",
-})  # not 4r5s:positions-receivers-orbits: one more failure than the monomials on 251 seeded networks
+    "4r5s:positions-receivers-orbits",  # since jumped instances pool their routes (network 518)
+})
 
 
 def _validated(name: str) -> bool:
@@ -233,8 +235,7 @@ def _agrees(tapes, spec: dict, coefficients: Callable) -> bool:
     N, P = len(spec["unknowns"]), len(spec["parameters"])
     x = rng.normal(size=(2, N)) + 1j * rng.normal(size=(2, N))
     q = rng.normal(size=P) + 1j * rng.normal(size=P)
-    structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
-    H, _, _ = tracker.evaluate(structure, tracker.segment_coefficients(coefficients, q[None], q[None], 0), x, np.zeros(2))
+    H, _ = _expanded(coefficients, np.array(spec["exponents"]), np.array(spec["term_equation"]), N, x, q)
     with np.errstate(all="ignore"):
         diff = np.abs(tape_kernel.evaluate(tapes.residual, x, 0.0, q, q) - H)
     return bool(np.all(diff <= 1e-9 * (1.0 + np.abs(H).max())))
@@ -289,8 +290,10 @@ class HomotopySolver:
               options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats."""
         options = options or self.options
-        if self.tapes is not None and options.predictor == "rk4":
+        if self.tapes is not None and options.predictor in tape_kernel.PREDICTORS:
             return tape_kernel.track(self.tapes, q0, q1, x0, inst, options)
+        if options.predictor == "pade":  # Taylor coefficients of the path come from the tapes only
+            options = dataclasses.replace(options, predictor="rk4")
         G = self.segment(q0, q1)
         return tracker.track(self.structure, G, x0, inst, options)
 
@@ -365,7 +368,9 @@ class HomotopySolver:
         # A route through a midpoint permutes the endpoints (monodromy): an endpoint that lands on a root
         # another path already holds means that path jumped (or took this one's root); then every path
         # of the instance takes the same midpoint route, whose endpoints are consistent, where the
-        # midpoint's root set is complete.
+        # midpoint's root set is complete; where that route is not complete either, the instance keeps
+        # the distinct endpoints of both routes (:meth:`_pooled`; replacing the direct endpoints by a route
+        # with fewer unresolved ones lost 4r/5s network 518's true root, which a direct path held).
         jumped = np.array(sorted(jumped), dtype=np.int64)
         for k in range(DETOURS):
             if not len(jumped):
@@ -374,8 +379,8 @@ class HomotopySolver:
             if not complete_m:
                 continue
             xk, ok = self._route(qm, xm, q[jumped])
-            better = np.array([np.sum(_unresolved(xk[j])) < np.sum(_unresolved(x[b])) for j, b in enumerate(jumped)], dtype=bool)
-            x[jumped[better]] = xk[better]
+            for j, b in enumerate(jumped):
+                x[b] = xk[j] if ok[j] else self._pooled(x[b], xk[j], q[b])
             jumped = jumped[~ok]
         # Where no midpoint's root set is complete (4r/5s: 5-40 of its 344 paths stall near roots that go
         # to infinity, on every segment), an instance still short of K distinct roots sends every path
@@ -384,8 +389,6 @@ class HomotopySolver:
         # in 4r/5s's scaled unknowns, can differ by more than the duplicate test's tolerance before
         # them and coincide after).
         left = np.array([b for b in bad if _unresolved(x[b]).any()], dtype=np.int64)
-        if len(left):
-            x[left] = self._polish(x[left], q[left])
         for k in range(POOLED_MIDPOINTS):
             if not len(left):
                 break
@@ -394,11 +397,21 @@ class HomotopySolver:
                 continue
             L, M = len(left), len(xm)
             xk, _ = self.track(qm[None], q[left], np.tile(xm, (L, 1)), np.repeat(np.arange(L), M))
-            xk = self._polish(xk.reshape(L, M, -1), q[left])
+            xk = xk.reshape(L, M, -1)
             for j, b in enumerate(left):
-                x[b] = _pool(x[b], xk[j])
+                x[b] = self._pooled(x[b], xk[j], q[b])
             left = left[[bool(_unresolved(x[b]).any()) for b in left]]
         return self._polish(x, q)
+
+    def _pooled(self, a: np.ndarray, b: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """:func:`_pool` of two endpoint sets (K, n) of one instance with target parameters q (P,), both
+        polished by Newton's method on the target first and ordered by their next Newton step."""
+        rows = self._polish(np.vstack([a, b])[None], q[None])[0]
+        step = np.full(len(rows), np.inf)
+        ok = np.all(np.isfinite(rows), axis=1)
+        if ok.any():
+            step[ok] = np.linalg.norm(self.newton(rows[ok], q[None]) - rows[ok], axis=1) / (1.0 + np.linalg.norm(rows[ok], axis=1))
+        return _pool(rows[: len(a)], rows[len(a):], step)
 
     def _polish(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Newton steps on the targets' own coefficients (x (B, K, N), q (B, P)): the tracker's are
@@ -446,9 +459,15 @@ def _distinct(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     return np.array(kept).reshape(-1, x.shape[1])
 
 
-def _pool(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The distinct roots of two endpoint sets (K, n) of one instance, a's first, as K rows (NaN-padded)."""
-    rows = _distinct(np.vstack([a, b]))[: len(a)]
+def _pool(a: np.ndarray, b: np.ndarray, step: np.ndarray | None = None) -> np.ndarray:
+    """The distinct roots of two endpoint sets (K, n) of one instance as K rows (NaN-padded), a's first; with
+    ``step`` (2K: each row's next Newton step on the target, a's rows then b's) in order of it instead,
+    so that of two copies of one root the converged one is kept and a surplus over K (an unconverged
+    copy counted as distinct: 4r/5s network 85) drops the least converged rows."""
+    rows = np.vstack([a, b])
+    if step is not None:
+        rows = rows[np.argsort(np.where(np.isfinite(step), step, np.inf), kind="stable")]
+    rows = _distinct(rows)[: len(a)]
     out = np.full_like(a, np.nan)
     out[: len(rows)] = rows
     return out
@@ -578,16 +597,24 @@ def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray]
 def system_residuals(system: ParametricSystem, x: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Largest relative residual over the equations of ``system`` (any shape, e.g. over-determined) at
     points x (K, N) and parameters q (P,): |f_e(x)| / sum of the moduli of f_e's terms."""
-    coefficients = load_coefficients(coefficient_source(system))
     exps, eq = structure(system)
+    H, size = _expanded(load_coefficients(coefficient_source(system)), exps, eq, len(system.equations), x, q)
+    return np.max(np.abs(H) / np.maximum(size, np.finfo(float).tiny), axis=1)
+
+
+def _expanded(coefficients: Callable, exps: np.ndarray, eq: np.ndarray, n_eq: int, x: np.ndarray,
+              q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values (K, n_eq) of an expanded system (term coefficients from ``coefficients``, exponents (T, N),
+    equation of each term (T,)) at points x (K, N) and parameters q (P,), and the sums of its terms'
+    moduli; numpy alone (a solver's first call compiles no monomial kernel to check its program)."""
     c = coefficients(np.asarray(q, dtype=complex)[None])[0]
     x = np.asarray(x, dtype=complex)
     terms = c[None, :] * np.prod(x[:, None, :] ** exps[None, :, :], axis=2)  # (K, T)
-    H = np.zeros((len(x), len(system.equations)), dtype=complex)
+    H = np.zeros((len(x), n_eq), dtype=complex)
     size = np.zeros(H.shape)
     np.add.at(H.T, eq, terms.T)
     np.add.at(size.T, eq, np.abs(terms).T)
-    return np.max(np.abs(H) / np.maximum(size, np.finfo(float).tiny), axis=1)
+    return H, size
 
 
 #: A start root of a squared system is a root of the full system when its relative residual there is

@@ -13,9 +13,13 @@ cached on disk: no system needs its own compile.
 Batched tracker (:func:`track`). The predictor-corrector of :mod:`solvers.methods.tracker` (classical
 RK4 on the tangent field, Newton corrector, step size from the first Newton correction; tight
 retracking by the caller), the step logic of ``tracker._track_one`` kept path by path but run in lock
-step: each round every live path makes one step attempt; each evaluation of H, dH/dx (and dH/ds) is
-one run of a tape over all live paths, followed by one batched LU with partial pivoting of the N x N
-Jacobians (paths in the inner loop). The Newton steps before the last use the tape without dH/ds
+step. A second predictor, Pade (:func:`_pade`, :func:`_taylor`): at each accepted point the path's
+Taylor coefficients x1 (the tangent), x2, x3 (central differences of the residual tape along the
+path's expansion, solved with the factorisation already at hand: seven runs of the short H tape, no
+factorisation) give a type (2, 1) Pade approximant per coordinate, which follows a nearby pole of the
+path (Timme 2021); a rejected step costs only its corrector. Each round every live path makes one
+step attempt; each evaluation of H, dH/dx (and dH/ds) is one run of a tape over all live paths,
+followed by one batched LU with partial pivoting of the N x N Jacobians (paths in the inner loop). The Newton steps before the last use the tape without dH/ds
 (:class:`slp.HomotopyTapes`); the last one's factorisation gives the next tangent. Paths that end leave
 the batch at the end of the round (their columns are compacted away). Statuses as in the tracker: 0
 reached s = 1, 1 stalled (or out of steps, or singular Jacobian), 2 diverged.
@@ -33,7 +37,7 @@ from .tracker import TrackerOptions
 # The tapes' types (solvers.methods.slp.Tape, HomotopyTapes) are named in annotations only as strings:
 # slp imports this module's opcodes, and this module never imports slp (one direction of dependency).
 
-__all__ = ["OPCODES", "evaluate", "newton", "run", "run_tape", "track", "workspace"]
+__all__ = ["OPCODES", "PREDICTORS", "evaluate", "newton", "run", "run_tape", "taylor", "track", "workspace"]
 
 #: Instruction set of the tape: d = a + b, a - b, a b, -a, imm a, a + imm, a a, imm; fused: c + imm a b
 #: (imm = +-1), a + imm b; OUT copies register a to output row d. a, b, c are registers, imm the
@@ -266,6 +270,99 @@ def _load_segment(Rr, Ri, N, q0, dq, b, col):
         Ri[N + 1 + Q + k, col] = dq[b, k].imag
 
 
+#: Largest step in s of the finite differences that give the Taylor coefficients of the path (and at most
+#: a tenth of the next step: the rounding error of x3 h^3 then stays ~ 1e3 eps times the terms' size).
+TAYLOR_DELTA = 1e-4
+
+#: Index of the Pade predictor in :data:`tracker.PREDICTORS`.
+PADE = 2
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+            st, dl, work, P):
+    """Taylor coefficients x2, x3 of the path x(s + t) = x + t x1 + t^2 x2 + t^3 x3 + ... (x1 = k1) at the
+    columns with ``fresh``, with the factored Jacobian in the outputs: x_k = -J^-1 c_k, c_k the t^k
+    coefficient of H along the path's lower-order expansion, by central differences of the residual tape
+    (H at t = 0, +-d for c2; at +-d, +-2d for c3: the odd part of H(x + t x1 + t^2 x2) has no t term
+    then). The outputs' H rows are overwritten, the factorisation (rows N..) is kept."""
+    for p in range(P):
+        dl[p] = min(TAYLOR_DELTA, 0.1 * h[p])
+    Cr, Ci, Tr, Ti = work[0], work[1], work[2], work[3]
+    _eval(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
+    for v in range(N):
+        for p in range(P):
+            Cr[v, p] = -2.0 * Or[v, p]
+            Ci[v, p] = -2.0 * Oi[v, p]
+    # t = d, -d on x + t x1 (c2 -> x2, into T), then t = d, -d, 2d, -2d on x + t x1 + t^2 x2 (c3 with
+    # weights -2, 2, 1, -1 -> x3, in C): one evaluation site (T is zero for the first two points)
+    for v in range(N):
+        for p in range(P):
+            Tr[v, p] = 0.0
+            Ti[v, p] = 0.0
+    for k in range(6):
+        m = (1.0 if k % 2 == 0 else -1.0) * (2.0 if k >= 4 else 1.0)
+        w = 1.0 if k < 2 else (-2.0 * m if k < 4 else 0.5 * m)
+        for p in range(P):
+            t = m * dl[p]
+            st[p] = s[p] + t
+            for v in range(N):
+                xtr[v, p] = xr[v, p] + t * (k1r[v, p] + t * Tr[v, p])
+                xti[v, p] = xi[v, p] + t * (k1i[v, p] + t * Ti[v, p])
+        _eval(rcode, rimm, Rr, Ri, Or, Oi, N, xtr, xti, st, P)
+        for v in range(N):
+            for p in range(P):
+                Cr[v, p] += w * Or[v, p]
+                Ci[v, p] += w * Oi[v, p]
+        if k == 1:  # x2 = -J^-1 c2, c2 = (H(d) + H(-d) - 2 H(0)) / (2 d^2)
+            for v in range(N):
+                for p in range(P):
+                    c = -0.5 / (dl[p] * dl[p])
+                    Tr[v, p] = c * Cr[v, p]
+                    Ti[v, p] = c * Ci[v, p]
+                    Cr[v, p] = 0.0
+                    Ci[v, p] = 0.0
+            _solve(Or, Oi, N, N, piv, Tr, Ti, P)
+    for v in range(N):  # x3 = -J^-1 c3, c3 = (H(2d) - 2 H(d) + 2 H(-d) - H(-2d)) / (12 d^3)
+        for p in range(P):
+            c = -1.0 / (12.0 * dl[p] * dl[p] * dl[p])
+            Cr[v, p] *= c
+            Ci[v, p] *= c
+    _solve(Or, Oi, N, N, piv, Cr, Ci, P)
+    for p in range(P):
+        if fresh[p]:
+            for v in range(N):
+                x2r[v, p] = Tr[v, p]
+                x2i[v, p] = Ti[v, p]
+                x3r[v, p] = Cr[v, p]
+                x3i[v, p] = Ci[v, p]
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, p, N, xpr, xpi):
+    """Column p of xp = the path at s + h by the Pade approximant of type (2, 1) of each coordinate's
+    Taylor polynomial x + h x1 + h^2 x2 + h^3 x3: (x + (x1 + b x) h + (x2 + b x1) h^2) / (1 + b h),
+    b = -x3 / x2, where the pole's term matters (|x3| h >= 1e-2 |x2|); else the Taylor polynomial."""
+    for v in range(N):
+        ar, ai = x2r[v, p], x2i[v, p]
+        cr, ci = x3r[v, p], x3i[v, p]
+        a2 = ar * ar + ai * ai
+        c2 = cr * cr + ci * ci
+        if a2 > 0.0 and c2 * h * h >= 1e-4 * a2:
+            br = -(cr * ar + ci * ai) / a2  # b = -x3 / x2
+            bi = -(ci * ar - cr * ai) / a2
+            nr = xr[v, p] + h * (k1r[v, p] + br * xr[v, p] - bi * xi[v, p]) + h * h * (ar + br * k1r[v, p] - bi * k1i[v, p])
+            ni = xi[v, p] + h * (k1i[v, p] + br * xi[v, p] + bi * xr[v, p]) + h * h * (ai + br * k1i[v, p] + bi * k1r[v, p])
+            dr = 1.0 + h * br
+            di = h * bi
+            d = dr * dr + di * di
+            xpr[v, p] = (nr * dr + ni * di) / d
+            xpi[v, p] = (ni * dr - nr * di) / d
+        else:
+            xpr[v, p] = xr[v, p] + h * (k1r[v, p] + h * (ar + h * cr))
+            xpi[v, p] = xi[v, p] + h * (k1i[v, p] + h * (ai + h * ci))
+
+
 @njit(cache=True, nogil=True)
 def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q0, dq, inst, opts, x_out, stats):
     """Track paths x0 (M, N) along the segments q0 + s dq (B, Q) (path m on inst[m]); endpoints to
@@ -276,6 +373,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
     h0, hmin, hmax, target, accept, tol = opts[0], opts[1], opts[2], opts[3], opts[4], opts[5]
     newton, final_newton, max_steps, big = int(opts[6]), int(opts[7]), int(opts[8]), opts[9]
     contract = opts[10]
+    pade = int(opts[11]) == PADE
     M, N = x0.shape
     Q = q0.shape[1]
     cap = max(M, 1)
@@ -321,6 +419,13 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
     e = np.empty(cap)
     good = np.empty(cap, dtype=np.bool_)  # predictor succeeded
     done = np.empty(cap, dtype=np.bool_)  # corrector finished
+    # Pade predictor: the path's Taylor coefficients x2, x3 at the last accepted point (x1 = k1)
+    x2r = np.zeros((N, cap))
+    x2i = np.zeros((N, cap))
+    x3r = np.zeros((N, cap))
+    x3i = np.zeros((N, cap))
+    work = np.empty((4, N, cap))
+    fresh = np.empty(cap, dtype=np.bool_)
     # segment data in the tape's input rows (written again when columns move)
     for m in range(M):
         _load_segment(Rr, Ri, N, q0, dq, inst[m], m)
@@ -332,6 +437,10 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
     for p in range(P):
         if not ok[p]:
             status[p] = 1
+        fresh[p] = ok[p]
+    if pade:
+        _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+                st, e, work, P)
     while True:
         # -- retire the paths that ended (write results, compact the live columns) -------------
         w = 0
@@ -354,6 +463,10 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
                     xi[v, w] = xi[v, p]
                     k1r[v, w] = k1r[v, p]
                     k1i[v, w] = k1i[v, p]
+                    x2r[v, w] = x2r[v, p]
+                    x2i[v, w] = x2i[v, p]
+                    x3r[v, w] = x3r[v, p]
+                    x3i[v, w] = x3i[v, p]
                 for k in range(N + 1, N + 1 + 2 * Q):
                     Rr[k, w] = Rr[k, p]
                     Ri[k, w] = Ri[k, p]
@@ -371,7 +484,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
             if h[p] > 1.0 - s[p]:
                 h[p] = 1.0 - s[p]
             good[p] = True
-        for stage in range(3):
+        for stage in range(0 if pade else 3):
             if stage == 0:
                 kr, ki = k1r, k1i
             elif stage == 1:
@@ -399,14 +512,16 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
             s1[p] = s[p] + h[p]
             if 1.0 - s1[p] < 1e-14:
                 s1[p] = 1.0
-            hh = h[p] / 6.0
+            if pade:
+                _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h[p], p, N, xpr, xpi)
+            else:
+                hh = h[p] / 6.0
+                for v in range(N):
+                    xpr[v, p] = xr[v, p] + hh * (k1r[v, p] + 2.0 * k2r[v, p] + 2.0 * k3r[v, p] + k4r[v, p])
+                    xpi[v, p] = xi[v, p] + hh * (k1i[v, p] + 2.0 * k2i[v, p] + 2.0 * k3i[v, p] + k4i[v, p])
             acc = 0.0
             for v in range(N):
-                a = xr[v, p] + hh * (k1r[v, p] + 2.0 * k2r[v, p] + 2.0 * k3r[v, p] + k4r[v, p])
-                b = xi[v, p] + hh * (k1i[v, p] + 2.0 * k2i[v, p] + 2.0 * k3i[v, p] + k4i[v, p])
-                xpr[v, p] = a
-                xpi[v, p] = b
-                acc += a * a + b * b
+                acc += xpr[v, p] * xpr[v, p] + xpi[v, p] * xpi[v, p]
             scale[p] = 1.0 + np.sqrt(acc)
             e0[p] = np.inf
             e[p] = np.inf
@@ -446,6 +561,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
                     done[p] = True
         # -- accept or reject, step size -------------------------------------------------------------
         for p in range(P):
+            fresh[p] = False
             if good[p] and np.isfinite(e[p]) and e0[p] < accept and (e[p] < tol or e[p] < contract * e0[p]):
                 for v in range(N):
                     xr[v, p] = xpr[v, p]
@@ -460,16 +576,21 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
                 if scale[p] > big:
                     status[p] = 2
                     continue
+                # local error ~ h^(order + 1) (RK4: 4, Pade (2, 1): 3): aim the next first correction at target
                 f = 2.0
                 if e0[p] > 0:
-                    f = 0.8 * (target / e0[p]) ** 0.2
+                    f = 0.8 * (target / e0[p]) ** (0.25 if pade else 0.2)
                 f = min(max(f, 0.5), 2.0)
                 h[p] = min(h[p] * f, hmax)
+                fresh[p] = True
             else:
                 rejected[p] += 1
                 h[p] *= 0.5
                 if h[p] < hmin:
                     status[p] = 2 if scale[p] > big else 1
+        if pade:  # Taylor coefficients at the new points (the last factorisation is at each one's x')
+            _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+                    st, e, work, P)
     # -- Newton steps on the target system for the paths that reached s = 1 ---------------------------
     P = 0
     for m in range(M):
@@ -566,12 +687,41 @@ def evaluate(tape: "Tape", x: np.ndarray, s: np.ndarray, q0: np.ndarray, q1: np.
     return run(tape, inputs).T
 
 
+def taylor(tapes: "HomotopyTapes", x: np.ndarray, s: np.ndarray, q0: np.ndarray, q1: np.ndarray,
+           h: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Taylor coefficients x1, x2, x3 (each (P, N)) of the paths through the points x (P, N) at s (P,) on
+    the segments q0 -> q1 (P, Q) or (Q,), as the Pade predictor computes them for a next step h (a
+    reference entry point for tests)."""
+    x = np.atleast_2d(np.asarray(x, dtype=complex))
+    P, N = x.shape
+    s = np.ascontiguousarray(np.broadcast_to(np.asarray(s, dtype=float), (P,)))
+    q0 = np.broadcast_to(np.asarray(q0, dtype=complex), (P, np.shape(q0)[-1]))
+    dq = np.broadcast_to(np.asarray(q1, dtype=complex), q0.shape) - q0
+    _check(tapes, N, q0.shape[1])
+    _, _, Or, Oi = workspace(tapes.full, P)
+    Rr = np.zeros((tapes.n_registers, P))
+    Ri = np.zeros((tapes.n_registers, P))
+    Q = q0.shape[1]
+    Rr[N + 1:N + 1 + Q], Ri[N + 1:N + 1 + Q] = q0.T.real, q0.T.imag
+    Rr[N + 1 + Q:N + 1 + 2 * Q], Ri[N + 1 + Q:N + 1 + 2 * Q] = dq.T.real, dq.T.imag
+    xr, xi = np.ascontiguousarray(x.T.real), np.ascontiguousarray(x.T.imag)
+    piv, ok = np.zeros((N, P), dtype=np.int64), np.zeros(P, dtype=np.bool_)
+    _eval(tapes.full.code, tapes.full.imm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
+    _lu(Or, Oi, N, N, piv, ok, P)
+    k = [np.zeros((N, P)) for _ in range(6)]
+    _tangent(Or, Oi, N, piv, k[0], k[1], P)
+    _taylor(tapes.residual.code, tapes.residual.imm, Rr, Ri, Or, Oi, N, xr, xi, s, np.full(P, float(h)), k[0], k[1],
+            piv, np.ones(P, dtype=np.bool_), k[2], k[3], k[4], k[5], np.empty((N, P)), np.empty((N, P)), np.empty(P),
+            np.empty(P), np.empty((4, N, P)), P)
+    return tuple((k[2 * j] + 1j * k[2 * j + 1]).T for j in range(3))
+
+
 def _segments(q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Start points and directions (B, Q) of the segments q0 -> q1 (either broadcast)."""
     q0 = np.atleast_2d(np.asarray(q0, dtype=np.complex128))
     q1 = np.atleast_2d(np.asarray(q1, dtype=np.complex128))
     B = max(len(q0), len(q1))
-    q0 = np.ascontiguousarray(np.broadcast_to(q0, (B, q0.shape[1])))
+    q0 = np.array(np.broadcast_to(q0, (B, q0.shape[1])))  # a writable copy: numba compiles readonly arrays apart
     return q0, np.ascontiguousarray(np.broadcast_to(q1, q0.shape) - q0)
 
 
@@ -583,6 +733,9 @@ def _check(tapes: "HomotopyTapes", N: int, Q: int) -> None:
 #: Paths per lock-step batch: the registers of a 9r/3s tape for 256 paths take 1 MB (L2-sized); a
 #: batch of 600 was slower per path than one of 300 (many instances solved at once are split).
 CHUNK = 256
+
+#: Predictors of :func:`track` (:data:`tracker.PREDICTORS` it implements).
+PREDICTORS = ("rk4", "pade")
 
 #: Correctors of :func:`track`: "newton" (every step factors the Jacobian at its point: the corrector of
 #: tracker._track_one) or "chord" (the steps after the first reuse its factorisation and evaluate H
@@ -599,9 +752,9 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
     """
     if corrector not in CORRECTORS:
         raise ValueError(f"unknown corrector {corrector!r}; valid: {', '.join(CORRECTORS)}")
-    if options.predictor != "rk4":
-        raise ValueError(f"the batched tracker predicts by rk4 only, not {options.predictor!r}")
-    x0 = np.ascontiguousarray(np.atleast_2d(x0), dtype=np.complex128)
+    if options.predictor not in PREDICTORS:
+        raise ValueError(f"the batched tracker predicts by {' or '.join(PREDICTORS)}, not {options.predictor!r}")
+    x0 = np.array(np.atleast_2d(x0), dtype=np.complex128)  # a writable copy (see _segments)
     M, N = x0.shape
     q0, dq = _segments(q0, q1)
     _check(tapes, N, q0.shape[1])
@@ -620,9 +773,9 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
 def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
     """``steps`` Newton steps on the systems at parameters q (B, Q) from x (P, N), row p on inst[p]; a row
     whose Jacobian is singular keeps its last point."""
-    x = np.ascontiguousarray(np.atleast_2d(x), dtype=np.complex128)
+    x = np.array(np.atleast_2d(x), dtype=np.complex128)
     M, N = x.shape
-    q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=np.complex128)))
+    q = np.array(q, dtype=np.complex128, ndmin=2)  # a writable copy (a broadcast view would compile apart)
     _check(tapes, N, q.shape[1])
     inst = np.zeros(M, dtype=np.int64) if inst is None else np.ascontiguousarray(inst, dtype=np.int64)
     out = np.empty_like(x)

@@ -32,8 +32,10 @@ __all__ = ["SystemStructure", "TrackerOptions", "evaluate", "segment_coefficient
 
 
 #: Predictors: classical Runge-Kutta on the tangent field (three extra factorisations per step), or cubic
-#: Hermite extrapolation through the last two points and tangents (none; first step by RK4).
-PREDICTORS = ("rk4", "hermite")
+#: Hermite extrapolation through the last two points and tangents (none; first step by RK4), or (the
+#: batched tape tracker only, :mod:`solvers.methods.tape_kernel`) a Pade approximant of type (2, 1) from
+#: the path's Taylor coefficients (no factorisation in the predictor).
+PREDICTORS = ("rk4", "hermite", "pade")
 
 
 @dataclass(frozen=True)
@@ -73,10 +75,13 @@ class TrackerOptions:
 #: seeded networks where the default missed the true root (its path is among the tracked ones: tracked
 #: back from the true root with TIGHT, it ends on a tracked start root): one plain track with the
 #: default misses it on 15 of the 17, with these on 3, for 8 % more steps (tables/NOTES.md).
-FAMILY = {"target": 3e-3, "accept": 3e-2}
+FAMILY = {"target": 3e-3, "accept": 3e-2, "predictor": "pade"}
 
-#: Step control for retracking a path that stalled or jumped: smaller steps, stricter acceptance.
-TIGHT = TrackerOptions(h0=0.01, hmin=1e-13, target=1e-5, accept=1e-3, newton=3, contract=0.05, max_steps=4000)
+#: Step control for retracking a path that stalled or jumped: smaller steps, stricter acceptance. At
+#: these targets the Pade predictor of the tape tracker takes far fewer steps than RK4 (6r/3s, 5r/4s:
+#: retracking most of the solve time; tables/NOTES.md); the monomial tracker runs RK4 instead.
+TIGHT = TrackerOptions(h0=0.01, hmin=1e-13, target=1e-5, accept=1e-3, newton=3, contract=0.05, max_steps=4000,
+                       predictor="pade")
 
 
 @dataclass(frozen=True)
@@ -464,6 +469,8 @@ def track(structure: SystemStructure, G: np.ndarray, x0: np.ndarray, inst: np.nd
     Returns endpoints (P, N) (NaN unless the path reached s = 1) and stats (P, 4): status (0 reached
     s = 1, 1 stalled, 2 diverged), accepted steps, rejected steps, last s.
     """
+    if options.predictor == "pade":
+        raise ValueError("the monomial tracker predicts by rk4 or hermite; pade is the tape tracker's")
     x0 = np.ascontiguousarray(x0, dtype=np.complex128)
     P, N = x0.shape
     if N != structure.nvars:
