@@ -53,7 +53,7 @@ MODULE_TEMPLATE = '''\
 solve(F) -> ({rows}, {nvars}) complex candidate roots in the unknown order {unknown_list};
 solve_batch(F) for F of shape (..., {pshape}) -> (..., {rows}, {nvars}). Candidates may be complex or
 spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
-positions and offsets.
+positions and offsets{calibrations_doc}.
 """
 from __future__ import annotations
 
@@ -82,8 +82,23 @@ def solver():
     return _SOLVER[0]
 
 
-{solve}
+{solve}{calibrations}
 '''
+
+CALIBRATIONS_SOURCE = '''
+
+
+def calibrations(F):
+    """Positions and offsets from this solver's roots on F: the real, geometrically valid calibrations,
+    best first, in the gauge r_1 = 0, r_2 on the positive x axis (3D: r_3 in the xy plane, y > 0);
+    solvers.api.calibrations(this module, F). Nothing is refined."""
+    from types import SimpleNamespace
+
+    from solvers.api import calibrations as _calibrations
+
+    this = SimpleNamespace(__name__=__name__, SYSTEM=SYSTEM, CONFIG=CONFIG, UNKNOWNS=UNKNOWNS, solve=solve)
+    return _calibrations(this, F)'''
+"""What a TDOA solver module (one with a configuration) gets after ``solve``: positions from its roots."""
 
 
 @dataclass(frozen=True)
@@ -304,4 +319,6 @@ def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str)
         unknown_list=", ".join(unknowns), pshape=", ".join(map(str, parts.pshape)),
         imports=parts.imports, config=repr(parts.config), unknowns=repr(unknowns), degree=int(spec["degree"]),
         method_constants=parts.method_constants, scale_powers=repr(parts.scale_powers),
-        coefficients=coefficients.rstrip("\n"), load=parts.load, solve=parts.solve)
+        coefficients=coefficients.rstrip("\n"), load=parts.load, solve=parts.solve,
+        calibrations=CALIBRATIONS_SOURCE if parts.config is not None else "",
+        calibrations_doc=" (here: calibrations(F))" if parts.config is not None else "")

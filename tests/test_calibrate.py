@@ -141,6 +141,25 @@ def test_calibrations_from_a_generated_solvers_roots(label):
     assert best.residual < 1e-8 and max(errors.position, errors.offset) < 1e-8, (label, best.residual, errors)
 
 
+def test_a_generated_module_gives_its_own_calibrations(tmp_path):
+    """generate -> solve -> positions from the module alone, also when it is loaded from a file outside
+    any package (not in sys.modules): the same calibrations as solvers.api.calibrations."""
+    import importlib.util
+
+    from solvers.api import _module_for, calibrations
+
+    committed = _module_for("6r4s")
+    spec = importlib.util.spec_from_file_location("loose_solver", committed.__file__)
+    loose = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(loose)
+    net = random_network(6, 4, np.random.default_rng(5))
+    F = net.measurements()
+    own, via_api = loose.calibrations(F), calibrations(committed, F)
+    assert own and [c.residual for c in own] == [c.residual for c in via_api]
+    errors = calibration_errors(own[0], net)
+    assert max(errors.position, errors.offset) < 1e-8
+
+
 def test_calibrations_refuse_other_data_and_systems():
     from types import SimpleNamespace
 

@@ -11,7 +11,7 @@ satisfy the full system (11 equations, 152 roots certified over GF(p)) are track
 solve(F) -> (152, 9) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3, o4;
 solve_batch(F) for F of shape (..., 5, 4) -> (..., 152, 9). Candidates may be complex or
 spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
-positions and offsets.
+positions and offsets (here: calibrations(F)).
 """
 from __future__ import annotations
 
@@ -598,3 +598,15 @@ def solve_batch(F):
 def solve(F):
     """Candidate roots (152, 9) for one instance F (5, 4)."""
     return solve_batch(np.asarray(F)[None])[0]
+
+
+def calibrations(F):
+    """Positions and offsets from this solver's roots on F: the real, geometrically valid calibrations,
+    best first, in the gauge r_1 = 0, r_2 on the positive x axis (3D: r_3 in the xy plane, y > 0);
+    solvers.api.calibrations(this module, F). Nothing is refined."""
+    from types import SimpleNamespace
+
+    from solvers.api import calibrations as _calibrations
+
+    this = SimpleNamespace(__name__=__name__, SYSTEM=SYSTEM, CONFIG=CONFIG, UNKNOWNS=UNKNOWNS, solve=solve)
+    return _calibrations(this, F)

@@ -9,7 +9,7 @@ monodromy) are tracked to the data by the compiled tracker of solvers.methods.tr
 solve(F) -> (180, 8) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3;
 solve_batch(F) for F of shape (..., 6, 3) -> (..., 180, 8). Candidates may be complex or
 spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
-positions and offsets.
+positions and offsets (here: calibrations(F)).
 """
 from __future__ import annotations
 
@@ -352,3 +352,15 @@ def solve_batch(F):
 def solve(F):
     """Candidate roots (180, 8) for one instance F (6, 3)."""
     return solve_batch(np.asarray(F)[None])[0]
+
+
+def calibrations(F):
+    """Positions and offsets from this solver's roots on F: the real, geometrically valid calibrations,
+    best first, in the gauge r_1 = 0, r_2 on the positive x axis (3D: r_3 in the xy plane, y > 0);
+    solvers.api.calibrations(this module, F). Nothing is refined."""
+    from types import SimpleNamespace
+
+    from solvers.api import calibrations as _calibrations
+
+    this = SimpleNamespace(__name__=__name__, SYSTEM=SYSTEM, CONFIG=CONFIG, UNKNOWNS=UNKNOWNS, solve=solve)
+    return _calibrations(this, F)

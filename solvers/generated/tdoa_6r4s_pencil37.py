@@ -10,7 +10,7 @@ solvers.methods.pencil. The pencil's other eigenvalues (infinite, o_1 = infinity
 solve(F) -> (22, 9) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3, o4;
 solve_batch(F) for F of shape (..., 6, 4) -> (..., 22, 9). Candidates may be complex or
 spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
-positions and offsets.
+positions and offsets (here: calibrations(F)).
 """
 from __future__ import annotations
 
@@ -713,3 +713,15 @@ def solve_batch(F, polish=POLISH_ITERATIONS):
 def solve(F, polish=POLISH_ITERATIONS):
     """Candidate roots (22, 9) for one data matrix F (6, 4)."""
     return runtime.solve_one(solver(), coefficients, F, CONFIG, polish)
+
+
+def calibrations(F):
+    """Positions and offsets from this solver's roots on F: the real, geometrically valid calibrations,
+    best first, in the gauge r_1 = 0, r_2 on the positive x axis (3D: r_3 in the xy plane, y > 0);
+    solvers.api.calibrations(this module, F). Nothing is refined."""
+    from types import SimpleNamespace
+
+    from solvers.api import calibrations as _calibrations
+
+    this = SimpleNamespace(__name__=__name__, SYSTEM=SYSTEM, CONFIG=CONFIG, UNKNOWNS=UNKNOWNS, solve=solve)
+    return _calibrations(this, F)

@@ -10,7 +10,7 @@ Positions: solvers.api.calibrations (3D gauge r_1 = 0, r_2 on the x axis, r_3 in
 solve(F) -> (1, 14) complex candidate roots in the unknown order h11, h12, h13, h22, h23, h33, b1, b2, b3, o1, o2, o3, o4, o5;
 solve_batch(F) for F of shape (..., 9, 5) -> (..., 1, 14). Candidates may be complex or
 spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
-positions and offsets.
+positions and offsets (here: calibrations(F)).
 """
 from __future__ import annotations
 
@@ -60,3 +60,15 @@ def solve(F):
     if F.ndim != 2:
         raise ValueError(f"solve takes one (9, 5) matrix; use solve_batch for {F.shape}")
     return solve_batch(F)
+
+
+def calibrations(F):
+    """Positions and offsets from this solver's roots on F: the real, geometrically valid calibrations,
+    best first, in the gauge r_1 = 0, r_2 on the positive x axis (3D: r_3 in the xy plane, y > 0);
+    solvers.api.calibrations(this module, F). Nothing is refined."""
+    from types import SimpleNamespace
+
+    from solvers.api import calibrations as _calibrations
+
+    this = SimpleNamespace(__name__=__name__, SYSTEM=SYSTEM, CONFIG=CONFIG, UNKNOWNS=UNKNOWNS, solve=solve)
+    return _calibrations(this, F)
