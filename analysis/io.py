@@ -37,6 +37,7 @@ __all__ = [
     "InputError",
     "System",
     "parse_msolve",
+    "MSOLVE_NAME",
     "parse_polynomial",
     "read_system",
     "decode_text",
@@ -55,7 +56,10 @@ MAX_DEGREE = (1 << FIELD_BITS) - 1
 """Largest total degree the ring's packed monomial keys support; larger exponents are input errors."""
 
 _OPERATORS = r"\s+\-*/^(),#"
-_VARIABLE_NAME = re.compile(rf"[^{_OPERATORS}0-9.][^{_OPERATORS}]*\Z")
+MSOLVE_NAME = rf"[^{_OPERATORS}0-9.][^{_OPERATORS}]*"
+"""A variable name as msolve reads it (regular expression): no blank, operator, comma or '#', and not
+starting with a digit or '.'. Used for files, their tokens and msolve's own output."""
+_VARIABLE_NAME = re.compile(MSOLVE_NAME + r"\Z")
 _VARIABLE_RULE = ("as msolve reads them: any characters but blanks, the operators + - * / ^ ( ), commas and '#', "
                   "not starting with a digit or '.' (e.g. x1, x_1, x', x[1], a.b)")
 
@@ -438,10 +442,12 @@ def _normalise(poly: Mapping, nvars: int, p: int, name: str) -> Coefficients:
 
 # -- tokenizer and recursive-descent parser ------------------------------------------------------
 
-_TOKEN = re.compile(rf"\s*(?:(?P<num>[0-9]+)|(?P<name>[^{_OPERATORS}0-9.][^{_OPERATORS}]*)|(?P<op>\*\*|[-+*/^(),])"
-                    r"|(?P<bad>\S))")
-_IDENTIFIER_TOKEN = re.compile(r"\s*(?:(?P<num>[0-9]+)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^(),])"
-                               r"|(?P<bad>\S))")
+def _token_pattern(name: str) -> re.Pattern:
+    return re.compile(rf"\s*(?:(?P<num>[0-9]+)|(?P<name>{name})|(?P<op>\*\*|[-+*/^(),])|(?P<bad>\S))")
+
+
+_TOKEN = _token_pattern(MSOLVE_NAME)
+_IDENTIFIER_TOKEN = _token_pattern(r"[A-Za-z_][A-Za-z0-9_]*")
 """Tokens of formats whose names are identifiers (the parametric systems: their names become Python
 names in a generated solver); anything else in a name is an unexpected character."""
 

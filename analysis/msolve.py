@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .f4 import GroebnerResult
+from .io import MSOLVE_NAME
 from .ring import Poly, Ring
 
 __all__ = ["MsolveError", "MsolveRun", "MsolveTimeout", "find_msolve", "groebner_msolve", "msolve_version", "parse_msolve_basis",
@@ -110,7 +111,7 @@ def to_msolve_input(polys: Sequence[Poly]) -> str:
     return f"{','.join(names)}\n{ring.prime}\n{body}\n"
 
 
-_FACTOR = re.compile(r"([^\s+\-*/^(),#0-9.][^\s+\-*/^(),#]*)(?:\^(\d+))?\Z")  # a name as msolve reads it
+_FACTOR = re.compile(rf"({MSOLVE_NAME})(?:\^(\d+))?\Z")
 
 
 def parse_msolve_basis(text: str, ring: Ring, names: Sequence[str] | None = None) -> list[Poly]:
