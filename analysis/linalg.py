@@ -532,7 +532,12 @@ def numpy_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p
 # sparse backend (compiled)
 # ----------------------------------------------------------------------------------------------
 def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool) -> SparseRows:
-    from .sparse_kernels import sparse_echelon
+    from . import native
+
+    if native.kernel() is not None:
+        sparse_echelon = native.sparse_echelon
+    else:
+        from .sparse_kernels import sparse_echelon
 
     def arrays(block: SparseRows) -> tuple[np.ndarray, ...]:  # one compiled signature
         return (np.ascontiguousarray(block.indptr, dtype=np.int64), np.ascontiguousarray(block.cols, dtype=np.int32),
@@ -558,15 +563,19 @@ def sparse_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, 
 
 
 SPARSE_MAX_DENSITY = 0.05
-"""``auto`` reduces a matrix with the compiled sparse kernel only when its pivot rows fill at most this
-share of their columns: above it the dense BLAS products of the numpy backend were faster (random
-quadrics, pivot density 8 %: 1.1-1.6x; katsura-9 and eco-10/11, 1-3 %: sparse 2-4x faster)."""
+"""Pivot rows that fill more than this share of their columns are *dense*: on large such matrices the
+dense BLAS products of the numpy backend are faster than the sparse kernel (random quadrics, pivot
+density 8 %; katsura-9 and eco-10/11, 1-3 %: the sparse kernel 2-4x faster)."""
+DENSE_MIN_WORK = 5_000_000_000
+"""With the C kernel, ``auto`` takes numpy only for dense matrices above this many multiply-adds (rows to
+reduce x pivots x columns): quadrics-10 (1.9 s numpy against 2.1 s sparse) is above, quadrics-9 (0.39 s
+against 0.34 s) below; on everything smaller the kernel's lack of per-call overhead wins."""
 SPARSE_MIN_WORK = 20_000_000_000
-"""... and, until the kernel is loaded, when the dense elimination would cost more than this many
-multiply-adds (rows to reduce x pivots x columns, about 1 s of dense products): loading numba and the cached kernel
-costs about 0.8 s of a process's time, which small systems never pay."""
+"""Without the C kernel (no compiler), the numba kernel is taken, until it is loaded, only when the dense
+elimination would cost more than this many multiply-adds (about 1 s of dense products): loading numba and
+the cached kernel costs about 0.45 s and 110 MB of a process, which small systems never pay."""
 SPARSE_MIN_WORK_LOADED = 20_000_000
-"""Once the kernel is loaded, the dense path is kept only for matrices below this much work, where
+"""Once the numba kernel is loaded, the dense path is kept only for matrices below this much work, where
 numpy's products are as fast."""
 
 
@@ -574,10 +583,18 @@ def sparse_pays(npiv: int, pivot_entries: int, nrows: int, ncols: int) -> bool:
     """Whether ``auto`` reduces this matrix with the sparse kernel (see :data:`SPARSE_MAX_DENSITY`)."""
     import sys
 
-    if not npiv or not nrows or pivot_entries > SPARSE_MAX_DENSITY * npiv * ncols:
+    from . import native
+
+    if not nrows:
+        return False
+    work = nrows * npiv * ncols
+    dense_pivots = pivot_entries > SPARSE_MAX_DENSITY * npiv * ncols
+    if native.kernel() is not None:
+        return not (dense_pivots and work > DENSE_MIN_WORK)
+    if not npiv or dense_pivots:
         return False
     loaded = "analysis.sparse_kernels" in sys.modules
-    return nrows * npiv * ncols > (SPARSE_MIN_WORK_LOADED if loaded else SPARSE_MIN_WORK)
+    return work > (SPARSE_MIN_WORK_LOADED if loaded else SPARSE_MIN_WORK)
 
 
 def auto_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:

@@ -25,10 +25,29 @@ def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3):
     return pivots, rows
 
 
-@pytest.mark.parametrize("name", ["numpy", "sparse"])
+def use_kernel(monkeypatch, kernel: str) -> None:
+    """Make the sparse backend run the C kernel (analysis.native) or the numba one ("none": as it is)."""
+    from analysis import native
+
+    if kernel == "none":
+        return
+    if kernel == "numba":
+        monkeypatch.setattr(native, "_LOADED", [None])
+    elif native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernel cannot be built")
+
+
+@pytest.fixture(params=["C", "numba"])
+def sparse_kernel(request, monkeypatch):
+    use_kernel(monkeypatch, request.param)
+    return request.param
+
+
+@pytest.mark.parametrize("name, kernel", [("numpy", "none"), ("sparse", "C"), ("sparse", "numba")])
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
 @pytest.mark.parametrize("seed", range(4))
-def test_fast_backends_match_reference(name, p, seed):
+def test_fast_backends_match_reference(name, kernel, p, seed, monkeypatch):
+    use_kernel(monkeypatch, kernel)
     rng = np.random.default_rng(seed)
     ncols = 120
     pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=60, nrows=50)
@@ -40,7 +59,7 @@ def test_fast_backends_match_reference(name, p, seed):
 
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
 @pytest.mark.parametrize("seed", range(3))
-def test_sparse_interface_matches_row_lists(p, seed):
+def test_sparse_interface_matches_row_lists(p, seed, sparse_kernel):
     rng = np.random.default_rng(seed)
     ncols = 400
     pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=300, nrows=120, density=0.1)
@@ -55,6 +74,34 @@ def test_sparse_interface_matches_row_lists(p, seed):
         assert reduced == backend.reduce(pivots, rows, ncols, p)
         each = backend.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
         assert each == backend.reduce_each(pivots, rows, ncols, p)
+
+
+@pytest.mark.parametrize("p", [7, 65521, 2147483647])
+@pytest.mark.parametrize("seed", range(3))
+def test_c_kernel_matches_numba_kernel(p, seed):
+    """The C twin of the numba kernel returns the same arrays, in echelon and in "each" mode, also with
+    empty blocks (no pivots, no rows)."""
+    from analysis import native
+    from analysis.sparse_kernels import sparse_echelon
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernel cannot be built")
+    rng = np.random.default_rng(seed)
+    ncols = 300
+    pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=150, nrows=100, density=0.05)
+    pivot_rows = SparseRows.from_rows([pivots[c] for c in rng.permutation(sorted(pivots))])
+    blocks = [pivot_rows, SparseRows.from_rows(rows), SparseRows.from_rows([])]
+
+    def arrays(block):
+        return block.indptr.astype(np.int64), block.cols.astype(np.int32), block.vals.astype(np.int32)
+
+    for piv, red in ((0, 1), (2, 1), (0, 2), (2, 2)):
+        for echelon in (True, False):
+            args = (*arrays(blocks[piv]), *arrays(blocks[red]), ncols, p, echelon)
+            ours, theirs = native.sparse_echelon(*args), sparse_echelon(*args)
+            assert len(ours[0]) == len(theirs[0]) and (echelon or len(ours[0]) == len(blocks[red]) + 1)
+            for a, b in zip(ours, theirs):
+                assert np.array_equal(a, b)
 
 
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
