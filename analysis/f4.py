@@ -403,13 +403,12 @@ class _State:
 
 @dataclass(frozen=True)
 class _Rows:
-    """Rows mult[r] * g[index[r]] of an F4 matrix and their terms: monomial codes, positions in the term
-    pool and row lengths."""
+    """Rows mult[r] * g[index[r]] of an F4 matrix: multiplier codes, element indices and row lengths. Their
+    terms are generated when needed (:meth:`entries`), a block at a time, and never kept for a whole
+    matrix: 16 bytes per matrix entry that the assembled int32 blocks do not need."""
 
     mult: np.ndarray
     index: np.ndarray
-    terms: np.ndarray
-    positions: np.ndarray
     lengths: np.ndarray
 
     @staticmethod
@@ -421,16 +420,19 @@ class _Rows:
             top = int((codes.degrees(mult) + state.max_degrees[index]).max())
             if top > codes.max_degree:
                 raise CodeOverflow(f"degree {top} exceeds the narrow monomial codes")
-        lengths = state.lengths[index]
-        ends = np.cumsum(lengths)
-        total = int(ends[-1]) if len(ends) else 0
-        positions = np.repeat(state.starts[index] - (ends - lengths), lengths) + np.arange(total)
-        return _Rows(mult, index, state.pool_codes[positions] + np.repeat(mult, lengths), positions, lengths)
+        return _Rows(mult, index, state.lengths[index])
 
     @staticmethod
     def concat(parts: Sequence["_Rows"]) -> "_Rows":
-        fields = ("mult", "index", "terms", "positions", "lengths")
-        return _Rows(*(np.concatenate([getattr(rows, f) for rows in parts]) for f in fields))
+        return _Rows(*(np.concatenate([getattr(rows, f) for rows in parts]) for f in ("mult", "index", "lengths")))
+
+    def entries(self, state: "_State", rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """The terms of the given rows, concatenated: (monomial codes, positions in the term pool)."""
+        mult, index, lengths = self.mult[rows], self.index[rows], self.lengths[rows]
+        ends = np.cumsum(lengths)
+        total = int(ends[-1]) if len(ends) else 0
+        positions = np.repeat(state.starts[index] - (ends - lengths), lengths) + np.arange(total)
+        return state.pool_codes[positions] + np.repeat(mult, lengths), positions
 
 
 def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -508,8 +510,8 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
     monomials if ordered (for callers that record the rows), else by increasing monomial: the matrix
     and its reduction do not depend on that order.
     """
-    done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else rows.terms[:0]
-    frontier = _first_seen(rows.terms, done, ordered)
+    done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else state.pool_codes[:0]
+    frontier = _first_seen(rows.entries(state)[0], done, ordered)
     seen = _distinct(np.concatenate([frontier, done]))
     parts = [rows]
     act = _by_length(state)
@@ -521,7 +523,7 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
         if not len(red_index):
             break
         parts.append(_Rows.of(state, frontier[has] - state.lm_codes[red_index], red_index, graded))
-        frontier = _first_seen(parts[-1].terms, seen, ordered)
+        frontier = _first_seen(parts[-1].entries(state)[0], seen, ordered)
         seen = np.concatenate([seen, np.sort(frontier) if ordered else frontier])
         seen.sort(kind="stable")  # two sorted runs: a merge
     return _Rows.concat(parts), seen
@@ -530,36 +532,28 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
 def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None) -> SparseRows:
     """The rows (those at index, in that order, if given) as sparse rows over the column codes (ascending;
     column 0 is the largest monomial), with int32 columns and values (p < 2**31): a third of the int64
-    layout's memory on the large matrices. The entries are converted a block at a time (_ASSEMBLE_BLOCK),
-    so that the int64 temporaries stay small."""
-    lengths = rows.lengths if index is None else rows.lengths[index]
-    indptr = np.zeros(len(lengths) + 1, dtype=np.int64)
-    np.cumsum(lengths, out=indptr[1:])
+    layout's memory on the large matrices. The terms are generated a block of rows at a time (about
+    _ASSEMBLE_BLOCK entries), so that the int64 temporaries stay small."""
+    if index is None:
+        index = np.arange(len(rows.lengths))
+    indptr = np.zeros(len(index) + 1, dtype=np.int64)
+    np.cumsum(rows.lengths[index], out=indptr[1:])
     total = int(indptr[-1])
-    if index is not None:
-        starts = np.zeros(len(rows.lengths), dtype=np.int64)
-        np.cumsum(rows.lengths[:-1], out=starts[1:])
-        offsets = starts[index] - indptr[:-1]  # entry e of the result is entry e + offsets[row] of rows
     cols = np.empty(total, dtype=np.int32)
     vals = np.empty(total, dtype=np.int32)
     last = len(columns) - 1
-    for lo in range(0, total, _ASSEMBLE_BLOCK):
-        hi = min(lo + _ASSEMBLE_BLOCK, total)
-        if index is None:
-            at = slice(lo, hi)
-        else:
-            first, stop = np.searchsorted(indptr, [lo, hi], side="right") - 1
-            at = np.repeat(offsets[first : stop + 1], np.diff(np.clip(indptr[first : stop + 2], lo, hi))) + np.arange(lo, hi)
-        cols[lo:hi] = last - np.searchsorted(columns, rows.terms[at])
-        vals[lo:hi] = state.pool_coeffs[rows.positions[at]]
+    bounds = _distinct(np.searchsorted(indptr, np.arange(0, total, _ASSEMBLE_BLOCK), side="right") - 1)
+    for a, b in zip(bounds, [*bounds[1:], len(index)]):
+        terms, positions = rows.entries(state, index[a:b])
+        lo, hi = indptr[a], indptr[b]
+        cols[lo:hi] = last - np.searchsorted(columns, terms)
+        vals[lo:hi] = state.pool_coeffs[positions]
     return SparseRows(indptr, cols, vals)
 
 
-def _lead_columns(rows: _Rows, columns: np.ndarray) -> np.ndarray:
-    """The column of every row's leading term (its first: the terms of an element are decreasing)."""
-    starts = np.zeros(len(rows.lengths), dtype=np.int64)
-    np.cumsum(rows.lengths[:-1], out=starts[1:])
-    return len(columns) - 1 - np.searchsorted(columns, rows.terms[starts])
+def _lead_columns(state: _State, rows: _Rows, columns: np.ndarray) -> np.ndarray:
+    """The column of every row's leading term."""
+    return len(columns) - 1 - np.searchsorted(columns, state.lm_codes[rows.index] + rows.mult)
 
 
 def _split_pivots(leads: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -653,7 +647,7 @@ def _f4(
                 f"F4 matrix {nrows} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
             )
         nonzeros = int(rows.lengths.sum())
-        leads = _lead_columns(rows, columns)
+        leads = _lead_columns(state, rows, columns)
         pivot_rows, reduce_rows = _split_pivots(leads, rows.lengths)
         dense = backend.name == "numpy" or (backend.name == "auto" and not sparse_pays(
             len(pivot_rows), int(rows.lengths[pivot_rows].sum()), len(reduce_rows), ncols))

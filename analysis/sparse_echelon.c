@@ -51,8 +51,8 @@ static int64_t inverse(int64_t a, int64_t p)
 /* Reduce acc[first:] by every pivot except the one at column skip; entries left in [0, p). Returns the
  * number of nonzero entries. */
 static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t *pivot_of, const int64_t *starts,
-                     const int64_t *ends, const int32_t *scols, const int32_t *svals, uint64_t p, int delayed,
-                     int64_t skip)
+                     const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals, int64_t npiv,
+                     const int32_t *scols, const int32_t *svals, uint64_t p, int delayed, int64_t skip)
 {
     int64_t nnz = 0;
     for (int64_t c = first; c < ncols; c++) {
@@ -73,7 +73,9 @@ static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t 
         }
         acc[c] = 0;
         uint64_t m = p - a; /* pivot rows are monic: add (p - a) times the row's tail */
-        const int32_t *pc = scols + starts[k] + 1, *pv = svals + starts[k] + 1;
+        /* the known pivots are read where the caller keeps them, the new ones from the store */
+        const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
+        const int32_t *pv = (k < npiv ? piv_vals : svals) + starts[k] + 1;
         int64_t n = ends[k] - starts[k] - 1;
         if (delayed) {
             for (int64_t t = 0; t < n; t++)
@@ -119,7 +121,7 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
 {
     uint64_t p = (uint64_t)prime;
     int delayed = ((double)npiv + nrows + 1.0) * (prime - 1.0) * (prime - 1.0) + prime < 4611686018427387904.0;
-    int64_t npiv_entries = piv_indptr[npiv], nrow_entries = row_indptr[nrows];
+    int64_t nrow_entries = row_indptr[nrows];
     int64_t *pivot_of = malloc(ncols * sizeof(int64_t));
     int64_t *starts = malloc((npiv + nrows + 1) * sizeof(int64_t));
     int64_t *ends = malloc((npiv + nrows + 1) * sizeof(int64_t));
@@ -131,11 +133,8 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         goto done;
     for (int64_t c = 0; c < ncols; c++)
         pivot_of[c] = -1;
-    if (room(&st, npiv_entries + (ncols > 16 ? ncols : 16)))
+    if (room(&st, ncols > 1024 ? ncols : 1024)) /* the store holds the new pivots only */
         goto done;
-    memcpy(st.cols, piv_cols, npiv_entries * sizeof(int32_t));
-    memcpy(st.vals, piv_vals, npiv_entries * sizeof(int32_t));
-    st.size = npiv_entries;
     for (int64_t k = 0; k < npiv; k++) {
         starts[k] = piv_indptr[k];
         ends[k] = piv_indptr[k + 1];
@@ -153,7 +152,8 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         for (int64_t t = a; t < b; t++)
             acc[row_cols[t]] = (uint64_t)row_vals[t];
         int64_t first = row_cols[a];
-        int64_t nnz = sweep(acc, first, ncols, pivot_of, starts, ends, st.cols, st.vals, p, delayed, -1);
+        int64_t nnz = sweep(acc, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, npiv, st.cols, st.vals, p, delayed,
+                            -1);
         if (!echelon) {
             if (room(&out, nnz))
                 goto done;
@@ -207,7 +207,8 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         int64_t lead = st.cols[s];
         for (int64_t t = s; t < e; t++)
             acc[st.cols[t]] = (uint64_t)st.vals[t];
-        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, st.cols, st.vals, p, delayed, lead);
+        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, piv_cols, piv_vals, npiv, st.cols, st.vals, p,
+                            delayed, lead);
         if (nnz > e - s) {
             if (room(&st, nnz)) {
                 free(order);
