@@ -24,8 +24,8 @@ from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend, sparse_pay
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
-_ASSEMBLE_BLOCK = 1 << 20
-"""Matrix entries converted at a time by :func:`_assemble`."""
+_ASSEMBLE_BLOCK = 1 << 18
+"""Matrix entries generated at a time by symbolic preprocessing and :func:`_assemble` (:meth:`_Rows.blocks`)."""
 
 CUBE_CELLS = 1 << 21
 """Up to this many divisibility tests (new elements x partners^2) the pair update of a round tests all
@@ -434,6 +434,16 @@ class _Rows:
         positions = np.repeat(state.starts[index] - (ends - lengths), lengths) + np.arange(total)
         return state.pool_codes[positions] + np.repeat(mult, lengths), positions
 
+    def blocks(self, state: "_State", index: np.ndarray):
+        """The terms of the rows at index a block of rows at a time (about _ASSEMBLE_BLOCK terms each, so
+        that the int64 temporaries stay small): (first entry, end entry, codes, pool positions) per block;
+        entry numbers count the terms of the rows at index in order."""
+        indptr = np.zeros(len(index) + 1, dtype=np.int64)
+        np.cumsum(self.lengths[index], out=indptr[1:])
+        bounds = _distinct(np.searchsorted(indptr, np.arange(0, int(indptr[-1]), _ASSEMBLE_BLOCK), side="right") - 1)
+        for a, b in zip(bounds, [*bounds[1:], len(index)]):
+            yield (indptr[a], indptr[b], *self.entries(state, index[a:b]))
+
 
 def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each monomial code, the first element of act (the active elements by increasing length, in
@@ -492,6 +502,14 @@ def _first_seen(terms: np.ndarray, known: np.ndarray, ordered: bool = True) -> n
     return distinct[first.argsort()]
 
 
+def _new_terms(state: _State, rows: _Rows, known: np.ndarray, ordered: bool) -> np.ndarray:
+    """:func:`_first_seen` of the terms of the rows, a block of rows at a time."""
+    found = [_first_seen(terms, known, ordered) for _, _, terms, _ in rows.blocks(state, np.arange(len(rows.index)))]
+    if len(found) == 1:
+        return found[0]
+    return _first_seen(np.concatenate(found), known[:0], ordered) if found else known[:0]
+
+
 def _graded(codes: MonomialCodes) -> bool:
     """Whether the order compares total degrees first: the most significant field of a code is the
     total degree."""
@@ -511,7 +529,7 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
     and its reduction do not depend on that order.
     """
     done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else state.pool_codes[:0]
-    frontier = _first_seen(rows.entries(state)[0], done, ordered)
+    frontier = _new_terms(state, rows, done, ordered)
     seen = _distinct(np.concatenate([frontier, done]))
     parts = [rows]
     act = _by_length(state)
@@ -523,7 +541,7 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
         if not len(red_index):
             break
         parts.append(_Rows.of(state, frontier[has] - state.lm_codes[red_index], red_index, graded))
-        frontier = _first_seen(parts[-1].entries(state)[0], seen, ordered)
+        frontier = _new_terms(state, parts[-1], seen, ordered)
         seen = np.concatenate([seen, np.sort(frontier) if ordered else frontier])
         seen.sort(kind="stable")  # two sorted runs: a merge
     return _Rows.concat(parts), seen
@@ -538,14 +556,10 @@ def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray
         index = np.arange(len(rows.lengths))
     indptr = np.zeros(len(index) + 1, dtype=np.int64)
     np.cumsum(rows.lengths[index], out=indptr[1:])
-    total = int(indptr[-1])
-    cols = np.empty(total, dtype=np.int32)
-    vals = np.empty(total, dtype=np.int32)
+    cols = np.empty(int(indptr[-1]), dtype=np.int32)
+    vals = np.empty(int(indptr[-1]), dtype=np.int32)
     last = len(columns) - 1
-    bounds = _distinct(np.searchsorted(indptr, np.arange(0, total, _ASSEMBLE_BLOCK), side="right") - 1)
-    for a, b in zip(bounds, [*bounds[1:], len(index)]):
-        terms, positions = rows.entries(state, index[a:b])
-        lo, hi = indptr[a], indptr[b]
+    for lo, hi, terms, positions in rows.blocks(state, index):
         cols[lo:hi] = last - np.searchsorted(columns, terms)
         vals[lo:hi] = state.pool_coeffs[positions]
     return SparseRows(indptr, cols, vals)
