@@ -440,6 +440,9 @@ class _Rows:
         entry numbers count the terms of the rows at index in order."""
         indptr = np.zeros(len(index) + 1, dtype=np.int64)
         np.cumsum(self.lengths[index], out=indptr[1:])
+        if indptr[-1] <= _ASSEMBLE_BLOCK:
+            yield (0, indptr[-1], *self.entries(state, index))
+            return
         bounds = _distinct(np.searchsorted(indptr, np.arange(0, int(indptr[-1]), _ASSEMBLE_BLOCK), side="right") - 1)
         for a, b in zip(bounds, [*bounds[1:], len(index)]):
             yield (indptr[a], indptr[b], *self.entries(state, index[a:b]))
@@ -731,11 +734,11 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])
     reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime)
     column_keys = state.codes.to_keys(columns[::-1])  # fewer than the terms: decode each column once
-    keys = list(map(column_keys.__getitem__, reduced.cols.tolist()))
-    vals = reduced.vals.tolist()
     bounds = reduced.indptr.tolist()
     basis = []
+    # element by element: no list of all terms beside the polynomials' own (about 36 bytes per term)
     for lm, a, b in zip(state.codes.to_keys(state.lm_codes[idx]), bounds, bounds[1:]):
-        basis.append(Poly(ring, [lm] + keys[a:b], [1] + vals[a:b]))
+        keys = map(column_keys.__getitem__, reduced.cols[a:b].tolist())
+        basis.append(Poly(ring, [lm, *keys], [1, *reduced.vals[a:b].tolist()]))
     basis.sort(key=lambda g: g.lm)
     return basis
