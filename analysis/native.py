@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 SOURCE = Path(__file__).with_name("sparse_echelon.c")
-FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99")
+FLAGS = ("-O3", "-funroll-loops", "-shared", "-fPIC", "-std=c99")
 
 _LOCK = threading.Lock()
 _LOADED: list = []  # [library or None] once tried
