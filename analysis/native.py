@@ -1,7 +1,7 @@
 """The C sparse reduction kernel (:file:`sparse_echelon.c`), compiled on first use and loaded by ctypes.
 
 The kernel is the C twin of the numba kernel :func:`analysis.sparse_kernels.sparse_echelon` (same
-algorithm, same results). It exists because loading numba and its cached kernel costs a process about
+results; rows reduced a block at a time with vector multiplies, see the source's header). It exists because loading numba and its cached kernel costs a process about
 0.45 s and 110 MB, more than the whole F4 run of most systems; the shared library loads in a millisecond.
 It is compiled once with the system's C compiler (``$CC`` or ``cc``) into ``analysis/__pycache__`` (or the
 user's cache directory when that is read-only), named by a hash of the source and the flags, so an edited

@@ -1,10 +1,12 @@
 /* Sparse row reduction mod p for F4 matrices: the C twin of analysis/sparse_kernels.py.
  *
  * Loaded through ctypes by analysis/native.py (compiled there on first use with the system's C compiler
- * and cached); no Python API. Same algorithm and same results as the numba kernel sparse_echelon: the
- * rows are reduced one at a time in a dense 64-bit accumulator by the sparse, unreduced pivot rows, with
- * delayed modular reduction; in echelon mode the rows that do not vanish become pivots, and at the end
- * every new pivot is swept once more (reduced row echelon form).
+ * and cached); no Python API. Same results as the numba kernel sparse_echelon, and the same design: the
+ * rows are reduced in dense 64-bit accumulators by the sparse, unreduced pivot rows, with delayed modular
+ * reduction; in echelon mode the rows that do not vanish become pivots, and at the end every new pivot is
+ * swept once more (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in
+ * interleaved accumulators: a pivot row is read once per block and applied to all its rows with vector
+ * multiplies, and the rows of a block that find no pivot at a column eliminate it among themselves.
  *
  * Reference: J. Berthomieu, C. Eder, M. Safey El Din, "msolve: a library for solving polynomial systems",
  * ISSAC 2021 (known pivots kept sparse, delayed reduction in 64-bit accumulators).
@@ -12,6 +14,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 typedef struct {
     int32_t *cols;
@@ -102,6 +107,172 @@ static int64_t gather(uint64_t *acc, int64_t first, int64_t ncols, int32_t *cols
     return w;
 }
 
+#define BLOCK 8 /* rows reduced together: each pivot row is read once per block, not once per row */
+
+/* y[c * BLOCK + r] += m[r] * v[t] at the columns c = col[t] of a pivot's tail, all BLOCK rows at once
+ * (delayed reduction: no mod). m[r] and v[t] are below 2**32, so every product is one 32 x 32 -> 64-bit
+ * vector multiply; AVX2 where the processor has it (checked at run time), else SSE2 (every x86-64), else
+ * plain C. */
+#if defined(__x86_64__)
+static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m)
+{
+    __m128i m01 = _mm_set_epi64x(m[1], m[0]), m23 = _mm_set_epi64x(m[3], m[2]);
+    __m128i m45 = _mm_set_epi64x(m[5], m[4]), m67 = _mm_set_epi64x(m[7], m[6]);
+    for (int64_t t = 0; t < n; t++) {
+        __m128i v = _mm_set1_epi64x((uint32_t)val[t]);
+        __m128i *y = (__m128i *)(bacc + (int64_t)col[t] * BLOCK);
+        _mm_storeu_si128(y, _mm_add_epi64(_mm_loadu_si128(y), _mm_mul_epu32(m01, v)));
+        _mm_storeu_si128(y + 1, _mm_add_epi64(_mm_loadu_si128(y + 1), _mm_mul_epu32(m23, v)));
+        _mm_storeu_si128(y + 2, _mm_add_epi64(_mm_loadu_si128(y + 2), _mm_mul_epu32(m45, v)));
+        _mm_storeu_si128(y + 3, _mm_add_epi64(_mm_loadu_si128(y + 3), _mm_mul_epu32(m67, v)));
+    }
+}
+
+__attribute__((target("avx2"))) static void axpy_avx2(uint64_t *bacc, const int32_t *col, const int32_t *val,
+                                                      int64_t n, const uint32_t *m)
+{
+    __m256i lo = _mm256_set_epi64x(m[3], m[2], m[1], m[0]), hi = _mm256_set_epi64x(m[7], m[6], m[5], m[4]);
+    for (int64_t t = 0; t < n; t++) {
+        __m256i v = _mm256_set1_epi64x((uint32_t)val[t]);
+        __m256i *y = (__m256i *)(bacc + (int64_t)col[t] * BLOCK);
+        _mm256_storeu_si256(y, _mm256_add_epi64(_mm256_loadu_si256(y), _mm256_mul_epu32(lo, v)));
+        _mm256_storeu_si256(y + 1, _mm256_add_epi64(_mm256_loadu_si256(y + 1), _mm256_mul_epu32(hi, v)));
+    }
+}
+#else
+static void axpy_plain(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m)
+{
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
+        for (int r = 0; r < BLOCK; r++)
+            y[r] += (uint64_t)m[r] * v;
+    }
+}
+#endif
+
+typedef void (*axpy_t)(uint64_t *, const int32_t *, const int32_t *, int64_t, const uint32_t *);
+
+static axpy_t pick_axpy(void)
+{
+#if defined(__x86_64__)
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx2"))
+        return axpy_avx2;
+    return axpy_sse2;
+#else
+    return axpy_plain;
+#endif
+}
+
+/* Reduce a block of rows, held interleaved in bacc[c * BLOCK + r], from column first on by every pivot.
+ * In echelon mode, at a column without a pivot the first nonzero row of the block that has no lead yet
+ * takes it as its lead (lead[r] = c) and the column is eliminated from the other rows without a lead (the
+ * block's own Gaussian elimination). Leaves every entry in [0, p). Undesignated rows end zero. */
+static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, const int64_t *pivot_of,
+                        const int64_t *starts, const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
+                        int64_t npiv, const int32_t *scols, const int32_t *svals, uint64_t p, int delayed,
+                        int echelon, int64_t *lead, axpy_t axpy)
+{
+    uint32_t m[BLOCK]; /* 32 x 32 -> 64-bit products: one vector multiply for several rows */
+    for (int64_t c = first; c < ncols; c++) {
+        uint64_t *a = bacc + c * BLOCK;
+        uint64_t any = 0;
+        for (int r = 0; r < BLOCK; r++)
+            any |= a[r];
+        if (!any)
+            continue;
+        int hits = 0, last = 0;
+        for (int r = 0; r < BLOCK; r++) {
+            if (delayed)
+                a[r] %= p;
+            if (a[r]) {
+                hits++;
+                last = r;
+            }
+        }
+        if (!hits)
+            continue;
+        int64_t k = pivot_of[c];
+        if (k >= 0) {
+            /* the known pivots are read where the caller keeps them, the new ones from the store */
+            const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
+            const int32_t *pv = (k < npiv ? piv_vals : svals) + starts[k] + 1;
+            int64_t n = ends[k] - starts[k] - 1;
+            if (hits == 1) {
+                uint64_t mm = p - a[last], *x = bacc + last;
+                a[last] = 0;
+                if (delayed) {
+                    for (int64_t t = 0; t < n; t++)
+                        x[(int64_t)pc[t] * BLOCK] += mm * (uint64_t)pv[t];
+                } else {
+                    for (int64_t t = 0; t < n; t++) {
+                        uint64_t *y = x + (int64_t)pc[t] * BLOCK;
+                        *y = (*y + mm * (uint64_t)pv[t]) % p;
+                    }
+                }
+                continue;
+            }
+            for (int r = 0; r < BLOCK; r++) {
+                m[r] = (uint32_t)(a[r] ? p - a[r] : 0); /* pivot rows are monic: add (p - a) times the tail */
+                a[r] = 0;
+            }
+            if (delayed) {
+                axpy(bacc, pc, pv, n, m);
+            } else {
+                for (int64_t t = 0; t < n; t++) {
+                    uint64_t v = (uint64_t)pv[t], *y = bacc + (int64_t)pc[t] * BLOCK;
+                    for (int r = 0; r < BLOCK; r++)
+                        y[r] = (y[r] + (uint64_t)m[r] * v) % p;
+                }
+            }
+            continue;
+        }
+        if (!echelon)
+            continue;
+        int r0 = -1;
+        for (int r = 0; r < nb && r0 < 0; r++)
+            if (a[r] && lead[r] < 0)
+                r0 = r;
+        if (r0 < 0)
+            continue;
+        lead[r0] = c;
+        uint64_t inv = (uint64_t)inverse((int64_t)a[r0], (int64_t)p);
+        for (int r = 0; r < nb; r++) {
+            if (r == r0 || !a[r] || lead[r] >= 0)
+                continue;
+            uint64_t mm = (p - a[r]) * inv % p;
+            a[r] = 0;
+            for (int64_t j = c + 1; j < ncols; j++) {
+                uint64_t x = bacc[j * BLOCK + r0];
+                if (!x)
+                    continue;
+                uint64_t *y = bacc + j * BLOCK + r;
+                if (delayed)
+                    *y += mm * (x % p);
+                else
+                    *y = (*y + mm * x) % p;
+            }
+        }
+    }
+}
+
+/* Move the nonzero entries of row r of the block from column first on to cols/vals from position w on,
+ * times scale mod p (the block is left zero there); returns the position after them. */
+static int64_t gather_row(uint64_t *bacc, int r, int64_t first, int64_t ncols, int32_t *cols, int32_t *vals,
+                          int64_t w, uint64_t scale, uint64_t p)
+{
+    for (int64_t c = first; c < ncols; c++) {
+        uint64_t v = bacc[c * BLOCK + r];
+        if (v) {
+            cols[w] = (int32_t)c;
+            vals[w] = (int32_t)(v * scale % p);
+            w++;
+            bacc[c * BLOCK + r] = 0;
+        }
+    }
+    return w;
+}
+
 static int ascending(const void *x, const void *y)
 {
     int64_t a = *(const int64_t *)x, b = *(const int64_t *)y;
@@ -141,50 +312,64 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         pivot_of[piv_cols[piv_indptr[k]]] = k;
     }
     int64_t count = npiv;
+    axpy_t axpy = pick_axpy();
     if (!echelon && room(&out, nrow_entries > 16 ? nrow_entries : 16))
         goto done;
-    for (int64_t r = 0; r < nrows; r++) {
-        int64_t a = row_indptr[r], b = row_indptr[r + 1];
-        if (a == b) {
-            indptr[r + 1] = out.size;
-            continue;
-        }
-        for (int64_t t = a; t < b; t++)
-            acc[row_cols[t]] = (uint64_t)row_vals[t];
-        int64_t first = row_cols[a];
-        int64_t nnz = sweep(acc, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, npiv, st.cols, st.vals, p, delayed,
-                            -1);
-        if (!echelon) {
-            if (room(&out, nnz))
-                goto done;
-            out.size = gather(acc, first, ncols, out.cols, out.vals, out.size);
-            indptr[r + 1] = out.size;
-            continue;
-        }
-        if (!nnz)
-            continue;
-        if (room(&st, nnz))
-            goto done;
-        int64_t lead = -1;
-        uint64_t inv = 1;
-        starts[count] = st.size;
-        for (int64_t c = first; c < ncols; c++) {
-            uint64_t v = acc[c];
-            if (v) {
-                if (lead < 0) {
-                    lead = c;
-                    inv = (uint64_t)inverse((int64_t)v, prime);
-                }
-                st.cols[st.size] = (int32_t)c;
-                st.vals[st.size] = (int32_t)(v * inv % p);
-                st.size++;
-                acc[c] = 0;
-            }
-        }
-        ends[count] = st.size;
-        pivot_of[lead] = count;
-        count++;
+    /* rows in blocks of BLOCK; in echelon mode by leading column, so that a block's rows fill in alike */
+    int64_t *row_order = malloc((nrows + 1) * sizeof(int64_t));
+    uint64_t *bacc = calloc((size_t)ncols * BLOCK + 1, sizeof(uint64_t));
+    if (!row_order || !bacc) {
+        free(row_order);
+        free(bacc);
+        goto done;
     }
+    for (int64_t r = 0; r < nrows; r++) {
+        int64_t first = row_indptr[r] < row_indptr[r + 1] ? row_cols[row_indptr[r]] : ncols;
+        row_order[r] = echelon ? (first << 32) | r : r;
+    }
+    if (echelon)
+        qsort(row_order, nrows, sizeof(int64_t), ascending);
+    for (int64_t b0 = 0; b0 < nrows; b0 += BLOCK) {
+        int nb = nrows - b0 < BLOCK ? (int)(nrows - b0) : BLOCK;
+        int64_t first = ncols, lead[BLOCK];
+        for (int r = 0; r < nb; r++) {
+            int64_t row = row_order[b0 + r] & 0xFFFFFFFF;
+            lead[r] = -1;
+            for (int64_t t = row_indptr[row]; t < row_indptr[row + 1]; t++)
+                bacc[(int64_t)row_cols[t] * BLOCK + r] = (uint64_t)row_vals[t];
+            if (row_indptr[row] < row_indptr[row + 1] && row_cols[row_indptr[row]] < first)
+                first = row_cols[row_indptr[row]];
+        }
+        block_sweep(bacc, nb, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, npiv, st.cols, st.vals, p,
+                    delayed, echelon, lead, axpy);
+        for (int r = 0; r < nb; r++) {
+            if (!echelon) {
+                if (room(&out, ncols - first)) {
+                    free(row_order);
+                    free(bacc);
+                    goto done;
+                }
+                out.size = gather_row(bacc, r, first, ncols, out.cols, out.vals, out.size, 1, p);
+                indptr[b0 + r + 1] = out.size;
+                continue;
+            }
+            if (lead[r] < 0)
+                continue;
+            if (room(&st, ncols - lead[r])) {
+                free(row_order);
+                free(bacc);
+                goto done;
+            }
+            starts[count] = st.size;
+            uint64_t inv = (uint64_t)inverse((int64_t)bacc[lead[r] * BLOCK + r], prime);
+            st.size = gather_row(bacc, r, lead[r], ncols, st.cols, st.vals, st.size, inv, p);
+            ends[count] = st.size;
+            pivot_of[lead[r]] = count;
+            count++;
+        }
+    }
+    free(row_order);
+    free(bacc);
     int64_t out_rows = nrows;
     if (!echelon)
         goto hand_over;
