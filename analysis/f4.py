@@ -21,6 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend, sparse_pays
+from .native import index_of
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 
@@ -496,9 +497,7 @@ def _first_seen(terms: np.ndarray, known: np.ndarray, ordered: bool = True) -> n
     """The distinct terms that are not in known (sorted), in order of first occurrence if ordered, else
     ascending."""
     if len(known):
-        at = known.searchsorted(terms)
-        at[at == len(known)] = 0
-        terms = terms[known[at] != terms]
+        terms = terms[index_of(known, terms) < 0]
     if not ordered:
         return _distinct(terms)
     distinct, first = np.unique(terms, return_index=True)
@@ -563,7 +562,7 @@ def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray
     vals = np.empty(int(indptr[-1]), dtype=np.int32)
     last = len(columns) - 1
     for lo, hi, terms, positions in rows.blocks(state, index):
-        cols[lo:hi] = last - np.searchsorted(columns, terms)
+        cols[lo:hi] = last - index_of(columns, terms)
         vals[lo:hi] = state.pool_coeffs[positions]
     return SparseRows(indptr, cols, vals)
 

@@ -132,3 +132,21 @@ def test_numpy_backend_in_row_chunks_matches_reference(p, monkeypatch):
     monkeypatch.setattr(linalg, "_ROW_CHUNK_CELLS", 7 * ncols)  # chunks of 7 rows
     fast = get_backend("numpy")
     assert (fast.reduce(pivots, rows, ncols, p), fast.reduce_each(pivots, rows, ncols, p)) == expected
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_index_of_matches_searchsorted(seed, monkeypatch):
+    """The hashed lookup of monomial codes gives the positions np.searchsorted finds, -1 for absent codes,
+    by the C table and by the numpy fallback alike."""
+    from analysis import native
+
+    rng = np.random.default_rng(seed)
+    keys = np.unique(rng.integers(0, 2**63, 5000, dtype=np.uint64))
+    queries = np.concatenate([rng.choice(keys, 3000), rng.integers(0, 2**63, 500, dtype=np.uint64)])
+    expected = np.searchsorted(keys, queries)
+    expected[(expected == len(keys)) | (keys[np.minimum(expected, len(keys) - 1)] != queries)] = -1
+    assert (expected >= 0).sum() >= 3000
+    for kernel in ("C", "numba"):
+        use_kernel(monkeypatch, kernel)
+        assert np.array_equal(native.index_of(keys, queries), expected)
+        assert np.array_equal(native.index_of(keys[:0], queries), np.full(len(queries), -1))

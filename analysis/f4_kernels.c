@@ -440,3 +440,34 @@ done:
     free(out.vals);
     return status;
 }
+
+/* out[i] = the position of queries[i] in keys (distinct), or -1 when it is not there: a hash table of the
+ * keys, one probe sequence per query (a binary search costs log2(nkeys) cache misses per query). Returns
+ * 0, or -1 when memory ran out. */
+int f4_index_of(const uint64_t *keys, int64_t nkeys, const uint64_t *queries, int64_t nq, int64_t *out)
+{
+    int bits = 4;
+    while (((int64_t)1 << bits) < 2 * nkeys)
+        bits++;
+    uint64_t mask = ((uint64_t)1 << bits) - 1;
+    int64_t *table = malloc(((size_t)1 << bits) * sizeof(int64_t));
+    if (!table)
+        return -1;
+    for (uint64_t h = 0; h <= mask; h++)
+        table[h] = -1;
+    for (int64_t i = 0; i < nkeys; i++) {
+        uint64_t h = (keys[i] * 0x9E3779B97F4A7C15ULL) >> (64 - bits);
+        while (table[h] >= 0)
+            h = (h + 1) & mask;
+        table[h] = i;
+    }
+    for (int64_t i = 0; i < nq; i++) {
+        uint64_t q = queries[i], h = (q * 0x9E3779B97F4A7C15ULL) >> (64 - bits);
+        int64_t at;
+        while ((at = table[h]) >= 0 && keys[at] != q)
+            h = (h + 1) & mask;
+        out[i] = at;
+    }
+    free(table);
+    return 0;
+}
