@@ -16,10 +16,11 @@ operations, each on row lists (pivots as a dict leading column -> row) and on :c
 
 Backends: ``"python"`` is the slow, obviously correct reference used in tests; ``"numpy"`` does the
 elimination with dense float64 BLAS products (a blocked triangular solve against the pivot rows) and
-the echelon form with a blocked row-by-row elimination; ``"sparse"`` reduces row by row with a compiled
-kernel (:mod:`analysis.sparse_kernels`, numba) that keeps the pivot rows sparse; ``"auto"`` (the F4
-default) takes the sparse kernel for large matrices with sparse pivot rows and numpy otherwise
-(:func:`sparse_pays`). All must return identical rows.
+the echelon form with a blocked row-by-row elimination; ``"sparse"`` reduces with a compiled kernel that
+keeps the pivot rows sparse: the C one of :mod:`analysis.native` (compiled on first use), or the numba one
+of :mod:`analysis.sparse_kernels` where no C compiler is found; ``"auto"`` (the F4 default) takes the C
+kernel for every matrix, and without it the numba kernel for large matrices with sparse pivot rows and
+numpy otherwise (:func:`sparse_pays`). All must return identical rows.
 """
 from __future__ import annotations
 
@@ -563,13 +564,11 @@ def sparse_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, 
 
 
 SPARSE_MAX_DENSITY = 0.05
-"""Pivot rows that fill more than this share of their columns are *dense*: on large such matrices the
-dense BLAS products of the numpy backend are faster than the sparse kernel (random quadrics, pivot
-density 8 %; katsura-9 and eco-10/11, 1-3 %: the sparse kernel 2-4x faster)."""
-DENSE_MIN_WORK = 5_000_000_000
-"""With the C kernel, ``auto`` takes numpy only for dense matrices above this many multiply-adds (rows to
-reduce x pivots x columns): quadrics-10 (1.9 s numpy against 2.1 s sparse) is above, quadrics-9 (0.39 s
-against 0.34 s) below; on everything smaller the kernel's lack of per-call overhead wins."""
+"""Without the C kernel, pivot rows that fill more than this share of their columns are *dense*, and the
+numba kernel is not taken for them: the dense BLAS products of the numpy backend were faster there
+(random quadrics, pivot density 8 %: 1.1-1.6x). The C kernel (rows a block at a time, vector multiplies)
+is faster than numpy on every benchmark matrix, dense ones included (quadrics-10: 0.94 s and 83 MB
+against 1.44 s and 131 MB), so with it ``auto`` always takes the sparse kernel."""
 SPARSE_MIN_WORK = 20_000_000_000
 """Without the C kernel (no compiler), the numba kernel is taken, until it is loaded, only when the dense
 elimination would cost more than this many multiply-adds (about 1 s of dense products): loading numba and
@@ -587,14 +586,12 @@ def sparse_pays(npiv: int, pivot_entries: int, nrows: int, ncols: int) -> bool:
 
     if not nrows:
         return False
-    work = nrows * npiv * ncols
-    dense_pivots = pivot_entries > SPARSE_MAX_DENSITY * npiv * ncols
     if native.kernel() is not None:
-        return not (dense_pivots and work > DENSE_MIN_WORK)
-    if not npiv or dense_pivots:
+        return True
+    if not npiv or pivot_entries > SPARSE_MAX_DENSITY * npiv * ncols:
         return False
     loaded = "analysis.sparse_kernels" in sys.modules
-    return work > (SPARSE_MIN_WORK_LOADED if loaded else SPARSE_MIN_WORK)
+    return nrows * npiv * ncols > (SPARSE_MIN_WORK_LOADED if loaded else SPARSE_MIN_WORK)
 
 
 def auto_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
