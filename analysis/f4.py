@@ -32,6 +32,9 @@ CUBE_CELLS = 1 << 21
 """Up to this many divisibility tests (new elements x partners^2) the pair update of a round tests all
 pairs of partners at once; above it, degree by degree against the minimal lcms (same pairs)."""
 
+COEFFICIENT_TABLE = 1 << 17
+"""Up to this prime the reduced basis shares one int object per field element (see :func:`_reduce_basis`)."""
+
 DEFAULT_MAX_MEMORY = 8 << 30
 """Default memory cap of one F4 matrix reduction (8 GiB), well inside a 16-24 GB machine."""
 
@@ -208,7 +211,7 @@ class _State:
         self.lengths = np.zeros(256, dtype=np.int64)
         self.max_degrees = np.zeros(256, dtype=np.int64)
         self.pool_codes = np.zeros(16384, dtype=self.codes.dtype)
-        self.pool_coeffs = np.zeros(16384, dtype=np.int64)
+        self.pool_coeffs = np.zeros(16384, dtype=np.int32)  # p < 2**31; the C kernel reads it as it is
         self.pool_size = 0
         # pairs: rows (i, j, lcm degree) and the packed lcm exponents
         self.pairs = np.zeros((0, 3), dtype=np.int64)
@@ -255,7 +258,7 @@ class _State:
         if end > len(self.pool_codes):
             grow = max(end, 2 * len(self.pool_codes)) - len(self.pool_codes)
             self.pool_codes = np.concatenate([self.pool_codes, np.zeros(grow, dtype=self.pool_codes.dtype)])
-            self.pool_coeffs = np.concatenate([self.pool_coeffs, np.zeros(grow, dtype=np.int64)])
+            self.pool_coeffs = np.concatenate([self.pool_coeffs, np.zeros(grow, dtype=np.int32)])
         self.pool_codes[self.pool_size : end] = codes
         self.pool_coeffs[self.pool_size : end] = coeffs
         degrees = self.codes.degrees(codes)
@@ -427,26 +430,26 @@ class _Rows:
     def concat(parts: Sequence["_Rows"]) -> "_Rows":
         return _Rows(*(np.concatenate([getattr(rows, f) for rows in parts]) for f in ("mult", "index", "lengths")))
 
-    def entries(self, state: "_State", rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        """The terms of the given rows, concatenated: (monomial codes, positions in the term pool)."""
+    def entries(self, state: "_State", rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The terms (monomial codes) of the given rows, concatenated."""
         mult, index, lengths = self.mult[rows], self.index[rows], self.lengths[rows]
         ends = np.cumsum(lengths)
         total = int(ends[-1]) if len(ends) else 0
         positions = np.repeat(state.starts[index] - (ends - lengths), lengths) + np.arange(total)
-        return state.pool_codes[positions] + np.repeat(mult, lengths), positions
+        return state.pool_codes[positions] + np.repeat(mult, lengths)
 
     def blocks(self, state: "_State", index: np.ndarray):
         """The terms of the rows at index a block of rows at a time (about _ASSEMBLE_BLOCK terms each, so
-        that the int64 temporaries stay small): (first entry, end entry, codes, pool positions) per block;
-        entry numbers count the terms of the rows at index in order."""
+        that the int64 temporaries stay small): (first entry, end entry, codes) per block; entry numbers
+        count the terms of the rows at index in order."""
         indptr = np.zeros(len(index) + 1, dtype=np.int64)
         np.cumsum(self.lengths[index], out=indptr[1:])
         if indptr[-1] <= _ASSEMBLE_BLOCK:
-            yield (0, indptr[-1], *self.entries(state, index))
+            yield 0, indptr[-1], self.entries(state, index)
             return
         bounds = _distinct(np.searchsorted(indptr, np.arange(0, int(indptr[-1]), _ASSEMBLE_BLOCK), side="right") - 1)
         for a, b in zip(bounds, [*bounds[1:], len(index)]):
-            yield (indptr[a], indptr[b], *self.entries(state, index[a:b]))
+            yield indptr[a], indptr[b], self.entries(state, index[a:b])
 
 
 def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -506,7 +509,7 @@ def _first_seen(terms: np.ndarray, known: np.ndarray, ordered: bool = True) -> n
 
 def _new_terms(state: _State, rows: _Rows, known: np.ndarray, ordered: bool) -> np.ndarray:
     """:func:`_first_seen` of the terms of the rows, a block of rows at a time."""
-    found = [_first_seen(terms, known, ordered) for _, _, terms, _ in rows.blocks(state, np.arange(len(rows.index)))]
+    found = [_first_seen(terms, known, ordered) for _, _, terms in rows.blocks(state, np.arange(len(rows.index)))]
     if len(found) == 1:
         return found[0]
     return _first_seen(np.concatenate(found), known[:0], ordered) if found else known[:0]
@@ -551,20 +554,18 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
 
 def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None) -> SparseRows:
     """The rows (those at index, in that order, if given) as sparse rows over the column codes (ascending;
-    column 0 is the largest monomial), with int32 columns and values (p < 2**31): a third of the int64
-    layout's memory on the large matrices. The terms are generated a block of rows at a time (about
-    _ASSEMBLE_BLOCK entries), so that the int64 temporaries stay small."""
+    column 0 is the largest monomial): int32 columns, the values read from the term pool through offsets
+    (a row repeats its element's coefficients), so 4 bytes per matrix entry. The column indices are
+    computed a block of rows at a time (:meth:`_Rows.blocks`), so that the int64 temporaries stay small."""
     if index is None:
         index = np.arange(len(rows.lengths))
     indptr = np.zeros(len(index) + 1, dtype=np.int64)
     np.cumsum(rows.lengths[index], out=indptr[1:])
     cols = np.empty(int(indptr[-1]), dtype=np.int32)
-    vals = np.empty(int(indptr[-1]), dtype=np.int32)
     last = len(columns) - 1
-    for lo, hi, terms, positions in rows.blocks(state, index):
+    for lo, hi, terms in rows.blocks(state, index):
         cols[lo:hi] = last - index_of(columns, terms)
-        vals[lo:hi] = state.pool_coeffs[positions]
-    return SparseRows(indptr, cols, vals)
+    return SparseRows(indptr, cols, state.pool_coeffs, state.starts[rows.index[index]])
 
 
 def _lead_columns(state: _State, rows: _Rows, columns: np.ndarray) -> np.ndarray:
@@ -726,18 +727,22 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
     rows, columns = _preprocess(state, elements, leads_done=False, ordered=False)
     pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)))
-    heads = _assemble(state, rows, columns, np.arange(len(idx)))
+    heads = _assemble(state, rows, columns, np.arange(len(idx))).compact()
     del rows
     tail = np.ones(len(heads.cols), dtype=bool)
     tail[heads.indptr[:-1]] = False
     tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])
     reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime)
     column_keys = state.codes.to_keys(columns[::-1])  # fewer than the terms: decode each column once
+    # a small field's coefficients as shared int objects when there are more terms than field elements:
+    # 8 bytes per coefficient instead of 36 (quadrics-11: 1.5M terms, 42 MB less at the peak)
+    values = list(range(ring.prime)) if ring.prime <= COEFFICIENT_TABLE and len(reduced.vals) > ring.prime else None
     bounds = reduced.indptr.tolist()
     basis = []
-    # element by element: no list of all terms beside the polynomials' own (about 36 bytes per term)
+    # element by element: no list of all terms beside the polynomials' own
     for lm, a, b in zip(state.codes.to_keys(state.lm_codes[idx]), bounds, bounds[1:]):
         keys = map(column_keys.__getitem__, reduced.cols[a:b].tolist())
-        basis.append(Poly(ring, [lm, *keys], [1, *reduced.vals[a:b].tolist()]))
+        coeffs = reduced.vals[a:b].tolist()
+        basis.append(Poly(ring, [lm, *keys], [1, *(coeffs if values is None else map(values.__getitem__, coeffs))]))
     basis.sort(key=lambda g: g.lm)
     return basis

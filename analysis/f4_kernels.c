@@ -56,7 +56,8 @@ static int64_t inverse(int64_t a, int64_t p)
 /* Reduce acc[first:] by every pivot except the one at column skip; entries left in [0, p). Returns the
  * number of nonzero entries. */
 static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t *pivot_of, const int64_t *starts,
-                     const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals, int64_t npiv,
+                     const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
+                     const int64_t *piv_voff, int64_t npiv,
                      const int32_t *scols, const int32_t *svals, uint64_t p, int delayed, int64_t skip)
 {
     int64_t nnz = 0;
@@ -80,7 +81,7 @@ static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t 
         uint64_t m = p - a; /* pivot rows are monic: add (p - a) times the row's tail */
         /* the known pivots are read where the caller keeps them, the new ones from the store */
         const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
-        const int32_t *pv = (k < npiv ? piv_vals : svals) + starts[k] + 1;
+        const int32_t *pv = k < npiv ? piv_vals + piv_voff[k] + 1 : svals + starts[k] + 1;
         int64_t n = ends[k] - starts[k] - 1;
         if (delayed) {
             for (int64_t t = 0; t < n; t++)
@@ -170,7 +171,7 @@ static axpy_t pick_axpy(void)
  * block's own Gaussian elimination). Leaves every entry in [0, p). Undesignated rows end zero. */
 static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, const int64_t *pivot_of,
                         const int64_t *starts, const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
-                        int64_t npiv, const int32_t *scols, const int32_t *svals, uint64_t p, int delayed,
+                        const int64_t *piv_voff, int64_t npiv, const int32_t *scols, const int32_t *svals, uint64_t p, int delayed,
                         int echelon, int64_t *lead, axpy_t axpy)
 {
     uint32_t m[BLOCK]; /* 32 x 32 -> 64-bit products: one vector multiply for several rows */
@@ -196,7 +197,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
         if (k >= 0) {
             /* the known pivots are read where the caller keeps them, the new ones from the store */
             const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
-            const int32_t *pv = (k < npiv ? piv_vals : svals) + starts[k] + 1;
+            const int32_t *pv = k < npiv ? piv_vals + piv_voff[k] + 1 : svals + starts[k] + 1;
             int64_t n = ends[k] - starts[k] - 1;
             if (hits == 1) {
                 uint64_t mm = p - a[last], *x = bacc + last;
@@ -281,13 +282,16 @@ static int ascending(const void *x, const void *y)
 
 void f4_free(void *ptr) { free(ptr); }
 
-/* Reduce the rows by the monic pivot rows (any order, distinct leading columns). echelon != 0: the reduced
+/* Reduce the rows by the monic pivot rows (any order, distinct leading columns). The values of row i of a
+ * block are vals[voff[i] :] (one pool may serve many rows: an F4 row repeats the coefficients of the basis
+ * element it is a multiple of). echelon != 0: the reduced
  * row echelon form of the reduced rows, nonzero rows only, monic, by increasing leading column; else every
  * row reduced on its own (zero rows kept). The result is returned in malloc'ed arrays, their addresses and
  * the row count in result[0..3] (indptr with rows + 1 entries, cols, vals, rows; free each array with
  * f4_free). Returns 0, or -1 when memory ran out. */
-int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const int32_t *piv_vals, int64_t npiv,
-                      const int64_t *row_indptr, const int32_t *row_cols, const int32_t *row_vals, int64_t nrows,
+int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const int32_t *piv_vals,
+                      const int64_t *piv_voff, int64_t npiv, const int64_t *row_indptr, const int32_t *row_cols,
+                      const int32_t *row_vals, const int64_t *row_voff, int64_t nrows,
                       int64_t ncols, int64_t prime, int echelon, int64_t *result)
 {
     uint64_t p = (uint64_t)prime;
@@ -335,12 +339,13 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         for (int r = 0; r < nb; r++) {
             int64_t row = row_order[b0 + r] & 0xFFFFFFFF;
             lead[r] = -1;
+            const int32_t *rv = row_vals + row_voff[row] - row_indptr[row];
             for (int64_t t = row_indptr[row]; t < row_indptr[row + 1]; t++)
-                bacc[(int64_t)row_cols[t] * BLOCK + r] = (uint64_t)row_vals[t];
+                bacc[(int64_t)row_cols[t] * BLOCK + r] = (uint64_t)rv[t];
             if (row_indptr[row] < row_indptr[row + 1] && row_cols[row_indptr[row]] < first)
                 first = row_cols[row_indptr[row]];
         }
-        block_sweep(bacc, nb, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, npiv, st.cols, st.vals, p,
+        block_sweep(bacc, nb, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, p,
                     delayed, echelon, lead, axpy);
         for (int r = 0; r < nb; r++) {
             if (!echelon) {
@@ -392,7 +397,7 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         int64_t lead = st.cols[s];
         for (int64_t t = s; t < e; t++)
             acc[st.cols[t]] = (uint64_t)st.vals[t];
-        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, piv_cols, piv_vals, npiv, st.cols, st.vals, p,
+        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, p,
                             delayed, lead);
         if (nnz > e - s) {
             if (room(&st, nnz)) {

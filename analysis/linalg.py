@@ -49,6 +49,18 @@ class SparseRows:
     indptr: np.ndarray
     cols: np.ndarray
     vals: np.ndarray
+    offsets: np.ndarray | None = None
+    """If given, vals is a pool of values shared by the rows and row i's values are
+    ``vals[offsets[i] : offsets[i] + length]``: an F4 row repeats the coefficients of the basis element it
+    is a multiple of, so F4's matrices keep only their columns (half the memory). :meth:`compact` gives
+    the plain layout, which every method but the C kernel expects."""
+
+    def compact(self) -> "SparseRows":
+        """The same rows with their own values (vals aligned with cols)."""
+        if self.offsets is None:
+            return self
+        gather = np.repeat(self.offsets - self.indptr[:-1], self.lengths) + np.arange(len(self.cols))
+        return SparseRows(self.indptr, self.cols, self.vals[gather])
 
     @staticmethod
     def from_rows(rows: Sequence[Row]) -> "SparseRows":
@@ -173,11 +185,11 @@ def _pivot_dict(pivots: SparseRows) -> dict[int, Row]:
 
 
 def python_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
-    return SparseRows.from_rows(python_reduce(_pivot_dict(pivots), rows.to_rows(), ncols, p))
+    return SparseRows.from_rows(python_reduce(_pivot_dict(pivots.compact()), rows.compact().to_rows(), ncols, p))
 
 
 def python_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
-    return SparseRows.from_rows(python_reduce_each(_pivot_dict(pivots), rows.to_rows(), ncols, p))
+    return SparseRows.from_rows(python_reduce_each(_pivot_dict(pivots.compact()), rows.compact().to_rows(), ncols, p))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -504,6 +516,7 @@ def pivot_columns(m: np.ndarray, p: int) -> np.ndarray:
 
 
 def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+    pivots, rows = pivots.compact(), rows.compact()
     leads = pivots.leads
     if (leads[1:] < leads[:-1]).any():
         pivots = pivots.take(leads.argsort())
@@ -515,6 +528,7 @@ def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int
 
 
 def numpy_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+    pivots, rows = pivots.compact(), rows.compact()
     leads = pivots.leads
     if (leads[1:] < leads[:-1]).any():
         pivots = pivots.take(leads.argsort())
@@ -535,16 +549,20 @@ def numpy_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p
 def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool) -> SparseRows:
     from . import native
 
-    if native.kernel() is not None:
-        sparse_echelon = native.sparse_echelon
-    else:
-        from .sparse_kernels import sparse_echelon
-
     def arrays(block: SparseRows) -> tuple[np.ndarray, ...]:  # one compiled signature
         return (np.ascontiguousarray(block.indptr, dtype=np.int64), np.ascontiguousarray(block.cols, dtype=np.int32),
                 np.ascontiguousarray(block.vals, dtype=np.int32))
 
-    return SparseRows(*sparse_echelon(*arrays(pivots), *arrays(rows), ncols, p, echelon))
+    if native.kernel() is None:
+        from .sparse_kernels import sparse_echelon
+
+        return SparseRows(*sparse_echelon(*arrays(pivots.compact()), *arrays(rows.compact()), ncols, p, echelon))
+
+    def offsets(block: SparseRows) -> np.ndarray:
+        return np.ascontiguousarray(block.indptr[:-1] if block.offsets is None else block.offsets, dtype=np.int64)
+
+    return SparseRows(*native.sparse_echelon(*arrays(pivots), offsets(pivots), *arrays(rows), offsets(rows), ncols, p,
+                                             echelon))
 
 
 def sparse_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:

@@ -84,7 +84,7 @@ def kernel():
                     lib = None
             if lib is not None:
                 lib.f4_sparse_echelon.restype = ctypes.c_int
-                lib.f4_sparse_echelon.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_int64] + [ctypes.c_void_p] * 3 + [
+                lib.f4_sparse_echelon.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64] + [ctypes.c_void_p] * 4 + [
                     ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_int, ctypes.c_void_p]
                 lib.f4_free.restype = None
                 lib.f4_free.argtypes = [ctypes.c_void_p]
@@ -102,15 +102,17 @@ def _take(address: int, count: int, dtype) -> np.ndarray:
     return np.frombuffer((ctypes.c_char * (count * np.dtype(dtype).itemsize)).from_address(address), dtype=dtype).copy()
 
 
-def sparse_echelon(piv_indptr, piv_cols, piv_vals, row_indptr, row_cols, row_vals, ncols: int, p: int, echelon: bool):
+def sparse_echelon(piv_indptr, piv_cols, piv_vals, piv_offsets, row_indptr, row_cols, row_vals, row_offsets,
+                   ncols: int, p: int, echelon: bool):
     """As :func:`analysis.sparse_kernels.sparse_echelon` (indptr int64, columns and values int32, all
-    C-contiguous), by the C kernel; returns (indptr int64, cols int32, vals int32)."""
+    C-contiguous), by the C kernel, except that the values of row i of a block start at vals[offsets[i]]
+    (int64; indptr[:-1] for the plain layout); returns (indptr int64, cols int32, vals int32)."""
     lib = kernel()
     result = np.zeros(4, dtype=np.int64)
     status = lib.f4_sparse_echelon(
-        piv_indptr.ctypes.data, piv_cols.ctypes.data, piv_vals.ctypes.data, len(piv_indptr) - 1,
-        row_indptr.ctypes.data, row_cols.ctypes.data, row_vals.ctypes.data, len(row_indptr) - 1,
-        ncols, p, int(echelon), result.ctypes.data,
+        piv_indptr.ctypes.data, piv_cols.ctypes.data, piv_vals.ctypes.data, piv_offsets.ctypes.data,
+        len(piv_indptr) - 1, row_indptr.ctypes.data, row_cols.ctypes.data, row_vals.ctypes.data,
+        row_offsets.ctypes.data, len(row_indptr) - 1, ncols, p, int(echelon), result.ctypes.data,
     )
     if status:
         raise MemoryError("the C sparse kernel ran out of memory")

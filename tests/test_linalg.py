@@ -43,6 +43,23 @@ def sparse_kernel(request, monkeypatch):
     return request.param
 
 
+def _pooled(block: SparseRows, rng) -> SparseRows:
+    """The same rows with their values read through offsets from a pool (rows in shuffled order, gaps
+    between them), as F4 hands them to the kernels."""
+    order = rng.permutation(len(block))
+    pool, offsets, at = [], np.zeros(len(block), dtype=np.int64), 0
+    for i in order:
+        gap = int(rng.integers(0, 3))
+        pool.append(np.zeros(gap, dtype=np.int64))
+        offsets[i] = at + gap
+        pool.append(block.vals[block.indptr[i] : block.indptr[i + 1]])
+        at += gap + block.lengths[i]
+    pool = np.concatenate(pool) if pool else np.zeros(0, dtype=np.int64)
+    pooled = SparseRows(block.indptr, block.cols, pool.astype(np.int32), offsets)
+    assert pooled.compact().to_rows() == block.to_rows()
+    return pooled
+
+
 @pytest.mark.parametrize("name, kernel", [("numpy", "none"), ("sparse", "C"), ("sparse", "numba")])
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
 @pytest.mark.parametrize("seed", range(4))
@@ -74,6 +91,9 @@ def test_sparse_interface_matches_row_lists(p, seed, sparse_kernel):
         assert reduced == backend.reduce(pivots, rows, ncols, p)
         each = backend.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
         assert each == backend.reduce_each(pivots, rows, ncols, p)
+        pooled_pivots, pooled_rows = _pooled(pivot_rows, rng), _pooled(sparse_rows, rng)
+        assert backend.reduce_sparse(pooled_pivots, pooled_rows, ncols, p).to_rows() == reduced
+        assert backend.reduce_each_sparse(pooled_pivots, pooled_rows, ncols, p).to_rows() == each
 
 
 @pytest.mark.parametrize("p", [7, 65521, 2147483647])
@@ -95,10 +115,14 @@ def test_c_kernel_matches_numba_kernel(p, seed):
     def arrays(block):
         return block.indptr.astype(np.int64), block.cols.astype(np.int32), block.vals.astype(np.int32)
 
+    def pooled_arrays(block):  # the C kernel reads the values through offsets into a shared pool
+        pooled = _pooled(block, rng)
+        return (*arrays(pooled), pooled.offsets)
+
     for piv, red in ((0, 1), (2, 1), (0, 2), (2, 2)):
         for echelon in (True, False):
-            args = (*arrays(blocks[piv]), *arrays(blocks[red]), ncols, p, echelon)
-            ours, theirs = native.sparse_echelon(*args), sparse_echelon(*args)
+            theirs = sparse_echelon(*arrays(blocks[piv]), *arrays(blocks[red]), ncols, p, echelon)
+            ours = native.sparse_echelon(*pooled_arrays(blocks[piv]), *pooled_arrays(blocks[red]), ncols, p, echelon)
             assert len(ours[0]) == len(theirs[0]) and (echelon or len(ours[0]) == len(blocks[red]) + 1)
             for a, b in zip(ours, theirs):
                 assert np.array_equal(a, b)
