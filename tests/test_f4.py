@@ -423,3 +423,29 @@ def test_matrices_assembled_in_blocks_give_the_same_basis(monkeypatch):
     blocks = groebner(polys)
     assert blocks.basis == whole.basis
     assert [(r.rows, r.cols, r.new) for r in blocks.rounds] == [(r.rows, r.cols, r.new) for r in whole.rounds]
+
+
+@pytest.mark.parametrize("prime,kind,seed", [(p, kind, seed) for p in PRIMES[:2] for kind in SYSTEM_KINDS for seed in range(3)]
+                         + [(65521, "katsura", 6), (65521, "cyclic", 5)])
+def test_c_kernels_give_the_same_rounds_as_numpy(prime, kind, seed, monkeypatch):
+    """The C kernels (pair update, lookup, reduction: analysis/f4_kernels.c) and the numpy code they replace
+    give the same pairs round by round (degree, pairs, matrix shape, new elements) and the same basis."""
+    from analysis import native
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernels cannot be built")
+    if kind == "katsura":
+        polys = katsura(seed, prime)
+    elif kind == "cyclic":
+        polys = cyclic(seed, prime)
+    else:
+        polys = random_small_system(seed, prime, kind, nvars=case_nvars(seed))[1]
+
+    def rounds(gb):
+        return [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in gb.rounds]
+
+    with_c = groebner(polys)
+    monkeypatch.setattr(native, "_LOADED", [None])
+    without = groebner(polys)
+    assert rounds(with_c) == rounds(without), f"{kind} seed {seed} p {prime}"
+    assert with_c.basis == without.basis
