@@ -468,6 +468,10 @@ def _reducers(state: _State, act: np.ndarray, monomials: np.ndarray) -> tuple[np
     index order on ties: see :func:`_by_length`) whose leading monomial divides it: (mask of monomials
     that have one, their reducers)."""
     X = state.codes.decode(monomials)
+    if native.kernel() is not None:
+        best = native.first_divisors(state.lead_exponents(act), X)
+        has = best >= 0
+        return has, act[best[has]]
     field = _exponent_field(int(X.max(initial=0)))
     if field.itemsize < state.field.itemsize:
         field = state.field

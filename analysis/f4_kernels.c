@@ -607,3 +607,39 @@ done:
     free(out_lcm);
     return status;
 }
+
+/* For each of nmono monomials (exponent rows of nvars), the first of nlead leading monomials (in the order
+ * given: the preferred reducers first) that divides it, or -1: best[i]. A support mask per monomial (bit
+ * v % 64 for every variable v with a positive exponent) rejects most candidates with one test before the
+ * exponents are compared. Returns 0, or -1 when memory ran out. */
+int f4_reducers(int64_t nvars, const int32_t *lead, int64_t nlead, const int32_t *mono, int64_t nmono, int64_t *best)
+{
+    uint64_t *masks = malloc((nlead + 1) * sizeof(uint64_t));
+    if (!masks)
+        return -1;
+    for (int64_t a = 0; a < nlead; a++) {
+        uint64_t mask = 0;
+        for (int64_t v = 0; v < nvars; v++)
+            if (lead[a * nvars + v])
+                mask |= (uint64_t)1 << (v & 63);
+        masks[a] = mask;
+    }
+    for (int64_t i = 0; i < nmono; i++) {
+        const int32_t *x = mono + i * nvars;
+        uint64_t mask = 0;
+        for (int64_t v = 0; v < nvars; v++)
+            if (x[v])
+                mask |= (uint64_t)1 << (v & 63);
+        best[i] = -1;
+        for (int64_t a = 0; a < nlead; a++) {
+            if (masks[a] & ~mask)
+                continue;
+            if (divides(lead + a * nvars, x, nvars)) {
+                best[i] = a;
+                break;
+            }
+        }
+    }
+    free(masks);
+    return 0;
+}

@@ -69,8 +69,8 @@ def _build() -> Path | None:
 
 
 def kernel():
-    """The loaded library (functions ``f4_sparse_echelon``, ``f4_free``, ``f4_index_of``, ``f4_update``), or
-    None when it cannot be built here."""
+    """The loaded library (functions ``f4_sparse_echelon``, ``f4_free``, ``f4_index_of``, ``f4_update``,
+    ``f4_reducers``), or None when it cannot be built here."""
     if _LOADED:
         return _LOADED[0]
     with _LOCK:
@@ -91,6 +91,9 @@ def kernel():
                 lib.f4_update.restype = ctypes.c_int
                 lib.f4_update.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 3 + [ctypes.c_int64] * 3 + [
                     ctypes.c_void_p] * 4
+                lib.f4_reducers.restype = ctypes.c_int
+                lib.f4_reducers.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
+                                            ctypes.c_int64, ctypes.c_void_p]
                 lib.f4_index_of.restype = ctypes.c_int
                 lib.f4_index_of.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                             ctypes.c_void_p]
@@ -175,3 +178,16 @@ def pair_update(E: np.ndarray, degrees: np.ndarray, active: np.ndarray, k: int, 
         lib.f4_free(int(result[1]))
     alive = new[:, 3] >= 0
     return keep.view(bool), new[alive, :3], new_lcms[alive], flags.view(bool)
+
+
+def first_divisors(leads: np.ndarray, monomials: np.ndarray) -> np.ndarray:
+    """For each exponent row of monomials, the position of the first row of leads (exponents) that divides
+    it, or -1 (by the C kernel; both int32-convertible, same number of columns)."""
+    lib = kernel()
+    leads = np.ascontiguousarray(leads, dtype=np.int32)
+    monomials = np.ascontiguousarray(monomials, dtype=np.int32)
+    best = np.empty(len(monomials), dtype=np.int64)
+    if lib.f4_reducers(leads.shape[1], leads.ctypes.data, len(leads), monomials.ctypes.data, len(monomials),
+                       best.ctypes.data):
+        raise MemoryError("the C reducer search ran out of memory")
+    return best

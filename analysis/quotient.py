@@ -88,27 +88,27 @@ def standard_monomials(gb: GroebnerResult) -> list[int]:
     if not is_zero_dimensional(gb):
         raise NotZeroDimensional(dimension(gb))
     ring = gb.ring
-    lm_exps = [ring.exps(k) for k in gb.leading_monomials]
     n = ring.nvars
-    seen = {0}
-    frontier = [(0,) * n]
-    out = [0]
-    while frontier:
-        nxt = []
-        for e in frontier:
-            for i in range(n):
-                f = e[:i] + (e[i] + 1,) + e[i + 1 :]
-                k = ring.key(f)
-                if k in seen:
-                    continue
-                seen.add(k)
-                if any(all(a <= b for a, b in zip(lm, f)) for lm in lm_exps):
-                    continue
-                out.append(k)
-                nxt.append(f)
-        frontier = nxt
-    out.sort()
-    return out
+    lm_exps = np.array([ring.exps(k) for k in gb.leading_monomials], dtype=np.int64).reshape(-1, n)
+    # degree by degree: the multiples x_i s of the standard monomials s of degree d are all of degree d + 1,
+    # so each wave is deduplicated on its own; those no leading monomial divides are the next wave
+    frontier = np.zeros((1, n), dtype=np.int64)
+    waves = [frontier]
+    step = np.eye(n, dtype=np.int64)
+    chunk = max(1, (1 << 20) // max(1, len(lm_exps) * n))
+    while len(frontier):
+        candidates = (frontier[:, None, :] + step[None, :, :]).reshape(-1, n)
+        candidates = candidates[np.lexsort(candidates.T)]  # np.unique(axis=0) would import numpy.ma (12 ms)
+        fresh = np.ones(len(candidates), dtype=bool)
+        fresh[1:] = (candidates[1:] != candidates[:-1]).any(axis=1)
+        candidates = candidates[fresh]
+        divisible = np.concatenate([
+            (lm_exps[None, :, :] <= candidates[s : s + chunk, None, :]).all(axis=2).any(axis=1)
+            for s in range(0, len(candidates), chunk)
+        ])
+        frontier = candidates[~divisible]
+        waves.append(frontier)
+    return sorted(ring.key(tuple(e)) for e in np.concatenate(waves).tolist())
 
 
 def degree(gb: GroebnerResult) -> int:
