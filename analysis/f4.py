@@ -511,23 +511,24 @@ def _distinct(values: np.ndarray) -> np.ndarray:
     return values
 
 
-def _first_seen(terms: np.ndarray, known: np.ndarray, ordered: bool = True) -> np.ndarray:
-    """The distinct terms that are not in known (sorted), in order of first occurrence if ordered, else
-    ascending."""
+def _first_seen(terms: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The distinct terms that are not in known (sorted), ascending."""
     if len(known):
         terms = terms[index_of(known, terms) < 0]
-    if not ordered:
-        return _distinct(terms)
-    distinct, first = np.unique(terms, return_index=True)
-    return distinct[first.argsort()]
+    return _distinct(terms)
 
 
-def _new_terms(state: _State, rows: _Rows, known: np.ndarray, ordered: bool) -> np.ndarray:
-    """:func:`_first_seen` of the terms of the rows, a block of rows at a time."""
-    found = [_first_seen(terms, known, ordered) for _, _, terms in rows.blocks(state, np.arange(len(rows.index)))]
+def _new_terms(state: _State, rows: _Rows, known: np.ndarray) -> np.ndarray:
+    """The distinct terms of the rows that are not in known (sorted), ascending: by the C kernel where it
+    is built (no temporaries of the rows' size), else by :func:`_first_seen` a block of rows at a time."""
+    if native.kernel() is not None and state.pool_codes.dtype == np.uint64:
+        found = native.new_terms(state.pool_codes, state.starts[rows.index], rows.lengths, rows.mult, known)
+        found.sort()
+        return found
+    found = [_first_seen(terms, known) for _, _, terms in rows.blocks(state, np.arange(len(rows.index)))]
     if len(found) == 1:
         return found[0]
-    return _first_seen(np.concatenate(found), known[:0], ordered) if found else known[:0]
+    return _distinct(np.concatenate(found)) if found else known[:0]
 
 
 def _graded(codes: MonomialCodes) -> bool:
@@ -537,19 +538,18 @@ def _graded(codes: MonomialCodes) -> bool:
     return not codes.wide and list(codes._degree_fields) == [top] and int(codes._degree_weights[0]) == 1
 
 
-def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bool = True) -> tuple[_Rows, np.ndarray]:
+def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_Rows, np.ndarray]:
     """Symbolic preprocessing on arrays: add a reducer row for every matrix monomial divisible by a lead.
 
     Works in waves: the monomials first seen in one wave are tested for divisibility against all active
     leading monomials at once; the reducer of a monomial is the sparsest basis element whose leading
     monomial divides it. With leads_done=False the leading monomials of the given rows get reducers too
-    (tail reduction). Returns all rows, the given ones first and then the reducers wave by wave, and the
-    column codes ascending. Within a wave the reducers come in order of first occurrence of their
-    monomials if ordered (for callers that record the rows), else by increasing monomial: the matrix
-    and its reduction do not depend on that order.
+    (tail reduction). Returns all rows, the given ones first and then the reducers wave by wave (within
+    a wave by increasing monomial: the matrix and its reduction do not depend on that order), and the
+    column codes ascending.
     """
     done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else state.pool_codes[:0]
-    frontier = _new_terms(state, rows, done, ordered)
+    frontier = _new_terms(state, rows, done)
     seen = _distinct(np.concatenate([frontier, done]))
     parts = [rows]
     act = _by_length(state)
@@ -561,8 +561,8 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, ordered: bo
         if not len(red_index):
             break
         parts.append(_Rows.of(state, frontier[has] - state.lm_codes[red_index], red_index, graded))
-        frontier = _new_terms(state, parts[-1], seen, ordered)
-        seen = np.concatenate([seen, np.sort(frontier) if ordered else frontier])
+        frontier = _new_terms(state, parts[-1], seen)
+        seen = np.concatenate([seen, frontier])
         seen.sort(kind="stable")  # two sorted runs: a merge
     return _Rows.concat(parts), seen
 
@@ -576,10 +576,14 @@ def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray
         index = np.arange(len(rows.lengths))
     indptr = np.zeros(len(index) + 1, dtype=np.int64)
     np.cumsum(rows.lengths[index], out=indptr[1:])
-    cols = np.empty(int(indptr[-1]), dtype=np.int32)
-    last = len(columns) - 1
-    for lo, hi, terms in rows.blocks(state, index):
-        cols[lo:hi] = last - index_of(columns, terms)
+    if native.kernel() is not None and columns.dtype == np.uint64:
+        cols = native.column_indices(state.pool_codes, state.starts[rows.index[index]], rows.lengths[index],
+                                     rows.mult[index], columns)
+    else:
+        cols = np.empty(int(indptr[-1]), dtype=np.int32)
+        last = len(columns) - 1
+        for lo, hi, terms in rows.blocks(state, index):
+            cols[lo:hi] = last - index_of(columns, terms)
     return SparseRows(indptr, cols, state.pool_coeffs, state.starts[rows.index[index]])
 
 
@@ -672,7 +676,7 @@ def _f4(
         t0 = time.perf_counter()
         d, pi, pj, lcms = state.pop_pairs()
         npairs = len(pi)
-        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms), graded), ordered=False)
+        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms), graded))
         nrows, ncols = len(rows.index), len(columns)
         if nrows * ncols > options.max_matrix_cells:
             raise MatrixTooLarge(
@@ -740,7 +744,7 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     ring = state.ring
     idx = np.flatnonzero(state.active[: len(state.polys)])
     elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
-    rows, columns = _preprocess(state, elements, leads_done=False, ordered=False)
+    rows, columns = _preprocess(state, elements, leads_done=False)
     pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)))
     heads = _assemble(state, rows, columns, np.arange(len(idx))).compact()
     del rows

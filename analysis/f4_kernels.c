@@ -446,37 +446,6 @@ done:
     return status;
 }
 
-/* out[i] = the position of queries[i] in keys (distinct), or -1 when it is not there: a hash table of the
- * keys, one probe sequence per query (a binary search costs log2(nkeys) cache misses per query). Returns
- * 0, or -1 when memory ran out. */
-int f4_index_of(const uint64_t *keys, int64_t nkeys, const uint64_t *queries, int64_t nq, int64_t *out)
-{
-    int bits = 4;
-    while (((int64_t)1 << bits) < 2 * nkeys)
-        bits++;
-    uint64_t mask = ((uint64_t)1 << bits) - 1;
-    int64_t *table = malloc(((size_t)1 << bits) * sizeof(int64_t));
-    if (!table)
-        return -1;
-    for (uint64_t h = 0; h <= mask; h++)
-        table[h] = -1;
-    for (int64_t i = 0; i < nkeys; i++) {
-        uint64_t h = (keys[i] * 0x9E3779B97F4A7C15ULL) >> (64 - bits);
-        while (table[h] >= 0)
-            h = (h + 1) & mask;
-        table[h] = i;
-    }
-    for (int64_t i = 0; i < nq; i++) {
-        uint64_t q = queries[i], h = (q * 0x9E3779B97F4A7C15ULL) >> (64 - bits);
-        int64_t at;
-        while ((at = table[h]) >= 0 && keys[at] != q)
-            h = (h + 1) & mask;
-        out[i] = at;
-    }
-    free(table);
-    return 0;
-}
-
 /* Gebauer-Moeller pair update of analysis/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
  * one after the other. E: exponents (k + m rows of nvars), deg: their degrees, active: flags of the k old
  * elements (updated in place, k + m entries). Existing pairs: npairs rows (i, j, lcm degree) with lcm
@@ -641,5 +610,133 @@ int f4_reducers(int64_t nvars, const int32_t *lead, int64_t nlead, const int32_t
         }
     }
     free(masks);
+    return 0;
+}
+
+/* A hash table of distinct 64-bit codes (open addressing, linear probing): slot -> position in keys, -1. */
+typedef struct {
+    int64_t *slot;
+    uint64_t mask;
+    int bits;
+} table_t;
+
+static int table_init(table_t *t, int64_t capacity)
+{
+    t->bits = 4;
+    while (((int64_t)1 << t->bits) < 2 * capacity)
+        t->bits++;
+    t->mask = ((uint64_t)1 << t->bits) - 1;
+    t->slot = malloc(((size_t)1 << t->bits) * sizeof(int64_t));
+    if (!t->slot)
+        return -1;
+    for (uint64_t h = 0; h <= t->mask; h++)
+        t->slot[h] = -1;
+    return 0;
+}
+
+static inline uint64_t table_home(const table_t *t, uint64_t key)
+{
+    return (key * 0x9E3779B97F4A7C15ULL) >> (64 - t->bits);
+}
+
+/* the slot of key in the table over keys: its position there, or the empty slot where it would go */
+static inline uint64_t table_find(const table_t *t, const uint64_t *keys, uint64_t key)
+{
+    uint64_t h = table_home(t, key);
+    while (t->slot[h] >= 0 && keys[t->slot[h]] != key)
+        h = (h + 1) & t->mask;
+    return h;
+}
+
+/* The codes of the terms of F4 rows that are not in known (distinct codes), each once: row r is
+ * mult[r] times the basis element whose term codes are pool[starts[r] : starts[r] + lengths[r]], so its
+ * codes are those plus mult[r]. The new codes, in order of first occurrence, go to a malloc'ed array
+ * (address and count in result[0..1]; free with f4_free). Returns 0, or -1 when memory ran out. */
+int f4_new_terms(const uint64_t *pool, const int64_t *starts, const int64_t *lengths, const uint64_t *mult,
+                 int64_t nrows, const uint64_t *known, int64_t nknown, int64_t *result)
+{
+    table_t old = {0}, fresh = {0};
+    int64_t cap = 1024, count = 0;
+    uint64_t *out = malloc(cap * sizeof(uint64_t));
+    int status = -1;
+    if (!out || table_init(&old, nknown) || table_init(&fresh, cap))
+        goto done;
+    for (int64_t i = 0; i < nknown; i++)
+        old.slot[table_find(&old, known, known[i])] = i;
+    for (int64_t r = 0; r < nrows; r++) {
+        const uint64_t *terms = pool + starts[r];
+        for (int64_t t = 0; t < lengths[r]; t++) {
+            uint64_t code = terms[t] + mult[r];
+            if (nknown && old.slot[table_find(&old, known, code)] >= 0)
+                continue;
+            uint64_t h = table_find(&fresh, out, code);
+            if (fresh.slot[h] >= 0)
+                continue;
+            if (2 * (count + 1) > (int64_t)fresh.mask + 1) { /* grow: rehash the codes found so far */
+                table_t bigger;
+                if (table_init(&bigger, 2 * (count + 1)))
+                    goto done;
+                for (int64_t i = 0; i < count; i++)
+                    bigger.slot[table_find(&bigger, out, out[i])] = i;
+                free(fresh.slot);
+                fresh = bigger;
+                h = table_find(&fresh, out, code);
+            }
+            if (count == cap) {
+                cap *= 2;
+                uint64_t *o = realloc(out, cap * sizeof(uint64_t));
+                if (!o)
+                    goto done;
+                out = o;
+            }
+            out[count] = code;
+            fresh.slot[h] = count++;
+        }
+    }
+    result[0] = (int64_t)(intptr_t)out;
+    result[1] = count;
+    out = NULL;
+    status = 0;
+done:
+    free(old.slot);
+    free(fresh.slot);
+    free(out);
+    return status;
+}
+
+/* The column of every term of F4 rows (as in f4_new_terms) over the matrix columns (codes ascending; column
+ * 0 is the largest code): out[e] = ncols - 1 - position of the code, entry by entry. Every code must be a
+ * column. Returns 0, or -1 when memory ran out. */
+int f4_columns(const uint64_t *pool, const int64_t *starts, const int64_t *lengths, const uint64_t *mult,
+               int64_t nrows, const uint64_t *columns, int64_t ncols, int32_t *out)
+{
+    table_t t;
+    if (table_init(&t, ncols))
+        return -1;
+    for (int64_t i = 0; i < ncols; i++)
+        t.slot[table_find(&t, columns, columns[i])] = i;
+    int64_t e = 0;
+    for (int64_t r = 0; r < nrows; r++) {
+        const uint64_t *terms = pool + starts[r];
+        for (int64_t k = 0; k < lengths[r]; k++)
+            out[e++] = (int32_t)(ncols - 1 - t.slot[table_find(&t, columns, terms[k] + mult[r])]);
+    }
+    free(t.slot);
+    return 0;
+}
+
+/* out[i] = the position of queries[i] in keys (distinct), or -1 when it is not there: a hash table of the
+ * keys, one probe sequence per query (a binary search costs log2(nkeys) cache misses per query). Returns
+ * 0, or -1 when memory ran out. */
+int f4_index_of(const uint64_t *keys, int64_t nkeys, const uint64_t *queries, int64_t nq, int64_t *out)
+{
+    table_t t;
+    if (table_init(&t, nkeys))
+        return -1;
+    for (int64_t i = 0; i < nkeys; i++)
+        t.slot[table_find(&t, keys, keys[i])] = i;
+    for (int64_t i = 0; i < nq; i++)
+        out[i] = t.slot[table_find(&t, keys, queries[i])];
+    free(t.slot);
     return 0;
 }

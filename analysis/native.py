@@ -70,7 +70,7 @@ def _build() -> Path | None:
 
 def kernel():
     """The loaded library (functions ``f4_sparse_echelon``, ``f4_free``, ``f4_index_of``, ``f4_update``,
-    ``f4_reducers``), or None when it cannot be built here."""
+    ``f4_reducers``, ``f4_new_terms``, ``f4_columns``), or None when it cannot be built here."""
     if _LOADED:
         return _LOADED[0]
     with _LOCK:
@@ -94,6 +94,12 @@ def kernel():
                 lib.f4_reducers.restype = ctypes.c_int
                 lib.f4_reducers.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
                                             ctypes.c_int64, ctypes.c_void_p]
+                lib.f4_new_terms.restype = ctypes.c_int
+                lib.f4_new_terms.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
+                                                                     ctypes.c_void_p]
+                lib.f4_columns.restype = ctypes.c_int
+                lib.f4_columns.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
+                                                                   ctypes.c_void_p]
                 lib.f4_index_of.restype = ctypes.c_int
                 lib.f4_index_of.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                             ctypes.c_void_p]
@@ -191,3 +197,40 @@ def first_divisors(leads: np.ndarray, monomials: np.ndarray) -> np.ndarray:
                        best.ctypes.data):
         raise MemoryError("the C reducer search ran out of memory")
     return best
+
+
+def _rows_args(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: np.ndarray) -> tuple:
+    """Rows mult[r] * (the terms pool[starts[r] : starts[r] + lengths[r]]) as C arguments (and the arrays
+    that must stay alive while they are used)."""
+    arrays = (np.ascontiguousarray(pool), np.ascontiguousarray(starts, dtype=np.int64),
+              np.ascontiguousarray(lengths, dtype=np.int64), np.ascontiguousarray(mult))
+    return tuple(a.ctypes.data for a in arrays) + (len(starts),), arrays
+
+
+def new_terms(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: np.ndarray,
+              known: np.ndarray) -> np.ndarray:
+    """The distinct codes (uint64) of the terms of the rows mult[r] * pool[starts[r] : starts[r] + lengths[r]]
+    that are not in known (distinct codes), in order of first occurrence, by the C kernel."""
+    lib = kernel()
+    args, keep = _rows_args(pool, starts, lengths, mult)
+    known = np.ascontiguousarray(known)
+    result = np.zeros(2, dtype=np.int64)
+    if lib.f4_new_terms(*args, known.ctypes.data, len(known), result.ctypes.data):
+        raise MemoryError("the C term search ran out of memory")
+    try:
+        return _take(int(result[0]), int(result[1]), np.uint64)
+    finally:
+        lib.f4_free(int(result[0]))
+
+
+def column_indices(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: np.ndarray,
+                   columns: np.ndarray) -> np.ndarray:
+    """The column (int32; len(columns) - 1 - position in the ascending codes columns) of every term of the
+    rows mult[r] * pool[starts[r] : starts[r] + lengths[r]], row after row, by the C kernel."""
+    lib = kernel()
+    args, keep = _rows_args(pool, starts, lengths, mult)
+    columns = np.ascontiguousarray(columns)
+    out = np.empty(int(np.sum(lengths)), dtype=np.int32)
+    if lib.f4_columns(*args, columns.ctypes.data, len(columns), out.ctypes.data):
+        raise MemoryError("the C column lookup ran out of memory")
+    return out
