@@ -59,6 +59,9 @@ def _build() -> Path | None:
             if done.returncode:
                 return None
             os.replace(tmp, folder / name)  # atomic: concurrent processes see a whole file or none
+            for stale in folder.glob("f4_kernels-*.so"):  # builds of earlier sources
+                if stale.name != name:
+                    stale.unlink(missing_ok=True)
             return folder / name
         except (OSError, subprocess.SubprocessError):
             return None

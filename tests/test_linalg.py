@@ -174,3 +174,18 @@ def test_index_of_matches_searchsorted(seed, monkeypatch):
         use_kernel(monkeypatch, kernel)
         assert np.array_equal(native.index_of(keys, queries), expected)
         assert np.array_equal(native.index_of(keys[:0], queries), np.full(len(queries), -1))
+
+
+def test_c_kernels_build_where_a_compiler_is_found():
+    """Where a C compiler is on PATH, the C kernels must build and load (else every C test above would skip
+    and F4 would silently fall back to numba and numpy)."""
+    import shutil
+
+    from analysis import native
+
+    if not (shutil.which("cc") or shutil.which("gcc")):
+        pytest.skip("no C compiler on PATH")
+    lib = native.kernel()
+    assert lib is not None, "a C compiler is on PATH but analysis/f4_kernels.c did not build"
+    assert all(hasattr(lib, f) for f in ("f4_sparse_echelon", "f4_update", "f4_reducers", "f4_new_terms",
+                                         "f4_columns", "f4_index_of", "f4_free"))
