@@ -735,6 +735,21 @@ def _insert_rows(state: _State, rows: SparseRows, columns: np.ndarray) -> bool:
     return False
 
 
+def interreduce(basis: Sequence[Poly], options: F4Options = F4Options()) -> list[Poly]:
+    """The reduced Gröbner basis from a minimal one (monic elements of one ring, no leading monomial
+    dividing another's), by the tail reduction that ends :func:`groebner` (:func:`_reduce_basis`).
+
+    Raises :class:`analysis.ring.CodeOverflow` when a reducer's degree outgrows the narrow monomial codes
+    (possible in a non-graded order); callers then reduce another way.
+    """
+    if not basis:
+        return []
+    state = _State(basis[0].ring)
+    for g in sorted(basis, key=lambda g: g.lm, reverse=True):
+        state.add(g)
+    return _reduce_basis(state, get_backend(options.backend))
+
+
 def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis.
 

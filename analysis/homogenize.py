@@ -21,9 +21,9 @@ from __future__ import annotations
 import time
 from typing import Sequence
 
-from .f4 import F4Options, GroebnerResult, groebner
+from .f4 import F4Options, GroebnerResult, groebner, interreduce
 from .quotient import normal_form
-from .ring import Poly, Ring
+from .ring import CodeOverflow, MonomialCodes, Poly, Ring
 
 __all__ = ["lex_by_homogenization"]
 
@@ -41,6 +41,25 @@ def _homogenize(f: Poly, ring: Ring) -> Poly:
     return ring.from_terms((e + (top - sum(e),), c) for e, c in terms)
 
 
+def _dehomogenize(basis: Sequence[Poly], ring: Ring) -> list[Poly]:
+    """The homogeneous polynomials of the homogenizing ring with the last variable set to 1, in ring. The
+    terms of a homogeneous polynomial stay distinct; their keys are computed on arrays (through the
+    monomial codes) where the degrees fit them, else term by term."""
+    if not basis:
+        return []
+    hom = basis[0].ring
+    exps = hom.decode_many([k for g in basis for k in g.mons])[:, :-1]
+    codes = MonomialCodes(ring)
+    if codes.wide or int(exps.sum(axis=1).max()) > codes.max_degree:
+        return [ring.from_terms((e[:-1], c) for e, c in g.terms()) for g in basis]
+    keys = codes.to_keys(codes.encode(exps))
+    out, at = [], 0
+    for g in basis:
+        out.append(Poly.from_dict(ring, dict(zip(keys[at : at + len(g.mons)], g.coeffs))))
+        at += len(g.mons)
+    return out
+
+
 def _reduced(basis: Sequence[Poly], ring: Ring) -> tuple[Poly, ...]:
     """The reduced Gröbner basis from a Gröbner basis: drop elements whose leading monomial another's
     divides, then reduce every tail by the others."""
@@ -51,6 +70,10 @@ def _reduced(basis: Sequence[Poly], ring: Ring) -> tuple[Poly, ...]:
     for g in basis:  # ascending leading monomials: a divisor's comes first
         if not any(ring.divides(h.lm, g.lm) for h in minimal):
             minimal.append(g)
+    try:  # F4's tail reduction (compiled kernels); the division below where its codes overflow
+        return tuple(interreduce(minimal))
+    except CodeOverflow:
+        pass
     out = []
     for k, g in enumerate(minimal):
         others = GroebnerResult(ring, tuple(minimal[:k] + minimal[k + 1:]), ())
@@ -71,5 +94,5 @@ def lex_by_homogenization(polys: Sequence[Poly], options: F4Options = F4Options(
     if not polys:
         return GroebnerResult(ring, (), ())
     gb = groebner([_homogenize(f, hom) for f in polys], options)
-    affine = [ring.from_terms((e[:-1], c) for e, c in g.terms()) for g in gb.basis]
+    affine = _dehomogenize(gb.basis, ring)
     return GroebnerResult(ring, _reduced(affine, ring), gb.rounds, time.perf_counter() - t0)

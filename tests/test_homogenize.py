@@ -65,3 +65,22 @@ def test_lex_by_homogenization_needs_a_lex_ring():
     ring = Ring(("x", "y"), 65521, "grevlex")
     with pytest.raises(ValueError, match="lex ring"):
         lex_by_homogenization([ring.gen(0)])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_tail_reduction_by_f4_equals_the_division_fallback(seed, monkeypatch):
+    """The reduced basis from F4's tail reduction (interreduce) equals the one from dividing each tail by
+    the others (the fallback where the narrow monomial codes overflow)."""
+    import analysis.homogenize as homogenize
+    from analysis.ring import CodeOverflow
+
+    ring = Ring(("x", "y", "z"), 32003, "lex")
+    polys = dense_random_system(3, (3, 3), 32003, seed, ring)
+    by_f4 = lex_by_homogenization(polys)
+
+    def overflow(*args, **kwargs):
+        raise CodeOverflow("forced for the test")
+
+    monkeypatch.setattr(homogenize, "interreduce", overflow)
+    by_division = lex_by_homogenization(polys)
+    assert by_f4.basis == by_division.basis and len(by_f4.basis) >= 2
