@@ -353,17 +353,19 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
     T = np.zeros((nb, nb), dtype=dtype)  # E = T V, V the vectors of the new standard monomials
     pivots: list[int] = []
     std: list[tuple[int, ...]] = []
-    leads: list[tuple[int, ...]] = []
+    leads = np.zeros((n * nb + 1, n), dtype=np.int64)  # the leading monomials found so far
+    nleads = 0
     polys: list[Poly] = []
     zero = (0,) * n
     one = np.zeros(nb, dtype=dtype)
     one[basis.index(ring.key(zero))] = 1
+    steps = [target.key(tuple(int(i == j) for j in range(n))) for i in range(n)]  # key(e + x_i) = key(e) + steps[i]
     heap = [(target.key(zero), zero)]
     vectors = {zero: one}
     while heap:
-        _, e = heapq.heappop(heap)
+        key, e = heapq.heappop(heap)
         v = vectors.pop(e, None)
-        if v is None or any(all(a <= b for a, b in zip(lead, e)) for lead in leads):
+        if v is None or (nleads and (leads[:nleads] <= e).all(axis=1).any()):
             continue
         k = len(pivots)
         coefs = v[pivots] % p if k else np.zeros(0, dtype=dtype)
@@ -371,7 +373,8 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
         combo = (coefs @ T[:k, :k]) % p if k else np.zeros(0, dtype=dtype)
         nonzero = np.flatnonzero(r)
         if not len(nonzero):
-            leads.append(e)
+            leads[nleads] = e
+            nleads += 1
             polys.append(target.from_terms([(e, 1)] + [(s, -int(c)) for s, c in zip(std, combo) if c]))
             continue
         c = int(nonzero[0])
@@ -389,6 +392,6 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
             f = e[:i] + (e[i] + 1,) + e[i + 1:]
             if f not in vectors:
                 vectors[f] = v @ M[i] % p
-                heapq.heappush(heap, (target.key(f), f))
+                heapq.heappush(heap, (key + steps[i], f))
     polys.sort(key=lambda g: g.lm)
     return GroebnerResult(target, tuple(polys), gb.rounds, gb.seconds + time.perf_counter() - t0)
