@@ -352,7 +352,7 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
     E = np.zeros((nb, nb), dtype=dtype)  # reduced echelon rows (pivot entries 1, pivot columns cleared)
     T = np.zeros((nb, nb), dtype=dtype)  # E = T V, V the vectors of the new standard monomials
     pivots: list[int] = []
-    std: list[tuple[int, ...]] = []
+    std: list[int] = []  # keys of the standard monomials found so far
     leads = np.zeros((n * nb + 1, n), dtype=np.int64)  # the leading monomials found so far
     nleads = 0
     polys: list[Poly] = []
@@ -361,12 +361,15 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
     one[basis.index(ring.key(zero))] = 1
     steps = [target.key(tuple(int(i == j) for j in range(n))) for i in range(n)]  # key(e + x_i) = key(e) + steps[i]
     heap = [(target.key(zero), zero)]
-    vectors = {zero: one}
+    # the vector of a candidate x_i s is NF(s) M_i, computed when the candidate is reached and is not a
+    # multiple of a leading monomial found by then (most are)
+    vectors: dict[tuple[int, ...], tuple[np.ndarray, int]] = {zero: (one, -1)}
     while heap:
         key, e = heapq.heappop(heap)
-        v = vectors.pop(e, None)
-        if v is None or (nleads and (leads[:nleads] <= e).all(axis=1).any()):
+        source = vectors.pop(e, None)
+        if source is None or (nleads and (leads[:nleads] <= e).all(axis=1).any()):
             continue
+        v = source[0] if source[1] < 0 else source[0] @ M[source[1]] % p
         k = len(pivots)
         coefs = v[pivots] % p if k else np.zeros(0, dtype=dtype)
         r = (v - coefs @ E[:k]) % p if k else v % p
@@ -375,7 +378,9 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
         if not len(nonzero):
             leads[nleads] = e
             nleads += 1
-            polys.append(target.from_terms([(e, 1)] + [(s, -int(c)) for s, c in zip(std, combo) if c]))
+            terms = {s: (-int(c)) % p for s, c in zip(std, combo.tolist()) if c}
+            terms[key] = 1
+            polys.append(Poly.from_dict(target, terms))
             continue
         c = int(nonzero[0])
         inv = pow(int(r[c]), -1, p)
@@ -387,11 +392,11 @@ def fglm(gb: GroebnerResult, target: Ring) -> GroebnerResult:
             E[:k] = (E[:k] - np.outer(factor, E[k])) % p
             T[:k, : k + 1] = (T[:k, : k + 1] - np.outer(factor, T[k, : k + 1])) % p
         pivots.append(c)
-        std.append(e)
+        std.append(key)
         for i in range(n):
             f = e[:i] + (e[i] + 1,) + e[i + 1:]
             if f not in vectors:
-                vectors[f] = v @ M[i] % p
+                vectors[f] = (v, i)
                 heapq.heappush(heap, (key + steps[i], f))
     polys.sort(key=lambda g: g.lm)
     return GroebnerResult(target, tuple(polys), gb.rounds, gb.seconds + time.perf_counter() - t0)
