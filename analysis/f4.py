@@ -548,6 +548,13 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_R
     a wave by increasing monomial: the matrix and its reduction do not depend on that order), and the
     column codes ascending.
     """
+    codes = state.codes
+    if native.kernel() is not None and _graded(codes):  # the same waves in C, one call
+        act = _by_length(state)
+        mult, index, columns = native.preprocess(
+            state.pool_codes, state.starts, state.lengths, state.lm_codes, act, state.lead_exponents(act),
+            codes._code_shifts, codes.max_degree, codes.ring._winv_t, rows.mult, rows.index, leads_done)
+        return _Rows.concat([rows, _Rows(mult, index, state.lengths[index])]), columns
     done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else state.pool_codes[:0]
     frontier = _new_terms(state, rows, done)
     seen = _distinct(np.concatenate([frontier, done]))

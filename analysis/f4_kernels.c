@@ -460,6 +460,17 @@ static int divides(const int32_t *a, const int32_t *b, int64_t n)
     return 1;
 }
 
+/* bit v % 64 for every variable v with a positive exponent: a lead can divide only monomials whose mask
+ * holds its own */
+static uint64_t support_mask(const int32_t *e, int64_t n)
+{
+    uint64_t mask = 0;
+    for (int64_t v = 0; v < n; v++)
+        if (e[v])
+            mask |= (uint64_t)1 << (v & 63);
+    return mask;
+}
+
 static int64_t lcm_degree(const int32_t *a, const int32_t *b, int64_t n)
 {
     int64_t d = 0;
@@ -586,19 +597,11 @@ int f4_reducers(int64_t nvars, const int32_t *lead, int64_t nlead, const int32_t
     uint64_t *masks = malloc((nlead + 1) * sizeof(uint64_t));
     if (!masks)
         return -1;
-    for (int64_t a = 0; a < nlead; a++) {
-        uint64_t mask = 0;
-        for (int64_t v = 0; v < nvars; v++)
-            if (lead[a * nvars + v])
-                mask |= (uint64_t)1 << (v & 63);
-        masks[a] = mask;
-    }
+    for (int64_t a = 0; a < nlead; a++)
+        masks[a] = support_mask(lead + a * nvars, nvars);
     for (int64_t i = 0; i < nmono; i++) {
         const int32_t *x = mono + i * nvars;
-        uint64_t mask = 0;
-        for (int64_t v = 0; v < nvars; v++)
-            if (x[v])
-                mask |= (uint64_t)1 << (v & 63);
+        uint64_t mask = support_mask(x, nvars);
         best[i] = -1;
         for (int64_t a = 0; a < nlead; a++) {
             if (masks[a] & ~mask)
@@ -739,4 +742,173 @@ int f4_index_of(const uint64_t *keys, int64_t nkeys, const uint64_t *queries, in
         out[i] = t.slot[table_find(&t, keys, queries[i])];
     free(t.slot);
     return 0;
+}
+
+/* A growing set of distinct codes: keys[0 .. n) and a hash table over them. */
+typedef struct {
+    table_t t;
+    uint64_t *keys;
+    int64_t n, cap;
+} codeset_t;
+
+static int set_init(codeset_t *s, int64_t cap)
+{
+    s->n = 0;
+    s->cap = cap > 16 ? cap : 16;
+    s->keys = malloc(s->cap * sizeof(uint64_t));
+    if (!s->keys || table_init(&s->t, s->cap)) {
+        free(s->keys);
+        s->keys = NULL;
+        return -1;
+    }
+    return 0;
+}
+
+static void set_free(codeset_t *s)
+{
+    free(s->keys);
+    free(s->t.slot);
+}
+
+/* 1 if key was added, 0 if it was there, -1 when memory ran out */
+static int set_add(codeset_t *s, uint64_t key)
+{
+    uint64_t h = table_find(&s->t, s->keys, key);
+    if (s->t.slot[h] >= 0)
+        return 0;
+    if (s->n == s->cap) {
+        s->cap *= 2;
+        uint64_t *k = realloc(s->keys, s->cap * sizeof(uint64_t));
+        if (!k)
+            return -1;
+        s->keys = k;
+        table_t bigger;
+        if (table_init(&bigger, s->cap))
+            return -1;
+        for (int64_t i = 0; i < s->n; i++)
+            bigger.slot[table_find(&bigger, s->keys, s->keys[i])] = i;
+        free(s->t.slot);
+        s->t = bigger;
+        h = table_find(&s->t, s->keys, key);
+    }
+    s->keys[s->n] = key;
+    s->t.slot[h] = s->n++;
+    return 1;
+}
+
+static int ascending_u64(const void *x, const void *y)
+{
+    uint64_t a = *(const uint64_t *)x, b = *(const uint64_t *)y;
+    return (a > b) - (a < b);
+}
+
+/* Symbolic preprocessing of analysis/f4.py (_preprocess) for narrow codes of a graded order: the terms of
+ * the rows mult[r] * g[index[r]] (element g's term codes pool[el_start[g] : el_start[g] + el_len[g]],
+ * leading code lm[g]) are walked wave by wave; every code first seen (not a leading term of a given row when
+ * leads_done) whose exponents some active leading monomial divides gets a reducer row, from the first of
+ * the active elements act[0 .. nact) (exponents act_exps) that divides it; a wave's codes are taken in
+ * ascending order. A code's exponents: its fields (code >> shift[f]) & field_mask times winv_t (nfields x
+ * nvars). Results (free each array with f4_free): result[0..2] the reducers' multipliers, elements and
+ * count, result[3..4] all codes seen (the matrix columns), ascending, and their count. Returns 0, or -1
+ * when memory ran out. */
+int f4_preprocess(const uint64_t *pool, const int64_t *el_start, const int64_t *el_len, const uint64_t *lm,
+                  const int64_t *act, int64_t nact, const int32_t *act_exps, int64_t nvars, int64_t nfields,
+                  const uint64_t *shift, uint64_t field_mask, const int64_t *winv_t, const uint64_t *mult,
+                  const int64_t *index, int64_t nrows, int leads_done, int64_t *result)
+{
+    codeset_t seen = {0};
+    int64_t fcap = 1024, nfront = 0, rcap = 1024, nred = 0;
+    uint64_t *front = malloc(fcap * sizeof(uint64_t)), *red_mult = malloc(rcap * sizeof(uint64_t));
+    int64_t *red_index = malloc(rcap * sizeof(int64_t));
+    uint64_t *masks = malloc((nact + 1) * sizeof(uint64_t));
+    int32_t *x = malloc((nvars + 1) * sizeof(int32_t));
+    int status = -1;
+    if (!front || !red_mult || !red_index || !masks || !x || set_init(&seen, 4096))
+        goto done;
+    for (int64_t a = 0; a < nact; a++)
+        masks[a] = support_mask(act_exps + a * nvars, nvars);
+    if (leads_done)
+        for (int64_t r = 0; r < nrows; r++)
+            if (set_add(&seen, lm[index[r]] + mult[r]) < 0)
+                goto done;
+    int64_t from = 0; /* the rows whose terms are walked next: the given ones, then each wave's reducers */
+    for (int wave = 0;; wave++) {
+        nfront = 0;
+        int64_t upto = wave ? nred : nrows;
+        for (int64_t r = from; r < upto; r++) {
+            int64_t g = wave ? red_index[r] : index[r];
+            uint64_t m = wave ? red_mult[r] : mult[r];
+            const uint64_t *terms = pool + el_start[g];
+            for (int64_t t = 0; t < el_len[g]; t++) {
+                int added = set_add(&seen, terms[t] + m);
+                if (added < 0)
+                    goto done;
+                if (!added)
+                    continue;
+                if (nfront == fcap) {
+                    fcap *= 2;
+                    uint64_t *f = realloc(front, fcap * sizeof(uint64_t));
+                    if (!f)
+                        goto done;
+                    front = f;
+                }
+                front[nfront++] = terms[t] + m;
+            }
+        }
+        if (!nfront || !nact)
+            break;
+        qsort(front, nfront, sizeof(uint64_t), ascending_u64);
+        int64_t wave_start = nred;
+        for (int64_t i = 0; i < nfront; i++) {
+            uint64_t code = front[i];
+            for (int64_t v = 0; v < nvars; v++)
+                x[v] = 0;
+            for (int64_t f = 0; f < nfields; f++) {
+                int64_t value = (int64_t)((code >> shift[f]) & field_mask);
+                if (value)
+                    for (int64_t v = 0; v < nvars; v++)
+                        x[v] += (int32_t)(value * winv_t[f * nvars + v]);
+            }
+            uint64_t mask = support_mask(x, nvars);
+            for (int64_t a = 0; a < nact; a++) {
+                if ((masks[a] & ~mask) || !divides(act_exps + a * nvars, x, nvars))
+                    continue;
+                if (nred == rcap) {
+                    rcap *= 2;
+                    uint64_t *rm = realloc(red_mult, rcap * sizeof(uint64_t));
+                    if (!rm)
+                        goto done;
+                    red_mult = rm;
+                    int64_t *ri = realloc(red_index, rcap * sizeof(int64_t));
+                    if (!ri)
+                        goto done;
+                    red_index = ri;
+                }
+                red_mult[nred] = code - lm[act[a]];
+                red_index[nred++] = act[a];
+                break;
+            }
+        }
+        if (nred == wave_start)
+            break;
+        from = wave_start;
+    }
+    qsort(seen.keys, seen.n, sizeof(uint64_t), ascending_u64);
+    result[0] = (int64_t)(intptr_t)red_mult;
+    result[1] = (int64_t)(intptr_t)red_index;
+    result[2] = nred;
+    result[3] = (int64_t)(intptr_t)seen.keys;
+    result[4] = seen.n;
+    red_mult = NULL;
+    red_index = NULL;
+    seen.keys = NULL;
+    status = 0;
+done:
+    free(front);
+    free(red_mult);
+    free(red_index);
+    free(masks);
+    free(x);
+    set_free(&seen);
+    return status;
 }

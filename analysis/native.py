@@ -73,7 +73,8 @@ def _build() -> Path | None:
 
 def kernel():
     """The loaded library (functions ``f4_sparse_echelon``, ``f4_free``, ``f4_index_of``, ``f4_update``,
-    ``f4_reducers``, ``f4_new_terms``, ``f4_columns``), or None when it cannot be built here."""
+    ``f4_reducers``, ``f4_new_terms``, ``f4_columns``, ``f4_preprocess``), or None when it cannot be built
+    here."""
     if _LOADED:
         return _LOADED[0]
     with _LOCK:
@@ -103,6 +104,10 @@ def kernel():
                 lib.f4_columns.restype = ctypes.c_int
                 lib.f4_columns.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                                                    ctypes.c_void_p]
+                lib.f4_preprocess.restype = ctypes.c_int
+                lib.f4_preprocess.argtypes = [ctypes.c_void_p] * 5 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
+                                              ctypes.c_int64, ctypes.c_void_p, ctypes.c_uint64] + [
+                    ctypes.c_void_p] * 3 + [ctypes.c_int64, ctypes.c_int, ctypes.c_void_p]
                 lib.f4_index_of.restype = ctypes.c_int
                 lib.f4_index_of.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                             ctypes.c_void_p]
@@ -237,3 +242,32 @@ def column_indices(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mu
     if lib.f4_columns(*args, columns.ctypes.data, len(columns), out.ctypes.data):
         raise MemoryError("the C column lookup ran out of memory")
     return out
+
+
+def preprocess(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lm_codes: np.ndarray, act: np.ndarray,
+               act_exps: np.ndarray, shifts: np.ndarray, field_mask: int, winv_t: np.ndarray, mult: np.ndarray,
+               index: np.ndarray, leads_done: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Symbolic preprocessing of :func:`analysis.f4._preprocess` in C, for narrow codes of a graded order
+    (per element: term pool offsets and lengths, leading codes; the active elements in order of preference
+    with their lead exponents; the codes' field shifts, mask and inverse weights). Returns the reducers'
+    multipliers (uint64) and elements (int64), wave by wave, and the matrix columns (codes, ascending)."""
+    lib = kernel()
+    arrays = [np.ascontiguousarray(pool), np.ascontiguousarray(starts, dtype=np.int64),
+              np.ascontiguousarray(lengths, dtype=np.int64), np.ascontiguousarray(lm_codes),
+              np.ascontiguousarray(act, dtype=np.int64), np.ascontiguousarray(act_exps, dtype=np.int32),
+              np.ascontiguousarray(shifts, dtype=np.uint64), np.ascontiguousarray(winv_t, dtype=np.int64),
+              np.ascontiguousarray(mult), np.ascontiguousarray(index, dtype=np.int64)]
+    pool, starts, lengths, lm_codes, act, act_exps, shifts, winv_t, mult, index = arrays
+    result = np.zeros(5, dtype=np.int64)
+    if lib.f4_preprocess(pool.ctypes.data, starts.ctypes.data, lengths.ctypes.data, lm_codes.ctypes.data,
+                         act.ctypes.data, len(act), act_exps.ctypes.data, act_exps.shape[1], len(shifts),
+                         shifts.ctypes.data, field_mask, winv_t.ctypes.data, mult.ctypes.data, index.ctypes.data,
+                         len(index), int(leads_done), result.ctypes.data):
+        raise MemoryError("the C symbolic preprocessing ran out of memory")
+    addresses = [int(result[0]), int(result[1]), int(result[3])]
+    try:
+        return (_take(addresses[0], int(result[2]), np.uint64), _take(addresses[1], int(result[2]), np.int64),
+                _take(addresses[2], int(result[4]), np.uint64))
+    finally:
+        for address in addresses:
+            lib.f4_free(address)
