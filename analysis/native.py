@@ -24,6 +24,7 @@ FLAGS = ("-O3", "-funroll-loops", "-shared", "-fPIC", "-std=c99")
 
 _LOCK = threading.Lock()
 _LOADED: list = []  # [library or None] once tried
+_WHY: list[str] = []  # why the library is not loaded, once known (describe())
 
 
 def _cache_dirs() -> list[Path]:
@@ -46,6 +47,7 @@ def _build() -> Path | None:
 
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
+        _WHY.append("no C compiler found (cc, gcc or $CC)")
         return None
     for folder in _cache_dirs():
         try:
@@ -57,13 +59,16 @@ def _build() -> Path | None:
         try:
             done = subprocess.run([compiler, *FLAGS, "-o", tmp, str(SOURCE)], capture_output=True, timeout=120)
             if done.returncode:
+                lines = done.stderr.decode(errors="replace").strip().splitlines()
+                _WHY.append(f"{compiler} failed on {SOURCE.name}: {lines[0] if lines else done.returncode}")
                 return None
             os.replace(tmp, folder / name)  # atomic: concurrent processes see a whole file or none
             for stale in folder.glob("f4_kernels-*.so"):  # builds of earlier sources
                 if stale.name != name:
                     stale.unlink(missing_ok=True)
             return folder / name
-        except (OSError, subprocess.SubprocessError):
+        except (OSError, subprocess.SubprocessError) as exc:
+            _WHY.append(f"{compiler} could not build {SOURCE.name}: {exc}")
             return None
         finally:
             if os.path.exists(tmp):
@@ -84,7 +89,8 @@ def kernel():
             if path is not None:
                 try:
                     lib = ctypes.CDLL(str(path))
-                except OSError:
+                except OSError as exc:
+                    _WHY.append(f"{path} did not load: {exc}")
                     lib = None
             if lib is not None:
                 lib.f4_sparse_echelon.restype = ctypes.c_int
@@ -113,6 +119,14 @@ def kernel():
                                             ctypes.c_void_p]
             _LOADED.append(lib)
     return _LOADED[0]
+
+
+def describe() -> str:
+    """One line for a report: which F4 kernels this process runs, and why not the C ones when it cannot."""
+    lib = kernel()
+    if lib is not None:
+        return f"C kernels ({lib._name})"
+    return f"numba/numpy kernels ({_WHY[-1] if _WHY else 'the C kernels are unavailable'})"
 
 
 def _take(address: int, count: int, dtype) -> np.ndarray:

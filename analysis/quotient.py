@@ -7,6 +7,7 @@ Geometry*, ch. 2 (action matrices).
 from __future__ import annotations
 
 import heapq
+import math
 import time
 from typing import Sequence
 
@@ -88,12 +89,22 @@ def standard_monomials(gb: GroebnerResult) -> list[int]:
     if not is_zero_dimensional(gb):
         raise NotZeroDimensional(dimension(gb))
     ring = gb.ring
-    n = ring.nvars
-    lm_exps = np.array([ring.exps(k) for k in gb.leading_monomials], dtype=np.int64).reshape(-1, n)
-    # degree by degree: the multiples x_i s of the standard monomials s of degree d are all of degree d + 1,
-    # so each wave is deduplicated on its own; those no leading monomial divides are the next wave
+    waves = _standard_waves(_lead_exponents(gb))
+    return sorted(ring.key(tuple(e)) for e in np.concatenate(list(waves)).tolist())
+
+
+def _lead_exponents(gb: GroebnerResult) -> np.ndarray:
+    n = gb.ring.nvars
+    return np.array([gb.ring.exps(k) for k in gb.leading_monomials], dtype=np.int64).reshape(-1, n)
+
+
+def _standard_waves(lm_exps: np.ndarray):
+    """The standard monomials of a zero-dimensional leading ideal degree by degree (exponent arrays, one
+    per degree): the multiples x_i s of the standard monomials s of degree d are all of degree d + 1, so
+    each wave is deduplicated on its own; those no leading monomial divides are the next wave."""
+    n = lm_exps.shape[1]
     frontier = np.zeros((1, n), dtype=np.int64)
-    waves = [frontier]
+    yield frontier
     step = np.eye(n, dtype=np.int64)
     chunk = max(1, (1 << 20) // max(1, len(lm_exps) * n))
     while len(frontier):
@@ -107,8 +118,12 @@ def standard_monomials(gb: GroebnerResult) -> list[int]:
             for s in range(0, len(candidates), chunk)
         ])
         frontier = candidates[~divisible]
-        waves.append(frontier)
-    return sorted(ring.key(tuple(e)) for e in np.concatenate(waves).tolist())
+        yield frontier
+
+
+WAVE_COUNT_LIMIT = 200_000
+"""count_standard_monomials enumerates B wave by wave (arrays) when the box of the pure powers bounds |B| by
+this; above it, it counts by the memoised split, which never lists B."""
 
 
 def degree(gb: GroebnerResult) -> int:
@@ -295,6 +310,10 @@ def count_standard_monomials(gb: GroebnerResult) -> int:
     if not is_zero_dimensional(gb):
         raise NotZeroDimensional(dimension(gb))
     ring = gb.ring
+    lm_exps = _lead_exponents(gb)
+    pure = [int(min(e[i] for e in lm_exps if not any(e[:i]) and not any(e[i + 1:]))) for i in range(ring.nvars)]
+    if math.prod(pure) <= WAVE_COUNT_LIMIT:  # B lies in the box of the pure powers
+        return sum(len(wave) for wave in _standard_waves(lm_exps))
     memo: dict[tuple, int] = {}
 
     def minimal(gens: list[tuple[int, ...]]) -> tuple[tuple[int, ...], ...]:

@@ -92,6 +92,10 @@ def _default_max_memory() -> str:
 def _f4_options(args: argparse.Namespace):
     from analysis.f4 import F4Options
 
+    if args.verbose and args.backend in ("auto", "sparse"):
+        from analysis import native
+
+        print(f"[f4] {native.describe()}", file=sys.stderr)
     return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
                      verbose=args.verbose)
 
@@ -155,8 +159,9 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
                    help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
     p.add_argument("--backend", default="auto",
-                   help="linear algebra backend: auto (default: a compiled sparse kernel on large sparse matrices, "
-                   "else numpy), numpy, sparse or python (reference)")
+                   help="linear algebra backend: auto (default: the compiled C sparse kernel, built on first use by the "
+                   "system's C compiler; without one numba's sparse kernel on large sparse matrices, else numpy; -v "
+                   "names the one in use), numpy, sparse or python (reference)")
     p.add_argument("--engine", default="own", choices=("auto", "own", "msolve"),
                    help="Groebner engine: own (default), msolve (an msolve executable, run as an external program, "
                    "checked by the own engine on the second prime where affordable) or auto (msolve when present "

@@ -189,3 +189,19 @@ def test_c_kernels_build_where_a_compiler_is_found():
     assert lib is not None, "a C compiler is on PATH but analysis/f4_kernels.c did not build"
     assert all(hasattr(lib, f) for f in ("f4_sparse_echelon", "f4_update", "f4_reducers", "f4_new_terms",
                                          "f4_columns", "f4_index_of", "f4_free"))
+
+
+def test_native_describe_names_why_the_c_kernels_are_not_used(monkeypatch, tmp_path):
+    """A source that does not compile: the engine falls back, and -v's line says which kernels run and why."""
+    from analysis import native
+
+    broken = tmp_path / "broken.c"
+    broken.write_text("int f( {\n")
+    monkeypatch.setattr(native, "SOURCE", broken)
+    monkeypatch.setattr(native, "_LOADED", [])
+    monkeypatch.setattr(native, "_WHY", [])
+    monkeypatch.setattr(native, "_cache_dirs", lambda: [tmp_path / "cache"])
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    assert native.kernel() is None
+    line = native.describe()
+    assert line.startswith("numba/numpy kernels (") and "no-such-compiler" in line and "broken.c" in line
