@@ -32,9 +32,17 @@ def _cache_dirs() -> list[Path]:
     return [SOURCE.parent / "__pycache__", user]
 
 
+DISABLE_ENV = "TDOA_WORKBENCH_NATIVE"
+"""Set to ``off`` to run the numba/numpy kernels instead of the C ones (a comparison, a broken compiler)."""
+
+
 def _build() -> Path | None:
     """The shared library for the current source, compiled if not cached; None without a compiler."""
+    if os.environ.get(DISABLE_ENV, "").lower() in ("off", "0", "no"):
+        _WHY.append(f"{DISABLE_ENV}={os.environ[DISABLE_ENV]}")
+        return None
     if not SOURCE.exists():
+        _WHY.append(f"{SOURCE} is missing")
         return None
     name = f"f4_kernels-{zlib.crc32(SOURCE.read_bytes() + ' '.join(FLAGS).encode()):08x}.so"
     for folder in _cache_dirs():

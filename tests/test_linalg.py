@@ -1,4 +1,6 @@
 """The mod-p linear algebra backends agree with the pure-Python reference on F4-shaped matrices."""
+import os
+
 import numpy as np
 import pytest
 
@@ -185,6 +187,8 @@ def test_c_kernels_build_where_a_compiler_is_found():
 
     if not (shutil.which("cc") or shutil.which("gcc")):
         pytest.skip("no C compiler on PATH")
+    if os.environ.get(native.DISABLE_ENV):
+        pytest.skip(f"{native.DISABLE_ENV} is set")
     lib = native.kernel()
     assert lib is not None, "a C compiler is on PATH but analysis/f4_kernels.c did not build"
     assert all(hasattr(lib, f) for f in ("f4_sparse_echelon", "f4_update", "f4_reducers", "f4_new_terms",
@@ -202,6 +206,7 @@ def test_native_describe_names_why_the_c_kernels_are_not_used(monkeypatch, tmp_p
     monkeypatch.setattr(native, "_WHY", [])
     monkeypatch.setattr(native, "_cache_dirs", lambda: [tmp_path / "cache"])
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    monkeypatch.delenv(native.DISABLE_ENV, raising=False)
     assert native.kernel() is None
     line = native.describe()
     assert line.startswith("numba/numpy kernels (") and "no-such-compiler" in line and "broken.c" in line
