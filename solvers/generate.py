@@ -74,11 +74,11 @@ SQUARED = {"5r4s": 7, "5r5s": 6}
 #: (the plain track, :class:`solvers.methods.tracker.TrackerOptions` fields) and "retrack" (fields replaced
 #: in :data:`solvers.methods.tracker.TIGHT` for the retracks and detours). 4r/5s: 5-40 of its 344 paths
 #: crawl through an ill-conditioned stretch (Jacobian condition 1e8-1e10, also in projective coordinates)
-#: at steps of 1e-5 to the step limit on every route; lower limits hand them sooner to the detours and
-#: pooled routes that resolve the instance: 1063 -> 400 ms per solve on 300 seeded networks, no failures
-#: either way (a plain limit of 200 lost network 57: too many paths out of steps count as degenerate data;
-#: tables/NOTES.md).
-STEP_CONTROL = {"4r5s": {"tracker": {"max_steps": 250}, "retrack": {"max_steps": 150}}}
+#: at steps of 1e-5; a plain limit of 400 (600) hands them sooner to the retracks: on the 1000 seeded
+#: networks of tables/solvers.csv the same two failures (406, 665), 6 % less time on 20 of them. Lower
+#: retrack limits lose true roots whose paths need thousands of tight steps (1000: networks 440 and 986;
+#: plain 250 with retrack 150: 10 more of 1000), so "retrack" is left at TIGHT's (tables/NOTES.md).
+STEP_CONTROL = {"4r5s": {"tracker": {"max_steps": 400}}}
 
 #: A start pair: generic complex parameters q0 and one root x0 there, or a function rng -> such a pair.
 Start = Union[tuple[np.ndarray, np.ndarray], Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]]
