@@ -70,6 +70,16 @@ POSITIONS = {"4r5s": "receivers-orbits"}
 #: the minors by random integer combinations (analysis.parametric.square); counted on one seed.
 SQUARED = {"5r4s": 7, "5r5s": 6}
 
+#: Step control of a configuration's tracking, written into its spec over the method's defaults: "tracker"
+#: (the plain track, :class:`solvers.methods.tracker.TrackerOptions` fields) and "retrack" (fields replaced
+#: in :data:`solvers.methods.tracker.TIGHT` for the retracks and detours). 4r/5s: 5-40 of its 344 paths
+#: crawl through an ill-conditioned stretch (Jacobian condition 1e8-1e10, also in projective coordinates)
+#: at steps of 1e-5; a plain limit of 400 (600) hands them sooner to the retracks: on the 1000 seeded
+#: networks of tables/solvers.csv the same two failures (406, 665), 6 % less time on 20 of them. Lower
+#: retrack limits lose true roots whose paths need thousands of tight steps (1000: networks 440 and 986;
+#: plain 250 with retrack 150: 10 more of 1000), so "retrack" is left at TIGHT's (tables/NOTES.md).
+STEP_CONTROL = {"4r5s": {"tracker": {"max_steps": 400}}}
+
 #: A start pair: generic complex parameters q0 and one root x0 there, or a function rng -> such a pair.
 Start = Union[tuple[np.ndarray, np.ndarray], Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]]
 
@@ -199,7 +209,7 @@ class Job:
     formulation: a TDOA formulation label (pencil; the homotopy's system came from it) or None;
     system: the square parametric system (homotopy); full: the over-determined system it squares;
     start / trials: start pair and seeded real instances (TDOA targets; a user's start pair);
-    seeds: the GF(p) certification's seeds.
+    seeds: the GF(p) certification's seeds; step_control: the spec's tracking options (:data:`STEP_CONTROL`).
     """
 
     name: str
@@ -210,6 +220,7 @@ class Job:
     trials: Callable | None = None
     full: ParametricSystem | None = None
     seeds: tuple[int, ...] = (0, 1)
+    step_control: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -292,24 +303,29 @@ class HomotopyMethod:
             raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
         if report.degree == 0:
             raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
-        # a squared system is verified once, on the paths it will track (below), not on all its roots
-        build_options = dataclasses.replace(options, verify_trials=0) if full is not None else options
+        # verified once, below: a squared system on the paths it will track (not on all its roots), a system
+        # with its own step control as it will run
+        build_options = dataclasses.replace(options, verify_trials=0) if full is not None or job.step_control else options
         spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
         spec = {"name": job.name, **spec, "paths": len(spec["start_roots"]),
                 "certified": {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
                               "saturated_by": list(system.nonzero)},
                 "config": list(job.config) if job.config else None,
                 "scale_powers": list(system.scale_powers) if system.scale_powers else None}
+        coefficients = homotopy.load_coefficients(source)
         if full_report is not None:
-            coefficients = homotopy.load_coefficients(source)
             tracked = homotopy.full_system_roots(full, spec, coefficients, full_report.degree)
             spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
                                    "primes": list(full_report.primes), "seeds": [0, 1], "tracked": tracked}
             spec["degree"] = spec["paths"] = full_report.degree
             spec["tracker"] = dict(tracker.FAMILY)  # a jump to another family is invisible to the duplicate test
             build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
-            if job.trials is not None and options.verify_trials:
-                build["verified"] = homotopy.verify(full.name, spec, coefficients, job.trials, options.verify_trials)
+        for key, fields in (job.step_control or {}).items():  # "tracker", "retrack"
+            spec[key] = {**spec.get(key, {}), **fields}
+        if (full_report is not None or job.step_control) and job.trials is not None and options.verify_trials:
+            # verified on the paths and with the step control it will run with
+            build["verified"] = homotopy.verify(full.name if full_report is not None else system.name, spec,
+                                                coefficients, job.trials, options.verify_trials)
         return Built(spec, source, report.degree, spec["paths"], build)
 
 
@@ -401,7 +417,8 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
             raise GenerationError(f"{label}: its positions formulation is solved by the homotopy method, not {method!r}")
         system, variant = solver_system(label), POSITIONS[label]
         return (Job(name, formulation, system, config, _positions_start(*config, variant),
-                    _positions_trials(*config, variant, system.scale_powers)), "homotopy", label)
+                    _positions_trials(*config, variant, system.scale_powers), step_control=STEP_CONTROL.get(label)),
+                "homotopy", label)
     chosen = method or solver_method(Formulation.parse(formulation))
     if chosen in ("curve-pencil", "offset-kernel"):
         return Job(name, formulation, config=config), chosen, label
@@ -409,7 +426,7 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
     full = from_formulation(formulation, saturate_det_h=True) if label in SQUARED else None
     trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
     return (Job(name, formulation, system, config, _tdoa_start(*config), trials, full,
-                seeds=(0,) if label in SQUARED else (0, 1)), chosen, label)
+                seeds=(0,) if label in SQUARED else (0, 1), step_control=STEP_CONTROL.get(label)), chosen, label)
 
 
 def _identifier(text: str) -> str:

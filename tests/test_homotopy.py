@@ -331,3 +331,21 @@ def test_known_root_among_candidates(name):
     else:  # as the earlier 9r3s tests: every seed to 1e-9, median below 1e-11
         assert errs.max() < 1e-9 and np.median(np.log10(errs)) < -11, errs
 
+
+
+@pytest.mark.parametrize("name", HOMOTOPY_SPECS)
+def test_committed_spec_carries_its_configurations_step_control(name):
+    # the generator's per-configuration step control (solvers.generate.STEP_CONTROL) is in the committed
+    # spec, and the solver tracks with it: the plain track's options and TIGHT with the retrack fields replaced
+    import dataclasses
+
+    from solvers.generate import STEP_CONTROL
+
+    _, spec = _spec(name)
+    label = spec["name"].split("_")[1]
+    for key, fields in STEP_CONTROL.get(label, {}).items():
+        assert {k: spec[key][k] for k in fields} == fields
+    solver = hm.HomotopySolver(spec, _module(name[:-5]).coefficients)
+    assert solver.retrack == dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
+    assert solver.options == tracker.TrackerOptions(**spec.get("tracker", {}))
+    assert set(spec.get("retrack", {})) <= {f.name for f in dataclasses.fields(tracker.TrackerOptions)}

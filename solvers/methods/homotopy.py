@@ -244,7 +244,9 @@ def _agrees(tapes, spec: dict, coefficients: Callable) -> bool:
 class HomotopySolver:
     """Tracks the stored start roots from q0 to target parameters (the online half of the method).
 
-    ``evaluator`` (:data:`EVALUATORS`): how the tracker evaluates the system.
+    ``evaluator`` (:data:`EVALUATORS`): how the tracker evaluates the system. The spec's "tracker" fields
+    set the plain track's options, its "retrack" fields replace those of :data:`tracker.TIGHT` for the
+    retracks and detours (:data:`solvers.generate.STEP_CONTROL`).
     """
 
     def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
@@ -256,6 +258,7 @@ class HomotopySolver:
         roots = spec["start_roots"]
         self.x0 = _complex_array(roots) if roots else np.zeros((0, self.structure.nvars), complex)
         self.options = TrackerOptions(**spec.get("tracker", {}))
+        self.retrack = dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
         self.nvars = self.structure.nvars
         tracked = (spec.get("full_system") or {}).get("tracked")
         if tracked is not None:  # a squared system: only the roots of the full system are tracked
@@ -316,7 +319,7 @@ class HomotopySolver:
                 redo[b] = False
         bi, ki = np.nonzero(redo)
         if len(bi):
-            xr, _ = self.track(qa[None], q, xa[ki], bi, tracker.TIGHT)
+            xr, _ = self.track(qa[None], q, xa[ki], bi, self.retrack)
             x[bi, ki] = xr
         complete = np.array([not _unresolved(x[b]).any() for b in range(B)])
         return x, complete
@@ -354,11 +357,11 @@ class HomotopySolver:
                 break
             bj, kj = np.nonzero(rows)
             qm = self._detour_point(k)
-            xm, _ = self.track(self.q0[None], qm[None], self.x0[kj], None, tracker.TIGHT)
+            xm, _ = self.track(self.q0[None], qm[None], self.x0[kj], None, self.retrack)
             good = np.flatnonzero(np.all(np.isfinite(xm), axis=1))
             if not len(good):
                 continue
-            xe, _ = self.track(qm[None], q, xm[good], bj[good], tracker.TIGHT)
+            xe, _ = self.track(qm[None], q, xm[good], bj[good], self.retrack)
             for b, i, xi in zip(bj[good], kj[good], xe):
                 if np.all(np.isfinite(xi)):
                     if _duplicated(np.vstack([x[b], xi[None]]))[-1]:
