@@ -75,7 +75,9 @@ def update_provenance(sections: dict[str, dict], path: Path = PROVENANCE_PATH) -
     """
     record: dict = {}
     timing = path.with_name(path.stem + ".timing.json")  # the full record of the last run (untracked)
-    source = timing if timing.exists() else path
+    # the timing file holds the last run's full record, unless the tracked file is newer (a checkout or merge
+    # brought another run's record): merging into a stale one would rewrite the tracked file for nothing
+    source = timing if timing.exists() and (not path.exists() or timing.stat().st_mtime >= path.stat().st_mtime) else path
     if source.exists():
         try:
             record = json.loads(source.read_text())
