@@ -311,8 +311,9 @@ def count_standard_monomials(gb: GroebnerResult) -> int:
         raise NotZeroDimensional(dimension(gb))
     ring = gb.ring
     lm_exps = _lead_exponents(gb)
-    pure = [int(min(e[i] for e in lm_exps if not any(e[:i]) and not any(e[i + 1:]))) for i in range(ring.nvars)]
-    if math.prod(pure) <= WAVE_COUNT_LIMIT:  # B lies in the box of the pure powers
+    single = (lm_exps > 0).sum(axis=1) == 1  # pure powers x_i^a (each variable has one: zero-dimensional)
+    pure = np.where(lm_exps[single] > 0, lm_exps[single], np.iinfo(np.int64).max).min(axis=0)
+    if math.prod(int(a) for a in pure) <= WAVE_COUNT_LIMIT:  # B lies in the box of the pure powers
         return sum(len(wave) for wave in _standard_waves(lm_exps))
     memo: dict[tuple, int] = {}
 
