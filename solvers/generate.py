@@ -78,7 +78,10 @@ SQUARED = {"5r4s": 7, "5r5s": 6}
 #: networks of tables/solvers.csv the same two failures (406, 665), 6 % less time on 20 of them. Lower
 #: retrack limits lose true roots whose paths need thousands of tight steps (1000: networks 440 and 986;
 #: plain 250 with retrack 150: 10 more of 1000), so "retrack" is left at TIGHT's (tables/NOTES.md).
-STEP_CONTROL = {"4r5s": {"tracker": {"max_steps": 400}}}
+#: "starts": tracked from this many start systems (the spec's and seeded others, :func:`homotopy.extra_starts`),
+#: endpoints pooled, nothing retracked: 4r/5s's stalled paths are cheaper to replace by two more plain tracks
+#: than to retrack (tables/NOTES.md, "Three start systems").
+STEP_CONTROL = {"4r5s": {"tracker": {"max_steps": 400}, "starts": 3}}
 
 #: A start pair: generic complex parameters q0 and one root x0 there, or a function rng -> such a pair.
 Start = Union[tuple[np.ndarray, np.ndarray], Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]]
@@ -320,8 +323,13 @@ class HomotopyMethod:
             spec["degree"] = spec["paths"] = full_report.degree
             spec["tracker"] = dict(tracker.FAMILY)  # a jump to another family is invisible to the duplicate test
             build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
-        for key, fields in (job.step_control or {}).items():  # "tracker", "retrack"
-            spec[key] = {**spec.get(key, {}), **fields}
+        for key, fields in (job.step_control or {}).items():  # "tracker", "retrack"; "starts": a count
+            if key != "starts":
+                spec[key] = {**spec.get(key, {}), **fields}
+        if (job.step_control or {}).get("starts", 1) > 1:
+            if progress:
+                progress(f"{system.name}: solving {job.step_control['starts'] - 1} further start system(s)")
+            spec["starts"] = homotopy.extra_starts(spec, homotopy.load_coefficients(source), job.step_control["starts"] - 1)
         if (full_report is not None or job.step_control) and job.trials is not None and options.verify_trials:
             # verified on the paths and with the step control it will run with
             build["verified"] = homotopy.verify(full.name if full_report is not None else system.name, spec,

@@ -180,21 +180,26 @@ def test_every_path_of_a_failing_instance_takes_the_same_detour(index):
     assert np.min(np.linalg.norm(roots - x, axis=1)) / np.linalg.norm(x) < 1e-9
 
 
-def test_pooled_routes_find_a_root_the_direct_segment_loses():
-    # seeded network 164 of bench_solvers (4r/5s, seed 0): the true root's path heads towards infinity
-    # on the direct segment (backtracked from the truth, |x| grows from 2 to 126 before s = 0.53, where
-    # it stalls) and five other paths are lost; a lost path's detour lands on a root another path
-    # holds, so every path goes through a midpoint and the distinct endpoints of both routes are pooled
+@pytest.mark.parametrize("index", [164, 679])
+def test_further_start_systems_find_a_root_the_direct_segment_loses(index):
+    # seeded networks of bench_solvers (4r/5s, seed 0). 164: the true root's path heads towards infinity on
+    # the direct segment (backtracked from the truth, |x| grows from 2 to 126 before s = 0.53, where it
+    # stalls); the segments from the spec's further start systems reach it. 679: its path stalls at s = 1 -
+    # 3e-5 on the direct segment (an ill-conditioned root) and is kept for Newton's method on the target.
     from analysis.positions import _to_gauge
     from solvers.subsystem import orbits_from_receivers
     from solvers.synthetic import random_network
 
     module = importlib.import_module("solvers.generated.tdoa_4r5s_homotopy344")
+    solver = module.solver()
+    assert len(solver.starts) == 3 and all(len(x) == module.PATHS for _, x in solver.starts)
     rng = np.random.default_rng(0)
-    net = [random_network(4, 5, rng) for _ in range(165)][164]
+    net = [random_network(4, 5, rng) for _ in range(index + 1)][index]
+    truth = orbits_from_receivers(_to_gauge(np.asarray(net.receivers, float), np.asarray(net.transmitters, float))[0])
+    direct = hm.solve_scaled(solver, net.measurements(), module.CONFIG, module.SCALE_POWERS, plain=True)
+    assert not np.nanmin(np.linalg.norm(direct - truth, axis=1)) / np.linalg.norm(truth) < 1e-6
     roots = module.solve(net.measurements())
     assert not hm._has_duplicates(roots)  # a few roots near infinity stay lost (NaN rows)
-    truth = orbits_from_receivers(_to_gauge(np.asarray(net.receivers, float), np.asarray(net.transmitters, float))[0])
     assert np.nanmin(np.linalg.norm(roots - truth, axis=1)) / np.linalg.norm(truth) < 1e-9
 
 
@@ -343,9 +348,12 @@ def test_committed_spec_carries_its_configurations_step_control(name):
 
     _, spec = _spec(name)
     label = spec["name"].split("_")[1]
-    for key, fields in STEP_CONTROL.get(label, {}).items():
+    control = dict(STEP_CONTROL.get(label, {}))
+    starts = control.pop("starts", 1)  # a count: the spec holds the further start systems
+    for key, fields in control.items():
         assert {k: spec[key][k] for k in fields} == fields
     solver = hm.HomotopySolver(spec, _module(name[:-5]).coefficients)
+    assert len(spec.get("starts", [])) == starts - 1 and len(solver.starts) == starts
     assert solver.retrack == dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
     assert solver.options == tracker.TrackerOptions(**spec.get("tracker", {}))
     assert set(spec.get("retrack", {})) <= {f.name for f in dataclasses.fields(tracker.TrackerOptions)}

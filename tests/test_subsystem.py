@@ -103,6 +103,22 @@ def test_4r6s_finds_a_root_the_first_subset_misses():
     assert len(kept) == 1 and np.linalg.norm(kept[0] - truth) / np.linalg.norm(truth) < 1e-10
 
 
+def test_4r6s_plain_pass_first(monkeypatch):
+    # a homotopy base runs its plain track alone on every subset before its full solve: on a network whose
+    # true root the plain track holds, the full solve (retracks, further start systems) never runs
+    from solvers.methods import homotopy as hm
+
+    def refused(self, q):
+        raise AssertionError("the full solve ran")
+
+    monkeypatch.setattr(hm.HomotopySolver, "roots", refused)
+    net = random_network(4, 6, np.random.default_rng(11))
+    truth = _true_orbits(net)
+    roots = SubsystemSolver("4r6s").solve(net.measurements())
+    kept = roots[np.all(np.isfinite(roots), axis=1)]
+    assert len(kept) == 1 and np.linalg.norm(kept[0] - truth) / np.linalg.norm(truth) < 1e-10
+
+
 def test_unknown_subsystem_is_refused():
     with pytest.raises(ValueError, match="valid: 4r6s"):
         SubsystemSolver("4r7s")

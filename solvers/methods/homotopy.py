@@ -19,7 +19,9 @@ an unexpanded straight-line program (TDOA formulations, with minors squared, and
 formulation: :func:`solvers.methods.slp.system_equations`; see :data:`VALIDATED_PROGRAMS`), by the
 batched tracker on its instruction tapes (:mod:`solvers.methods.tape_kernel`); paths that stall,
 and all paths of an instance where two endpoints coincide (path jumping), are retracked with tight
-step control. Because q0 is a generic complex point, the segment misses the discriminant with
+step control. A spec with further start systems (``starts``, :func:`extra_starts`; 4r/5s) is instead
+tracked from each of them and the distinct endpoints pooled, nothing retracked
+(:meth:`HomotopySolver._multistart`). Because q0 is a generic complex point, the segment misses the discriminant with
 probability one (the gamma trick; Sommese & Wampler 2005, ch. 7).
 
 References: Duff, Hill, Jensen, Lee, Leykin, Sommese, "Solving polynomial systems via homotopy
@@ -70,11 +72,25 @@ def _detour_direction(P: int, k: int = 0) -> np.ndarray:
 DETOURS = 6
 
 #: Midpoint routes whose endpoints are pooled for an instance still short of its distinct roots after
-#: the detours (no midpoint root set is complete, or none resolved it). Almost every 4r/5s instance is
-#: short (5-40 of its 344 paths stall near roots that go to infinity), so each route costs it about a
-#: third more time: on its 9 seeded networks (of the first 1000) whose true root was lost and 4 others,
-#: one route found all 9 true roots at 4.2-10.8 s per instance, two at 6.1-15.6 s.
+#: the detours (no midpoint root set is complete, or none resolved it). Written for 4r/5s (5-40 of its 344
+#: paths stall on every segment), which now tracks from three start systems instead
+#: (:meth:`HomotopySolver._multistart`); before that, on its 9 seeded networks (of the first 1000) whose
+#: true root was lost and 4 others, one route found all 9 true roots at 4.2-10.8 s per instance.
 POOLED_MIDPOINTS = 1
+
+
+#: Seed of the extra start systems' parameters (:func:`extra_starts`; start k >= 1 is
+#: ``_detour_direction(P, k - 1)`` scaled to the RMS of q0: the first one is detour point 0's direction).
+START_SEED = 12345
+
+
+#: A path of a multi-start solve that stalls at s >= 1 - NEAR_END keeps its last point for Newton's method on
+#: the target (4r/5s networks 679, 820, 899: the true root's path stalled at 1 - 3e-5, 1 - 1e-9, 1 - 5e-4).
+NEAR_END = 1e-3
+
+#: Newton steps on the target from such a last point (679 and 820 converge to the truth in 5: their roots are
+#: ill-conditioned, which is why the paths stalled).
+RESCUE_NEWTON = 8
 
 
 #: Newton steps on the target system's directly evaluated coefficients after tracking.
@@ -266,6 +282,12 @@ class HomotopySolver:
         self.n_paths = len(self.x0)
         if self.n_paths:
             self.x0 = self.newton(self.x0, np.broadcast_to(self.q0, (1, len(self.q0))), steps=2)
+        # further complete start systems (:func:`extra_starts`): every path is tracked from each, the
+        # distinct endpoints pooled, nothing retracked (:meth:`_multistart`)
+        self.starts = [(self.q0, self.x0)]
+        for item in spec.get("starts", []):
+            qk = _complex_array(item["parameters"])
+            self.starts.append((qk, self.newton(_complex_array(item["roots"]), qk[None], steps=2)))
 
     def segment(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
         return tracker.segment_coefficients(self.coefficients, q0, q1, self.degree)
@@ -290,11 +312,12 @@ class HomotopySolver:
         return np.abs(H).max(axis=1)
 
     def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
-              options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats."""
+              options: TrackerOptions | None = None, near_end: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats
+        (``near_end``: :func:`tape_kernel.track`'s, for the tape tracker)."""
         options = options or self.options
         if self.tapes is not None and options.predictor in tape_kernel.PREDICTORS:
-            return tape_kernel.track(self.tapes, q0, q1, x0, inst, options)
+            return tape_kernel.track(self.tapes, q0, q1, x0, inst, options, near_end=near_end)
         if options.predictor == "pade":  # Taylor coefficients of the path come from the tapes only
             options = dataclasses.replace(options, predictor="rk4")
         G = self.segment(q0, q1)
@@ -341,6 +364,8 @@ class HomotopySolver:
     def roots(self, q: np.ndarray) -> np.ndarray:
         """Candidate roots (B, K, N) for target parameters q (B, P); NaN rows for lost paths."""
         q = np.atleast_2d(np.asarray(q, dtype=complex))
+        if len(self.starts) > 1:
+            return self._multistart(q)
         B, K = len(q), self.n_paths
         x, complete = self._route(self.q0, self.x0, q)
         bad = [b for b in np.flatnonzero(~complete) if not _degenerate(_unresolved(x[b]))]
@@ -406,6 +431,46 @@ class HomotopySolver:
             left = left[[bool(_unresolved(x[b]).any()) for b in left]]
         return self._polish(x, q)
 
+    def _multistart(self, q: np.ndarray) -> np.ndarray:
+        """Candidate roots (B, K, N): the plain track from every start system, each instance's distinct
+        endpoints pooled (polished on the target, in order of their next Newton step, at most K kept).
+
+        For systems where a few paths of every segment stall in ill-conditioned stretches (4r/5s: about
+        20 of 344, some of them the true root's on 4.4 % of seeded networks), a root one start's segment
+        loses, another's usually reaches, at the cost of one plain track per start: cheaper than
+        retracking the stalled paths with tight steps (1,000-4,000 steps each; tables/NOTES.md)."""
+        B = len(q)
+        parts = []
+        for qa, xa in self.starts:
+            K = len(xa)
+            x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), np.repeat(np.arange(B), K), near_end=NEAR_END)
+            x = x.reshape(B, K, -1)
+            bi, ki = np.nonzero((stats[:, 0] == 1).reshape(B, K) & np.all(np.isfinite(x), axis=2))
+            if len(bi):  # stalled near the end: Newton's method on the target from the last point
+                x[bi, ki] = self.newton(x[bi, ki], q, steps=RESCUE_NEWTON, inst=bi)
+            parts.append(self._polish(x, q))
+        rows = np.concatenate(parts, axis=1)
+        out = np.full((B, self.n_paths, self.nvars), np.nan, dtype=complex)
+        for b in range(B):
+            ok = np.flatnonzero(np.all(np.isfinite(rows[b]), axis=1))
+            step = np.full(len(rows[b]), np.inf)
+            if len(ok):
+                step[ok] = (np.linalg.norm(self.newton(rows[b, ok], q[b][None]) - rows[b, ok], axis=1)
+                            / (1.0 + np.linalg.norm(rows[b, ok], axis=1)))
+            order = np.argsort(step, kind="stable")
+            kept = _distinct(rows[b, order[np.isfinite(step[order])]])[: self.n_paths]
+            out[b, : len(kept)] = kept
+        return out
+
+    def plain_roots(self, q: np.ndarray) -> np.ndarray:
+        """Candidate roots (B, K, N) from the plain track alone, polished on the targets: no retracks, detours
+        or pooled routes, so a stalled path's row stays NaN. The cheap first pass of a caller that can tell
+        a right answer when it sees one (4r/6s: its extra transmitter; :mod:`solvers.subsystem`)."""
+        q = np.atleast_2d(np.asarray(q, dtype=complex))
+        B, K = len(q), self.n_paths
+        x, _ = self.track(self.q0[None], q, np.tile(self.x0, (B, 1)), np.repeat(np.arange(B), K))
+        return self._polish(x.reshape(B, K, -1), q)
+
     def _pooled(self, a: np.ndarray, b: np.ndarray, q: np.ndarray) -> np.ndarray:
         """:func:`_pool` of two endpoint sets (K, n) of one instance with target parameters q (P,), both
         polished by Newton's method on the target first and ordered by their next Newton step."""
@@ -454,12 +519,20 @@ def _duplicated(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
 
 
 def _distinct(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """The finite rows of x (K, n), one per group of coinciding rows (same test as :func:`_duplicated`)."""
-    kept: list[np.ndarray] = []
-    for row in x[np.all(np.isfinite(x), axis=1)]:
-        if not kept or np.min(np.linalg.norm(np.array(kept) - row, axis=1)) >= tol * (1.0 + np.linalg.norm(row)):
-            kept.append(row)
-    return np.array(kept).reshape(-1, x.shape[1])
+    """The finite rows of x (K, n), one per group of coinciding rows (same test as :func:`_duplicated`):
+    in order, a row is kept unless it lies within tol (1 + |row|) of a row kept before it."""
+    f = x[np.all(np.isfinite(x), axis=1)]
+    if len(f) < 2:
+        return f.reshape(-1, x.shape[1])
+    size = np.linalg.norm(f, axis=1)
+    # squared distances from the Gram matrix (rounding ~1e-16 |x|^2, far below tol^2 (1 + |x|)^2)
+    d2 = size[:, None] ** 2 + size[None, :] ** 2 - 2.0 * (f @ f.conj().T).real
+    close = np.tril(d2 < (tol * (1.0 + size))[:, None] ** 2, k=-1)  # row i within reach of an earlier row j
+    kept = ~close.any(axis=1)  # no earlier row near: kept whatever the others
+    dropped = (close & kept[None, :]).any(axis=1)  # near a row that is kept
+    for i in np.flatnonzero(~kept & ~dropped):
+        kept[i] = not np.any(close[i, :i] & kept[:i])
+    return f[kept]
 
 
 def _pool(a: np.ndarray, b: np.ndarray, step: np.ndarray | None = None) -> np.ndarray:
@@ -473,6 +546,27 @@ def _pool(a: np.ndarray, b: np.ndarray, step: np.ndarray | None = None) -> np.nd
     rows = _distinct(rows)[: len(a)]
     out = np.full_like(a, np.nan)
     out[: len(rows)] = rows
+    return out
+
+
+def extra_starts(spec: dict, coefficients: Callable, count: int) -> list[dict]:
+    """``count`` further start systems for :meth:`HomotopySolver._multistart`, as spec entries: seeded complex
+    parameters (:data:`START_SEED`) and all their K roots, found by the spec's solver (retracks, detours,
+    pooled routes) and checked: K distinct finite roots, each converged under Newton's method."""
+    solver = HomotopySolver({**spec, "starts": []}, coefficients)
+    q0, K = solver.q0, solver.n_paths
+    out = []
+    for k in range(count):
+        qk = np.sqrt(np.mean(np.abs(q0) ** 2)) * _detour_direction(len(q0), k)
+        qk = np.array([complex(*v) for v in _pairs(qk)])  # as stored
+        x = solver.roots(qk[None])[0]
+        x = solver.newton(_distinct(x), qk[None], steps=3)
+        step = np.linalg.norm(solver.newton(x, qk[None]) - x, axis=1) / (1.0 + np.linalg.norm(x, axis=1)) if len(x) else np.inf
+        if len(x) != K or np.max(step) > START_TOL or _has_duplicates(x):
+            raise HomotopyError(f"{spec['system']}: extra start {k + 1}: {len(x)} distinct roots of {K} "
+                                f"(largest Newton step {np.max(step):.1e})")
+        order = np.lexsort((np.round(x.imag[:, 0], 8), np.round(x.real[:, 0], 8)))
+        out.append({"parameters": _pairs(qk), "roots": _pairs(x[order])})
     return out
 
 
@@ -729,18 +823,21 @@ def load_spec(text: str) -> dict:
     return spec
 
 
-def solve_scaled(solver: HomotopySolver, F, shape: tuple[int, ...], powers: tuple[float, ...] | None) -> np.ndarray:
+def solve_scaled(solver: HomotopySolver, F, shape: tuple[int, ...], powers: tuple[float, ...] | None,
+                 plain: bool = False) -> np.ndarray:
     """Roots for data F (..., *shape): parameters normalised by their RMS when ``powers`` (the scaling
-    weights of the unknowns) are known, roots mapped back to the data's scale."""
+    weights of the unknowns) are known, roots mapped back to the data's scale. ``plain``: the plain track
+    alone (:meth:`HomotopySolver.plain_roots`)."""
     F = np.asarray(F)
     if F.shape[F.ndim - len(shape):] != tuple(shape):
         raise ValueError(f"data of shape {F.shape} given; the solver needs (..., {', '.join(map(str, shape))})")
     batch = F.shape[: F.ndim - len(shape)]
     Q = F.reshape(-1, int(np.prod(shape))).astype(complex)
+    roots = solver.plain_roots if plain else solver.roots
     if powers is not None:
         s = np.sqrt(np.mean(np.abs(Q) ** 2, axis=1))
         s = np.where(s > 0, s, 1.0)
-        x = solver.roots(Q / s[:, None]) * s[:, None, None] ** np.asarray(powers)[None, None, :]
+        x = roots(Q / s[:, None]) * s[:, None, None] ** np.asarray(powers)[None, None, :]
     else:
-        x = solver.roots(Q)
+        x = roots(Q)
     return x.reshape(batch + x.shape[1:])
