@@ -99,6 +99,19 @@ def extra_transmitter_residuals(receivers: np.ndarray, f: np.ndarray) -> np.ndar
     return out
 
 
+def _real_network(x: np.ndarray) -> np.ndarray:
+    """Mask of the 4r/5s roots (..., 5) that are real networks: real (to :data:`REAL_TOL`) with X = x2^2 > 0
+    and Y = y3^2 > 0. The filter passes complex candidates too; a pass is final only with a real one (on
+    exact real data the true network is one): 4r/6s networks 113 and 199 have a real root near infinity
+    with Y < 0 (|X| ~ 4e5 in scaled units) whose extra-transmitter residual is 2e-7 - 6e-7 relative to its
+    own huge terms."""
+    x = np.asarray(x)
+    with np.errstate(invalid="ignore"):
+        finite = np.all(np.isfinite(x), axis=-1)
+        real = np.max(np.abs(x.imag), axis=-1) <= REAL_TOL * np.max(np.abs(x), axis=-1)
+        return finite & real & (x[..., 0].real > 0) & (x[..., 1].real > 0)
+
+
 class SubsystemSolver:
     """The solver of an over-determined configuration (:data:`SUBSYSTEMS`): its base solver on the
     first transmitters (then on the other subsets while no candidate passes), candidates kept only when
@@ -131,7 +144,9 @@ class SubsystemSolver:
 
         The first subset is transmitters 1..n_base; an instance where no candidate passes (the base
         solver lost the true root's path, or ended it too far off for the filter) is solved again on
-        the next subset (:meth:`subsets`), until one passes or all were tried. A homotopy base goes
+        the next subset (:meth:`subsets`), until one passes or all were tried (a pass is final when a
+        candidate that passes is a real network; complex ones that pass are kept unless a later pass finds
+        candidates of its own). A homotopy base goes
         through the subsets twice: its plain track alone first (:meth:`HomotopySolver.plain_roots`,
         a third of its full solve for 4r/5s), then its full solve. The roots describe the
         receivers only, so every subset's candidates are in the same unknowns. The filter is for exact
@@ -147,10 +162,12 @@ class SubsystemSolver:
                   for subset in self.subsets()]
         out = self._filtered(flat, *passes[0])
         for subset, plain in passes[1:]:
-            todo = np.flatnonzero(~np.any(np.all(np.isfinite(out), axis=-1), axis=-1))
+            todo = np.flatnonzero(~np.any(_real_network(out), axis=-1))
             if not len(todo):
                 break
-            out[todo] = self._filtered(flat[todo], subset, plain)
+            new = self._filtered(flat[todo], subset, plain)
+            found = np.any(np.all(np.isfinite(new), axis=-1), axis=-1)
+            out[todo[found]] = new[found]  # where this pass keeps nothing, the earlier candidates stay
         return out.reshape(F.shape[:-2] + out.shape[-2:])
 
     def _plain_pass(self) -> bool:
