@@ -234,6 +234,9 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
         tracked = (f"\nThe spec stores all {len(spec['start_roots'])} roots of the squared system; only the {paths} that also\n"
                    f"satisfy the full system ({full['equations']} equations, {full['degree']} roots certified over GF(p)) "
                    f"are tracked.")
+    if spec.get("starts"):
+        tracked += (f"\nThey are tracked from {len(spec['starts']) + 1} start instances (the spec's further ones seeded, their roots\n"
+                    f"found at generation), each instance's distinct endpoints pooled; nothing is retracked.")
     shape = ", ".join(map(str, pshape))
     return ModuleParts(
         summary=f"parameter homotopy with {paths} paths in {nvars} unknowns.",

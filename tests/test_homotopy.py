@@ -207,14 +207,14 @@ def test_pool_keeps_one_copy_of_each_root_and_pads_with_nan():
     nan = np.nan
     a = np.array([[1.0, 0.0], [1.0, 0.0], [nan, nan], [3.0, 0.0]], complex)   # a jumped pair, a lost path
     b = np.array([[2.0, 0.0], [3.0, 1e-9], [1.0, 0.0], [nan, nan]], complex)  # the missing root 2
-    pooled = hm._pool(a, b)
+    pooled = hm._pool([a, b])
     assert pooled[:3].real.tolist() == [[1, 0], [3, 0], [2, 0]] and np.all(np.isnan(pooled[3]))
     assert hm._distinct(np.full((2, 2), nan)).shape == (0, 2)
     # ordered by the next Newton step: a surplus drops the unconverged copy (4r/5s network 85's case)
     a = np.array([[1.0, 0.0], [5.0, 0.0], [nan, nan]], complex)
     b = np.array([[2.0, 0.0], [1.0 + 1e-3, 0.0], [nan, nan]], complex)  # 1.001: an unconverged copy of 1
     step = np.array([1e-16, 1e-15, np.inf, 1e-16, 1e-3, np.inf])
-    assert hm._pool(a, b, step)[:3].real.tolist() == [[1, 0], [2, 0], [5, 0]]
+    assert hm._pool([a, b], step)[:3].real.tolist() == [[1, 0], [2, 0], [5, 0]]
 
 
 @pytest.mark.parametrize("name", [n for n in HOMOTOPY_SPECS if _spec(n)[1].get("full_system")])

@@ -5,6 +5,8 @@
 
 The 344 roots of a generic complex start instance (certified count over GF(p), found by
 monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+They are tracked from 3 start instances (the spec's further ones seeded, their roots
+found at generation), each instance's distinct endpoints pooled; nothing is retracked.
 
 solve(F) -> (344, 5) complex candidate roots in the unknown order X, Y, xi3, xi4, eta4;
 solve_batch(F) for F of shape (..., 4, 5) -> (..., 344, 5). Candidates may be complex or

@@ -79,11 +79,6 @@ DETOURS = 6
 POOLED_MIDPOINTS = 1
 
 
-#: Seed of the extra start systems' parameters (:func:`extra_starts`; start k >= 1 is
-#: ``_detour_direction(P, k - 1)`` scaled to the RMS of q0: the first one is detour point 0's direction).
-START_SEED = 12345
-
-
 #: A path of a multi-start solve that stalls at s >= 1 - NEAR_END keeps its last point for Newton's method on
 #: the target (4r/5s networks 679, 820, 899: the true root's path stalled at 1 - 3e-5, 1 - 1e-9, 1 - 5e-4).
 NEAR_END = 1e-3
@@ -440,7 +435,7 @@ class HomotopySolver:
         loses, another's usually reaches, at the cost of one plain track per start: cheaper than
         retracking the stalled paths with tight steps (1,000-4,000 steps each; tables/NOTES.md)."""
         B = len(q)
-        parts = []
+        parts = []  # (B, K, N) per start
         for qa, xa in self.starts:
             K = len(xa)
             x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), np.repeat(np.arange(B), K), near_end=NEAR_END)
@@ -449,18 +444,8 @@ class HomotopySolver:
             if len(bi):  # stalled near the end: Newton's method on the target from the last point
                 x[bi, ki] = self.newton(x[bi, ki], q, steps=RESCUE_NEWTON, inst=bi)
             parts.append(self._polish(x, q))
-        rows = np.concatenate(parts, axis=1)
-        out = np.full((B, self.n_paths, self.nvars), np.nan, dtype=complex)
-        for b in range(B):
-            ok = np.flatnonzero(np.all(np.isfinite(rows[b]), axis=1))
-            step = np.full(len(rows[b]), np.inf)
-            if len(ok):
-                step[ok] = (np.linalg.norm(self.newton(rows[b, ok], q[b][None]) - rows[b, ok], axis=1)
-                            / (1.0 + np.linalg.norm(rows[b, ok], axis=1)))
-            order = np.argsort(step, kind="stable")
-            kept = _distinct(rows[b, order[np.isfinite(step[order])]])[: self.n_paths]
-            out[b, : len(kept)] = kept
-        return out
+        return np.stack([_pool([x[b] for x in parts], self._next_step(np.concatenate([x[b] for x in parts]), q[b]))
+                         for b in range(B)])
 
     def plain_roots(self, q: np.ndarray) -> np.ndarray:
         """Candidate roots (B, K, N) from the plain track alone, polished on the targets: no retracks, detours
@@ -475,11 +460,16 @@ class HomotopySolver:
         """:func:`_pool` of two endpoint sets (K, n) of one instance with target parameters q (P,), both
         polished by Newton's method on the target first and ordered by their next Newton step."""
         rows = self._polish(np.vstack([a, b])[None], q[None])[0]
+        return _pool([rows[: len(a)], rows[len(a):]], self._next_step(rows, q))
+
+    def _next_step(self, rows: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Size of each row's (K, n) next Newton step on the target q (P,), relative to 1 + |row|; inf where
+        the row is not finite."""
         step = np.full(len(rows), np.inf)
         ok = np.all(np.isfinite(rows), axis=1)
         if ok.any():
             step[ok] = np.linalg.norm(self.newton(rows[ok], q[None]) - rows[ok], axis=1) / (1.0 + np.linalg.norm(rows[ok], axis=1))
-        return _pool(rows[: len(a)], rows[len(a):], step)
+        return step
 
     def _polish(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Newton steps on the targets' own coefficients (x (B, K, N), q (B, P)): the tracker's are
@@ -535,23 +525,23 @@ def _distinct(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
     return f[kept]
 
 
-def _pool(a: np.ndarray, b: np.ndarray, step: np.ndarray | None = None) -> np.ndarray:
-    """The distinct roots of two endpoint sets (K, n) of one instance as K rows (NaN-padded), a's first; with
-    ``step`` (2K: each row's next Newton step on the target, a's rows then b's) in order of it instead,
-    so that of two copies of one root the converged one is kept and a surplus over K (an unconverged
-    copy counted as distinct: 4r/5s network 85) drops the least converged rows."""
-    rows = np.vstack([a, b])
+def _pool(sets: list[np.ndarray], step: np.ndarray | None = None) -> np.ndarray:
+    """The distinct roots of endpoint sets (K, n) of one instance as K rows (NaN-padded), in the sets' order;
+    with ``step`` (each row's next Newton step on the target, the sets' rows in turn) in order of it
+    instead, so that of two copies of one root the converged one is kept and a surplus over K (an
+    unconverged copy counted as distinct: 4r/5s network 85) drops the least converged rows."""
+    rows = np.vstack(sets)
     if step is not None:
-        rows = rows[np.argsort(np.where(np.isfinite(step), step, np.inf), kind="stable")]
-    rows = _distinct(rows)[: len(a)]
-    out = np.full_like(a, np.nan)
+        rows = rows[np.argsort(step, kind="stable")]
+    rows = _distinct(rows)[: len(sets[0])]
+    out = np.full_like(sets[0], np.nan)
     out[: len(rows)] = rows
     return out
 
 
 def extra_starts(spec: dict, coefficients: Callable, count: int) -> list[dict]:
     """``count`` further start systems for :meth:`HomotopySolver._multistart`, as spec entries: seeded complex
-    parameters (:data:`START_SEED`) and all their K roots, found by the spec's solver (retracks, detours,
+    parameters (the k-th detour direction, :func:`_detour_direction`, scaled to the RMS of q0) and all their K roots, found by the spec's solver (retracks, detours,
     pooled routes) and checked: K distinct finite roots, each converged under Newton's method."""
     solver = HomotopySolver({**spec, "starts": []}, coefficients)
     q0, K = solver.q0, solver.n_paths
