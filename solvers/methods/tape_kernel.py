@@ -277,6 +277,11 @@ TAYLOR_DELTA = 1e-4
 #: Index of the Pade predictor in :data:`tracker.PREDICTORS`.
 PADE = 2
 
+#: Index of the options array's flag for Newton steps only (:func:`newton` runs through the tracker's kernel,
+#: the final Newton steps alone: one compiled entry point, where a kernel of its own took 12.8 of the 33 s
+#: of a first call in a fresh environment). :meth:`TrackerOptions.as_array` has no such entry.
+NEWTON_ONLY = 12
+
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
@@ -430,17 +435,22 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
     for m in range(M):
         _load_segment(Rr, Ri, N, q0, dq, inst[m], m)
     P = M
-    # tangent at the start
-    _eval(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
-    _lu(Or, Oi, N, N, piv, ok, P)
-    _tangent(Or, Oi, N, piv, k1r, k1i, P)
-    for p in range(P):
-        if not ok[p]:
-            status[p] = 1
-        fresh[p] = ok[p]
-    if pade:
-        _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-                st, e, work, P)
+    newton_only = opts.shape[0] > NEWTON_ONLY and opts[NEWTON_ONLY] > 0.0
+    if newton_only:  # every path "at s = 1": only the final Newton steps run (:func:`newton`)
+        for p in range(P):
+            status[p] = 0
+            s[p] = 1.0
+    else:  # tangent at the start
+        _eval(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, P)
+        _lu(Or, Oi, N, N, piv, ok, P)
+        _tangent(Or, Oi, N, piv, k1r, k1i, P)
+        for p in range(P):
+            if not ok[p]:
+                status[p] = 1
+            fresh[p] = ok[p]
+        if pade:
+            _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+                    st, e, work, P)
     while True:
         # -- retire the paths that ended (write results, compact the live columns) -------------
         w = 0
@@ -603,7 +613,8 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
             s[P] = 1.0
             done[P] = False
             P += 1
-    _newton_steps(ncode, nimm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, final_newton, 1e-15, P)
+    _newton_steps(ncode, nimm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, final_newton,
+                  0.0 if newton_only else 1e-15, P)
     for p in range(P):
         for v in range(N):
             x_out[ids[p], v] = xr[v, p] + 1j * xi[v, p]
@@ -628,31 +639,6 @@ def _newton_steps(code, imm, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, do
                 b += xr[v, p] * xr[v, p] + xi[v, p] * xi[v, p]
             if np.sqrt(a) < stop * (1.0 + np.sqrt(b)):
                 done[p] = True
-
-
-@njit(cache=True, nogil=True)
-def _newton_batch(code, imm, n_reg, n_out, x, q, inst, steps, x_out):
-    """``steps`` Newton steps on the systems at parameters q (B, Q) from x (M, N), row m on inst[m]."""
-    M, N = x.shape
-    cap = max(M, 1)
-    Rr = np.zeros((n_reg, cap))
-    Ri = np.zeros((n_reg, cap))
-    Or = np.zeros((n_out, cap))
-    Oi = np.zeros((n_out, cap))
-    dq = np.zeros_like(q)
-    xr = np.empty((N, cap))
-    xi = np.empty((N, cap))
-    for m in range(M):
-        _load_segment(Rr, Ri, N, q, dq, inst[m], m)
-        for v in range(N):
-            xr[v, m] = x[m, v].real
-            xi[v, m] = x[m, v].imag
-    _newton_steps(code, imm, Rr, Ri, Or, Oi, N, xr, xi, np.zeros(cap), np.zeros((N, cap), dtype=np.int64),
-                  np.zeros(cap, dtype=np.bool_), np.empty((N, cap)), np.empty((N, cap)), np.zeros(cap, dtype=np.bool_),
-                  steps, 0.0, M)
-    for m in range(M):
-        for v in range(N):
-            x_out[m, v] = xr[v, m] + 1j * xi[v, m]
 
 
 def workspace(tape: "Tape", capacity: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -789,7 +775,11 @@ def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarra
     _check(tapes, N, q.shape[1])
     inst = np.zeros(M, dtype=np.int64) if inst is None else np.ascontiguousarray(inst, dtype=np.int64)
     out = np.empty_like(x)
+    stats = np.zeros((M, 4))
+    opts = np.zeros(NEWTON_ONLY + 1)
+    opts[7], opts[NEWTON_ONLY] = int(steps), 1.0  # final_newton = steps; Newton steps only
     for a, b in _chunks(M):
-        _newton_batch(tapes.newton.code, tapes.newton.imm, tapes.n_registers, tapes.newton.n_outputs, x[a:b], q,
-                      inst[a:b], int(steps), out[a:b])
+        _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
+                     tapes.residual.imm, False, tapes.n_registers, tapes.full.n_outputs, x[a:b], q, np.zeros_like(q),
+                     inst[a:b], opts, out[a:b], stats[a:b])
     return out
