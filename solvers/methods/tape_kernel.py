@@ -729,6 +729,7 @@ def _chunks(M: int) -> list[tuple[int, int]]:
     size = -(-M // n)
     return [(a, min(a + size, M)) for a in range(0, M, size)]
 
+
 #: Predictors of :func:`track` (:data:`tracker.PREDICTORS` it implements).
 PREDICTORS = ("rk4", "pade")
 
