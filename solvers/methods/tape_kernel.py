@@ -453,7 +453,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
                     st, e, work, P)
     while True:
         # -- retire the paths that ended (write results, compact the live columns) -------------
-        w = 0
+        w = np.int64(0)  # not a literal 0: see the final Newton steps below
         for p in range(P):
             if status[p] == -1 and steps[p] + rejected[p] >= max_steps:
                 status[p] = 1
@@ -602,7 +602,9 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, chord, n_reg, n_out, x0, q
             _taylor(rcode, rimm, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
                     st, e, work, P)
     # -- Newton steps on the target system for the paths that reached s = 1 ---------------------------
-    P = 0
+    # (not "P = 0": numba's type inference would first type the calls below with the literal 0 and compile
+    # everything they call a second time for it: several seconds of a first call in a fresh environment)
+    P = np.int64(0)
     for m in range(M):
         if stats[m, 0] == 0:
             ids[P] = m
