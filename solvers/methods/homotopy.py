@@ -435,15 +435,7 @@ class HomotopySolver:
         loses, another's usually reaches, at the cost of one plain track per start: cheaper than
         retracking the stalled paths with tight steps (1,000-4,000 steps each; tables/NOTES.md)."""
         B = len(q)
-        parts = []  # (B, K, N) per start
-        for qa, xa in self.starts:
-            K = len(xa)
-            x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), np.repeat(np.arange(B), K), near_end=NEAR_END)
-            x = x.reshape(B, K, -1)
-            bi, ki = np.nonzero((stats[:, 0] == 1).reshape(B, K) & np.all(np.isfinite(x), axis=2))
-            if len(bi):  # stalled near the end: Newton's method on the target from the last point
-                x[bi, ki] = self.newton(x[bi, ki], q, steps=RESCUE_NEWTON, inst=bi)
-            parts.append(self._polish(x, q))
+        parts = [self._plain(qa, xa, q, near_end=NEAR_END) for qa, xa in self.starts]  # (B, K, N) each
         return np.stack([_pool([x[b] for x in parts], self._next_step(np.concatenate([x[b] for x in parts]), q[b]))
                          for b in range(B)])
 
@@ -451,10 +443,19 @@ class HomotopySolver:
         """Candidate roots (B, K, N) from the plain track alone, polished on the targets: no retracks, detours
         or pooled routes, so a stalled path's row stays NaN. The cheap first pass of a caller that can tell
         a right answer when it sees one (4r/6s: its extra transmitter; :mod:`solvers.subsystem`)."""
-        q = np.atleast_2d(np.asarray(q, dtype=complex))
-        B, K = len(q), self.n_paths
-        x, _ = self.track(self.q0[None], q, np.tile(self.x0, (B, 1)), np.repeat(np.arange(B), K))
-        return self._polish(x.reshape(B, K, -1), q)
+        return self._plain(self.q0, self.x0, np.atleast_2d(np.asarray(q, dtype=complex)))
+
+    def _plain(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, near_end: float = 0.0) -> np.ndarray:
+        """The roots xa (K, N) of qa tracked to every target q (B, P) with the plain options, polished on the
+        targets: (B, K, N), NaN rows for lost paths. ``near_end``: a path that stalls at s >= 1 - near_end
+        gets :data:`RESCUE_NEWTON` Newton steps on its target from its last point."""
+        B, K = len(q), len(xa)
+        x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), np.repeat(np.arange(B), K), near_end=near_end)
+        x = x.reshape(B, K, -1)
+        bi, ki = np.nonzero((stats[:, 0] != 0).reshape(B, K) & np.all(np.isfinite(x), axis=2))
+        if len(bi):  # stalled near the end (kept by near_end only)
+            x[bi, ki] = self.newton(x[bi, ki], q, steps=RESCUE_NEWTON, inst=bi)
+        return self._polish(x, q)
 
     def _pooled(self, a: np.ndarray, b: np.ndarray, q: np.ndarray) -> np.ndarray:
         """:func:`_pool` of two endpoint sets (K, n) of one instance with target parameters q (P,), both
