@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from . import tape_kernel, tracker
+from . import tape_kernel, tape_native, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -290,7 +290,7 @@ class HomotopySolver:
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         """Newton steps on the system at parameters q (B, P); x (P', N), path p on instance inst[p]."""
         if self.tapes is not None:
-            return tape_kernel.newton(self.tapes, q, x, inst, steps)
+            return tape_kernel.newton(self.tapes, q, x, inst, steps, native=tape_native.addresses(self.tapes))
         G = self.segment(q, q)
         for _ in range(steps):
             H, J, _ = tracker.evaluate(self.structure, G, x, np.zeros(len(x)), inst)
@@ -312,7 +312,8 @@ class HomotopySolver:
         (``near_end``: :func:`tape_kernel.track`'s, for the tape tracker)."""
         options = options or self.options
         if self.tapes is not None and options.predictor in tape_kernel.PREDICTORS:
-            return tape_kernel.track(self.tapes, q0, q1, x0, inst, options, near_end=near_end)
+            return tape_kernel.track(self.tapes, q0, q1, x0, inst, options, near_end=near_end,
+                                     native=tape_native.addresses(self.tapes))
         if options.predictor == "pade":  # Taylor coefficients of the path come from the tapes only
             options = dataclasses.replace(options, predictor="rk4")
         G = self.segment(q0, q1)
