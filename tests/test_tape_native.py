@@ -26,7 +26,7 @@ def test_compiled_tapes_equal_the_interpreter_bit_for_bit():
 
     module, solver = _solver()
     native = tape_native.addresses(solver.tapes, wait=True)
-    assert native.shape == (3,) and np.all(native != 0), tape_native.describe(solver.tapes)
+    assert native.shape == (5,) and np.all(native != 0), tape_native.describe(solver.tapes)
     rng = np.random.default_rng(5)
     for kind, fn in zip(tape_native.KINDS, native):
         tape = getattr(solver.tapes, kind)
@@ -60,8 +60,8 @@ def test_native_switch_and_bad_addresses(monkeypatch):
     _, solver = _solver()
     monkeypatch.setenv(tape_native.DISABLE_ENV, "off")
     assert not tape_native.addresses(solver.tapes).any()
-    with pytest.raises(ValueError, match="three entry points"):
-        tape_kernel.track(solver.tapes, solver.q0, solver.q0, solver.x0[:2], None, solver.options, native=np.zeros(2))
+    with pytest.raises(ValueError, match="five entry points"):
+        tape_kernel.track(solver.tapes, solver.q0, solver.q0, solver.x0[:2], None, solver.options, native=np.zeros(3))
 
 
 def test_lu_one_by_one_equals_batched():

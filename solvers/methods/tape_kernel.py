@@ -320,6 +320,59 @@ def _call_native(typingctx, fn, P, C, R, I, OR, OI):
     return sig, codegen
 
 
+@intrinsic
+def _call_lu(typingctx, fn, P, C, Ar, Ai, base, piv, ok):
+    """Call a compiled LU (``void f(long P, long C, double *Ar, *Ai, long base, long *piv, unsigned char *ok)``)
+    at address fn; the arrays as their data addresses (int64)."""
+    sig = types.void(*([types.int64] * 8))
+
+    def codegen(context, builder, signature, args):
+        i64, dptr, i8ptr = ir.IntType(64), ir.DoubleType().as_pointer(), ir.IntType(8).as_pointer()
+        fnty = ir.FunctionType(ir.VoidType(), [i64, i64, dptr, dptr, i64, i64.as_pointer(), i8ptr])
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        builder.call(f, [args[1], args[2], builder.inttoptr(args[3], dptr), builder.inttoptr(args[4], dptr), args[5],
+                         builder.inttoptr(args[6], i64.as_pointer()), builder.inttoptr(args[7], i8ptr)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def _call_solve(typingctx, fn, P, C, Ar, Ai, base, piv, br, bi):
+    """Call a compiled solve (``void f(long P, long C, double *Ar, *Ai, long base, long *piv, double *br, *bi)``)."""
+    sig = types.void(*([types.int64] * 9))
+
+    def codegen(context, builder, signature, args):
+        i64, dptr = ir.IntType(64), ir.DoubleType().as_pointer()
+        fnty = ir.FunctionType(ir.VoidType(), [i64, i64, dptr, dptr, i64, i64.as_pointer(), dptr, dptr])
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        builder.call(f, [args[1], args[2], builder.inttoptr(args[3], dptr), builder.inttoptr(args[4], dptr), args[5],
+                         builder.inttoptr(args[6], i64.as_pointer()), builder.inttoptr(args[7], dptr),
+                         builder.inttoptr(args[8], dptr)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _factor(lin, Ar, Ai, base, N, piv, ok, P):
+    """:func:`_lu`, by the solver's compiled LU at address lin[0] where there is one (the same bits)."""
+    if lin[0] != 0:
+        _call_lu(lin[0], P, Ar.shape[1], Ar.ctypes.data, Ai.ctypes.data, base, piv.ctypes.data, ok.ctypes.data)
+    else:
+        _lu(Ar, Ai, base, N, piv, ok, P)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _back(lin, Ar, Ai, base, N, piv, br, bi, P):
+    """:func:`_solve`, by the solver's compiled solve at address lin[1] where there is one (the same bits)."""
+    if lin[1] != 0:
+        _call_solve(lin[1], P, Ar.shape[1], Ar.ctypes.data, Ai.ctypes.data, base, piv.ctypes.data, br.ctypes.data,
+                    bi.ctypes.data)
+    else:
+        _solve(Ar, Ai, base, N, piv, br, bi, P)
+
+
 @njit(cache=True, nogil=True, boundscheck=False)
 def _eval(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, P):
     """Outputs of a homotopy tape at the points x (N, capacity) and path parameters s (capacity,): by its
@@ -338,32 +391,32 @@ def _eval(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, P):
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _tangent(Or, Oi, N, piv, kr, ki, P):
+def _tangent(lin, Or, Oi, N, piv, kr, ki, P):
     """k = -J^-1 dH/ds with the factored Jacobian in the outputs."""
     hs = N + N * N
     for v in range(N):
         for p in range(P):
             kr[v, p] = -Or[hs + v, p]
             ki[v, p] = -Oi[hs + v, p]
-    _solve(Or, Oi, N, N, piv, kr, ki, P)
+    _back(lin, Or, Oi, N, N, piv, kr, ki, P)
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _newton_step(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P):
+def _newton_step(code, imm, fn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P):
     """Newton correction dx = J^-1 H at (x, s) (not applied); the factored Jacobian stays in the outputs."""
     _eval(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, P)
-    _lu(Or, Oi, N, N, piv, ok, P)
-    _correction(Or, Oi, N, piv, dxr, dxi, P)
+    _factor(lin, Or, Oi, N, N, piv, ok, P)
+    _correction(lin, Or, Oi, N, piv, dxr, dxi, P)
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _correction(Or, Oi, N, piv, dxr, dxi, P):
+def _correction(lin, Or, Oi, N, piv, dxr, dxi, P):
     """dx = J^-1 H with H and the factored J in the outputs."""
     for v in range(N):
         for p in range(P):
             dxr[v, p] = Or[v, p]
             dxi[v, p] = Oi[v, p]
-    _solve(Or, Oi, N, N, piv, dxr, dxi, P)
+    _back(lin, Or, Oi, N, N, piv, dxr, dxi, P)
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -391,7 +444,7 @@ NEWTON_ONLY = 12
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _taylor(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
             st, dl, work, P):
     """Taylor coefficients x2, x3 of the path x(s + t) = x + t x1 + t^2 x2 + t^3 x3 + ... (x1 = k1) at the
     columns with ``fresh``, with the factored Jacobian in the outputs: x_k = -J^-1 c_k, c_k the t^k
@@ -434,13 +487,13 @@ def _taylor(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fr
                     Ti[v, p] = c * Ci[v, p]
                     Cr[v, p] = 0.0
                     Ci[v, p] = 0.0
-            _solve(Or, Oi, N, N, piv, Tr, Ti, P)
+            _back(lin, Or, Oi, N, N, piv, Tr, Ti, P)
     for v in range(N):  # x3 = -J^-1 c3, c3 = (H(2d) - 2 H(d) + 2 H(-d) - H(-2d)) / (12 d^3)
         for p in range(P):
             c = -1.0 / (12.0 * dl[p] * dl[p] * dl[p])
             Cr[v, p] *= c
             Ci[v, p] *= c
-    _solve(Or, Oi, N, N, piv, Cr, Ci, P)
+    _back(lin, Or, Oi, N, N, piv, Cr, Ci, P)
     for p in range(P):
         if fresh[p]:
             for v in range(N):
@@ -490,6 +543,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
     Q = q0.shape[1]
     cap = (max(M, 1) + WIDTH - 1) // WIDTH * WIDTH  # room for the compiled tapes' last pass
     fn, nfn, rfn = fns[0], fns[1], fns[2]
+    lin = fns[3:5]  # compiled LU and solve (zeros: the batched kernels)
     Rr = np.zeros((n_reg, cap))
     Ri = np.zeros((n_reg, cap))
     Or = np.zeros((n_out, cap))
@@ -550,14 +604,14 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
             s[p] = 1.0
     else:  # tangent at the start
         _eval(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, P)
-        _lu(Or, Oi, N, N, piv, ok, P)
-        _tangent(Or, Oi, N, piv, k1r, k1i, P)
+        _factor(lin, Or, Oi, N, N, piv, ok, P)
+        _tangent(lin, Or, Oi, N, piv, k1r, k1i, P)
         for p in range(P):
             if not ok[p]:
                 status[p] = 1
             fresh[p] = ok[p]
         if pade:
-            _taylor(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+            _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
                     st, e, work, P)
     while True:
         # -- retire the paths that ended (write results, compact the live columns) -------------
@@ -616,13 +670,13 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                     xtr[v, p] = xr[v, p] + c * kr[v, p]
                     xti[v, p] = xi[v, p] + c * ki[v, p]
             _eval(code, imm, fn, Rr, Ri, Or, Oi, N, xtr, xti, st, P)
-            _lu(Or, Oi, N, N, piv, ok, P)
+            _factor(lin, Or, Oi, N, N, piv, ok, P)
             if stage == 0:
-                _tangent(Or, Oi, N, piv, k2r, k2i, P)
+                _tangent(lin, Or, Oi, N, piv, k2r, k2i, P)
             elif stage == 1:
-                _tangent(Or, Oi, N, piv, k3r, k3i, P)
+                _tangent(lin, Or, Oi, N, piv, k3r, k3i, P)
             else:
-                _tangent(Or, Oi, N, piv, k4r, k4i, P)
+                _tangent(lin, Or, Oi, N, piv, k4r, k4i, P)
             for p in range(P):
                 if not ok[p]:
                     good[p] = False
@@ -651,12 +705,12 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
         for it in range(newton):
             if chord and it > 0:
                 _eval(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xpr, xpi, s1, P)
-                _correction(Or, Oi, N, piv, dxr, dxi, P)
+                _correction(lin, Or, Oi, N, piv, dxr, dxi, P)
             elif it == newton - 1 or chord:
-                _newton_step(code, imm, fn, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
-                _tangent(Or, Oi, N, piv, ktr, kti, P)
+                _newton_step(code, imm, fn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
+                _tangent(lin, Or, Oi, N, piv, ktr, kti, P)
             else:
-                _newton_step(ncode, nimm, nfn, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
+                _newton_step(ncode, nimm, nfn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
             for p in range(P):
                 if done[p]:
                     continue
@@ -707,7 +761,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 if h[p] < hmin:
                     status[p] = 2 if scale[p] > big else 1
         if pade:  # Taylor coefficients at the new points (the last factorisation is at each one's x')
-            _taylor(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
+            _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
                     st, e, work, P)
     # -- Newton steps on the target system for the paths that reached s = 1 ---------------------------
     # (not "P = 0": numba's type inference would first type the calls below with the literal 0 and compile
@@ -723,7 +777,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
             s[P] = 1.0
             done[P] = False
             P += 1
-    _newton_steps(ncode, nimm, nfn, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, final_newton,
+    _newton_steps(ncode, nimm, nfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, final_newton,
                   0.0 if newton_only else 1e-15, P)
     for p in range(P):
         for v in range(N):
@@ -731,11 +785,11 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _newton_steps(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, steps, stop, P):
+def _newton_steps(code, imm, fn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, done, steps, stop, P):
     """Up to ``steps`` Newton steps at the points x (columns with done False): a column stops after a
     step smaller than stop (1 + |x|) or at a singular Jacobian (then unchanged)."""
     for it in range(steps):
-        _newton_step(code, imm, fn, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P)
+        _newton_step(code, imm, fn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, piv, ok, dxr, dxi, P)
         for p in range(P):
             if done[p] or not ok[p]:
                 done[p] = True
@@ -805,8 +859,9 @@ def taylor(tapes: "HomotopyTapes", x: np.ndarray, s: np.ndarray, q0: np.ndarray,
     _eval(tapes.full.code, tapes.full.imm, 0, Rr, Ri, Or, Oi, N, xr, xi, s, P)
     _lu(Or, Oi, N, N, piv, ok, P)
     k = [np.zeros((N, P)) for _ in range(6)]
-    _tangent(Or, Oi, N, piv, k[0], k[1], P)
-    _taylor(tapes.residual.code, tapes.residual.imm, 0, Rr, Ri, Or, Oi, N, xr, xi, s, np.full(P, float(h)), k[0], k[1],
+    lin = np.zeros(2, dtype=np.int64)  # the batched kernels (these arrays have no room for compiled passes)
+    _tangent(lin, Or, Oi, N, piv, k[0], k[1], P)
+    _taylor(tapes.residual.code, tapes.residual.imm, 0, lin, Rr, Ri, Or, Oi, N, xr, xi, s, np.full(P, float(h)), k[0], k[1],
             piv, np.ones(P, dtype=np.bool_), k[2], k[3], k[4], k[5], np.empty((N, P)), np.empty((N, P)), np.empty(P),
             np.empty(P), np.empty((4, N, P)), P)
     return tuple((k[2 * j] + 1j * k[2 * j + 1]).T for j in range(3))
@@ -822,12 +877,13 @@ def _segments(q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _native(native: np.ndarray | None) -> np.ndarray:
-    """The three tapes' compiled entry points as the kernel takes them (zeros: the interpreter)."""
+    """The compiled entry points as the kernel takes them: the full, Newton and residual tapes, the LU and
+    its solve (zeros: the interpreter and the batched kernels)."""
     if native is None:
-        return np.zeros(3, dtype=np.int64)
+        return np.zeros(5, dtype=np.int64)
     native = np.ascontiguousarray(native, dtype=np.int64)
-    if native.shape != (3,):
-        raise ValueError(f"native: three entry points (full, Newton, residual tape) expected, not {native.shape}")
+    if native.shape != (5,):
+        raise ValueError(f"native: five entry points (full, Newton, residual tape, LU, solve) expected, not {native.shape}")
     return native
 
 
