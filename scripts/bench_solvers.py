@@ -148,8 +148,13 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
     t0 = time.perf_counter()
     module.solve(F[0])  # first call: spec, index arrays, compiled kernels from the disk cache
     first_ms = 1e3 * (time.perf_counter() - t0)
-    # best of SINGLE_ROUNDS medians: this shared VM's speed drifts by up to 2x between minutes
-    medians = []
+    # the eigen step of a |B|-root action-matrix solver; a pencil solver's own eigen step is its pencil's
+    # size (6r4s: 37 x 37 for |B| = 22, the "eig37"); an over-determined configuration solved on
+    # a square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
+    eig_n = module.PATHS if label in SUBSYSTEMS else (module.DEGREE if homotopy else module.SIZE[0])
+    # best of SINGLE_ROUNDS medians of the solver and of eig, rounds interleaved: this shared VM's speed
+    # drifts by up to 2x between minutes (eig64 4.3 and 7.7 ms in one session), so both see the same periods
+    medians, eigs = [], []
     for _ in range(SINGLE_ROUNDS):
         single = []
         for k in range(min(trials, single_calls)):
@@ -157,11 +162,8 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
             module.solve(F[k])
             single.append(time.perf_counter() - t0)
         medians.append(float(np.median(single)))
-    # the eigen step of a |B|-root action-matrix solver; a pencil solver's own eigen step is its pencil's
-    # size (6r4s: 37 x 37 for |B| = 22, the "eig37"); an over-determined configuration solved on
-    # a square subsystem (4r6s: |B| = 1) is compared with the subsystem's |B| (its paths)
-    eig_n = module.PATHS if label in SUBSYSTEMS else (module.DEGREE if homotopy else module.SIZE[0])
-    eig = min(_eig_ms(eig_n, rng) for _ in range(SINGLE_ROUNDS))
+        eigs.append(_eig_ms(eig_n, rng))
+    eig = min(eigs)
     evaluator, evals_per_s = "", ""
     if homotopy and label not in SUBSYSTEMS:  # the tracker's evaluations of H, dH/dx, dH/ds at |B| paths per call
         from bench_tape import rates as tape_rates  # scripts/ is on the path of a script (tests import this file)
@@ -286,7 +288,7 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
         "raw": "polish=0: eigen-solutions of the 6r4s pencil; homotopy endpoints (tracking ends with "
                "Newton steps on the target system; no polishing); solver_*: the module's default polishing",
         "eig": "numpy.linalg.eig of an eig_n x eig_n complex normal matrix, median of 30, best of 3 rounds, same "
-               "process; eig_n = |B| for homotopy solvers, the pencil size for the 6r4s pencil (37, its own eigen "
+               "process, each round right after a round of the solver's single calls; eig_n = |B| for homotopy solvers, the pencil size for the 6r4s pencil (37, its own eigen "
                "step), the subsystem's |B| for 4r6s (|B| = 1, solved on its 4r5s subsystem: 344)",
         "subsystems": "4r6s: the 4r5s solver on transmitters 1-5 (where no candidate passes, the next 5-subset), "
                       "candidates kept when the other transmitter's range equations hold, then polished on all "
