@@ -6,7 +6,7 @@ directory, not timed in tests), the first call in this process (loading the comp
 on-disk cache) apart, median runtime of one solve (best of three rounds), its ratio to numpy's ``eig`` of an
 eig_n x eig_n complex matrix timed in the same process (eig_n = |B|; a pencil solver's own pencil size), time per path,
 for homotopy solvers the evaluator of the tracker (``tape``: straight-line program, solvers.methods.tape_kernel;
-``monomials``: tracker.track) and its evaluations of H, dH/dx, dH/ds per second at |B| paths per call
+``tape (compiled)``: its C code, solvers.methods.tape_native; ``monomials``: tracker.track) and its evaluations of H, dH/dx, dH/ds per second at |B| paths per call
 (scripts/bench_tape.py), batched throughput, and, on N seeded
 noiseless networks (positions
 N(0, 10^2), offsets N(0, 1), via solvers.synthetic.random_network): median / 90th / 99th percentile of the
@@ -171,7 +171,9 @@ def bench(label: str, trials: int, seed: int, generate: bool, single_calls: int,
         solver = module.solver()
         evaluator = "tape" if solver.tapes is not None else "monomials"
         rates = tape_rates(solver, solver.n_paths, np.random.default_rng(seed + 1), repeat=3)
-        evals_per_s = round(1.0 / rates["full" if solver.tapes is not None else "changing"])
+        kind = "full_native" if "full_native" in rates else ("full" if solver.tapes is not None else "changing")
+        evaluator += " (compiled)" if kind == "full_native" else ""
+        evals_per_s = round(1.0 / rates[kind])
     polished, batch_s = _solve_all(label, F, jobs)
     batch_s /= trials
     raw = polished if homotopy else module.solve_batch(F, polish=0)
@@ -295,7 +297,8 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
                       "measurements (solvers.subsystem); mean_real counts the kept real candidates",
         "real": f"finite candidates with max |imag| <= {REAL_TOL} max |x|",
         "evals_per_s": "evaluations of H, dH/dx and dH/ds per second at |B| paths per call (tape: one run of the "
-                       "full tape for all paths, per path; monomials: tracker._evaluate_many with s changing), best of "
+                       "full tape for all paths, per path, by its compiled code where it is built (evaluator 'tape "
+                       "(compiled)'), else by the interpreter; monomials: tracker._evaluate_many with s changing), best of "
                        "3 interleaved rounds (scripts/bench_tape.rates)",
         "timing": f"single: best of {SINGLE_ROUNDS} medians of --single-calls solve() calls each; first_call_ms "
                   "apart (first solve in the process: spec, compiled tracker loaded from numba's disk cache); "

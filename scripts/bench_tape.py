@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-from solvers.methods import slp, tape_kernel, tracker  # noqa: E402
+from solvers.methods import slp, tape_kernel, tape_native, tracker  # noqa: E402
 
 
 @njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them
@@ -41,6 +41,13 @@ def _tape_loop(code, imm, Rr, Ri, Or, Oi, P, reps):
         tape_kernel.run_tape(code, imm, Rr, Ri, Or, Oi, P)
 
 
+@njit(cache=False)
+def _native_loop(fn, Rr, Ri, Or, Oi, P, reps):
+    """reps runs of a tape's compiled code (solvers.methods.tape_native) at address fn, as the tracker calls it."""
+    for r in range(reps):
+        tape_kernel._call_native(fn, P, Rr.shape[1], Rr.ctypes.data, Ri.ctypes.data, Or.ctypes.data, Oi.ctypes.data)
+
+
 def best(f, repeat: int = 5) -> float:
     out = np.inf
     for _ in range(repeat):
@@ -52,7 +59,8 @@ def best(f, repeat: int = 5) -> float:
 
 def rates(S, P: int, rng: np.random.Generator, repeat: int = 7) -> dict[str, float]:
     """Seconds per path per evaluation at P paths per call of the homotopy solver S's system: its tapes
-    ("full", "newton", "residual"; absent for a solver without a program) and the tracker's kernel with
+    ("full", "newton", "residual"; absent for a solver without a program), the full tape's compiled code
+    ("full_native", where tape_native builds it here: what the tracker runs) and the tracker's kernel with
     s changing at every call ("changing") and fixed ("fixed"); "eig": seconds of numpy's eig of the
     root count's size. Interleaved rounds (this machine's load drifts), minimum over ``repeat``."""
     x = np.resize(S.x0, (P, S.nvars)) + 0.01 * (rng.normal(size=(P, S.nvars)) + 1j * rng.normal(size=(P, S.nvars)))
@@ -79,6 +87,14 @@ def rates(S, P: int, rng: np.random.Generator, repeat: int = 7) -> dict[str, flo
         Ri[: tape.n_inputs] = inputs.imag
         _tape_loop(tape.code, tape.imm, Rr, Ri, Or, Oi, P, 1)
         runs[kind] = (functools.partial(_tape_loop, tape.code, tape.imm, Rr, Ri, Or, Oi, P), P)
+    native = tape_native.addresses(tapes, wait=True) if tapes is not None else np.zeros(1)
+    if native[0]:
+        cap = -(-P // tape_kernel.WIDTH) * tape_kernel.WIDTH  # room for the last pass of four paths
+        Rr, Ri, Or, Oi = tape_kernel.workspace(tapes.full, cap)
+        Rr[: tapes.full.n_inputs, :P] = inputs.real
+        Ri[: tapes.full.n_inputs, :P] = inputs.imag
+        _native_loop(native[0], Rr, Ri, Or, Oi, P, 1)
+        runs["full_native"] = (functools.partial(_native_loop, native[0], Rr, Ri, Or, Oi, P), P)
     A = rng.normal(size=(S.n_paths, S.n_paths)) + 1j * rng.normal(size=(S.n_paths, S.n_paths))
     runs["eig"] = (lambda k: [np.linalg.eig(A) for _ in range(k)], 1)
     row = {key: np.inf for key in runs}
