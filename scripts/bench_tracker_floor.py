@@ -9,7 +9,8 @@ Per solver (a committed homotopy solver with a straight-line program; default 9r
    pass in vector registers, the solvers' choice), compiled by the system's C compiler (its compile
    seconds reported; skipped without a compiler).
 2. **LU anchor.** LU with partial pivoting and two solves of the N x N Jacobians: the tracker's batched
-   kernel (paths in the inner loop) against a plain per-path C routine.
+   kernel (paths in the inner loop), the solver's compiled LU (four paths per pass, what the tracker runs
+   where it is built) and a plain per-path C routine.
 3. **The lock step's tail.** One plain track of each seeded network against the same track of K copies
    of that network's median path (every column then takes the same number of attempts: the cost of an
    attempt in a full batch), which gives the track's time without any tail; both against numpy's eig
@@ -43,12 +44,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
+from numba import njit  # noqa: E402
 
 from solvers.methods import tape_kernel, tape_native  # noqa: E402
 from solvers.synthetic import random_network  # noqa: E402
 
-from bench_tape import best  # noqa: E402  (scripts/ is on the path of a script)
-from bench_tape_tracker import _lu_loop, _module, _solver  # noqa: E402
+from bench_tape import _native_loop, best  # noqa: E402  (scripts/ is on the path of a script)
+from bench_tape_tracker import _module, _solver  # noqa: E402
 
 
 # --------------------------------------------------------------------------------------------------
@@ -106,6 +108,7 @@ def _ptr(a: np.ndarray):
 
 
 def kernel_anchors(S, folder: str, flags: tuple[str, ...]) -> None:
+    native = tape_native.addresses(S.tapes, wait=True)
     tape, K, N = S.tapes.full, S.n_paths, S.nvars
     cap = 4 * ((K + 3) // 4)
     rng = np.random.default_rng(0)
@@ -140,20 +143,70 @@ def kernel_anchors(S, folder: str, flags: tuple[str, ...]) -> None:
         A, b, piv = np.empty_like(A0), np.empty_like(b0), np.zeros((P, N), np.int32)
         c_args = (_ptr(A0), _ptr(A), _ptr(b0), _ptr(b), _ptr(piv))
         t_c = (best(lambda: lib.lu_reps(reps, P, N, 1, *c_args)) - best(lambda: lib.lu_reps(reps, P, N, 0, *c_args)))
-        J0r, J0i = np.zeros((N + N * N, P)), np.zeros((N + N * N, P))
-        J0r[N:], J0i[N:] = A0.reshape(P, -1).T.real, A0.reshape(P, -1).T.imag
-        b0r, b0i = np.ascontiguousarray(b0.T.real), np.ascontiguousarray(b0.T.imag)
-        args = (J0r, J0i, J0r.copy(), J0i.copy(), N, np.zeros((N, P), np.int64), np.zeros(P, bool), b0r, b0i,
-                b0r.copy(), b0i.copy(), P)
-        _lu_loop(*args, 1, True)
-        _lu_loop(*args, 1, False)
-        t_numba = best(lambda: _lu_loop(*args, reps, True)) - best(lambda: _lu_loop(*args, reps, False))
-        print(f"    P = {P:3d}: batched kernel {1e6 * t_numba / (reps * P):.3f}, C per path {1e6 * t_c / (reps * P):.3f}")
+        cap = -(-P // tape_kernel.WIDTH) * tape_kernel.WIDTH  # the compiled LU's last pass of four columns
+        J0r, J0i = np.zeros((N + N * N, cap)), np.zeros((N + N * N, cap))
+        J0r[N:, :P], J0i[N:, :P] = A0.reshape(P, -1).T.real, A0.reshape(P, -1).T.imag
+        b0r, b0i = np.zeros((N, cap)), np.zeros((N, cap))
+        b0r[:, :P], b0i[:, :P] = b0.T.real, b0.T.imag
+        times = []
+        for lin in (np.zeros(2, dtype=np.int64), native[3:5]):  # the batched kernel, the solver's compiled LU
+            args = (lin, J0r, J0i, J0r.copy(), J0i.copy(), N, np.zeros((N, cap), np.int64), np.zeros(cap, np.bool_),
+                    b0r, b0i, b0r.copy(), b0i.copy(), P)
+            _compiled_lu_loop(*args, 1, True)
+            _compiled_lu_loop(*args, 1, False)
+            times.append(best(lambda: _compiled_lu_loop(*args, reps, True)) - best(lambda: _compiled_lu_loop(*args, reps, False)))
+        print(f"    P = {P:3d}: batched kernel {1e6 * times[0] / (reps * P):.3f}, compiled (4 per pass) "
+              f"{1e6 * times[1] / (reps * P):.3f}, C per path {1e6 * t_c / (reps * P):.3f}")
 
 
 # --------------------------------------------------------------------------------------------------
 # 3: the lock step's tail
 # --------------------------------------------------------------------------------------------------
+
+@njit(cache=False)
+def _compiled_lu_loop(lin, J0r, J0i, Ar, Ai, N, piv, ok, b0r, b0i, br, bi, P, reps, factor):
+    """As bench_tape_tracker._lu_loop, with the solver's compiled LU and solves (addresses lin)."""
+    for r in range(reps):
+        Ar[:, :] = J0r
+        Ai[:, :] = J0i
+        for k in range(2):
+            br[:, :] = b0r
+            bi[:, :] = b0i
+            if factor:
+                if k == 0:
+                    tape_kernel._factor(lin, Ar, Ai, N, N, piv, ok, P)
+                tape_kernel._back(lin, Ar, Ai, N, N, piv, br, bi, P)
+
+
+def _compiled_costs(S, native) -> tuple[float, float, float, float]:
+    """Seconds per path, at K paths per call, of the compiled full, Newton and residual tapes and of the
+    compiled LU with two solves."""
+    K, N, tapes = S.n_paths, S.nvars, S.tapes
+    cap = -(-K // tape_kernel.WIDTH) * tape_kernel.WIDTH
+    rng = np.random.default_rng(1)
+    x = np.resize(S.x0, (cap, N))
+    q1 = rng.normal(size=len(S.q0)) + 0j
+    inputs = np.concatenate([x.T, np.full((1, cap), 0.5), np.tile(S.q0[:, None], (1, cap)),
+                             np.tile((q1 - S.q0)[:, None], (1, cap))])
+    reps = max(1, 20000 // K)
+    costs = []
+    for fn, tape in zip(native[:3], (tapes.full, tapes.newton, tapes.residual)):
+        Rr, Ri, Or, Oi = tape_kernel.workspace(tape, cap)
+        Rr[: tape.n_inputs], Ri[: tape.n_inputs] = inputs.real, inputs.imag
+        _native_loop(fn, Rr, Ri, Or, Oi, K, 1)
+        costs.append(best(lambda: _native_loop(fn, Rr, Ri, Or, Oi, K, reps)) / (reps * K))
+    Rr, Ri, Or, Oi = tape_kernel.workspace(tapes.full, cap)
+    Rr[: tapes.full.n_inputs], Ri[: tapes.full.n_inputs] = inputs.real, inputs.imag
+    _native_loop(native[0], Rr, Ri, Or, Oi, K, 1)
+    J0r, J0i = Or.copy(), Oi.copy()
+    b0r, b0i = np.ascontiguousarray(J0r[:N]), np.ascontiguousarray(J0i[:N])
+    args = (native[3:5], J0r, J0i, Or, Oi, N, np.zeros((N, cap), np.int64), np.zeros(cap, np.bool_), b0r, b0i,
+            b0r.copy(), b0i.copy(), K)
+    _compiled_lu_loop(*args, 1, True)
+    _compiled_lu_loop(*args, 1, False)
+    t_lu = best(lambda: _compiled_lu_loop(*args, reps, True)) - best(lambda: _compiled_lu_loop(*args, reps, False))
+    return costs[0], costs[1], costs[2], t_lu / (reps * K)
+
 
 def tail(S, module, networks: int, native) -> None:
     m, n = module.CONFIG
@@ -161,13 +214,14 @@ def tail(S, module, networks: int, native) -> None:
     rng = np.random.default_rng(0)
     nets = [random_network(m, n, rng) for _ in range(networks)]
     A = rng.normal(size=(K, K)) + 1j * rng.normal(size=(K, K))
-    rows = []
+    rows, acc = [], []
     for net in nets:
         f = net.measurements()
         q = f.reshape(1, -1).astype(complex) / np.sqrt(np.mean(np.abs(f) ** 2))
         out = {}
         t1 = best(lambda: out.update(a=tape_kernel.track(S.tapes, S.q0[None], q, S.x0, None, S.options, native=native)[1]))
         attempts = out["a"][:, 1] + out["a"][:, 2]
+        acc.append(float(np.mean(out["a"][:, 1])))
         median = np.argsort(attempts)[K // 2]
         copies = np.repeat(S.x0[median:median + 1], K, axis=0)
         t2 = best(lambda: out.update(b=tape_kernel.track(S.tapes, S.q0[None], q, copies, None, S.options, native=native)[1]))
@@ -180,6 +234,19 @@ def tail(S, module, networks: int, native) -> None:
           f"{1e3 * t_eig:.2f} ms); attempts per path {a1:.1f} (max {amax:.0f}, the rounds of the lock step)")
     print(f"  an attempt in a full batch {1e6 * per_attempt:.2f} us -> the same track without a tail "
           f"{1e3 * free:.2f} ms = {1e6 * free / K:.0f} us per path ({free / t_eig:.2f}x eig{K})")
+    if np.any(native):  # where the compiled track's time goes (the count of kernel runs as bench_tape_tracker's)
+        t_full, t_newton, t_res, t_lu = _compiled_costs(S, native)
+        o = S.options
+        pade = o.predictor == "pade"
+        accepted = float(np.median(acc))
+        n_full = (1 if pade else 4) * a1 + 1
+        n_newton = (o.newton - 1) * a1 + o.final_newton
+        n_res = 7 * (accepted + 1) if pade else 0.0
+        ev = n_full * t_full + n_newton * t_newton + n_res * t_res
+        lu = (n_full + n_newton) * t_lu
+        print(f"  per path: evaluation {1e6 * ev:.0f} us + LU and solves {1e6 * lu:.0f} us + bookkeeping and tail "
+              f"{1e6 * (t1 / K - ev - lu):.0f} us ({n_full + n_newton + n_res:.0f} evaluations, {n_full + n_newton:.0f} "
+              f"factorisations; full tape {1e6 * t_full:.3f} us, LU with two solves {1e6 * t_lu:.3f} us per path)")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -309,11 +376,11 @@ def main(argv=None) -> None:
         module = _module(label)
         S = _solver(module, "tape")
         print(f"{label}: {S.n_paths} paths, {S.nvars} unknowns, full tape {S.tapes.full.n_instructions} instructions")
-        if compiler:
+        if compiler and tape_native.addresses(S.tapes, wait=True).any():
             with tempfile.TemporaryDirectory() as folder:
                 kernel_anchors(S, folder, tuple(args.flags.split()))
         else:
-            print("  no C compiler (cc or $CC): kernel anchors skipped")
+            print("  no C compiler (cc or $CC) or TDOA_WORKBENCH_NATIVE=off: kernel anchors skipped")
         tail(S, module, args.networks, None)
         native = tape_native.addresses(S.tapes, wait=True)
         if native.any():

@@ -1,5 +1,5 @@
-"""The tapes' compiled straight-line code (solvers.methods.tape_native) and the tail's one-by-one LU give
-the same bits as the interpreter and the batched LU: a solver's roots do not depend on which ran."""
+"""The tapes' compiled straight-line code and the compiled LU (solvers.methods.tape_native) give the same
+bits as the interpreter and the batched LU: a solver's roots do not depend on which ran."""
 from __future__ import annotations
 
 import shutil
@@ -64,31 +64,30 @@ def test_native_switch_and_bad_addresses(monkeypatch):
         tape_kernel.track(solver.tapes, solver.q0, solver.q0, solver.x0[:2], None, solver.options, native=np.zeros(3))
 
 
-def test_lu_one_by_one_equals_batched():
-    """Below SCALAR_BELOW columns the LU and its solves run matrix by matrix: the same bits as the batched
-    loops (the same matrices factored in a batch of 12 and in batches of 1 and 3), singular flags too."""
+@pytest.mark.skipif(not HAS_CC, reason="no C compiler")
+def test_compiled_lu_equals_batched():
+    """The solver's compiled LU and solves (four columns per pass) give the batched kernels' bits: factors,
+    pivots, singular flags and solutions, on 9 columns (a last pass into spare columns) with a singular one."""
+    _, solver = _solver()
+    lin = tape_native.addresses(solver.tapes, wait=True)[3:5]
+    N = solver.nvars
     rng = np.random.default_rng(11)
-    N, P = 7, 12
-    A = rng.normal(size=(N + N * N, P)) + 1j * rng.normal(size=(N + N * N, P))
+    P, cap = 9, 12
+    A = rng.normal(size=(N + N * N, cap)) + 1j * rng.normal(size=(N + N * N, cap))
     A[N:, 4] = 0.0  # a singular matrix
-    b = rng.normal(size=(N, P)) + 1j * rng.normal(size=(N, P))
+    b = rng.normal(size=(N, cap)) + 1j * rng.normal(size=(N, cap))
 
-    def factor_solve(cols):
-        Ar, Ai = np.ascontiguousarray(A[:, cols].real), np.ascontiguousarray(A[:, cols].imag)
-        br, bi = np.ascontiguousarray(b[:, cols].real), np.ascontiguousarray(b[:, cols].imag)
-        k = len(cols)
-        piv, ok = np.zeros((N, k), dtype=np.int64), np.zeros(k, dtype=np.bool_)
-        tape_kernel._lu(Ar, Ai, N, N, piv, ok, k)
-        tape_kernel._solve(Ar, Ai, N, N, piv, br, bi, k)
-        return Ar + 1j * Ai, br + 1j * bi, piv, ok
+    def factor_solve(addresses):
+        Ar, Ai = np.ascontiguousarray(A.real), np.ascontiguousarray(A.imag)
+        br, bi = np.ascontiguousarray(b.real), np.ascontiguousarray(b.imag)
+        piv, ok = np.zeros((N, cap), dtype=np.int64), np.zeros(cap, dtype=np.bool_)
+        tape_kernel._factor(addresses, Ar, Ai, N, N, piv, ok, P)
+        tape_kernel._back(addresses, Ar, Ai, N, N, piv, br, bi, P)
+        return (Ar + 1j * Ai)[:, :P], (br + 1j * bi)[:, :P], piv[:, :P], ok[:P]
 
-    assert 3 < tape_kernel.SCALAR_BELOW <= P
-    whole = factor_solve(list(range(P)))
-    for cols in ([0], [3, 4, 5], [11]):
-        part = factor_solve(cols)
-        for got, ref in zip(part, whole):
-            np.testing.assert_array_equal(got, ref[..., cols])
-    assert not whole[3][4] and whole[3][[0, 1, 2, 3, 5]].all()
-    # and the solves are solves: A x = b on a regular column
-    M = A[N:, 0].reshape(N, N)
-    np.testing.assert_allclose(M @ whole[1][:, 0], b[:, 0], rtol=1e-10, atol=1e-10)
+    compiled, batched = factor_solve(lin), factor_solve(np.zeros(2, dtype=np.int64))
+    for got, ref in zip(compiled, batched):
+        np.testing.assert_array_equal(got, ref)
+    assert not batched[3][4] and batched[3][[0, 1, 2, 3, 5, 6, 7, 8]].all()
+    M = A[N:, 0].reshape(N, N)  # and the solves are solves
+    np.testing.assert_allclose(M @ batched[1][:, 0], b[:, 0], rtol=1e-10, atol=1e-10)

@@ -155,13 +155,8 @@ def _lu(Ar, Ai, base, N, piv, ok, P):
 
     Interchanges as in LINPACK's zgefa: step k swaps rows k and piv[k] in columns k.. only (the
     multipliers stay where they were computed; :func:`_solve` interleaves the swaps), and every loop
-    runs over the points, so it vectorises. Below :data:`SCALAR_BELOW` points (the lock step's tail) the
-    loops over a handful of points cost more than their arithmetic: each matrix is then factored on its
-    own (:func:`_lu_one`), with the same operations in the same order (the same bits)."""
-    if P < SCALAR_BELOW:
-        for p in range(P):
-            ok[p] = _lu_one(Ar, Ai, base, N, piv, p)
-        return
+    runs over the points, so it vectorises (the solver's compiled LU, :func:`_factor`, does the same
+    operations four points per pass)."""
     best = np.empty(P)
     for p in range(P):
         ok[p] = True
@@ -194,73 +189,6 @@ def _lu(Ar, Ai, base, N, piv, ok, P):
                 _sub_product(Ar, Ai, base + i * N + j, base + k * N + j, Ar, Ai, ik, P)
 
 
-#: Below this many points :func:`_lu` and :func:`_solve` work matrix by matrix (9r/3s, one path: 6.7 us per
-#: LU and two solves batched against ~1.5 one by one).
-SCALAR_BELOW = 8
-
-
-@njit(cache=True, nogil=True, boundscheck=False)
-def _lu_one(Ar, Ai, base, N, piv, p):
-    """:func:`_lu` of column p alone (the same operations in the same order); False where singular."""
-    ok = True
-    for k in range(N):
-        kk = base + k * N + k
-        best = Ar[kk, p] * Ar[kk, p] + Ai[kk, p] * Ai[kk, p]
-        q = k
-        for i in range(k + 1, N):
-            ik = base + i * N + k
-            a = Ar[ik, p] * Ar[ik, p] + Ai[ik, p] * Ai[ik, p]
-            if a > best:
-                best = a
-                q = i
-        piv[k, p] = q
-        for j in range(k, N):
-            _swap(Ar, Ai, base + k * N + j, base + q * N + j, p)
-        b = best
-        if not (b > 0.0) or not np.isfinite(b):
-            ok = False
-            b = 1e-300
-        Ar[kk, p] = Ar[kk, p] / b
-        Ai[kk, p] = -Ai[kk, p] / b
-        fr = Ar[kk, p]
-        fi = Ai[kk, p]
-        for i in range(k + 1, N):
-            ik = base + i * N + k
-            yr = Ar[ik, p] * fr - Ai[ik, p] * fi
-            yi = Ar[ik, p] * fi + Ai[ik, p] * fr
-            Ar[ik, p] = yr
-            Ai[ik, p] = yi
-            for j in range(k + 1, N):
-                ij = base + i * N + j
-                kj = base + k * N + j
-                Ar[ij, p] -= yr * Ar[kj, p] - yi * Ai[kj, p]
-                Ai[ij, p] -= yr * Ai[kj, p] + yi * Ar[kj, p]
-    return ok
-
-
-@njit(cache=True, nogil=True, boundscheck=False)
-def _solve_one(Ar, Ai, base, N, piv, br, bi, p):
-    """:func:`_solve` of column p alone (the same operations in the same order)."""
-    for k in range(N):
-        _swap(br, bi, k, piv[k, p], p)
-        for i in range(k + 1, N):
-            a = Ar[base + i * N + k, p]
-            b = Ai[base + i * N + k, p]
-            br[i, p] -= a * br[k, p] - b * bi[k, p]
-            bi[i, p] -= a * bi[k, p] + b * br[k, p]
-    for i in range(N - 1, -1, -1):
-        for j in range(i + 1, N):
-            a = Ar[base + i * N + j, p]
-            b = Ai[base + i * N + j, p]
-            br[i, p] -= a * br[j, p] - b * bi[j, p]
-            bi[i, p] -= a * bi[j, p] + b * br[j, p]
-        f = base + i * N + i
-        yr = br[i, p] * Ar[f, p] - bi[i, p] * Ai[f, p]
-        yi = br[i, p] * Ai[f, p] + bi[i, p] * Ar[f, p]
-        br[i, p] = yr
-        bi[i, p] = yi
-
-
 @njit(cache=True, nogil=True, boundscheck=False)
 def _mul_row(Br, Bi, i, Fr, Fi, f, P):
     """Row i of B *= row f of F, over the points."""
@@ -284,10 +212,6 @@ def _sub_product(Br, Bi, i, j, Fr, Fi, f, P):
 @njit(cache=True, nogil=True, boundscheck=False)
 def _solve(Ar, Ai, base, N, piv, br, bi, P):
     """Solve A y = b in place in br, bi (N, capacity) with the factors of :func:`_lu`."""
-    if P < SCALAR_BELOW:
-        for p in range(P):
-            _solve_one(Ar, Ai, base, N, piv, br, bi, p)
-        return
     for k in range(N):
         for p in range(P):
             _swap(br, bi, k, piv[k, p], p)
