@@ -216,13 +216,20 @@ def _compile(text: str, path: Path) -> None:
     import shutil
     import subprocess
     import tempfile
+    import time
 
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
         _WHY.append("no C compiler found (cc, gcc or $CC)")
         return
     path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=path.parent) as tmp:
+    for stale in path.parent.glob("build-*"):  # left by a process that exited during its build (daemon thread)
+        try:
+            if time.time() - stale.stat().st_mtime > 3600:
+                shutil.rmtree(stale, ignore_errors=True)
+        except OSError:
+            pass
+    with tempfile.TemporaryDirectory(prefix="build-", dir=path.parent) as tmp:
         c_file, so_file = Path(tmp) / "tapes.c", Path(tmp) / "tapes.so"
         c_file.write_text(text, encoding="utf-8")
         done = subprocess.run([compiler, *FLAGS, "-o", str(so_file), str(c_file)], capture_output=True, timeout=600)
