@@ -33,12 +33,18 @@ def _cache_dirs() -> list[Path]:
 
 
 DISABLE_ENV = "TDOA_WORKBENCH_NATIVE"
-"""Set to ``off`` to run the numba/numpy kernels instead of the C ones (a comparison, a broken compiler)."""
+"""Set to ``off`` to run the numba/numpy kernels instead of the C ones (a comparison, a broken compiler);
+the homotopy solvers' compiled tapes (:mod:`solvers.methods.tape_native`) obey it too."""
+
+
+def disabled() -> bool:
+    """Whether ``TDOA_WORKBENCH_NATIVE`` switches the compiled C code off (``off``, ``0`` or ``no``)."""
+    return os.environ.get(DISABLE_ENV, "").lower() in ("off", "0", "no")
 
 
 def _build() -> Path | None:
     """The shared library for the current source, compiled if not cached; None without a compiler."""
-    if os.environ.get(DISABLE_ENV, "").lower() in ("off", "0", "no"):
+    if disabled():
         _WHY.append(f"{DISABLE_ENV}={os.environ[DISABLE_ENV]}")
         return None
     if not SOURCE.exists():

@@ -8,8 +8,9 @@ generated module's solve path (solve_scaled: scaling, tracking, retracking, deto
 target); reported: median ms of one solve (best of three rounds over the first ``--single`` networks),
 its ratio to numpy's complex eig of the root count's size (one BLAS thread) timed in this process,
 microseconds per path, failures (no candidate within 1e-6 of the true root) and log10 error quantiles
-of the raw endpoints, and where the tape solver's time goes (tape evaluations, batched LU + solves,
-the rest) from the steps the tracker took and the kernels' per-path costs measured here.
+of the raw endpoints, and where the tape solver's time goes (tape evaluations, LU + solves, the rest;
+the kernels as the solver runs them: its compiled code where solvers.methods.tape_native builds it)
+from the steps the tracker took and the kernels' per-path costs measured here.
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_tape_tracker.py [--trials 200] [--solvers 9r3s 6r3s]
 """
@@ -31,11 +32,11 @@ import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
 from solvers.generate import GENERATED_DIR  # noqa: E402
-from solvers.methods import homotopy, tape_kernel  # noqa: E402
+from solvers.methods import homotopy, tape_kernel, tape_native  # noqa: E402
 from solvers.synthetic import random_network  # noqa: E402
 
 from bench_solvers import _truth  # noqa: E402  (scripts/ is on the path of a script)
-from bench_tape import best as _best  # noqa: E402
+from bench_tape import _native_loop, _tape_loop, best as _best  # noqa: E402
 
 FAIL_TOL = 1e-6
 ROUNDS = 5
@@ -52,44 +53,53 @@ def _solver(module, evaluator: str) -> homotopy.HomotopySolver:
 
 
 @njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them
-def _lu_loop(J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P, reps, factor):
-    """reps x (copy the Jacobians and right-hand sides in; with ``factor``, one batched LU and two
-    solves, the tracker's work per evaluation; without, the copies alone, to be subtracted)."""
+def _lu_loop(lin, J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P, reps, factor):
+    """reps x (copy the Jacobians and right-hand sides in; with ``factor``, one LU and two solves, the
+    tracker's work per evaluation; without, the copies alone, to be subtracted). lin: the solver's
+    compiled LU and solve (tape_native), zeros for the batched numba kernels."""
     for r in range(reps):
-        Or[:, :P] = J0r[:, :P]
-        Oi[:, :P] = J0i[:, :P]
+        Or[:, :] = J0r
+        Oi[:, :] = J0i
         for k in range(2):
-            br[:, :P] = b0r[:, :P]  # fresh right-hand sides: repeated solves would reach denormals
-            bi[:, :P] = b0i[:, :P]
+            br[:, :] = b0r  # fresh right-hand sides: repeated solves would reach denormals
+            bi[:, :] = b0i
             if factor:
                 if k == 0:
-                    tape_kernel._lu(Or, Oi, N, N, piv, ok, P)
-                tape_kernel._solve(Or, Oi, N, N, piv, br, bi, P)
+                    tape_kernel._factor(lin, Or, Oi, N, N, piv, ok, P)
+                tape_kernel._back(lin, Or, Oi, N, N, piv, br, bi, P)
 
 
-def _kernel_costs(solver, P: int, rng) -> tuple[float, float, float, float]:
+def _kernel_costs(solver, P: int, rng, native=None) -> tuple[float, float, float, float]:
     """Seconds per path of one evaluation of the full, the Newton and the residual tape and of one LU
-    with two solves, at P paths per call."""
+    with two solves, at P paths per call: by the interpreter and the batched LU, or with ``native``
+    (tape_native.addresses) by the solver's compiled code."""
     N = solver.nvars
-    x = np.resize(solver.x0, (P, N))
+    tapes = solver.tapes
+    cap = -(-P // tape_kernel.WIDTH) * tape_kernel.WIDTH  # room for the compiled code's last pass of four
+    x = np.resize(solver.x0, (cap, N))
     q1 = rng.normal(size=len(solver.q0)) + 0j
-    inputs = np.concatenate([x.T, np.full((1, P), 0.5), np.tile(solver.q0[:, None], (1, P)),
-                             np.tile((q1 - solver.q0)[:, None], (1, P))])
+    inputs = np.concatenate([x.T, np.full((1, cap), 0.5), np.tile(solver.q0[:, None], (1, cap)),
+                             np.tile((q1 - solver.q0)[:, None], (1, cap))])
+    native = np.zeros(5, dtype=np.int64) if native is None else native
     reps = max(1, 20000 // P)
     costs = []
-    for tape in (solver.tapes.full, solver.tapes.newton, solver.tapes.residual):
-        Rr, Ri, Or, Oi = tape_kernel.workspace(tape, P)
+    for fn, tape in zip(native[:3], (tapes.full, tapes.newton, tapes.residual)):
+        Rr, Ri, Or, Oi = tape_kernel.workspace(tape, cap)
         Rr[: tape.n_inputs], Ri[: tape.n_inputs] = inputs.real, inputs.imag
-        tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
-        costs.append(_best(lambda: [tape_kernel.run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P) for _ in range(reps)]) / (reps * P))
-    Rr, Ri, Or, Oi = tape_kernel.workspace(solver.tapes.full, P)  # the full tape's outputs: J after H
-    Rr[: solver.tapes.full.n_inputs], Ri[: solver.tapes.full.n_inputs] = inputs.real, inputs.imag
-    tape_kernel.run_tape(solver.tapes.full.code, solver.tapes.full.imm, Rr, Ri, Or, Oi, P)
+        if fn:
+            run = lambda: _native_loop(fn, Rr, Ri, Or, Oi, P, reps)  # noqa: E731
+        else:
+            run = lambda: _tape_loop(tape.code, tape.imm, Rr, Ri, Or, Oi, P, reps)  # noqa: E731
+        run()
+        costs.append(_best(run) / (reps * P))
+    Rr, Ri, Or, Oi = tape_kernel.workspace(tapes.full, cap)  # the full tape's outputs: J after H
+    Rr[: tapes.full.n_inputs], Ri[: tapes.full.n_inputs] = inputs.real, inputs.imag
+    tape_kernel.run_tape(tapes.full.code, tapes.full.imm, Rr, Ri, Or, Oi, cap)
     J0r, J0i = np.ascontiguousarray(Or), np.ascontiguousarray(Oi)
-    piv, ok = np.zeros((N, P), dtype=np.int64), np.zeros(P, dtype=bool)
+    piv, ok = np.zeros((N, cap), dtype=np.int64), np.zeros(cap, dtype=bool)
     b0r, b0i = np.ascontiguousarray(J0r[:N]), np.ascontiguousarray(J0i[:N])
     br, bi = np.empty_like(b0r), np.empty_like(b0i)
-    args = (J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P)
+    args = (np.ascontiguousarray(native[3:5]), J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P)
     _lu_loop(*args, 1, True)
     _lu_loop(*args, 1, False)
     t_lu = _best(lambda: _lu_loop(*args, reps, True)) / (reps * P)
@@ -145,17 +155,18 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
             sc = np.sqrt(np.mean(np.abs(F[:single].reshape(len(F[:single]), -1)) ** 2, axis=1))
             # rounds interleave the plain tracks and the kernels' timings (minimum of each over rounds)
             attempts, accepted, t_track, costs = [], [], [], []
+            native = tape_native.addresses(solver.tapes, wait=True)  # what the solver runs (zeros: the interpreter)
             for _ in range(ROUNDS):
                 round_track = []
                 for f, s in zip(F[:single], sc):
                     q = f.reshape(1, -1).astype(complex) / s
                     t = time.perf_counter()
-                    _, stats = tape_kernel.track(solver.tapes, solver.q0[None], q, solver.x0, None, opts)
+                    _, stats = tape_kernel.track(solver.tapes, solver.q0[None], q, solver.x0, None, opts, native=native)
                     round_track.append(time.perf_counter() - t)
                     attempts.append(float(np.mean(stats[:, 1] + stats[:, 2])))
                     accepted.append(float(np.mean(stats[:, 1])))
                 t_track.append(float(np.median(round_track)))
-                costs.append(_kernel_costs(solver, K, rng))
+                costs.append(_kernel_costs(solver, K, rng, native))
             t_full, t_newton, t_res, t_lu = np.min(costs, axis=0)
             a, acc = float(np.median(attempts)), float(np.median(accepted))
             # per attempt: RK4 three full-tape stages, the corrector's Newton-tape steps and its last step on

@@ -44,13 +44,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
-from numba import njit  # noqa: E402
 
 from solvers.methods import tape_kernel, tape_native  # noqa: E402
 from solvers.synthetic import random_network  # noqa: E402
 
-from bench_tape import _native_loop, best  # noqa: E402  (scripts/ is on the path of a script)
-from bench_tape_tracker import _module, _solver  # noqa: E402
+from bench_tape import best  # noqa: E402  (scripts/ is on the path of a script)
+from bench_tape_tracker import _kernel_costs, _lu_loop, _module, _solver  # noqa: E402
 
 
 # --------------------------------------------------------------------------------------------------
@@ -152,9 +151,9 @@ def kernel_anchors(S, folder: str, flags: tuple[str, ...]) -> None:
         for lin in (np.zeros(2, dtype=np.int64), native[3:5]):  # the batched kernel, the solver's compiled LU
             args = (lin, J0r, J0i, J0r.copy(), J0i.copy(), N, np.zeros((N, cap), np.int64), np.zeros(cap, np.bool_),
                     b0r, b0i, b0r.copy(), b0i.copy(), P)
-            _compiled_lu_loop(*args, 1, True)
-            _compiled_lu_loop(*args, 1, False)
-            times.append(best(lambda: _compiled_lu_loop(*args, reps, True)) - best(lambda: _compiled_lu_loop(*args, reps, False)))
+            _lu_loop(*args, 1, True)
+            _lu_loop(*args, 1, False)
+            times.append(best(lambda: _lu_loop(*args, reps, True)) - best(lambda: _lu_loop(*args, reps, False)))
         print(f"    P = {P:3d}: batched kernel {1e6 * times[0] / (reps * P):.3f}, compiled (4 per pass) "
               f"{1e6 * times[1] / (reps * P):.3f}, C per path {1e6 * t_c / (reps * P):.3f}")
 
@@ -162,51 +161,6 @@ def kernel_anchors(S, folder: str, flags: tuple[str, ...]) -> None:
 # --------------------------------------------------------------------------------------------------
 # 3: the lock step's tail
 # --------------------------------------------------------------------------------------------------
-
-@njit(cache=False)
-def _compiled_lu_loop(lin, J0r, J0i, Ar, Ai, N, piv, ok, b0r, b0i, br, bi, P, reps, factor):
-    """As bench_tape_tracker._lu_loop, with the solver's compiled LU and solves (addresses lin)."""
-    for r in range(reps):
-        Ar[:, :] = J0r
-        Ai[:, :] = J0i
-        for k in range(2):
-            br[:, :] = b0r
-            bi[:, :] = b0i
-            if factor:
-                if k == 0:
-                    tape_kernel._factor(lin, Ar, Ai, N, N, piv, ok, P)
-                tape_kernel._back(lin, Ar, Ai, N, N, piv, br, bi, P)
-
-
-def _compiled_costs(S, native) -> tuple[float, float, float, float]:
-    """Seconds per path, at K paths per call, of the compiled full, Newton and residual tapes and of the
-    compiled LU with two solves."""
-    K, N, tapes = S.n_paths, S.nvars, S.tapes
-    cap = -(-K // tape_kernel.WIDTH) * tape_kernel.WIDTH
-    rng = np.random.default_rng(1)
-    x = np.resize(S.x0, (cap, N))
-    q1 = rng.normal(size=len(S.q0)) + 0j
-    inputs = np.concatenate([x.T, np.full((1, cap), 0.5), np.tile(S.q0[:, None], (1, cap)),
-                             np.tile((q1 - S.q0)[:, None], (1, cap))])
-    reps = max(1, 20000 // K)
-    costs = []
-    for fn, tape in zip(native[:3], (tapes.full, tapes.newton, tapes.residual)):
-        Rr, Ri, Or, Oi = tape_kernel.workspace(tape, cap)
-        Rr[: tape.n_inputs], Ri[: tape.n_inputs] = inputs.real, inputs.imag
-        _native_loop(fn, Rr, Ri, Or, Oi, K, 1)
-        costs.append(best(lambda: _native_loop(fn, Rr, Ri, Or, Oi, K, reps)) / (reps * K))
-    Rr, Ri, Or, Oi = tape_kernel.workspace(tapes.full, cap)
-    Rr[: tapes.full.n_inputs], Ri[: tapes.full.n_inputs] = inputs.real, inputs.imag
-    _native_loop(native[0], Rr, Ri, Or, Oi, K, 1)
-    J0r, J0i = Or.copy(), Oi.copy()
-    b0r, b0i = np.ascontiguousarray(J0r[:N]), np.ascontiguousarray(J0i[:N])
-    args = (native[3:5], J0r, J0i, Or, Oi, N, np.zeros((N, cap), np.int64), np.zeros(cap, np.bool_), b0r, b0i,
-            b0r.copy(), b0i.copy(), K)
-    _compiled_lu_loop(*args, 1, True)
-    _compiled_lu_loop(*args, 1, False)
-    t_lu = best(lambda: _compiled_lu_loop(*args, reps, True)) - best(lambda: _compiled_lu_loop(*args, reps, False))
-    return costs[0], costs[1], costs[2], t_lu / (reps * K)
-
 
 def tail(S, module, networks: int, native) -> None:
     m, n = module.CONFIG
@@ -235,7 +189,7 @@ def tail(S, module, networks: int, native) -> None:
     print(f"  an attempt in a full batch {1e6 * per_attempt:.2f} us -> the same track without a tail "
           f"{1e3 * free:.2f} ms = {1e6 * free / K:.0f} us per path ({free / t_eig:.2f}x eig{K})")
     if np.any(native):  # where the compiled track's time goes (the count of kernel runs as bench_tape_tracker's)
-        t_full, t_newton, t_res, t_lu = _compiled_costs(S, native)
+        t_full, t_newton, t_res, t_lu = _kernel_costs(S, K, np.random.default_rng(1), native)
         o = S.options
         pade = o.predictor == "pade"
         accepted = float(np.median(acc))

@@ -10,12 +10,12 @@ roots with or without it. The same library holds the LU with partial pivoting of
 and its solves (:func:`lu_source`: the batched kernel's operations, four paths per pass in vector
 registers; 1.3-1.4x the batched kernel for a full batch, 3-5x for a handful of paths).
 
-:func:`addresses` returns the three tapes' (full, Newton, residual) entry points for
+:func:`addresses` returns the entry points (the three tapes, the LU, its solve) for
 :func:`tape_kernel.track`, or zeros while the library is not built (the interpreter runs then). The
 library is compiled by the system's C compiler (``$CC``, ``cc`` or ``gcc``) in a background thread the
-first time a solver asks, into the user's cache directory under a name hashed from the source, the
-flags and the CPU, so the first solve in a fresh environment does not wait for it; later calls, and
-every later process, use it. ``TDOA_WORKBENCH_NATIVE=off`` (as for the F4 kernels) or no compiler:
+first time a solver asks, into the cache directory (``analysis.paths.cache_dir("tapes")``) under a name
+hashed from the source, the flags and the CPU, so the first solve in a fresh environment does not wait
+for it; later calls, and every later process, use it. ``TDOA_WORKBENCH_NATIVE=off`` (as for the F4 kernels) or no compiler:
 the interpreter only.
 """
 from __future__ import annotations
@@ -29,14 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .tape_kernel import OPCODES
+from analysis.native import DISABLE_ENV, disabled
+from analysis.paths import cache_dir
 
-__all__ = ["ENTRIES", "FLAGS", "WIDTH", "addresses", "describe", "lu_source", "source"]
+from .tape_kernel import OPCODES, WIDTH
 
-#: Paths per pass (one vector of doubles); the tracker's capacity is a multiple of it.
-WIDTH = 4
+__all__ = ["DISABLE_ENV", "ENTRIES", "FLAGS", "WIDTH", "addresses", "describe", "lu_source", "source"]
+
 FLAGS = ("-O2", "-march=native", "-ffp-contract=off", "-shared", "-fPIC", "-std=gnu99")
-DISABLE_ENV = "TDOA_WORKBENCH_NATIVE"
 KINDS = ("full", "newton", "residual")
 ENTRIES = ("tape_full", "tape_newton", "tape_residual", "lu_factor", "lu_solve")
 
@@ -96,13 +96,12 @@ def source(tape, name: str, width: int = WIDTH) -> str:
     return "\n".join(lines)
 
 
-def lu_source(N: int, width: int = WIDTH) -> str:
+def lu_source(N: int) -> str:
     """C source of ``lu_factor(P, C, Ar, Ai, base, piv, ok)`` and ``lu_solve(P, C, Ar, Ai, base, piv, br, bi)``
     for N x N matrices at rows base + i N + j of Ar, Ai (point p at column p, row stride C), four points
     per pass: :func:`tape_kernel._lu` and :func:`tape_kernel._solve` with the same operations in the same
-    order (the pivot search and the interchanges lane by lane, the elimination in vector registers)."""
-    if width != 4:
-        raise ValueError("the compiled LU runs four points per pass")
+    order (the pivot search and the interchanges lane by lane, the elimination in vector registers; four
+    points per pass, as :data:`tape_kernel.WIDTH`)."""
     return f"""
 #include <math.h>
 typedef double v4d __attribute__((vector_size(32)));
@@ -195,10 +194,6 @@ _WHY: list[str] = []
 _KEYS: dict[int, tuple] = {}  # id(tapes) -> (tapes, source hash, source): the source is written once per tapes
 
 
-def _cache_dir() -> Path:
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tdoa-workbench" / "tapes"
-
-
 def _cpu() -> str:
     """What -march=native compiles for: the CPU's model and flags (a cache shared between machines must
     not hand one machine's instructions to another)."""
@@ -265,7 +260,7 @@ def addresses(tapes, wait: bool = False) -> np.ndarray:
     it is being built (in the background: ``wait`` blocks until it is), without a compiler or with
     ``TDOA_WORKBENCH_NATIVE=off``."""
     none = np.zeros(len(ENTRIES), dtype=np.int64)
-    if os.environ.get(DISABLE_ENV, "").lower() in ("off", "0", "no"):
+    if disabled():
         return none
     known = _KEYS.get(id(tapes))
     if known is None or known[0] is not tapes:  # (an id can be reused after its object is gone)
@@ -279,7 +274,7 @@ def addresses(tapes, wait: bool = False) -> np.ndarray:
     with _LOCK:
         if key in _BUILT:
             return _BUILT[key][1]
-        path = _cache_dir() / f"tapes-{key:08x}.so"
+        path = cache_dir("tapes") / f"tapes-{key:08x}.so"
         thread = _PENDING.get(key)
         if thread is None:
             if path.exists():  # built by an earlier process: load now
