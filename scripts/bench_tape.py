@@ -89,7 +89,7 @@ def rates(S, P: int, rng: np.random.Generator, repeat: int = 7) -> dict[str, flo
         runs[kind] = (functools.partial(_tape_loop, tape.code, tape.imm, Rr, Ri, Or, Oi, P), P)
     native = tape_native.addresses(tapes, wait=True) if tapes is not None else np.zeros(1)
     if native[0]:
-        cap = -(-P // tape_kernel.WIDTH) * tape_kernel.WIDTH  # room for the last pass of four paths
+        cap = tape_kernel.capacity(P)  # as the tracker lays out its columns
         Rr, Ri, Or, Oi = tape_kernel.workspace(tapes.full, cap)
         Rr[: tapes.full.n_inputs, :P] = inputs.real
         Ri[: tapes.full.n_inputs, :P] = inputs.imag

@@ -75,7 +75,7 @@ def _kernel_costs(solver, P: int, rng, native=None) -> tuple[float, float, float
     (tape_native.addresses) by the solver's compiled code."""
     N = solver.nvars
     tapes = solver.tapes
-    cap = -(-P // tape_kernel.WIDTH) * tape_kernel.WIDTH  # room for the compiled code's last pass of four
+    cap = tape_kernel.capacity(P)  # as the tracker lays out its columns
     x = np.resize(solver.x0, (cap, N))
     q1 = rng.normal(size=len(solver.q0)) + 0j
     inputs = np.concatenate([x.T, np.full((1, cap), 0.5), np.tile(solver.q0[:, None], (1, cap)),

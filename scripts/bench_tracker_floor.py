@@ -142,7 +142,7 @@ def kernel_anchors(S, folder: str, flags: tuple[str, ...]) -> None:
         A, b, piv = np.empty_like(A0), np.empty_like(b0), np.zeros((P, N), np.int32)
         c_args = (_ptr(A0), _ptr(A), _ptr(b0), _ptr(b), _ptr(piv))
         t_c = (best(lambda: lib.lu_reps(reps, P, N, 1, *c_args)) - best(lambda: lib.lu_reps(reps, P, N, 0, *c_args)))
-        cap = -(-P // tape_kernel.WIDTH) * tape_kernel.WIDTH  # the compiled LU's last pass of four columns
+        cap = tape_kernel.capacity(P)  # as the tracker lays out its columns
         J0r, J0i = np.zeros((N + N * N, cap)), np.zeros((N + N * N, cap))
         J0r[N:, :P], J0i[N:, :P] = A0.reshape(P, -1).T.real, A0.reshape(P, -1).T.imag
         b0r, b0i = np.zeros((N, cap)), np.zeros((N, cap))

@@ -211,7 +211,7 @@ def test_pade_is_exact_on_a_pole():
     arr = [np.array([[z.real]]) for z in coeff] + [np.array([[z.imag]]) for z in coeff]
     xr, k1r, x2r, x3r, xi, k1i, x2i, x3i = arr
     out_r, out_i = np.zeros((1, 1)), np.zeros((1, 1))
-    tape_kernel._pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, 0, 1, out_r, out_i)
+    tape_kernel._pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, np.array([h]), 1, out_r, out_i, 1)
     np.testing.assert_allclose(out_r[0, 0] + 1j * out_i[0, 0], c / (1 - h / a), rtol=1e-13)
 
 
@@ -232,3 +232,12 @@ def test_pade_tracker_reaches_the_same_roots():
         x, st = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, options)
         assert np.all(st[ok, 0] == 0)
         np.testing.assert_allclose(x[ok], x_rk4[ok], rtol=1e-7, atol=1e-7 * np.abs(x_rk4[ok]).max())
+
+
+def test_tracker_capacity_avoids_power_of_two_rows():
+    """The tracker's arrays have room for every path and the compiled code's last pass of four, and an odd
+    number of 64-byte cache lines per row (rows a multiple of 128 bytes apart share few of the L1 cache's sets)."""
+    for M in [1, 3, 4, 63, 64, 65, 75, 152, 180, 344, 512]:
+        cap = tape_kernel.capacity(M)
+        assert cap >= M and cap % tape_kernel.WIDTH == 0
+        assert (8 * cap) % 64 == 0 and (8 * cap // 64) % 2 == 1, (M, cap)

@@ -42,7 +42,7 @@ from .tracker import TrackerOptions
 # The tapes' types (solvers.methods.slp.Tape, HomotopyTapes) are named in annotations only as strings:
 # slp imports this module's opcodes, and this module never imports slp (one direction of dependency).
 
-__all__ = ["OPCODES", "PREDICTORS", "evaluate", "newton", "run", "run_tape", "taylor", "track", "workspace"]
+__all__ = ["OPCODES", "PREDICTORS", "capacity", "evaluate", "newton", "run", "run_tape", "taylor", "track", "workspace"]
 
 #: Instruction set of the tape: d = a + b, a - b, a b, -a, imm a, a + imm, a a, imm; fused: c + imm a b
 #: (imm = +-1), a + imm b; OUT copies register a to output row d. a, b, c are registers, imm the
@@ -369,12 +369,13 @@ NEWTON_ONLY = 12
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-            st, dl, work, P):
+            st, dl, tv, work, P):
     """Taylor coefficients x2, x3 of the path x(s + t) = x + t x1 + t^2 x2 + t^3 x3 + ... (x1 = k1) at the
     columns with ``fresh``, with the factored Jacobian in the outputs: x_k = -J^-1 c_k, c_k the t^k
     coefficient of H along the path's lower-order expansion, by central differences of the residual tape
     (H at t = 0, +-d for c2; at +-d, +-2d for c3: the odd part of H(x + t x1 + t^2 x2) has no t term
-    then). The outputs' H rows are overwritten, the factorisation (rows N..) is kept."""
+    then). The outputs' H rows are overwritten, the factorisation (rows N..) is kept. Every loop runs
+    over the columns (vectorised); dl, tv, st: scratch (P,)."""
     for p in range(P):
         dl[p] = min(TAYLOR_DELTA, 0.1 * h[p])
     Cr, Ci, Tr, Ti = work[0], work[1], work[2], work[3]
@@ -383,19 +384,20 @@ def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, pi
         for p in range(P):
             Cr[v, p] = -2.0 * Or[v, p]
             Ci[v, p] = -2.0 * Oi[v, p]
-    # t = d, -d on x + t x1 (c2 -> x2, into T), then t = d, -d, 2d, -2d on x + t x1 + t^2 x2 (c3 with
-    # weights -2, 2, 1, -1 -> x3, in C): one evaluation site (T is zero for the first two points)
-    for v in range(N):
-        for p in range(P):
             Tr[v, p] = 0.0
             Ti[v, p] = 0.0
+    # t = d, -d on x + t x1 (c2 -> x2, into T), then t = d, -d, 2d, -2d on x + t x1 + t^2 x2 (c3 with
+    # weights -2, 2, 1, -1 -> x3, in C): one evaluation site (T is zero for the first two points)
     for k in range(6):
         m = (1.0 if k % 2 == 0 else -1.0) * (2.0 if k >= 4 else 1.0)
         w = 1.0 if k < 2 else (-2.0 * m if k < 4 else 0.5 * m)
         for p in range(P):
             t = m * dl[p]
+            tv[p] = t
             st[p] = s[p] + t
-            for v in range(N):
+        for v in range(N):
+            for p in range(P):
+                t = tv[p]
                 xtr[v, p] = xr[v, p] + t * (k1r[v, p] + t * Tr[v, p])
                 xti[v, p] = xi[v, p] + t * (k1i[v, p] + t * Ti[v, p])
         _eval(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xtr, xti, st, P)
@@ -404,23 +406,27 @@ def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, pi
                 Cr[v, p] += w * Or[v, p]
                 Ci[v, p] += w * Oi[v, p]
         if k == 1:  # x2 = -J^-1 c2, c2 = (H(d) + H(-d) - 2 H(0)) / (2 d^2)
+            for p in range(P):
+                tv[p] = -0.5 / (dl[p] * dl[p])
             for v in range(N):
                 for p in range(P):
-                    c = -0.5 / (dl[p] * dl[p])
+                    c = tv[p]
                     Tr[v, p] = c * Cr[v, p]
                     Ti[v, p] = c * Ci[v, p]
                     Cr[v, p] = 0.0
                     Ci[v, p] = 0.0
             _back(lin, Or, Oi, N, N, piv, Tr, Ti, P)
-    for v in range(N):  # x3 = -J^-1 c3, c3 = (H(2d) - 2 H(d) + 2 H(-d) - H(-2d)) / (12 d^3)
+    for p in range(P):  # x3 = -J^-1 c3, c3 = (H(2d) - 2 H(d) + 2 H(-d) - H(-2d)) / (12 d^3)
+        tv[p] = -1.0 / (12.0 * dl[p] * dl[p] * dl[p])
+    for v in range(N):
         for p in range(P):
-            c = -1.0 / (12.0 * dl[p] * dl[p] * dl[p])
+            c = tv[p]
             Cr[v, p] *= c
             Ci[v, p] *= c
     _back(lin, Or, Oi, N, N, piv, Cr, Ci, P)
-    for p in range(P):
-        if fresh[p]:
-            for v in range(N):
+    for v in range(N):
+        for p in range(P):
+            if fresh[p]:
                 x2r[v, p] = Tr[v, p]
                 x2i[v, p] = Ti[v, p]
                 x3r[v, p] = Cr[v, p]
@@ -428,28 +434,41 @@ def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, pi
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, p, N, xpr, xpi):
-    """Column p of xp = the path at s + h by the Pade approximant of type (2, 1) of each coordinate's
-    Taylor polynomial x + h x1 + h^2 x2 + h^3 x3: (x + (x1 + b x) h + (x2 + b x1) h^2) / (1 + b h),
+def _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, N, xpr, xpi, P):
+    """Columns p < P of xp = the path at s + h[p] by the Pade approximant of type (2, 1) of each
+    coordinate's Taylor polynomial x + h x1 + h^2 x2 + h^3 x3: (x + (x1 + b x) h + (x2 + b x1) h^2) / (1 + b h),
     b = -x3 / x2, where the pole's term matters (|x3| h >= 1e-2 |x2|); else the Taylor polynomial."""
     for v in range(N):
-        ar, ai = x2r[v, p], x2i[v, p]
-        cr, ci = x3r[v, p], x3i[v, p]
-        a2 = ar * ar + ai * ai
-        c2 = cr * cr + ci * ci
-        if a2 > 0.0 and c2 * h * h >= 1e-4 * a2:
-            br = -(cr * ar + ci * ai) / a2  # b = -x3 / x2
-            bi = -(ci * ar - cr * ai) / a2
-            nr = xr[v, p] + h * (k1r[v, p] + br * xr[v, p] - bi * xi[v, p]) + h * h * (ar + br * k1r[v, p] - bi * k1i[v, p])
-            ni = xi[v, p] + h * (k1i[v, p] + br * xi[v, p] + bi * xr[v, p]) + h * h * (ai + br * k1i[v, p] + bi * k1r[v, p])
-            dr = 1.0 + h * br
-            di = h * bi
-            d = dr * dr + di * di
-            xpr[v, p] = (nr * dr + ni * di) / d
-            xpi[v, p] = (ni * dr - nr * di) / d
-        else:
-            xpr[v, p] = xr[v, p] + h * (k1r[v, p] + h * (ar + h * cr))
-            xpi[v, p] = xi[v, p] + h * (k1i[v, p] + h * (ai + h * ci))
+        for p in range(P):
+            hp = h[p]
+            ar, ai = x2r[v, p], x2i[v, p]
+            cr, ci = x3r[v, p], x3i[v, p]
+            a2 = ar * ar + ai * ai
+            c2 = cr * cr + ci * ci
+            if a2 > 0.0 and c2 * hp * hp >= 1e-4 * a2:
+                br = -(cr * ar + ci * ai) / a2  # b = -x3 / x2
+                bi = -(ci * ar - cr * ai) / a2
+                nr = xr[v, p] + hp * (k1r[v, p] + br * xr[v, p] - bi * xi[v, p]) + hp * hp * (ar + br * k1r[v, p] - bi * k1i[v, p])
+                ni = xi[v, p] + hp * (k1i[v, p] + br * xi[v, p] + bi * xr[v, p]) + hp * hp * (ai + br * k1i[v, p] + bi * k1r[v, p])
+                dr = 1.0 + hp * br
+                di = hp * bi
+                d = dr * dr + di * di
+                xpr[v, p] = (nr * dr + ni * di) / d
+                xpi[v, p] = (ni * dr - nr * di) / d
+            else:
+                xpr[v, p] = xr[v, p] + hp * (k1r[v, p] + hp * (ar + hp * cr))
+                xpi[v, p] = xi[v, p] + hp * (k1i[v, p] + hp * (ai + hp * ci))
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def capacity(M):
+    """Columns of the tracker's arrays for M paths: room for the compiled code's last pass of four, and an odd
+    number of 64-byte cache lines per row (a multiple of 16 columns put 5r/5s's 64 paths on rows 512 bytes
+    apart, which share a few of the L1 cache's sets: the Jacobians' LU ran 2.3x slower, a plain track 1.15x)."""
+    cap = (max(M, 1) + 7) // 8 * 8
+    if cap % 16 == 0:
+        cap += 8
+    return cap
 
 
 @njit(cache=True, nogil=True)
@@ -465,7 +484,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
     pade = int(opts[11]) == PADE
     M, N = x0.shape
     Q = q0.shape[1]
-    cap = (max(M, 1) + WIDTH - 1) // WIDTH * WIDTH  # room for the compiled tapes' last pass
+    cap = capacity(M)
     fn, nfn, rfn = fns[0], fns[1], fns[2]
     lin = fns[3:5]  # compiled LU and solve (zeros: the batched kernels)
     Rr = np.zeros((n_reg, cap))
@@ -505,12 +524,14 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
     dxr = np.zeros((N, cap))
     dxi = np.zeros((N, cap))
     st = np.zeros(cap)
+    tv = np.zeros(cap)
     s1 = np.zeros(cap)
     scale = np.ones(cap)
     e0 = np.zeros(cap)
     e = np.zeros(cap)
     good = np.zeros(cap, dtype=np.bool_)  # predictor succeeded
-    done = np.zeros(cap, dtype=np.bool_)  # corrector finished
+    done = np.zeros(cap, dtype=np.bool_)  # corrector finished (then: step accepted)
+    live = np.zeros(cap, dtype=np.bool_)  # corrector running, Jacobian regular
     # Pade predictor: the path's Taylor coefficients x2, x3 at the last accepted point (x1 = k1)
     x2r = np.zeros((N, cap))
     x2i = np.zeros((N, cap))
@@ -537,7 +558,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
             fresh[p] = ok[p]
         if pade:
             _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-                    st, e, work, P)
+                    st, e, tv, work, P)
     while True:
         # -- retire the paths that ended (write results, compact the live columns) -------------
         w = np.int64(0)  # not a literal 0: see the final Newton steps below
@@ -609,20 +630,23 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
             s1[p] = s[p] + h[p]
             if 1.0 - s1[p] < 1e-14:
                 s1[p] = 1.0
-            if pade:
-                _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h[p], p, N, xpr, xpi)
-            else:
-                hh = h[p] / 6.0
-                for v in range(N):
-                    xpr[v, p] = xr[v, p] + hh * (k1r[v, p] + 2.0 * k2r[v, p] + 2.0 * k3r[v, p] + k4r[v, p])
-                    xpi[v, p] = xi[v, p] + hh * (k1i[v, p] + 2.0 * k2i[v, p] + 2.0 * k3i[v, p] + k4i[v, p])
-            acc = 0.0
-            for v in range(N):
-                acc += xpr[v, p] * xpr[v, p] + xpi[v, p] * xpi[v, p]
-            scale[p] = 1.0 + np.sqrt(acc)
             e0[p] = np.inf
             e[p] = np.inf
             done[p] = not good[p]
+            scale[p] = 0.0
+        if pade:
+            _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, N, xpr, xpi, P)
+        else:
+            for v in range(N):
+                for p in range(P):
+                    hh = h[p] / 6.0
+                    xpr[v, p] = xr[v, p] + hh * (k1r[v, p] + 2.0 * k2r[v, p] + 2.0 * k3r[v, p] + k4r[v, p])
+                    xpi[v, p] = xi[v, p] + hh * (k1i[v, p] + 2.0 * k2i[v, p] + 2.0 * k3i[v, p] + k4i[v, p])
+        for v in range(N):
+            for p in range(P):
+                scale[p] += xpr[v, p] * xpr[v, p] + xpi[v, p] * xpi[v, p]
+        for p in range(P):
+            scale[p] = 1.0 + np.sqrt(scale[p])
         # -- corrector. Newton: the last iteration's factorisation gives the tangent at the new point (at
         # the point before its correction; a path whose corrector finished earlier is evaluated there
         # too, at its final point). Chord: the first iteration's factorisation (at the predicted point)
@@ -637,18 +661,22 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
             else:
                 _newton_step(ncode, nimm, nfn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
             for p in range(P):
-                if done[p]:
-                    continue
-                if not ok[p]:
+                live[p] = not done[p] and ok[p]
+                if not done[p] and not ok[p]:
                     e[p] = np.inf
                     done[p] = True
+                tv[p] = 0.0
+            for v in range(N):  # (x - 0.0 is x: the columns that are not live keep their bits)
+                for p in range(P):
+                    ar = dxr[v, p] if live[p] else 0.0
+                    ai = dxi[v, p] if live[p] else 0.0
+                    xpr[v, p] -= ar
+                    xpi[v, p] -= ai
+                    tv[p] += ar * ar + ai * ai
+            for p in range(P):
+                if not live[p]:
                     continue
-                acc = 0.0
-                for v in range(N):
-                    xpr[v, p] -= dxr[v, p]
-                    xpi[v, p] -= dxi[v, p]
-                    acc += dxr[v, p] * dxr[v, p] + dxi[v, p] * dxi[v, p]
-                e[p] = np.sqrt(acc) / scale[p]
+                e[p] = np.sqrt(tv[p]) / scale[p]
                 if it == 0:
                     e0[p] = e[p]
                     if not (e0[p] < accept):
@@ -658,13 +686,17 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                     done[p] = True
         # -- accept or reject, step size -------------------------------------------------------------
         for p in range(P):
-            fresh[p] = False
-            if good[p] and np.isfinite(e[p]) and e0[p] < accept and (e[p] < tol or e[p] < contract * e0[p]):
-                for v in range(N):
+            done[p] = good[p] and np.isfinite(e[p]) and e0[p] < accept and (e[p] < tol or e[p] < contract * e0[p])
+        for v in range(N):
+            for p in range(P):
+                if done[p]:
                     xr[v, p] = xpr[v, p]
                     xi[v, p] = xpi[v, p]
                     k1r[v, p] = ktr[v, p]
                     k1i[v, p] = kti[v, p]
+        for p in range(P):
+            fresh[p] = False
+            if done[p]:
                 s[p] = s1[p]
                 steps[p] += 1
                 if s[p] >= 1.0:
@@ -687,7 +719,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                     status[p] = 2 if scale[p] > big else 1
         if pade:  # Taylor coefficients at the new points (the last factorisation is at each one's x')
             _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-                    st, e, work, P)
+                    st, e, tv, work, P)
     # -- Newton steps on the target system for the paths that reached s = 1 ---------------------------
     # (not "P = 0": numba's type inference would first type the calls below with the literal 0 and compile
     # everything they call a second time for it: several seconds of a first call in a fresh environment)
@@ -788,7 +820,7 @@ def taylor(tapes: "HomotopyTapes", x: np.ndarray, s: np.ndarray, q0: np.ndarray,
     _tangent(lin, Or, Oi, N, piv, k[0], k[1], P)
     _taylor(tapes.residual.code, tapes.residual.imm, 0, lin, Rr, Ri, Or, Oi, N, xr, xi, s, np.full(P, float(h)), k[0], k[1],
             piv, np.ones(P, dtype=np.bool_), k[2], k[3], k[4], k[5], np.empty((N, P)), np.empty((N, P)), np.empty(P),
-            np.empty(P), np.empty((4, N, P)), P)
+            np.empty(P), np.empty(P), np.empty((4, N, P)), P)
     return tuple((k[2 * j] + 1j * k[2 * j + 1]).T for j in range(3))
 
 
