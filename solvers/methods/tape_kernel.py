@@ -530,8 +530,9 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
     e0 = np.zeros(cap)
     e = np.zeros(cap)
     good = np.zeros(cap, dtype=np.bool_)  # predictor succeeded
-    done = np.zeros(cap, dtype=np.bool_)  # corrector finished (then: step accepted)
+    done = np.zeros(cap, dtype=np.bool_)  # corrector finished
     live = np.zeros(cap, dtype=np.bool_)  # corrector running, Jacobian regular
+    accepted = np.zeros(cap, dtype=np.bool_)  # step accepted
     # Pade predictor: the path's Taylor coefficients x2, x3 at the last accepted point (x1 = k1)
     x2r = np.zeros((N, cap))
     x2i = np.zeros((N, cap))
@@ -686,17 +687,17 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                     done[p] = True
         # -- accept or reject, step size -------------------------------------------------------------
         for p in range(P):
-            done[p] = good[p] and np.isfinite(e[p]) and e0[p] < accept and (e[p] < tol or e[p] < contract * e0[p])
+            accepted[p] = good[p] and np.isfinite(e[p]) and e0[p] < accept and (e[p] < tol or e[p] < contract * e0[p])
         for v in range(N):
             for p in range(P):
-                if done[p]:
+                if accepted[p]:
                     xr[v, p] = xpr[v, p]
                     xi[v, p] = xpi[v, p]
                     k1r[v, p] = ktr[v, p]
                     k1i[v, p] = kti[v, p]
         for p in range(P):
             fresh[p] = False
-            if done[p]:
+            if accepted[p]:
                 s[p] = s1[p]
                 steps[p] += 1
                 if s[p] >= 1.0:
