@@ -170,12 +170,12 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
             t_full, t_newton, t_res, t_lu = np.min(costs, axis=0)
             a, acc = float(np.median(attempts)), float(np.median(accepted))
             # per attempt: RK4 three full-tape stages, the corrector's Newton-tape steps and its last step on
-            # the full tape; Pade: no stage, and per accepted point (and the start) seven residual-tape runs
+            # the full tape; Pade: no stage, and per accepted point (and the start) four residual-tape runs
             # for the Taylor coefficients (their two solves reuse a factorisation: not counted)
             pade = opts.predictor == "pade"
             n_full = (1 if pade else 4) * a + 1
             n_newton = (opts.newton - 1) * a + opts.final_newton
-            n_res = 7 * (acc + 1) if pade else 0.0
+            n_res = 4 * (acc + 1) if pade else 0.0
             row.update({"predictor": opts.predictor, "attempts_per_path": a, "accepted_per_path": acc,
                         "evals_per_path": n_full + n_newton + n_res, "us_eval": 1e6 * t_full,
                         "us_eval_newton": 1e6 * t_newton, "us_eval_residual": 1e6 * t_res, "us_lu": 1e6 * t_lu,

@@ -195,7 +195,7 @@ def tail(S, module, networks: int, native) -> None:
         accepted = float(np.median(acc))
         n_full = (1 if pade else 4) * a1 + 1
         n_newton = (o.newton - 1) * a1 + o.final_newton
-        n_res = 7 * (accepted + 1) if pade else 0.0
+        n_res = 4 * (accepted + 1) if pade else 0.0
         ev = n_full * t_full + n_newton * t_newton + n_res * t_res
         lu = (n_full + n_newton) * t_lu
         print(f"  per path: evaluation {1e6 * ev:.0f} us + LU and solves {1e6 * lu:.0f} us + bookkeeping and tail "
@@ -223,13 +223,14 @@ def _taylor(S, x, s, J, Hs, q0, dq, h, how):
     N = S.nvars
     res = lambda Y, t: tape_kernel.run(S.tapes.residual, _inputs(S, Y, s + t, q0, dq))[:N]  # noqa: E731
     X = [x, -np.linalg.solve(J, Hs)]
-    if how == "differences":  # the tracker's: H at t = 0, +-d (c2); +-d, +-2d (c3)
+    if how == "differences":  # the tracker's: H at t = 0 (the full tape's), +-d on the line (c2); +-d3 on the curve (c3)
         d = min(tape_kernel.TAYLOR_DELTA, 0.1 * h)
         H = res(np.stack([x, x + d * X[1], x - d * X[1]], 1), np.array([0.0, d, -d]))
         X.append(-np.linalg.solve(J, (H[:, 1] + H[:, 2] - 2 * H[:, 0]) / (2 * d * d)))
-        t = np.array([d, -d, 2 * d, -2 * d])
+        d = min(tape_kernel.TAYLOR_DELTA3, 0.1 * h)
+        t = np.array([d, -d])
         H = res(x[:, None] + t * X[1][:, None] + t ** 2 * X[2][:, None], t)
-        X.append(-np.linalg.solve(J, (H[:, 2] - 2 * H[:, 0] + 2 * H[:, 1] - H[:, 3]) / (12 * d ** 3)))
+        X.append(-np.linalg.solve(J, (H[:, 0] - H[:, 1]) / (2 * d ** 3)))
         X.append(np.zeros(N, complex))  # x4 unknown: no local error estimate
         return X
     L, r = 16, max(min(0.25 * h, 0.05), 1e-6)  # exact up to aliasing r^16: samples on a circle, FFT

@@ -15,12 +15,14 @@ tracker for every solver), with bit-identical results, 1.5-3x faster, most in th
 
 Batched tracker (:func:`track`). The predictor-corrector of :mod:`solvers.methods.tracker` (classical
 RK4 on the tangent field, Newton corrector, step size from the first Newton correction; tight
-retracking by the caller), the step logic of ``tracker._track_one`` kept path by path but run in lock
-step. A second predictor, Pade (:func:`_pade`, :func:`_taylor`): at each accepted point the path's
+retracking by the caller), the step logic of ``tracker._track_one`` (with the finer step control below) kept path by path
+but run in lock step. A second predictor, Pade (:func:`_pade`, :func:`_taylor`): at each accepted point the path's
 Taylor coefficients x1 (the tangent), x2, x3 (central differences of the residual tape along the
-path's expansion, solved with the factorisation already at hand: seven runs of the short H tape, no
+path's expansion, solved with the factorisation already at hand: four runs of the short H tape, no
 factorisation) give a type (2, 1) Pade approximant per coordinate, which follows a nearby pole of the
-path (Timme 2021); a rejected step costs only its corrector. Each round every live path makes one
+path (Timme 2021); a rejected step costs only its corrector. The step aims at a first Newton correction
+of ``target``, or smaller where Newton's contraction asks for it (:func:`_aim`), and shrinks after a rejection
+by the same model (RK4 keeps the monomial tracker's steps: halve on rejection). Each round every live path makes one
 step attempt; each evaluation of H, dH/dx (and dH/ds) is one run of a tape over all live paths,
 followed by one batched LU with partial pivoting of the N x N Jacobians (paths in the inner loop). The Newton steps before the last use the tape without dH/ds
 (:class:`slp.HomotopyTapes`); the last one's factorisation gives the next tangent. Paths that end leave
@@ -358,6 +360,15 @@ def _load_segment(Rr, Ri, N, q0, dq, b, col):
 #: a tenth of the next step: the rounding error of x3 h^3 then stays ~ 1e3 eps times the terms' size).
 TAYLOR_DELTA = 1e-4
 
+#: The same for x3 (a third difference: its rounding error, ~ eps / d^3, balances the truncation error, ~ d^2,
+#: near eps^(1/5); at 1e-4 x3 was good to 2e-4 on the test path, at 5e-4 to 2e-5, in as many steps).
+TAYLOR_DELTA3 = 5e-4
+
+#: Step control: the contraction of Newton's method a step aims at, as a fraction of the accepted one
+#: (``contract``), and the largest shrink of a step after a rejection.
+CONTRACTION_AIM = 0.5
+REJECT_SHRINK = 0.1
+
 #: Index of the Pade predictor in :data:`tracker.PREDICTORS`.
 PADE = 2
 
@@ -368,29 +379,32 @@ NEWTON_ONLY = 12
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-            st, dl, tv, work, P):
-    """Taylor coefficients x2, x3 of the path x(s + t) = x + t x1 + t^2 x2 + t^3 x3 + ... (x1 = k1) at the
-    columns with ``fresh``, with the factored Jacobian in the outputs: x_k = -J^-1 c_k, c_k the t^k
-    coefficient of H along the path's lower-order expansion, by central differences of the residual tape
-    (H at t = 0, +-d for c2; at +-d, +-2d for c3: the odd part of H(x + t x1 + t^2 x2) has no t term
-    then). The outputs' H rows are overwritten, the factorisation (rows N..) is kept. Every loop runs
-    over the columns (vectorised); dl, tv, st: scratch (P,)."""
+def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, H0r, H0i, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i,
+            xtr, xti, st, dl, tv, work, P):
+    """Taylor coefficients x2, x3 of the path x(s + t) = x + t x1 + t^2 x2 + t^3 x3 + ... through the points x
+    where the full tape ran last (H0 = H there, x1 = k1 the tangent solved there with the factorisation in the
+    outputs), at the columns with ``fresh``: x_k = -J^-1 c_k, c_k the t^k coefficient of H along the path's
+    lower-order expansion, by central differences of the residual tape: c2 from H at t = +-d on x + t x1
+    (and H0), c3 from the odd part at t = +-d3 on x + t x1 + t^2 x2, which has no t term (J x1 + dH/ds = 0 at
+    x) and no t^2 term. Four runs. The outputs' H rows are overwritten, the factorisation (rows N..) is
+    kept. Every loop runs over the columns (vectorised); dl, tv, st: scratch (P,)."""
     for p in range(P):
         dl[p] = min(TAYLOR_DELTA, 0.1 * h[p])
     Cr, Ci, Tr, Ti = work[0], work[1], work[2], work[3]
-    _eval(rcode, rimm, rfn, Rr, Ri, Or, Oi, N, xr, xi, s, P)
     for v in range(N):
         for p in range(P):
-            Cr[v, p] = -2.0 * Or[v, p]
-            Ci[v, p] = -2.0 * Oi[v, p]
+            Cr[v, p] = -2.0 * H0r[v, p]
+            Ci[v, p] = -2.0 * H0i[v, p]
             Tr[v, p] = 0.0
             Ti[v, p] = 0.0
-    # t = d, -d on x + t x1 (c2 -> x2, into T), then t = d, -d, 2d, -2d on x + t x1 + t^2 x2 (c3 with
-    # weights -2, 2, 1, -1 -> x3, in C): one evaluation site (T is zero for the first two points)
-    for k in range(6):
-        m = (1.0 if k % 2 == 0 else -1.0) * (2.0 if k >= 4 else 1.0)
-        w = 1.0 if k < 2 else (-2.0 * m if k < 4 else 0.5 * m)
+    # t = d, -d on x + t x1 (c2 -> x2, into T), then t = d, -d on x + t x1 + t^2 x2 (c3 -> x3, in C): one
+    # evaluation site (T is zero for the first two points)
+    for k in range(4):
+        m = 1.0 if k % 2 == 0 else -1.0
+        w = 1.0 if k < 2 else m
+        if k == 2:
+            for p in range(P):
+                dl[p] = min(TAYLOR_DELTA3, 0.1 * h[p])
         for p in range(P):
             t = m * dl[p]
             tv[p] = t
@@ -405,7 +419,7 @@ def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, pi
             for p in range(P):
                 Cr[v, p] += w * Or[v, p]
                 Ci[v, p] += w * Oi[v, p]
-        if k == 1:  # x2 = -J^-1 c2, c2 = (H(d) + H(-d) - 2 H(0)) / (2 d^2)
+        if k == 1:  # x2 = -J^-1 c2, c2 = (H(d) + H(-d) - 2 H0) / (2 d^2)
             for p in range(P):
                 tv[p] = -0.5 / (dl[p] * dl[p])
             for v in range(N):
@@ -416,8 +430,8 @@ def _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, pi
                     Cr[v, p] = 0.0
                     Ci[v, p] = 0.0
             _back(lin, Or, Oi, N, N, piv, Tr, Ti, P)
-    for p in range(P):  # x3 = -J^-1 c3, c3 = (H(2d) - 2 H(d) + 2 H(-d) - H(-2d)) / (12 d^3)
-        tv[p] = -1.0 / (12.0 * dl[p] * dl[p] * dl[p])
+    for p in range(P):  # x3 = -J^-1 c3, c3 = (H(d) - H(-d)) / (2 d^3)
+        tv[p] = -0.5 / (dl[p] * dl[p] * dl[p])
     for v in range(N):
         for p in range(P):
             c = tv[p]
@@ -458,6 +472,26 @@ def _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, N, xpr, xpi, P):
             else:
                 xpr[v, p] = xr[v, p] + hp * (k1r[v, p] + hp * (ar + hp * cr))
                 xpi[v, p] = xi[v, p] + hp * (k1i[v, p] + hp * (ai + hp * ci))
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _keep_residual(Or, Oi, N, H0r, H0i, P):
+    """H0 = the outputs' H rows (the residual where the tape ran last)."""
+    for v in range(N):
+        for p in range(P):
+            H0r[v, p] = Or[v, p]
+            H0i[v, p] = Oi[v, p]
+
+
+@njit(cache=True, nogil=True, boundscheck=False, inline="always")
+def _aim(target, contract, e0, e):
+    """The first Newton correction to aim the next step at: the target, or less where Newton contracted
+    poorly. Newton's second correction is about (omega / 2) e0^2, so a first correction e0' gives a
+    contraction (omega / 2) e0'; aim at CONTRACTION_AIM times the accepted contraction (Timme 2021 drives the
+    step by the same estimate of omega)."""
+    if e > 0.0 and e0 > 0.0:
+        return min(target, CONTRACTION_AIM * contract * e0 * e0 / e)
+    return target
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -540,6 +574,12 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
     x3i = np.zeros((N, cap))
     work = np.zeros((4, N, cap))
     fresh = np.zeros(cap, dtype=np.bool_)
+    # where the full tape ran last in a round (the Taylor coefficients' expansion point) and H there
+    xqr = np.zeros((N, cap))
+    xqi = np.zeros((N, cap))
+    H0r = np.zeros((N, cap))
+    H0i = np.zeros((N, cap))
+    lastrej = np.zeros(cap, dtype=np.bool_)  # the path's last attempt was rejected
     # segment data in the tape's input rows (written again when columns move)
     for m in range(M):
         _load_segment(Rr, Ri, N, q0, dq, inst[m], m)
@@ -558,8 +598,9 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 status[p] = 1
             fresh[p] = ok[p]
         if pade:
-            _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-                    st, e, tv, work, P)
+            _keep_residual(Or, Oi, N, H0r, H0i, P)
+            _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, H0r, H0i, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r,
+                    x3i, xtr, xti, st, e, tv, work, P)
     while True:
         # -- retire the paths that ended (write results, compact the live columns) -------------
         w = np.int64(0)  # not a literal 0: see the final Newton steps below
@@ -593,6 +634,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 h[w] = h[p]
                 steps[w] = steps[p]
                 rejected[w] = rejected[p]
+                lastrej[w] = lastrej[p]
                 status[w] = -1
             w += 1
         P = w
@@ -659,6 +701,12 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
             elif it == newton - 1 or chord:
                 _newton_step(code, imm, fn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
                 _tangent(lin, Or, Oi, N, piv, ktr, kti, P)
+                if pade:  # the Taylor coefficients' expansion point: here J, dH/ds, H and the tangent agree
+                    _keep_residual(Or, Oi, N, H0r, H0i, P)
+                    for v in range(N):
+                        for p in range(P):
+                            xqr[v, p] = xpr[v, p]
+                            xqi[v, p] = xpi[v, p]
             else:
                 _newton_step(ncode, nimm, nfn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
             for p in range(P):
@@ -706,21 +754,33 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 if scale[p] > big:
                     status[p] = 2
                     continue
-                # local error ~ h^(order + 1) (RK4: 4, Pade (2, 1): 3): aim the next first correction at target
+                # local error ~ h^(order + 1) (RK4: 4, Pade (2, 1): 3): aim the next first correction at the
+                # target; Pade: or lower where Newton's contraction needs it (:func:`_aim`), and no growth right
+                # after a rejection (RK4 keeps tracker._track_one's steps)
                 f = 2.0
                 if e0[p] > 0:
-                    f = 0.8 * (target / e0[p]) ** (0.25 if pade else 0.2)
-                f = min(max(f, 0.5), 2.0)
+                    aim = _aim(target, contract, e0[p], e[p]) if pade else target
+                    f = 0.8 * (aim / e0[p]) ** (0.25 if pade else 0.2)
+                f = min(max(f, 0.5), 1.0 if pade and lastrej[p] else 2.0)
+                lastrej[p] = False
                 h[p] = min(h[p] * f, hmax)
                 fresh[p] = True
             else:
+                # halve; Pade: shrink to the step the same model predicts from this attempt's corrections (at
+                # least halve, at most by ten)
                 rejected[p] += 1
-                h[p] *= 0.5
+                lastrej[p] = True
+                f = 0.5
+                if pade and good[p] and e0[p] > 0 and np.isfinite(e0[p]) and np.isfinite(e[p]):
+                    aim = _aim(target, contract, e0[p], e[p]) if e0[p] < accept else target
+                    f = 0.8 * (aim / e0[p]) ** 0.25
+                    f = min(max(f, REJECT_SHRINK), 0.5)
+                h[p] *= f
                 if h[p] < hmin:
                     status[p] = 2 if scale[p] > big else 1
-        if pade:  # Taylor coefficients at the new points (the last factorisation is at each one's x')
-            _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r, x3i, xtr, xti,
-                    st, e, tv, work, P)
+        if pade:  # Taylor coefficients at the new points (expanded where the last full tape ran, see above)
+            _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xqr, xqi, H0r, H0i, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r,
+                    x3i, xtr, xti, st, e, tv, work, P)
     # -- Newton steps on the target system for the paths that reached s = 1 ---------------------------
     # (not "P = 0": numba's type inference would first type the calls below with the literal 0 and compile
     # everything they call a second time for it: several seconds of a first call in a fresh environment)
@@ -819,9 +879,10 @@ def taylor(tapes: "HomotopyTapes", x: np.ndarray, s: np.ndarray, q0: np.ndarray,
     k = [np.zeros((N, P)) for _ in range(6)]
     lin = np.zeros(2, dtype=np.int64)  # the batched kernels (these arrays have no room for compiled passes)
     _tangent(lin, Or, Oi, N, piv, k[0], k[1], P)
-    _taylor(tapes.residual.code, tapes.residual.imm, 0, lin, Rr, Ri, Or, Oi, N, xr, xi, s, np.full(P, float(h)), k[0], k[1],
-            piv, np.ones(P, dtype=np.bool_), k[2], k[3], k[4], k[5], np.empty((N, P)), np.empty((N, P)), np.empty(P),
-            np.empty(P), np.empty(P), np.empty((4, N, P)), P)
+    H0r, H0i = np.ascontiguousarray(Or[:N]), np.ascontiguousarray(Oi[:N])
+    _taylor(tapes.residual.code, tapes.residual.imm, 0, lin, Rr, Ri, Or, Oi, N, xr, xi, H0r, H0i, s, np.full(P, float(h)),
+            k[0], k[1], piv, np.ones(P, dtype=np.bool_), k[2], k[3], k[4], k[5], np.empty((N, P)), np.empty((N, P)),
+            np.empty(P), np.empty(P), np.empty(P), np.empty((4, N, P)), P)
     return tuple((k[2 * j] + 1j * k[2 * j + 1]).T for j in range(3))
 
 
