@@ -15,14 +15,12 @@ tracker for every solver), with bit-identical results, 1.5-3x faster, most in th
 
 Batched tracker (:func:`track`). The predictor-corrector of :mod:`solvers.methods.tracker` (classical
 RK4 on the tangent field, Newton corrector, step size from the first Newton correction; tight
-retracking by the caller), the step logic of ``tracker._track_one`` (with the finer step control below) kept path by path
-but run in lock step. A second predictor, Pade (:func:`_pade`, :func:`_taylor`): at each accepted point the path's
+retracking by the caller), the step logic of ``tracker._track_one`` kept path by path but run in lock
+step. A second predictor, Pade (:func:`_pade`, :func:`_taylor`): at each accepted point the path's
 Taylor coefficients x1 (the tangent), x2, x3 (central differences of the residual tape along the
 path's expansion, solved with the factorisation already at hand: four runs of the short H tape, no
 factorisation) give a type (2, 1) Pade approximant per coordinate, which follows a nearby pole of the
-path (Timme 2021); a rejected step costs only its corrector. The step aims at a first Newton correction
-of ``target``, or smaller where Newton's contraction asks for it (:func:`_aim`), and shrinks after a rejection
-by the same model (RK4 keeps the monomial tracker's steps: halve on rejection). Each round every live path makes one
+path (Timme 2021); a rejected step costs only its corrector. Each round every live path makes one
 step attempt; each evaluation of H, dH/dx (and dH/ds) is one run of a tape over all live paths,
 followed by one batched LU with partial pivoting of the N x N Jacobians (paths in the inner loop). The Newton steps before the last use the tape without dH/ds
 (:class:`slp.HomotopyTapes`); the last one's factorisation gives the next tangent. Paths that end leave
@@ -364,11 +362,6 @@ TAYLOR_DELTA = 1e-4
 #: near eps^(1/5); at 1e-4 x3 was good to 2e-4 on the test path, at 5e-4 to 2e-5, in as many steps).
 TAYLOR_DELTA3 = 5e-4
 
-#: Step control: the contraction of Newton's method a step aims at, as a fraction of the accepted one
-#: (``contract``), and the largest shrink of a step after a rejection.
-CONTRACTION_AIM = 0.5
-REJECT_SHRINK = 0.1
-
 #: Index of the Pade predictor in :data:`tracker.PREDICTORS`.
 PADE = 2
 
@@ -483,17 +476,6 @@ def _keep_residual(Or, Oi, N, H0r, H0i, P):
             H0i[v, p] = Oi[v, p]
 
 
-@njit(cache=True, nogil=True, boundscheck=False, inline="always")
-def _aim(target, contract, e0, e):
-    """The first Newton correction to aim the next step at: the target, or less where Newton contracted
-    poorly. Newton's second correction is about (omega / 2) e0^2, so a first correction e0' gives a
-    contraction (omega / 2) e0'; aim at CONTRACTION_AIM times the accepted contraction (Timme 2021 drives the
-    step by the same estimate of omega)."""
-    if e > 0.0 and e0 > 0.0:
-        return min(target, CONTRACTION_AIM * contract * e0 * e0 / e)
-    return target
-
-
 @njit(cache=True, nogil=True, boundscheck=False)
 def capacity(M):
     """Columns of the tracker's arrays for M paths: room for the compiled code's last pass of four, and an odd
@@ -579,7 +561,6 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
     xqi = np.zeros((N, cap))
     H0r = np.zeros((N, cap))
     H0i = np.zeros((N, cap))
-    lastrej = np.zeros(cap, dtype=np.bool_)  # the path's last attempt was rejected
     # segment data in the tape's input rows (written again when columns move)
     for m in range(M):
         _load_segment(Rr, Ri, N, q0, dq, inst[m], m)
@@ -634,7 +615,6 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 h[w] = h[p]
                 steps[w] = steps[p]
                 rejected[w] = rejected[p]
-                lastrej[w] = lastrej[p]
                 status[w] = -1
             w += 1
         P = w
@@ -754,28 +734,16 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 if scale[p] > big:
                     status[p] = 2
                     continue
-                # local error ~ h^(order + 1) (RK4: 4, Pade (2, 1): 3): aim the next first correction at the
-                # target; Pade: or lower where Newton's contraction needs it (:func:`_aim`), and no growth right
-                # after a rejection (RK4 keeps tracker._track_one's steps)
+                # local error ~ h^(order + 1) (RK4: 4, Pade (2, 1): 3): aim the next first correction at target
                 f = 2.0
                 if e0[p] > 0:
-                    aim = _aim(target, contract, e0[p], e[p]) if pade else target
-                    f = 0.8 * (aim / e0[p]) ** (0.25 if pade else 0.2)
-                f = min(max(f, 0.5), 1.0 if pade and lastrej[p] else 2.0)
-                lastrej[p] = False
+                    f = 0.8 * (target / e0[p]) ** (0.25 if pade else 0.2)
+                f = min(max(f, 0.5), 2.0)
                 h[p] = min(h[p] * f, hmax)
                 fresh[p] = True
             else:
-                # halve; Pade: shrink to the step the same model predicts from this attempt's corrections (at
-                # least halve, at most by ten)
                 rejected[p] += 1
-                lastrej[p] = True
-                f = 0.5
-                if pade and good[p] and e0[p] > 0 and np.isfinite(e0[p]) and np.isfinite(e[p]):
-                    aim = _aim(target, contract, e0[p], e[p]) if e0[p] < accept else target
-                    f = 0.8 * (aim / e0[p]) ** 0.25
-                    f = min(max(f, REJECT_SHRINK), 0.5)
-                h[p] *= f
+                h[p] *= 0.5
                 if h[p] < hmin:
                     status[p] = 2 if scale[p] > big else 1
         if pade:  # Taylor coefficients at the new points (expanded where the last full tape ran, see above)
