@@ -17,9 +17,9 @@ Every homotopy solver's root count is certified over GF(p) first (two primes, tw
 checked); monodromy must reach exactly that count. Its start pair (generic complex parameters with
 one known root) comes from a complex network for TDOA systems, is drawn for a system linear in its
 parameters, or is given by the user; a system not linear in its parameters without one is refused
-before any work. An over-determined formulation (5r4s, 5r5s) is squared by random integer
-combinations of its minors; the full system's count is certified too, and only the start roots that
-satisfy it are tracked (5r/5s: 64 of the squared system's 710).
+before any work. An over-determined formulation is squared by random integer combinations of its
+minors (5r4s) or by a choice of them (5r5s: its four principal minors); the full system's count is
+certified too, and only the start roots that satisfy it are tracked (5r/5s: 64 of the square system's 330).
 
 The committed solvers (solvers/generated/) are written by ``scripts/generate_solvers.py``;
 :func:`emit_committed` re-emits one from its committed spec (no numerics recomputed).
@@ -68,7 +68,17 @@ POSITIONS = {"4r5s": "receivers-orbits"}
 
 #: Over-determined formulations (dependent rank-2 minors): keep this many leading equations and replace
 #: the minors by random integer combinations (analysis.parametric.square); counted on one seed.
-SQUARED = {"5r4s": 7, "5r5s": 6}
+SQUARED = {"5r4s": 7}
+
+#: Over-determined formulations squared by a choice of their minors instead (the square system is the
+#: formulation's other equations and these minors; the full system's count is certified too and only its
+#: roots are tracked, as for SQUARED). 5r/5s: the four principal 3 x 3 minors of the 4 x 4 compaction matrix
+#: (each receiver row and transmitter column left out once) have 330 roots with B2, B3, C2-C5 (det H
+#: saturated), the 64 of the full system among them, where four random combinations of all 16 minors have
+#: 710: the program evaluates 4 minors instead of 16 (full tape 1011 instructions against 1887), and its
+#: plain track took 199 against 252 us per path (same attempts, 1000 networks: the same failure, 819;
+#: tables/NOTES.md).
+SQUARE_MINORS = {"5r5s": ("M123_123", "M124_124", "M134_134", "M234_234")}
 
 #: Step control of a configuration's tracking, written into its spec over the method's defaults: "tracker"
 #: (the plain track, :class:`solvers.methods.tracker.TrackerOptions` fields) and "retrack" (fields replaced
@@ -96,6 +106,9 @@ def solver_system(label: str) -> ParametricSystem:
     if label in POSITIONS:
         m, n = (int(v) for v in label[:-1].split("r"))
         return from_positions(m, n, POSITIONS[label])
+    if label in SQUARE_MINORS:
+        kept = SOLVERS[label].rsplit(",", 1)[0]  # the formulation without its family of minors
+        return from_formulation(kept + "," + ",".join(SQUARE_MINORS[label]), saturate_det_h=True)
     system = from_formulation(SOLVERS[label], saturate_det_h=True)
     if label in SQUARED:
         system = square(system, SQUARED[label], seed=0, name=squared_name(system.name, 0))
@@ -431,10 +444,11 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
     if chosen in ("curve-pencil", "offset-kernel"):
         return Job(name, formulation, config=config), chosen, label
     system = solver_system(label) if label else from_formulation(formulation, saturate_det_h=True)
-    full = from_formulation(formulation, saturate_det_h=True) if label in SQUARED else None
+    squared = label in SQUARED or label in SQUARE_MINORS
+    full = from_formulation(formulation, saturate_det_h=True) if squared else None
     trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
     return (Job(name, formulation, system, config, _tdoa_start(*config), trials, full,
-                seeds=(0,) if label in SQUARED else (0, 1), step_control=STEP_CONTROL.get(label)), chosen, label)
+                seeds=(0,) if squared else (0, 1), step_control=STEP_CONTROL.get(label)), chosen, label)
 
 
 def _identifier(text: str) -> str:
