@@ -342,11 +342,10 @@ class HomotopySolver:
         """
         B, K = len(q), len(xa)
         inst = np.repeat(np.arange(B), K)
-        x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), inst, near_end=1.0)  # stalled: last points kept
+        x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), inst)
         x = x.reshape(B, K, -1)
         stalled = stats[:, 0].reshape(B, K) == 1
-        last, x[stalled] = x[stalled], np.nan
-        self._local_detours(qa, xa, q, x, stalled, stats[:, 3].reshape(B, K)[stalled], last)
+        self._local_detours(qa, xa, q, x, stalled, stats[:, 3].reshape(B, K)[stalled])
         redo = stalled & ~np.all(np.isfinite(x), axis=2)
         for b in range(B):
             redo[b] |= _duplicated(x[b])
@@ -360,13 +359,13 @@ class HomotopySolver:
         return x, complete
 
     def _local_detours(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, x: np.ndarray, stalled: np.ndarray,
-                       at: np.ndarray, last: np.ndarray) -> None:
-        """Track the stalled paths (mask (B, K); they stalled at s = at, last points ``last``) around their
+                       at: np.ndarray) -> None:
+        """Track the stalled paths (mask (B, K); they stalled at s = at) from their start roots xa around their
         stall points (:data:`LOCAL_DETOUR`) into x (B, K, N), in place, where the endpoint is finite and
         distinct from the instance's other endpoints; one side of s*, then the other. Instances with many
         failed paths (degenerate data) are left to the caller."""
         bi, ki = np.nonzero(stalled)
-        keep = np.array([not _degenerate(stalled[b]) for b in bi], dtype=bool) & np.all(np.isfinite(last), axis=1)
+        keep = np.array([not _degenerate(stalled[b]) for b in bi], dtype=bool)
         bi, ki, at = bi[keep], ki[keep], at[keep]
         d = np.minimum(LOCAL_DETOUR, np.minimum(at, 0.5 * (1.0 - at)))
         keep = d > 0
