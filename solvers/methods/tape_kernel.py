@@ -468,12 +468,12 @@ def _pade(xr, xi, k1r, k1i, x2r, x2i, x3r, x3i, h, N, xpr, xpi, P):
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
-def _keep_residual(Or, Oi, N, H0r, H0i, P):
-    """H0 = the outputs' H rows (the residual where the tape ran last)."""
+def _copy_rows(Ar, Ai, N, Br, Bi, P):
+    """B = the first N rows of A (columns p < P)."""
     for v in range(N):
         for p in range(P):
-            H0r[v, p] = Or[v, p]
-            H0i[v, p] = Oi[v, p]
+            Br[v, p] = Ar[v, p]
+            Bi[v, p] = Ai[v, p]
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -579,7 +579,7 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 status[p] = 1
             fresh[p] = ok[p]
         if pade:
-            _keep_residual(Or, Oi, N, H0r, H0i, P)
+            _copy_rows(Or, Oi, N, H0r, H0i, P)  # H where the full tape ran
             _taylor(rcode, rimm, rfn, lin, Rr, Ri, Or, Oi, N, xr, xi, H0r, H0i, s, h, k1r, k1i, piv, fresh, x2r, x2i, x3r,
                     x3i, xtr, xti, st, e, tv, work, P)
     while True:
@@ -682,11 +682,8 @@ def _track_batch(code, imm, ncode, nimm, rcode, rimm, fns, chord, n_reg, n_out, 
                 _newton_step(code, imm, fn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
                 _tangent(lin, Or, Oi, N, piv, ktr, kti, P)
                 if pade:  # the Taylor coefficients' expansion point: here J, dH/ds, H and the tangent agree
-                    _keep_residual(Or, Oi, N, H0r, H0i, P)
-                    for v in range(N):
-                        for p in range(P):
-                            xqr[v, p] = xpr[v, p]
-                            xqi[v, p] = xpi[v, p]
+                    _copy_rows(Or, Oi, N, H0r, H0i, P)
+                    _copy_rows(xpr, xpi, N, xqr, xqi, P)
             else:
                 _newton_step(ncode, nimm, nfn, lin, Rr, Ri, Or, Oi, N, xpr, xpi, s1, piv, ok, dxr, dxi, P)
             for p in range(P):
