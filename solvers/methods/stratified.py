@@ -109,8 +109,12 @@ def solve_block(F: np.ndarray, sigma: float | None = None, trim: bool = False) -
     F = np.asarray(F, dtype=float)
     m, n = F.shape
     if trim and m > MIN_RECEIVERS and n == TRANSMITTERS and np.all(np.isfinite(F)):
+        scale = float(np.sqrt(np.mean(F * F))) or 1.0
+        s2 = _offsets(F / scale)[1]  # coplanar on the whole block (a sub-block may look less so)
+        if not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
+            return BlockOutcome(None, None, None, f"coplanar receivers (second kernel singular value {s2:.2g})")
         rows, cols = _trim(F)
-        out = _solve(F[np.ix_(rows, cols)], sigma)
+        out = _solve(F[np.ix_(rows, cols)], sigma, coplanar_checked=True)
         if not out.solved:
             return out
         R = np.full((m, 3), np.nan)
@@ -121,7 +125,7 @@ def solve_block(F: np.ndarray, sigma: float | None = None, trim: bool = False) -
     return _solve(F, sigma)
 
 
-def _solve(F: np.ndarray, sigma: float | None = None) -> BlockOutcome:
+def _solve(F: np.ndarray, sigma: float | None = None, coplanar_checked: bool = False) -> BlockOutcome:
     """One hypothesis from a fully measured block F (m >= 10 receivers x 5 transmitters) in 3D.
 
     sigma: the noise level of F when known. Coplanar receivers make D~ of rank 2 at the true offsets, so
@@ -146,7 +150,7 @@ def _solve(F: np.ndarray, sigma: float | None = None) -> BlockOutcome:
     scale = float(np.sqrt(np.mean(F * F))) or 1.0
     F = F / scale
     o, s2 = _offsets(F)
-    if not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
+    if not coplanar_checked and not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
         return BlockOutcome(None, None, None, f"coplanar receivers (second kernel singular value {s2:.2g})")
     if o is None:
         return BlockOutcome(None, None, None, "offset kernel without a usable solution")
