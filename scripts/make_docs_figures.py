@@ -4,8 +4,8 @@
 
 writes ``docs/figures/tour-{reproduce,explore,generate,calibrate}.png`` (default DIR: docs/figures of the
 repository). Every picture is computed from seeded inputs or committed tables, and saved without dates
-or version strings, so a rerun on the same versions writes the same bytes (``tests/test_docs.py`` checks
-it, marked slow). About 15 s.
+(PNG metadata: matplotlib's version only), so a rerun on the same versions writes the same bytes
+(``tests/test_docs.py`` checks it, marked slow). About 15 s.
 """
 from __future__ import annotations
 
@@ -24,8 +24,6 @@ import pandas as pd  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # this checkout's packages, not whichever one is installed
 FIGURES = REPO / "docs" / "figures"
-#: PNG text chunks left out: matplotlib writes its version as "Software" otherwise.
-PNG_METADATA = {"Software": None}
 #: The explore picture's formulations: Table 2's 9r/3s and 6r/3s rows (degrees 75 and 181).
 EXPLORE = ("9r3s:C2-C9", "6r3s:A,B2,B3,C2-C6")
 
@@ -43,7 +41,7 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str, path: Path) -> Path:
 def _save(fig, path: Path) -> Path:
     """Write ``fig`` as PNG at 100 dpi; the file is rewritten only when its bytes change."""
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100, metadata=PNG_METADATA)
+    fig.savefig(buffer, format="png", dpi=100)  # PNG metadata: matplotlib's version only, no date
     plt.close(fig)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists() or path.read_bytes() != buffer.getvalue():
@@ -117,26 +115,9 @@ def calibrate(out: Path) -> Path:
     data = read_measurements(str(REPO / "examples" / "network_10r8s.csv"))
     result = run(data.F, sigma=0.01, seed=0)
     path = out / "tour-calibrate.png"
-    buffer = out / "tour-calibrate.tmp.png"
-    plot_calibration(result, str(buffer), data, units="m")
-    # plot_calibration writes matplotlib's version into the PNG; redraw-free fix: strip that text chunk
-    raw = _strip_text_chunks(buffer.read_bytes())
-    buffer.unlink()
-    if not path.exists() or path.read_bytes() != raw:
-        path.write_bytes(raw)
+    out.mkdir(parents=True, exist_ok=True)
+    plot_calibration(result, str(path), data, units="m")
     return path
-
-
-def _strip_text_chunks(png: bytes) -> bytes:
-    """A PNG without its tEXt/iTXt/zTXt chunks (the image data are untouched)."""
-    head, pos, kept = png[:8], 8, []
-    while pos < len(png):
-        length = int.from_bytes(png[pos:pos + 4], "big")
-        chunk = png[pos:pos + 12 + length]
-        if chunk[4:8] not in (b"tEXt", b"iTXt", b"zTXt"):
-            kept.append(chunk)
-        pos += 12 + length
-    return head + b"".join(kept)
 
 
 def main(argv: list[str] | None = None) -> list[Path]:
