@@ -119,6 +119,7 @@ def _shims(bin_dir: Path) -> None:
 def run_console(text: str, cwd: Path) -> list[tuple[str, str, str]]:
     """Run a console block's commands in one bash session; (command, shown, got) per command."""
     pairs = console_commands(text)
+    assert pairs, "a console block without '$ ' commands"
     _shims(cwd / ".bin")
     separator = "@@@docs-test-separator@@@"
     script = "\n".join(f"echo {separator}\n{{ {command}\n}} 2>&1" for command, _ in pairs)
@@ -153,6 +154,7 @@ def test_docs_example(block: Block, tmp_path, monkeypatch):
         monkeypatch.chdir(tmp_path)
         monkeypatch.syspath_prepend(str(ROOT))
         test = doctest.DocTestParser().get_doctest(block.text, {}, block.name, str(block.page), block.line)
+        assert test.examples, f"{block.name}: a pycon block without '>>> ' lines"
         runner = doctest.DocTestRunner(optionflags=CHECK)
         report: list[str] = []
         runner.run(test, out=report.append)
