@@ -226,8 +226,6 @@ def test_collinear_receivers_are_warned_about_with_their_mirror_ambiguity():
     assert mirrored == {f"transmitter {j}" for j in range(1, 6)}, res.warnings
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 item 3: the status is 'ok' beside mirror positions that fit as "
-                   "well; the data cannot decide, so it must not be ok (remove this mark when that is fixed)")
 def test_collinear_receivers_are_not_ok():
     res = calibrate(_collinear_receivers())
     assert res.status == "ambiguous", res.message

@@ -304,3 +304,24 @@ def test_exit_status_is_0_only_for_ok_and_the_message_comes_first(capsys, monkey
     assert code == (0 if status == "ok" else 1) and out.splitlines()[0] == f"{status}: what calibrate says"
     code, out, _ = run(capsys, "calibrate", path, "--json")
     assert code == (0 if status == "ok" else 1) and json.loads(out)["status"] == status
+
+
+def test_dim_3_from_a_csv(capsys, tmp_path):
+    """calibrate --dim 3: x, y, z columns, a JSON with dim 3 and three coordinates, three projections drawn."""
+    from solvers.synthetic import room_network
+
+    net = room_network(12, 8, np.random.default_rng(3))
+    F = net.measurements(1e-3, np.random.default_rng(4))
+    path = tmp_path / "room.csv"
+    path.write_text("\n".join(",".join(f"{v:.6f}" for v in row) for row in F) + "\n")
+    plot = tmp_path / "room.png"
+    code, out, _ = run(capsys, "calibrate", str(path), "--dim", "3", "--sigma", "0.001", "--plot", str(plot))
+    assert code == 0, out
+    assert re.search(r"node\s+x\s+y\s+z\s+offset", out)
+    assert plot.stat().st_size > 10_000
+    code, out, _ = run(capsys, "calibrate", str(path), "--dim", "3", "--sigma", "0.001", "--json")
+    report = json.loads(out)
+    assert report["dim"] == 3 and len(report["receivers"][0]) == 3 and len(report["gauge"]) == 3
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", str(path), "--dim", "4"])
+    assert exc.value.code == 2

@@ -68,10 +68,14 @@ def _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor) -> list[st
     var = max(sigma, floor) ** 2
     dim = R.shape[1]
     across = "line" if dim == 2 else "plane"
+    # a gauge receiver's std is 0 by definition: its position is as uncertain as a typical node's
+    every = np.concatenate([rstd, tstd])
+    typical = float(np.median(every[np.isfinite(every) & (every > 0)])) if (np.isfinite(every) & (every > 0)).any() else 0.0
     for kind, k, alt, ssr_alt, ssr_now in _mirror_alternatives(F, inl, R, S, O):
         X, std = (R, rstd) if kind == "receiver" else (S, tstd)
         delta = (ssr_alt - ssr_now) / var
-        apart = np.linalg.norm(alt[:dim] - X[k]) > max(3.0 * np.nan_to_num(std[k], nan=0.0, posinf=0.0), 1e3 * floor)
+        own = float(np.nan_to_num(std[k], nan=0.0, posinf=0.0))
+        apart = np.linalg.norm(alt[:dim] - X[k]) > max(3.0 * (own if own > 0 else typical), 1e3 * floor)
         if apart and delta < opts.ambiguity_chi2:
             partners = "transmitters" if kind == "receiver" else "receivers"
             where = ", ".join(f"{v:.4g}" for v in alt[:dim])
@@ -229,8 +233,9 @@ def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, sea
     mirrors = _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor)
     out += mirrors
     if mirrors:
-        undecided.append(f"{len(mirrors)} node(s) have a mirror position that fits their measurements as well "
-                         f"(first: {mirrors[0]})")
+        nodes = ", ".join(w.split(":")[0] for w in mirrors[:4]) + (", ..." if len(mirrors) > 4 else "")
+        undecided.append(f"{len(mirrors)} node(s) ({nodes}) have a mirror image that fits their measurements as "
+                         "well: the data do not decide their side")
     # An alternative hypothesis (after local optimisation) of similar cost that is a different network.
     var = max(sigma, floor) ** 2
     best_cost = float(np.sum(np.minimum(_residual_matrix(F, R, S, O)[work] ** 2, (opts.threshold_sigmas ** 2) * var)))

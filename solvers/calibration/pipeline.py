@@ -121,6 +121,8 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
                 result = replace(first, warnings=first.warnings + (note,))
     if dim == 2 and result.status in ("inconsistent", "unconverged", "failed"):
         result = _suggest_3d(F, sigma, seed, opts, t0, result)
+    if sigma is None and result.status in ("ok", "uncontrolled", "ambiguous"):
+        result = _check_orientation(F, seed, opts, t0, dim, result)
     return replace(result, seconds=time.perf_counter() - t0, seed=seed)
 
 
@@ -150,6 +152,39 @@ def _check_sigma(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result:
             f"give --sigma {est.sigma:.2g} or omit it")
     return replace(est, status="inconsistent", message=_message("inconsistent", est, note),
                    warnings=(note,) + est.warnings)
+
+
+#: The transposed matrix's sigma estimate below this fraction of the answer's: the file is transposed.
+TRANSPOSED_SIGMA_RATIO = 1.0 / 3.0
+
+
+def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: CalibrationResult) -> CalibrationResult:
+    """With sigma estimated, a transposed matrix (transmitters as rows) can be fitted too, on its own
+    inflated noise scale. Where the transposed matrix is a calibratable shape, it is fitted with a small
+    budget (a matrix in the right orientation is found quickly: clean data fit at once); when its sigma
+    estimate is below TRANSPOSED_SIGMA_RATIO x this one's and it passes its checks, the data are
+    transposed: status "inconsistent", and the message says so. A fit of the transposed matrix that is
+    merely as good makes the orientation undecided: status "ambiguous"."""
+    m, n = F.shape
+    need_r, need_t = min_measurements(dim)
+    if n < need_t or m < need_r or int(np.isfinite(F).sum()) <= n_unknowns(n, m, dim):
+        return result
+    quick = replace(opts, stability_check=False, max_samples=min(opts.max_samples, 20),
+                    subnetwork_samples=min(opts.subnetwork_samples, 10), max_confirm_samples=5)
+    other = _calibrate_once(np.ascontiguousarray(F.T), None, seed, quick, t0, dim)
+    if other.status not in ("ok", "uncontrolled", "ambiguous") or not np.isfinite(other.sigma):
+        return result
+    if other.sigma < TRANSPOSED_SIGMA_RATIO * result.sigma:
+        note = (f"the transposed matrix fits far better (sigma {other.sigma:.3g} against {result.sigma:.3g}): the rows "
+                "look like transmitters; give --transpose (calibrate(F.T))")
+        return replace(result, status=_worst(result.status, "inconsistent"), warnings=(note,) + result.warnings,
+                       message=_message(_worst(result.status, "inconsistent"), result, note))
+    if result.sigma < TRANSPOSED_SIGMA_RATIO * other.sigma:
+        return result
+    note = (f"the transposed matrix fits about as well (sigma {other.sigma:.3g} against {result.sigma:.3g}): the data do "
+            "not decide whether rows are receivers or transmitters")
+    return replace(result, status=_worst(result.status, "ambiguous"), warnings=(note,) + result.warnings,
+                   message=_message(_worst(result.status, "ambiguous"), result, note))
 
 
 def _suggest_3d(F, sigma, seed, opts: CalibrationOptions, t0, result: CalibrationResult) -> CalibrationResult:
@@ -626,6 +661,10 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int) -> C
     unplaced = int((~placed_r & mask.any(axis=1)).sum() + (~placed_t & mask.any(axis=0)).sum())
     if unplaced:
         found.append(("partial", f"{unplaced} node(s) with measurements could not be placed"))
+    if search.short_of > 0:
+        found.append(("uncontrolled", f"the hypothesis search stopped at its budget of {opts.max_samples} samples, "
+                      f"{search.short_of} short of the {opts.confidence:g} confidence of a sample without gross "
+                      "errors: a better calibration may exist (give sigma, or raise max_samples)"))
     if sigma is None and (st is None or st.dof < opts.min_dof_for_sigma):
         dof = st.dof if st is not None else 0
         found.append(("uncontrolled", f"too little redundancy to estimate sigma ({dof} degrees of freedom, needs "

@@ -482,6 +482,9 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     confident = best is not None and ((needed == 0 and search.samples >= floor_samples)
                                       or search.samples >= max(needed, opts.min_samples))
     small = _n_params_mask(mask, dim) <= opts.subnetwork_max_params
+    if not confident and search.samples >= opts.max_samples:
+        # stopped by the budget, not by the confidence (nor by running out of blocks)
+        search.short_of = int(min(needed, 1e9)) - search.samples
     if confident or (best is not None and not small and search.samples >= opts.min_samples):
         return best, search
     # Sub-networks: the blocks ran out before the adaptive count was reached in a small network (few

@@ -133,3 +133,4 @@ class _Search:
     others: list = field(default_factory=list)  # distinct refined models (alternatives)
     runners_up: list = field(default_factory=list)  # unrefined models that did not beat the best
     accepted: bool = False  # the search ended because the best model passed the all-data test
+    short_of: int = 0  # samples the confidence still needed when the budget (max_samples) stopped the search
