@@ -3,8 +3,9 @@
  * Loaded through ctypes by analysis/native.py (compiled there on first use with the system's C compiler
  * and cached); no Python API. Same results as the numba kernel sparse_echelon, and the same design: the
  * rows are reduced in dense 64-bit accumulators by the sparse, unreduced pivot rows, with delayed modular
- * reduction; in echelon mode the rows that do not vanish become pivots, and at the end every new pivot is
- * swept once more (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in
+ * reduction where the sums cannot overflow (small primes) and accumulators bounded by p**2 by one compare
+ * and subtract per product elsewhere (31-bit primes; modulus_t), never a division per product; in echelon
+ * mode the rows that do not vanish become pivots, and at the end every new pivot is swept once more (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in
  * interleaved accumulators: a pivot row is read once per block and applied to all its rows with vector
  * multiplies, and the rows of a block that find no pivot at a column eliminate it among themselves.
  *
@@ -41,6 +42,38 @@ static int room(store_t *s, int64_t more)
     return 0;
 }
 
+/* The prime and its arithmetic. Products of two entries (< p < 2**31) are below p2 = p * p < 2**62. An
+ * accumulator is either delayed (no reduction until it is read; chosen when the largest possible sum of
+ * products, one per pivot and row, stays below 2**62) or bounded: kept below p2 by subtracting p2 after
+ * every addition (the sum of an accumulator and a product is below 2 * p2 < 2**63), as msolve's 31-bit
+ * kernels do; a single compare and subtract, no division. Entries are brought to [0, p) by Barrett
+ * reduction (a multiply by a precomputed floor(2**64 / p), no division). */
+typedef struct {
+    uint64_t p, p2, barrett;
+    int delayed;
+} modulus_t;
+
+static modulus_t modulus(uint64_t p, double additions)
+{
+    modulus_t m = {p, p * p, UINT64_MAX / p, additions * (p - 1.0) * (p - 1.0) + p < 4611686018427387904.0};
+    return m;
+}
+
+/* x mod p for any 64-bit x: the quotient estimate (x * floor(2**64 / p)) >> 64 is short by at most 2 */
+static inline uint64_t reduce(const modulus_t *m, uint64_t x)
+{
+#if defined(__SIZEOF_INT128__)
+    uint64_t r = x - (uint64_t)(((unsigned __int128)x * m->barrett) >> 64) * m->p;
+    r = r >= m->p ? r - m->p : r;
+    return r >= m->p ? r - m->p : r;
+#else
+    return x % m->p;
+#endif
+}
+
+/* a bounded accumulator after one addition (x < 2 * p2): below p2 again */
+static inline uint64_t bound(uint64_t x, uint64_t p2) { return x >= p2 ? x - p2 : x; }
+
 static int64_t inverse(int64_t a, int64_t p)
 {
     int64_t t = 0, nt = 1, r = p, nr = a;
@@ -58,15 +91,15 @@ static int64_t inverse(int64_t a, int64_t p)
 static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t *pivot_of, const int64_t *starts,
                      const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
                      const int64_t *piv_voff, int64_t npiv,
-                     const int32_t *scols, const int32_t *svals, uint64_t p, int delayed, int64_t skip)
+                     const int32_t *scols, const int32_t *svals, const modulus_t *mod, int64_t skip)
 {
     int64_t nnz = 0;
+    uint64_t p = mod->p, p2 = mod->p2;
     for (int64_t c = first; c < ncols; c++) {
         uint64_t a = acc[c];
         if (!a)
             continue;
-        if (delayed)
-            a %= p;
+        a = reduce(mod, a);
         if (!a) {
             acc[c] = 0;
             continue;
@@ -83,12 +116,12 @@ static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t 
         const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
         const int32_t *pv = k < npiv ? piv_vals + piv_voff[k] + 1 : svals + starts[k] + 1;
         int64_t n = ends[k] - starts[k] - 1;
-        if (delayed) {
+        if (mod->delayed) {
             for (int64_t t = 0; t < n; t++)
                 acc[pc[t]] += m * (uint64_t)pv[t];
         } else {
             for (int64_t t = 0; t < n; t++)
-                acc[pc[t]] = (acc[pc[t]] + m * (uint64_t)pv[t]) % p;
+                acc[pc[t]] = bound(acc[pc[t]] + m * (uint64_t)pv[t], p2);
         }
     }
     return nnz;
@@ -110,13 +143,38 @@ static int64_t gather(uint64_t *acc, int64_t first, int64_t ncols, int32_t *cols
 
 #define BLOCK 8 /* rows reduced together: each pivot row is read once per block, not once per row */
 
-/* y[c * BLOCK + r] += m[r] * v[t] at the columns c = col[t] of a pivot's tail, all BLOCK rows at once
- * (delayed reduction: no mod). m[r] and v[t] are below 2**32, so every product is one 32 x 32 -> 64-bit
- * vector multiply; AVX2 where the processor has it (checked at run time), else SSE2 (every x86-64), else
- * plain C. */
-#if defined(__x86_64__)
-static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m)
+/* y[c * BLOCK + r] += m[r] * v[t] at the columns c = col[t] of a pivot's tail, all BLOCK rows at once.
+ * m[r] and v[t] are below 2**31, so every product is one 32 x 32 -> 64-bit vector multiply. Delayed
+ * accumulators take the sum as it is; bounded ones (see modulus_t) are brought below p2 again by one
+ * compare and subtract (AVX-512: min(y, y - p2) in unsigned lanes, y - p2 wrapping around when y < p2).
+ * AVX-512 or AVX2 where the processor has it (checked at run time), else SSE2 (every x86-64; bounded:
+ * plain C), else plain C. */
+static void axpy_plain(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m,
+                       uint64_t p2)
 {
+    (void)p2;
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
+        for (int r = 0; r < BLOCK; r++)
+            y[r] += (uint64_t)m[r] * v;
+    }
+}
+
+static void axpy_plain_bounded(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n,
+                               const uint32_t *m, uint64_t p2)
+{
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
+        for (int r = 0; r < BLOCK; r++)
+            y[r] = bound(y[r] + (uint64_t)m[r] * v, p2);
+    }
+}
+
+#if defined(__x86_64__)
+static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m,
+                      uint64_t p2)
+{
+    (void)p2;
     __m128i m01 = _mm_set_epi64x(m[1], m[0]), m23 = _mm_set_epi64x(m[3], m[2]);
     __m128i m45 = _mm_set_epi64x(m[5], m[4]), m67 = _mm_set_epi64x(m[7], m[6]);
     for (int64_t t = 0; t < n; t++) {
@@ -130,8 +188,9 @@ static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, in
 }
 
 __attribute__((target("avx2"))) static void axpy_avx2(uint64_t *bacc, const int32_t *col, const int32_t *val,
-                                                      int64_t n, const uint32_t *m)
+                                                      int64_t n, const uint32_t *m, uint64_t p2)
 {
+    (void)p2;
     __m256i lo = _mm256_set_epi64x(m[3], m[2], m[1], m[0]), hi = _mm256_set_epi64x(m[7], m[6], m[5], m[4]);
     for (int64_t t = 0; t < n; t++) {
         __m256i v = _mm256_set1_epi64x((uint32_t)val[t]);
@@ -140,29 +199,73 @@ __attribute__((target("avx2"))) static void axpy_avx2(uint64_t *bacc, const int3
         _mm256_storeu_si256(y + 1, _mm256_add_epi64(_mm256_loadu_si256(y + 1), _mm256_mul_epu32(hi, v)));
     }
 }
-#else
-static void axpy_plain(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m)
+
+/* the sums are below 2**63, so the signed compare y > p2 - 1 is the unsigned one */
+__attribute__((target("avx2"))) static void axpy_avx2_bounded(uint64_t *bacc, const int32_t *col,
+                                                              const int32_t *val, int64_t n, const uint32_t *m,
+                                                              uint64_t p2)
 {
+    __m256i lo = _mm256_set_epi64x(m[3], m[2], m[1], m[0]), hi = _mm256_set_epi64x(m[7], m[6], m[5], m[4]);
+    __m256i q = _mm256_set1_epi64x((int64_t)p2), q1 = _mm256_set1_epi64x((int64_t)p2 - 1);
     for (int64_t t = 0; t < n; t++) {
-        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
-        for (int r = 0; r < BLOCK; r++)
-            y[r] += (uint64_t)m[r] * v;
+        __m256i v = _mm256_set1_epi64x((uint32_t)val[t]);
+        __m256i *y = (__m256i *)(bacc + (int64_t)col[t] * BLOCK);
+        __m256i a = _mm256_add_epi64(_mm256_loadu_si256(y), _mm256_mul_epu32(lo, v));
+        __m256i b = _mm256_add_epi64(_mm256_loadu_si256(y + 1), _mm256_mul_epu32(hi, v));
+        a = _mm256_sub_epi64(a, _mm256_and_si256(_mm256_cmpgt_epi64(a, q1), q));
+        b = _mm256_sub_epi64(b, _mm256_and_si256(_mm256_cmpgt_epi64(b, q1), q));
+        _mm256_storeu_si256(y, a);
+        _mm256_storeu_si256(y + 1, b);
+    }
+}
+
+__attribute__((target("avx512f"))) static void axpy_avx512(uint64_t *bacc, const int32_t *col, const int32_t *val,
+                                                           int64_t n, const uint32_t *m, uint64_t p2)
+{
+    (void)p2;
+    __m512i mm = _mm512_set_epi64(m[7], m[6], m[5], m[4], m[3], m[2], m[1], m[0]);
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t *y = bacc + (int64_t)col[t] * BLOCK;
+        __m512i v = _mm512_set1_epi64((uint32_t)val[t]);
+        _mm512_storeu_si512(y, _mm512_add_epi64(_mm512_loadu_si512(y), _mm512_mul_epu32(mm, v)));
+    }
+}
+
+__attribute__((target("avx512f"))) static void axpy_avx512_bounded(uint64_t *bacc, const int32_t *col,
+                                                                   const int32_t *val, int64_t n, const uint32_t *m,
+                                                                   uint64_t p2)
+{
+    __m512i mm = _mm512_set_epi64(m[7], m[6], m[5], m[4], m[3], m[2], m[1], m[0]), q = _mm512_set1_epi64((int64_t)p2);
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t *y = bacc + (int64_t)col[t] * BLOCK;
+        __m512i v = _mm512_set1_epi64((uint32_t)val[t]);
+        __m512i a = _mm512_add_epi64(_mm512_loadu_si512(y), _mm512_mul_epu32(mm, v));
+        _mm512_storeu_si512(y, _mm512_min_epu64(a, _mm512_sub_epi64(a, q)));
     }
 }
 #endif
 
-typedef void (*axpy_t)(uint64_t *, const int32_t *, const int32_t *, int64_t, const uint32_t *);
+typedef void (*axpy_t)(uint64_t *, const int32_t *, const int32_t *, int64_t, const uint32_t *, uint64_t);
 
-static axpy_t pick_axpy(void)
+/* The widest vector version this processor runs, for delayed or bounded accumulators. F4_KERNEL_ISA
+ * (avx512, avx2, sse2 or plain) caps it: a comparison of the versions on one machine. */
+static axpy_t pick_axpy(int delayed)
 {
+    const char *cap = getenv("F4_KERNEL_ISA");
+    int level = 3; /* 3 avx512, 2 avx2, 1 sse2, 0 plain */
+    if (cap)
+        level = !strcmp(cap, "avx2") ? 2 : !strcmp(cap, "sse2") ? 1 : !strcmp(cap, "plain") ? 0 : 3;
 #if defined(__x86_64__)
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2"))
-        return axpy_avx2;
-    return axpy_sse2;
-#else
-    return axpy_plain;
+    if (level >= 3 && __builtin_cpu_supports("avx512f"))
+        return delayed ? axpy_avx512 : axpy_avx512_bounded;
+    if (level >= 2 && __builtin_cpu_supports("avx2"))
+        return delayed ? axpy_avx2 : axpy_avx2_bounded;
+    if (level >= 1 && delayed)
+        return axpy_sse2;
 #endif
+    (void)level;
+    return delayed ? axpy_plain : axpy_plain_bounded;
 }
 
 /* Reduce a block of rows, held interleaved in bacc[c * BLOCK + r], from column first on by every pivot.
@@ -171,10 +274,12 @@ static axpy_t pick_axpy(void)
  * block's own Gaussian elimination). Leaves every entry in [0, p). Undesignated rows end zero. */
 static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, const int64_t *pivot_of,
                         const int64_t *starts, const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
-                        const int64_t *piv_voff, int64_t npiv, const int32_t *scols, const int32_t *svals, uint64_t p, int delayed,
-                        int echelon, int64_t *lead, axpy_t axpy)
+                        const int64_t *piv_voff, int64_t npiv, const int32_t *scols, const int32_t *svals,
+                        const modulus_t *mod, int echelon, int64_t *lead, axpy_t axpy)
 {
     uint32_t m[BLOCK]; /* 32 x 32 -> 64-bit products: one vector multiply for several rows */
+    const uint64_t p = mod->p, p2 = mod->p2;
+    const int delayed = mod->delayed;
     for (int64_t c = first; c < ncols; c++) {
         uint64_t *a = bacc + c * BLOCK;
         uint64_t any = 0;
@@ -184,8 +289,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
             continue;
         int hits = 0, last = 0;
         for (int r = 0; r < BLOCK; r++) {
-            if (delayed)
-                a[r] %= p;
+            a[r] = reduce(mod, a[r]);
             if (a[r]) {
                 hits++;
                 last = r;
@@ -208,7 +312,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
                 } else {
                     for (int64_t t = 0; t < n; t++) {
                         uint64_t *y = x + (int64_t)pc[t] * BLOCK;
-                        *y = (*y + mm * (uint64_t)pv[t]) % p;
+                        *y = bound(*y + mm * (uint64_t)pv[t], p2);
                     }
                 }
                 continue;
@@ -217,15 +321,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
                 m[r] = (uint32_t)(a[r] ? p - a[r] : 0); /* pivot rows are monic: add (p - a) times the tail */
                 a[r] = 0;
             }
-            if (delayed) {
-                axpy(bacc, pc, pv, n, m);
-            } else {
-                for (int64_t t = 0; t < n; t++) {
-                    uint64_t v = (uint64_t)pv[t], *y = bacc + (int64_t)pc[t] * BLOCK;
-                    for (int r = 0; r < BLOCK; r++)
-                        y[r] = (y[r] + (uint64_t)m[r] * v) % p;
-                }
-            }
+            axpy(bacc, pc, pv, n, m, p2);
             continue;
         }
         if (!echelon)
@@ -241,7 +337,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
         for (int r = 0; r < nb; r++) {
             if (r == r0 || !a[r] || lead[r] >= 0)
                 continue;
-            uint64_t mm = (p - a[r]) * inv % p;
+            uint64_t mm = reduce(mod, (p - a[r]) * inv);
             a[r] = 0;
             for (int64_t j = c + 1; j < ncols; j++) {
                 uint64_t x = bacc[j * BLOCK + r0];
@@ -249,9 +345,9 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
                     continue;
                 uint64_t *y = bacc + j * BLOCK + r;
                 if (delayed)
-                    *y += mm * (x % p);
+                    *y += mm * reduce(mod, x);
                 else
-                    *y = (*y + mm * x) % p;
+                    *y = bound(*y + mm * reduce(mod, x), p2);
             }
         }
     }
@@ -260,13 +356,13 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
 /* Move the nonzero entries of row r of the block from column first on to cols/vals from position w on,
  * times scale mod p (the block is left zero there); returns the position after them. */
 static int64_t gather_row(uint64_t *bacc, int r, int64_t first, int64_t ncols, int32_t *cols, int32_t *vals,
-                          int64_t w, uint64_t scale, uint64_t p)
+                          int64_t w, uint64_t scale, const modulus_t *mod)
 {
     for (int64_t c = first; c < ncols; c++) {
         uint64_t v = bacc[c * BLOCK + r];
         if (v) {
             cols[w] = (int32_t)c;
-            vals[w] = (int32_t)(v * scale % p);
+            vals[w] = (int32_t)(scale == 1 ? v : reduce(mod, v * scale));
             w++;
             bacc[c * BLOCK + r] = 0;
         }
@@ -295,7 +391,7 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
                       int64_t ncols, int64_t prime, int echelon, int64_t *result)
 {
     uint64_t p = (uint64_t)prime;
-    int delayed = ((double)npiv + nrows + 1.0) * (prime - 1.0) * (prime - 1.0) + prime < 4611686018427387904.0;
+    const modulus_t mod = modulus(p, (double)npiv + nrows + 1.0);
     int64_t nrow_entries = row_indptr[nrows];
     int64_t *pivot_of = malloc(ncols * sizeof(int64_t));
     int64_t *starts = malloc((npiv + nrows + 1) * sizeof(int64_t));
@@ -316,7 +412,7 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         pivot_of[piv_cols[piv_indptr[k]]] = k;
     }
     int64_t count = npiv;
-    axpy_t axpy = pick_axpy();
+    axpy_t axpy = pick_axpy(mod.delayed);
     if (!echelon && room(&out, nrow_entries > 16 ? nrow_entries : 16))
         goto done;
     /* rows in blocks of BLOCK; in echelon mode by leading column, so that a block's rows fill in alike */
@@ -345,8 +441,8 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
             if (row_indptr[row] < row_indptr[row + 1] && row_cols[row_indptr[row]] < first)
                 first = row_cols[row_indptr[row]];
         }
-        block_sweep(bacc, nb, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, p,
-                    delayed, echelon, lead, axpy);
+        block_sweep(bacc, nb, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, &mod,
+                    echelon, lead, axpy);
         for (int r = 0; r < nb; r++) {
             if (!echelon) {
                 if (room(&out, ncols - first)) {
@@ -354,7 +450,7 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
                     free(bacc);
                     goto done;
                 }
-                out.size = gather_row(bacc, r, first, ncols, out.cols, out.vals, out.size, 1, p);
+                out.size = gather_row(bacc, r, first, ncols, out.cols, out.vals, out.size, 1, &mod);
                 indptr[b0 + r + 1] = out.size;
                 continue;
             }
@@ -367,7 +463,7 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
             }
             starts[count] = st.size;
             uint64_t inv = (uint64_t)inverse((int64_t)bacc[lead[r] * BLOCK + r], prime);
-            st.size = gather_row(bacc, r, lead[r], ncols, st.cols, st.vals, st.size, inv, p);
+            st.size = gather_row(bacc, r, lead[r], ncols, st.cols, st.vals, st.size, inv, &mod);
             ends[count] = st.size;
             pivot_of[lead[r]] = count;
             count++;
@@ -397,8 +493,8 @@ int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const 
         int64_t lead = st.cols[s];
         for (int64_t t = s; t < e; t++)
             acc[st.cols[t]] = (uint64_t)st.vals[t];
-        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, p,
-                            delayed, lead);
+        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, &mod,
+                            lead);
         if (nnz > e - s) {
             if (room(&st, nnz)) {
                 free(order);
