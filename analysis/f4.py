@@ -50,12 +50,19 @@ class F4Options:
     max_memory: stop with :class:`MatrixTooLarge` before reducing a matrix whose estimated working
         memory (:func:`matrix_memory`) exceeds this many bytes.
     verbose: print one line per round to stderr.
+    threads: threads of the row reduction (the C kernel, built with OpenMP; the other backends and a
+        build without OpenMP use one). The basis is the same for every count.
     """
 
     backend: str = "auto"
     max_matrix_cells: int = 400_000_000
     max_memory: int = DEFAULT_MAX_MEMORY
     verbose: bool = False
+    threads: int = 1
+
+    def __post_init__(self):
+        if not isinstance(self.threads, int) or self.threads < 1:
+            raise ValueError(f"threads must be a positive integer, not {self.threads!r}")
 
 
 def format_bytes(n: float) -> str:
@@ -677,7 +684,8 @@ def _f4(
     cols = sorted({k for f in inputs for k in f.mons}, reverse=True)
     col_of = {m: c for c, m in enumerate(cols)}
     rows = SparseRows.from_rows([([col_of[k] for k in f.mons], f.coeffs) for f in inputs])
-    if _insert_rows(state, backend.reduce_sparse(rows.take([]), rows, len(cols), p), codes.from_keys(cols)):
+    if _insert_rows(state, backend.reduce_sparse(rows.take([]), rows, len(cols), p, options.threads),
+                    codes.from_keys(cols)):
         return (ring.one(),), ()
     while state.npairs:
         t0 = time.perf_counter()
@@ -704,7 +712,7 @@ def _f4(
         # the two blocks straight from the rows' terms (no whole matrix and copies of it)
         pivots, to_reduce = _assemble(state, rows, columns, pivot_rows), _assemble(state, rows, columns, reduce_rows)
         del rows
-        new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p)
+        new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p, options.threads)
         del pivots, to_reduce
         if _insert_rows(state, new_rows, columns[::-1]):
             return (ring.one(),), tuple(rounds)
@@ -726,7 +734,7 @@ def _f4(
                 f"{stats.seconds:7.3f}s",
                 file=sys.stderr,
             )
-    return tuple(_reduce_basis(state, backend)), tuple(rounds)
+    return tuple(_reduce_basis(state, backend, options.threads)), tuple(rounds)
 
 
 def _insert_rows(state: _State, rows: SparseRows, columns: np.ndarray) -> bool:
@@ -754,10 +762,10 @@ def interreduce(basis: Sequence[Poly], options: F4Options = F4Options()) -> list
     state = _State(basis[0].ring)
     for g in sorted(basis, key=lambda g: g.lm, reverse=True):
         state.add(g)
-    return _reduce_basis(state, get_backend(options.backend))
+    return _reduce_basis(state, get_backend(options.backend), options.threads)
 
 
-def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
+def _reduce_basis(state: _State, backend: Backend, threads: int = 1) -> list[Poly]:
     """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis.
 
     Symbolic preprocessing of the active elements supplies a reducer for every tail monomial that is
@@ -773,7 +781,7 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     tail = np.ones(len(heads.cols), dtype=bool)
     tail[heads.indptr[:-1]] = False
     tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])
-    reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime)
+    reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime, threads)
     column_keys = state.codes.to_keys(columns[::-1])  # fewer than the terms: decode each column once
     # a small field's coefficients as shared int objects when there are more terms than field elements:
     # 8 bytes per coefficient instead of 36 (quadrics-11: 1.5M terms, 42 MB less at the peak)

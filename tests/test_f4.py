@@ -449,3 +449,28 @@ def test_c_kernels_give_the_same_rounds_as_numpy(prime, kind, seed, monkeypatch)
     without = groebner(polys)
     assert rounds(with_c) == rounds(without), f"{kind} seed {seed} p {prime}"
     assert with_c.basis == without.basis
+
+
+@pytest.mark.parametrize("prime", [65521, 1073741827, 2147483647])
+def test_threads_give_the_same_basis_at_every_prime(prime):
+    """F4 with the C kernel on two threads, on one, and with the numpy backend (dense products, no C)
+    gives the same rounds and basis, at a 16-bit prime and at 30- and 31-bit ones (bounded accumulators)."""
+    from analysis import native
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernels cannot be built")
+    polys = katsura(6, prime)
+
+    def rounds(gb):
+        return [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in gb.rounds]
+
+    one, two = groebner(polys, F4Options(threads=1)), groebner(polys, F4Options(threads=2))
+    dense = groebner(polys, F4Options(backend="numpy"))
+    assert one.basis == two.basis == dense.basis
+    assert rounds(one) == rounds(two) == rounds(dense)
+    assert degree(one) == 64
+
+
+def test_threads_must_be_positive():
+    with pytest.raises(ValueError, match="threads must be a positive integer"):
+        F4Options(threads=0)

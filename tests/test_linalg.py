@@ -210,3 +210,29 @@ def test_native_describe_names_why_the_c_kernels_are_not_used(monkeypatch, tmp_p
     assert native.kernel() is None
     line = native.describe()
     assert line.startswith("numba/numpy kernels (") and "no-such-compiler" in line and "broken.c" in line
+
+
+@pytest.mark.parametrize("p", [7, 65521, 1073741827, 2147483647])
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_c_kernel_on_threads_matches_reference(p, threads):
+    """The C kernel on 1-3 threads returns the reference backend's rows, in echelon and in "each" mode, at
+    small primes (delayed accumulators) and 30/31-bit ones (accumulators bounded by p**2): many blocks of
+    low-rank rows with the same leads make the threads race for the same new pivots (run five times, for
+    several interleavings)."""
+    from analysis import native
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernel cannot be built")
+    rng = np.random.default_rng(p % 1000 + threads)
+    ncols = 240
+    pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=90, nrows=160, density=0.08)
+    pivot_rows = SparseRows.from_rows([pivots[c] for c in rng.permutation(sorted(pivots))])
+    sparse_rows = SparseRows.from_rows(rows)
+    reference = get_backend("python")
+    reduced = reference.reduce_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
+    each = reference.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
+    assert len(reduced) > 8 and any(c for c, _ in each)  # new pivots and nonzero remainders to race for
+    sparse = get_backend("sparse")
+    for _ in range(5):
+        assert sparse.reduce_sparse(pivot_rows, sparse_rows, ncols, p, threads).to_rows() == reduced
+        assert sparse.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p, threads).to_rows() == each
