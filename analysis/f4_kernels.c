@@ -723,6 +723,7 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
     uint64_t *emask = malloc((total + 1) * sizeof(uint64_t)), *lmask = malloc((total + 1) * sizeof(uint64_t));
     uint64_t *qmask = malloc((npairs + 1) * sizeof(uint64_t));
     int64_t *by_degree = malloc((total + 1) * sizeof(int64_t)), *minimal = malloc((total + 1) * sizeof(int64_t));
+    int64_t bucket_cap = 0, *bucket = NULL;
     int64_t cap = 64, count = 0, *out = malloc(cap * 4 * sizeof(int64_t));
     int32_t *out_lcm = malloc(cap * n * sizeof(int32_t) + 4);
     uint64_t *out_mask = malloc(cap * sizeof(uint64_t));
@@ -771,7 +772,7 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
             }
             pdeg[np] = d;
             coprime[np] = d == deg[g] + deg[h];
-            lmask[np] = divmask(&dm, l, n);
+            lmask[np] = emask[g] | hmask; /* the mask of a max is the union of the masks */
             np++;
         }
         /* criterion M (a partner's lcm properly divides this one's: dropped) and F (of the partners with
@@ -779,9 +780,27 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
          * degree; M is tested against one partner per distinct lcm that M kept (minimal[0 .. nmin), all of
          * lower degree): a proper divisor that M dropped has a kept one dividing it in turn. So the test is
          * against the few minimal lcms, not all the partners. */
-        for (int64_t c = 0; c < np; c++)
-            by_degree[c] = (pdeg[c] << 32) | c; /* degrees and counts are below 2**31 */
-        qsort(by_degree, np, sizeof(int64_t), ascending);
+        int64_t low = INT64_MAX, high = 0; /* counting sort: the lcm degrees span a short range */
+        for (int64_t c = 0; c < np; c++) {
+            low = pdeg[c] < low ? pdeg[c] : low;
+            high = pdeg[c] > high ? pdeg[c] : high;
+        }
+        if (np && high - low + 2 > bucket_cap) {
+            bucket_cap = 2 * (high - low + 2);
+            int64_t *b = realloc(bucket, bucket_cap * sizeof(int64_t));
+            if (!b)
+                goto done;
+            bucket = b;
+        }
+        if (np) {
+            memset(bucket, 0, (high - low + 2) * sizeof(int64_t));
+            for (int64_t c = 0; c < np; c++)
+                bucket[pdeg[c] - low + 1]++;
+            for (int64_t d = 1; d <= high - low + 1; d++)
+                bucket[d] += bucket[d - 1];
+            for (int64_t c = 0; c < np; c++) /* stable: by degree, then by partner */
+                by_degree[bucket[pdeg[c] - low]++] = (pdeg[c] << 32) | c;
+        }
         int64_t nmin = 0;
         for (int64_t s = 0; s < np;) {
             int64_t e = s; /* by_degree[s .. e): one lcm degree */
@@ -859,6 +878,7 @@ done:
     free(qmask);
     free(by_degree);
     free(minimal);
+    free(bucket);
     free(out_mask);
     free(dm.thr);
     free(out);
