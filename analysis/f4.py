@@ -581,18 +581,20 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_R
     return _Rows.concat(parts), seen
 
 
-def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None) -> SparseRows:
+def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None,
+              threads: int = 1) -> SparseRows:
     """The rows (those at index, in that order, if given) as sparse rows over the column codes (ascending;
     column 0 is the largest monomial): int32 columns, the values read from the term pool through offsets
     (a row repeats its element's coefficients), so 4 bytes per matrix entry. The column indices are
-    computed a block of rows at a time (:meth:`_Rows.blocks`), so that the int64 temporaries stay small."""
+    computed a block of rows at a time (:meth:`_Rows.blocks`), so that the int64 temporaries stay small (by
+    the C kernel: all at once, on up to threads threads)."""
     if index is None:
         index = np.arange(len(rows.lengths))
     indptr = np.zeros(len(index) + 1, dtype=np.int64)
     np.cumsum(rows.lengths[index], out=indptr[1:])
     if native.kernel() is not None and columns.dtype == np.uint64:
         cols = native.column_indices(state.pool_codes, state.starts[rows.index[index]], rows.lengths[index],
-                                     rows.mult[index], columns)
+                                     rows.mult[index], columns, threads)
     else:
         cols = np.empty(int(indptr[-1]), dtype=np.int32)
         last = len(columns) - 1
@@ -710,7 +712,8 @@ def _f4(
             )
         pivot_rows = pivot_rows[leads[pivot_rows].argsort()]  # by lead: the backend need not sort
         # the two blocks straight from the rows' terms (no whole matrix and copies of it)
-        pivots, to_reduce = _assemble(state, rows, columns, pivot_rows), _assemble(state, rows, columns, reduce_rows)
+        pivots = _assemble(state, rows, columns, pivot_rows, options.threads)
+        to_reduce = _assemble(state, rows, columns, reduce_rows, options.threads)
         del rows
         new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p, options.threads)
         del pivots, to_reduce
@@ -775,7 +778,7 @@ def _reduce_basis(state: _State, backend: Backend, threads: int = 1) -> list[Pol
     idx = np.flatnonzero(state.active[: len(state.polys)])
     elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
     rows, columns = _preprocess(state, elements, leads_done=False)
-    pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)))
+    pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)), threads)
     heads = _assemble(state, rows, columns, np.arange(len(idx))).compact()
     del rows
     tail = np.ones(len(heads.cols), dtype=bool)

@@ -1006,22 +1006,30 @@ done:
 }
 
 /* The column of every term of F4 rows (as in f4_new_terms) over the matrix columns (codes ascending; column
- * 0 is the largest code): out[e] = ncols - 1 - position of the code, entry by entry. Every code must be a
- * column. Returns 0, or -1 when memory ran out. */
+ * 0 is the largest code): out[e] = ncols - 1 - position of the code, entry by entry, the rows shared among
+ * up to threads threads (row r's entries start at offset[r]). Every code must be a column. Returns 0, or
+ * -1 when memory ran out. */
 int f4_columns(const uint64_t *pool, const int64_t *starts, const int64_t *lengths, const uint64_t *mult,
-               int64_t nrows, const uint64_t *columns, int64_t ncols, int32_t *out)
+               int64_t nrows, const uint64_t *columns, int64_t ncols, int32_t *out, int threads)
 {
     table_t t;
-    if (table_init(&t, ncols))
+    int64_t *offset = malloc((nrows + 1) * sizeof(int64_t));
+    if (!offset || table_init(&t, ncols)) {
+        free(offset);
         return -1;
+    }
     for (int64_t i = 0; i < ncols; i++)
         t.slot[table_find(&t, columns, columns[i])] = i;
-    int64_t e = 0;
+    offset[0] = 0;
+    for (int64_t r = 0; r < nrows; r++)
+        offset[r + 1] = offset[r] + lengths[r];
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1 && offset[nrows] > 100000)
     for (int64_t r = 0; r < nrows; r++) {
         const uint64_t *terms = pool + starts[r];
         for (int64_t k = 0; k < lengths[r]; k++)
-            out[e++] = (int32_t)(ncols - 1 - t.slot[table_find(&t, columns, terms[k] + mult[r])]);
+            out[offset[r] + k] = (int32_t)(ncols - 1 - t.slot[table_find(&t, columns, terms[k] + mult[r])]);
     }
+    free(offset);
     free(t.slot);
     return 0;
 }

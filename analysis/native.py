@@ -138,7 +138,7 @@ def kernel():
                                                                      ctypes.c_void_p]
                 lib.f4_columns.restype = ctypes.c_int
                 lib.f4_columns.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
-                                                                   ctypes.c_void_p]
+                                                                   ctypes.c_void_p, ctypes.c_int]
                 lib.f4_preprocess.restype = ctypes.c_int
                 lib.f4_preprocess.argtypes = [ctypes.c_void_p] * 5 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                               ctypes.c_int64, ctypes.c_void_p, ctypes.c_uint64] + [
@@ -277,14 +277,15 @@ def new_terms(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: n
 
 
 def column_indices(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: np.ndarray,
-                   columns: np.ndarray) -> np.ndarray:
+                   columns: np.ndarray, threads: int = 1) -> np.ndarray:
     """The column (int32; len(columns) - 1 - position in the ascending codes columns) of every term of the
-    rows mult[r] * pool[starts[r] : starts[r] + lengths[r]], row after row, by the C kernel."""
+    rows mult[r] * pool[starts[r] : starts[r] + lengths[r]], row after row, by the C kernel on up to
+    ``threads`` threads."""
     lib = kernel()
     args, keep = _rows_args(pool, starts, lengths, mult)
     columns = np.ascontiguousarray(columns)
     out = np.empty(int(np.sum(lengths)), dtype=np.int32)
-    if lib.f4_columns(*args, columns.ctypes.data, len(columns), out.ctypes.data):
+    if lib.f4_columns(*args, columns.ctypes.data, len(columns), out.ctypes.data, threads):
         raise MemoryError("the C column lookup ran out of memory")
     return out
 

@@ -236,3 +236,24 @@ def test_c_kernel_on_threads_matches_reference(p, threads):
     for _ in range(5):
         assert sparse.reduce_sparse(pivot_rows, sparse_rows, ncols, p, threads).to_rows() == reduced
         assert sparse.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p, threads).to_rows() == each
+
+
+def test_column_lookup_on_threads_matches_one_thread():
+    """The C column lookup of F4 rows (term codes plus a multiplier) gives the same columns on 2 threads
+    as on one, and as numpy's search, on a matrix large enough (> 100,000 entries) to be shared."""
+    from analysis import native
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernel cannot be built")
+    rng = np.random.default_rng(35)
+    pool = np.sort(rng.choice(1 << 40, size=5000, replace=False)).astype(np.uint64)
+    nrows = 3000
+    starts = rng.integers(0, 4900, nrows)
+    lengths = rng.integers(20, 100, nrows)
+    mult = rng.choice([0, 1 << 41, 1 << 42], size=nrows).astype(np.uint64)
+    codes = np.concatenate([pool[s : s + n] + m for s, n, m in zip(starts, lengths, mult)])
+    assert len(codes) > 100_000
+    columns = np.unique(codes)
+    expected = (len(columns) - 1 - np.searchsorted(columns, codes)).astype(np.int32)
+    for threads in (1, 2):
+        assert np.array_equal(native.column_indices(pool, starts, lengths, mult, columns, threads), expected)
