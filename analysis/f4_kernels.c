@@ -436,9 +436,11 @@ static void reduce_blocks(const int64_t *row_indptr, const int32_t *row_cols, co
                 break;
             int nb = nrows - b0 < BLOCK ? (int)(nrows - b0) : BLOCK;
             int64_t first = ncols, lead[BLOCK], slot[BLOCK];
+            int published[BLOCK]; /* the row is a pivot now (and zero in the block) */
             for (int r = 0; r < nb; r++) {
                 int64_t row = order[b0 + r];
                 lead[r] = slot[r] = -1;
+                published[r] = 0;
                 const int32_t *rv = row_vals + row_voff[row] - row_indptr[row];
                 for (int64_t t = row_indptr[row]; t < row_indptr[row + 1]; t++)
                     bacc[(int64_t)row_cols[t] * BLOCK + r] = (uint64_t)rv[t];
@@ -455,7 +457,7 @@ static void reduce_blocks(const int64_t *row_indptr, const int32_t *row_cols, co
                         each_len[row] = n;
                         continue;
                     }
-                    if (lead[r] < 0)
+                    if (lead[r] < 0 || published[r])
                         continue;
                     uint64_t inv = (uint64_t)inverse((int64_t)bacc[lead[r] * BLOCK + r], (int64_t)mod->p);
                     int64_t n = gather_row(bacc, r, lead[r], ncols, scratch, scratch + ncols, inv, mod);
@@ -469,8 +471,10 @@ static void reduce_blocks(const int64_t *row_indptr, const int32_t *row_cols, co
                     pv->vals[k] = row + n;
                     pv->len[k] = n;
                     if (__atomic_compare_exchange_n(&pv->at[lead[r]], &free_slot, k, 0, __ATOMIC_RELEASE,
-                                                    __ATOMIC_RELAXED))
+                                                    __ATOMIC_RELAXED)) {
+                        published[r] = 1;
                         continue;
+                    }
                     /* another thread published a pivot at this lead first: the row reduces on from there */
                     pv->len[k] = -1;
                     for (int64_t t = 0; t < n; t++)
