@@ -76,6 +76,7 @@ SUITES["all"] = tuple(name for suite in ("small", "large", "lex", "tdoa") for na
 SUITES["default"] = SUITES["all"]
 SUITES["primes"] = ("katsura-9", "katsura-10", "eco-10", "eco-11")  # issue 35: <= 1x msolve at 30/31-bit primes
 SUITES["threads"] = ("katsura-10", "eco-11", "quadrics-10", "positions-6r3s")  # issue 35: speedup on 2 cores
+PATHS = {ext: ROOT / "tables" / f"bench_engine.{ext}" for ext in ("csv", "md", "meta.json")}
 REPEAT_BELOW_S = 2.0
 """Runs shorter than this are repeated (up to --repeat times); longer ones run once."""
 SHORT_S = 0.05
