@@ -5,9 +5,12 @@
  * rows are reduced in dense 64-bit accumulators by the sparse, unreduced pivot rows, with delayed modular
  * reduction where the sums cannot overflow (small primes) and accumulators bounded by p**2 by one compare
  * and subtract per product elsewhere (31-bit primes; modulus_t), never a division per product; in echelon
- * mode the rows that do not vanish become pivots, and at the end every new pivot is swept once more (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in
- * interleaved accumulators: a pivot row is read once per block and applied to all its rows with vector
- * multiplies, and the rows of a block that find no pivot at a column eliminate it among themselves.
+ * mode the rows that do not vanish become pivots, and at the end every new pivot is swept once more
+ * (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in interleaved
+ * accumulators: a pivot row is read once per block and applied to all its rows with vector multiplies, and
+ * the rows of a block that find no pivot at a column eliminate it among themselves. With OpenMP the blocks
+ * and the final sweeps are shared among threads (reduce_blocks, back_substitute); the reduced row echelon
+ * form being unique, the result does not depend on the threads.
  *
  * Reference: J. Berthomieu, C. Eder, M. Safey El Din, "msolve: a library for solving polynomial systems",
  * ISSAC 2021 (known pivots kept sparse, delayed reduction in 64-bit accumulators).
@@ -452,7 +455,8 @@ static void reduce_blocks(const int64_t *row_indptr, const int32_t *row_cols, co
                 first = ncols;
                 for (int r = 0; r < nb; r++) {
                     if (!echelon) {
-                        int64_t row = order[b0 + r], n = gather_row(bacc, r, 0, ncols, scratch, scratch + ncols, 1, mod);
+                        int64_t row = order[b0 + r];
+                        int64_t n = gather_row(bacc, r, 0, ncols, scratch, scratch + ncols, 1, mod);
                         each[row] = new_row(scratch, scratch + ncols, n, oom);
                         each_len[row] = n;
                         continue;
@@ -733,7 +737,8 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
     uint64_t *out_mask = malloc(cap * sizeof(uint64_t));
     divmask_t dm = {0};
     int status = -1;
-    if (!partners || !pdeg || !L || !coprime || !dropped || !emask || !lmask || !qmask || !by_degree || !minimal || !out || !out_lcm ||
+    if (!partners || !pdeg || !L || !coprime || !dropped || !emask || !lmask || !qmask || !by_degree || !minimal ||
+        !out || !out_lcm ||
         !out_mask || divmask_init(&dm, E, total, n))
         goto done;
     for (int64_t g = 0; g < total; g++)

@@ -550,7 +550,8 @@ def numpy_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p
 # ----------------------------------------------------------------------------------------------
 # sparse backend (compiled)
 # ----------------------------------------------------------------------------------------------
-def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool, threads: int = 1) -> SparseRows:
+def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool,
+                   threads: int = 1) -> SparseRows:
     from . import native
 
     def arrays(block: SparseRows) -> tuple[np.ndarray, ...]:  # one compiled signature

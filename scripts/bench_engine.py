@@ -377,7 +377,9 @@ def metadata(args, exe: str | None, startup: float | None, baseline: float | Non
         ),
         "lex": "msolve prints no lex basis: its default rational parametrization is timed for lex systems (no match)",
         "own_baseline_mb": baseline,
-        "msolve": {"path": exe, "version": msolve_version(exe), "options": "-t 1 (-g 2 for grevlex)" + (f"; -t {args.threads} in the threads table" if args.threads > 1 else ""), "startup_s": startup},
+        "msolve": {"path": exe, "version": msolve_version(exe), "startup_s": startup,
+                   "options": "-t 1 (-g 2 for grevlex)" + (f"; -t {args.threads} in the threads table"
+                                                            if args.threads > 1 else "")},
         "versions": {
             "python": platform.python_version(),
             "numpy": np.__version__,
@@ -448,7 +450,8 @@ def markdown(rows: list[Row], meta: dict) -> str:
             f"| system | own 1 thread s | own {n} threads s | speedup | spread | same basis | msolve -t 1 s | "
             f"msolve -t {n} s | speedup | spread |",
             [f"| {r.system} | {_f(r.own_one_thread_s, '.3f')} | {_f(r.own_threads_s, '.3f')} | "
-             f"{_f(r.own_speedup, '.2f')} | {r.own_speedup_range} | {'' if r.threads_match is None else r.threads_match} | "
+             f"{_f(r.own_speedup, '.2f')} | {r.own_speedup_range} | "
+             f"{'' if r.threads_match is None else r.threads_match} | "
              f"{_f(r.msolve_one_thread_s, '.3f')} | {_f(r.msolve_threads_s, '.3f')} | {_f(r.msolve_speedup, '.2f')} | "
              f"{r.msolve_speedup_range} |" for r in rows])
     return "\n".join(lines) + "\n"
@@ -466,7 +469,8 @@ def print_table(rows: list[Row]) -> None:
         if r.threads > 1:
             print(f"{'':<20}on {r.threads} threads: own {_f(r.own_threads_s, '.3f')} s, speedup "
                   f"{_f(r.own_speedup, '.2f')} ({r.own_speedup_range}), same basis {r.threads_match}; msolve "
-                  f"{_f(r.msolve_threads_s, '.3f')} s, speedup {_f(r.msolve_speedup, '.2f')} ({r.msolve_speedup_range})")
+                  f"{_f(r.msolve_threads_s, '.3f')} s, speedup {_f(r.msolve_speedup, '.2f')} "
+                  f"({r.msolve_speedup_range})")
 
 
 # ----------------------------------------------------------------------------------------------
