@@ -50,12 +50,19 @@ class F4Options:
     max_memory: stop with :class:`MatrixTooLarge` before reducing a matrix whose estimated working
         memory (:func:`matrix_memory`) exceeds this many bytes.
     verbose: print one line per round to stderr.
+    threads: threads of the row reduction (the C kernel, built with OpenMP; the other backends and a
+        build without OpenMP use one). The basis is the same for every count.
     """
 
     backend: str = "auto"
     max_matrix_cells: int = 400_000_000
     max_memory: int = DEFAULT_MAX_MEMORY
     verbose: bool = False
+    threads: int = 1
+
+    def __post_init__(self):
+        if not isinstance(self.threads, int) or self.threads < 1:
+            raise ValueError(f"threads must be a positive integer, not {self.threads!r}")
 
 
 def format_bytes(n: float) -> str:
@@ -574,18 +581,20 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_R
     return _Rows.concat(parts), seen
 
 
-def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None) -> SparseRows:
+def _assemble(state: _State, rows: _Rows, columns: np.ndarray, index: np.ndarray | None = None,
+              threads: int = 1) -> SparseRows:
     """The rows (those at index, in that order, if given) as sparse rows over the column codes (ascending;
     column 0 is the largest monomial): int32 columns, the values read from the term pool through offsets
     (a row repeats its element's coefficients), so 4 bytes per matrix entry. The column indices are
-    computed a block of rows at a time (:meth:`_Rows.blocks`), so that the int64 temporaries stay small."""
+    computed a block of rows at a time (:meth:`_Rows.blocks`), so that the int64 temporaries stay small (by
+    the C kernel: all at once, on up to threads threads)."""
     if index is None:
         index = np.arange(len(rows.lengths))
     indptr = np.zeros(len(index) + 1, dtype=np.int64)
     np.cumsum(rows.lengths[index], out=indptr[1:])
     if native.kernel() is not None and columns.dtype == np.uint64:
         cols = native.column_indices(state.pool_codes, state.starts[rows.index[index]], rows.lengths[index],
-                                     rows.mult[index], columns)
+                                     rows.mult[index], columns, threads)
     else:
         cols = np.empty(int(indptr[-1]), dtype=np.int32)
         last = len(columns) - 1
@@ -677,7 +686,8 @@ def _f4(
     cols = sorted({k for f in inputs for k in f.mons}, reverse=True)
     col_of = {m: c for c, m in enumerate(cols)}
     rows = SparseRows.from_rows([([col_of[k] for k in f.mons], f.coeffs) for f in inputs])
-    if _insert_rows(state, backend.reduce_sparse(rows.take([]), rows, len(cols), p), codes.from_keys(cols)):
+    if _insert_rows(state, backend.reduce_sparse(rows.take([]), rows, len(cols), p, options.threads),
+                    codes.from_keys(cols)):
         return (ring.one(),), ()
     while state.npairs:
         t0 = time.perf_counter()
@@ -702,9 +712,10 @@ def _f4(
             )
         pivot_rows = pivot_rows[leads[pivot_rows].argsort()]  # by lead: the backend need not sort
         # the two blocks straight from the rows' terms (no whole matrix and copies of it)
-        pivots, to_reduce = _assemble(state, rows, columns, pivot_rows), _assemble(state, rows, columns, reduce_rows)
+        pivots = _assemble(state, rows, columns, pivot_rows, options.threads)
+        to_reduce = _assemble(state, rows, columns, reduce_rows, options.threads)
         del rows
-        new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p)
+        new_rows = backend.reduce_sparse(pivots, to_reduce, ncols, p, options.threads)
         del pivots, to_reduce
         if _insert_rows(state, new_rows, columns[::-1]):
             return (ring.one(),), tuple(rounds)
@@ -726,7 +737,7 @@ def _f4(
                 f"{stats.seconds:7.3f}s",
                 file=sys.stderr,
             )
-    return tuple(_reduce_basis(state, backend)), tuple(rounds)
+    return tuple(_reduce_basis(state, backend, options.threads)), tuple(rounds)
 
 
 def _insert_rows(state: _State, rows: SparseRows, columns: np.ndarray) -> bool:
@@ -754,10 +765,10 @@ def interreduce(basis: Sequence[Poly], options: F4Options = F4Options()) -> list
     state = _State(basis[0].ring)
     for g in sorted(basis, key=lambda g: g.lm, reverse=True):
         state.add(g)
-    return _reduce_basis(state, get_backend(options.backend))
+    return _reduce_basis(state, get_backend(options.backend), options.threads)
 
 
-def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
+def _reduce_basis(state: _State, backend: Backend, threads: int = 1) -> list[Poly]:
     """Minimal basis (active elements) with tails fully reduced: the reduced Gröbner basis.
 
     Symbolic preprocessing of the active elements supplies a reducer for every tail monomial that is
@@ -767,13 +778,13 @@ def _reduce_basis(state: _State, backend: Backend) -> list[Poly]:
     idx = np.flatnonzero(state.active[: len(state.polys)])
     elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
     rows, columns = _preprocess(state, elements, leads_done=False)
-    pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)))
+    pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)), threads)
     heads = _assemble(state, rows, columns, np.arange(len(idx))).compact()
     del rows
     tail = np.ones(len(heads.cols), dtype=bool)
     tail[heads.indptr[:-1]] = False
     tails = SparseRows(heads.indptr - np.arange(len(idx) + 1), heads.cols[tail], heads.vals[tail])
-    reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime)
+    reduced = backend.reduce_each_sparse(pivots, tails, len(columns), ring.prime, threads)
     column_keys = state.codes.to_keys(columns[::-1])  # fewer than the terms: decode each column once
     # a small field's coefficients as shared int objects when there are more terms than field elements:
     # 8 bytes per coefficient instead of 36 (quadrics-11: 1.5M terms, 42 MB less at the peak)

@@ -3,10 +3,14 @@
  * Loaded through ctypes by analysis/native.py (compiled there on first use with the system's C compiler
  * and cached); no Python API. Same results as the numba kernel sparse_echelon, and the same design: the
  * rows are reduced in dense 64-bit accumulators by the sparse, unreduced pivot rows, with delayed modular
- * reduction; in echelon mode the rows that do not vanish become pivots, and at the end every new pivot is
- * swept once more (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in
- * interleaved accumulators: a pivot row is read once per block and applied to all its rows with vector
- * multiplies, and the rows of a block that find no pivot at a column eliminate it among themselves.
+ * reduction where the sums cannot overflow (small primes) and accumulators bounded by p**2 by one compare
+ * and subtract per product elsewhere (31-bit primes; modulus_t), never a division per product; in echelon
+ * mode the rows that do not vanish become pivots, and at the end every new pivot is swept once more
+ * (reduced row echelon form). Unlike the numba kernel the rows go BLOCK at a time, in interleaved
+ * accumulators: a pivot row is read once per block and applied to all its rows with vector multiplies, and
+ * the rows of a block that find no pivot at a column eliminate it among themselves. With OpenMP the blocks
+ * and the final sweeps are shared among threads (reduce_blocks, back_substitute); the reduced row echelon
+ * form being unique, the result does not depend on the threads.
  *
  * Reference: J. Berthomieu, C. Eder, M. Safey El Din, "msolve: a library for solving polynomial systems",
  * ISSAC 2021 (known pivots kept sparse, delayed reduction in 64-bit accumulators).
@@ -17,29 +21,98 @@
 #if defined(__x86_64__)
 #include <immintrin.h>
 #endif
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
 
-typedef struct {
-    int32_t *cols;
-    int32_t *vals;
-    int64_t size, cap;
-} store_t;
-
-static int room(store_t *s, int64_t more)
+/* Built with -fopenmp where the compiler has it (analysis/native.py): the row reduction and the pair update
+ * then share their independent work among the threads asked for; without it every pragma is ignored. */
+int f4_openmp(void)
 {
-    if (s->size + more <= s->cap)
-        return 0;
-    int64_t grow = 2 * s->cap > s->size + more ? 2 * s->cap : s->size + more;
-    int32_t *c = realloc(s->cols, grow * sizeof(int32_t));
-    if (!c)
-        return -1;
-    s->cols = c;
-    int32_t *v = realloc(s->vals, grow * sizeof(int32_t));
-    if (!v)
-        return -1;
-    s->vals = v;
-    s->cap = grow;
+#if defined(_OPENMP)
+    return 1;
+#else
     return 0;
+#endif
 }
+
+/* The pivot rows, known and new, by index k: columns cols[k][0 .. len[k]) and values vals[k][...], the
+ * leading entry 1 at cols[k][0]; at[c] is the pivot whose leading column is c, or -1. A new pivot is
+ * published by a compare-and-swap on at[lead] after its row is written (release; readers load at[c] with
+ * acquire), so a thread that finds a pivot reads all of its row. A slot whose row is not published has
+ * len[k] = -1. */
+typedef struct {
+    const int32_t **cols, **vals;
+    int64_t *len, *at;
+    int64_t count; /* slots handed out: the known pivots, then one per new row that tried to publish */
+    int32_t **fin; /* during the back substitution: the final row of pivot k (columns, then values) once
+                      published, else NULL; its length fin_len[k] */
+    int64_t *fin_len;
+} pivots_t;
+
+/* the columns, values and length of pivot k: its final row where one is published, else its row */
+static inline const int32_t *pivot_row(const pivots_t *pv, int64_t k, const int32_t **vals, int64_t *len)
+{
+    const int32_t *f = pv->fin ? __atomic_load_n(&pv->fin[k], __ATOMIC_ACQUIRE) : NULL;
+    if (f) {
+        *len = pv->fin_len[k];
+        *vals = f + *len;
+        return f;
+    }
+    *len = pv->len[k];
+    *vals = pv->vals[k];
+    return pv->cols[k];
+}
+
+static inline int64_t pivot_at(const pivots_t *pv, int64_t c) { return __atomic_load_n(&pv->at[c], __ATOMIC_ACQUIRE); }
+
+/* A malloc'ed copy of n columns and values (one array: the columns, then the values), or NULL when n is 0
+ * or memory ran out (*oom set). */
+static int32_t *new_row(const int32_t *cols, const int32_t *vals, int64_t n, int *oom)
+{
+    if (!n)
+        return NULL;
+    int32_t *row = malloc(2 * n * sizeof(int32_t));
+    if (!row) {
+        __atomic_store_n(oom, 1, __ATOMIC_RELAXED);
+        return NULL;
+    }
+    memcpy(row, cols, n * sizeof(int32_t));
+    memcpy(row + n, vals, n * sizeof(int32_t));
+    return row;
+}
+
+/* The prime and its arithmetic. Products of two entries (< p < 2**31) are below p2 = p * p < 2**62. An
+ * accumulator is either delayed (no reduction until it is read; chosen when the largest possible sum of
+ * products, one per pivot and row, stays below 2**62) or bounded: kept below p2 by subtracting p2 after
+ * every addition (the sum of an accumulator and a product is below 2 * p2 < 2**63), as msolve's 31-bit
+ * kernels do; a single compare and subtract, no division. Entries are brought to [0, p) by Barrett
+ * reduction (a multiply by a precomputed floor(2**64 / p), no division). */
+typedef struct {
+    uint64_t p, p2, barrett;
+    int delayed;
+} modulus_t;
+
+static modulus_t modulus(uint64_t p, double additions)
+{
+    modulus_t m = {p, p * p, UINT64_MAX / p, additions * (p - 1.0) * (p - 1.0) + p < 4611686018427387904.0};
+    return m;
+}
+
+/* x mod p for any 64-bit x: the quotient estimate (x * floor(2**64 / p)) >> 64 is short by at most 2 */
+static inline uint64_t reduce(const modulus_t *m, uint64_t x)
+{
+#if defined(__SIZEOF_INT128__)
+    uint64_t r = x - (uint64_t)(((unsigned __int128)x * m->barrett) >> 64) * m->p;
+    r = r >= m->p ? r - m->p : r;
+    return r >= m->p ? r - m->p : r;
+#else
+    return x % m->p;
+#endif
+}
+
+/* a bounded accumulator after one addition (x < 2 * p2): below p2 again */
+static inline uint64_t bound(uint64_t x, uint64_t p2) { return x >= p2 ? x - p2 : x; }
 
 static int64_t inverse(int64_t a, int64_t p)
 {
@@ -55,23 +128,21 @@ static int64_t inverse(int64_t a, int64_t p)
 
 /* Reduce acc[first:] by every pivot except the one at column skip; entries left in [0, p). Returns the
  * number of nonzero entries. */
-static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t *pivot_of, const int64_t *starts,
-                     const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
-                     const int64_t *piv_voff, int64_t npiv,
-                     const int32_t *scols, const int32_t *svals, uint64_t p, int delayed, int64_t skip)
+static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const pivots_t *pv, const modulus_t *mod,
+                     int64_t skip)
 {
     int64_t nnz = 0;
+    uint64_t p = mod->p, p2 = mod->p2;
     for (int64_t c = first; c < ncols; c++) {
         uint64_t a = acc[c];
         if (!a)
             continue;
-        if (delayed)
-            a %= p;
+        a = reduce(mod, a);
         if (!a) {
             acc[c] = 0;
             continue;
         }
-        int64_t k = pivot_of[c];
+        int64_t k = pivot_at(pv, c);
         if (k < 0 || c == skip) {
             acc[c] = a;
             nnz++;
@@ -79,24 +150,26 @@ static int64_t sweep(uint64_t *acc, int64_t first, int64_t ncols, const int64_t 
         }
         acc[c] = 0;
         uint64_t m = p - a; /* pivot rows are monic: add (p - a) times the row's tail */
-        /* the known pivots are read where the caller keeps them, the new ones from the store */
-        const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
-        const int32_t *pv = k < npiv ? piv_vals + piv_voff[k] + 1 : svals + starts[k] + 1;
-        int64_t n = ends[k] - starts[k] - 1;
-        if (delayed) {
+        const int32_t *pvv;
+        int64_t n;
+        const int32_t *pc = pivot_row(pv, k, &pvv, &n) + 1;
+        pvv++;
+        n--;
+        if (mod->delayed) {
             for (int64_t t = 0; t < n; t++)
-                acc[pc[t]] += m * (uint64_t)pv[t];
+                acc[pc[t]] += m * (uint64_t)pvv[t];
         } else {
             for (int64_t t = 0; t < n; t++)
-                acc[pc[t]] = (acc[pc[t]] + m * (uint64_t)pv[t]) % p;
+                acc[pc[t]] = bound(acc[pc[t]] + m * (uint64_t)pvv[t], p2);
         }
     }
     return nnz;
 }
 
-/* Move the nonzero entries of acc[first:] to cols/vals from position w on (acc left zero). */
-static int64_t gather(uint64_t *acc, int64_t first, int64_t ncols, int32_t *cols, int32_t *vals, int64_t w)
+/* Move the nonzero entries of acc[first:] to cols/vals (acc left zero); returns their number. */
+static int64_t gather(uint64_t *acc, int64_t first, int64_t ncols, int32_t *cols, int32_t *vals)
 {
+    int64_t w = 0;
     for (int64_t c = first; c < ncols; c++) {
         if (acc[c]) {
             cols[w] = (int32_t)c;
@@ -110,13 +183,38 @@ static int64_t gather(uint64_t *acc, int64_t first, int64_t ncols, int32_t *cols
 
 #define BLOCK 8 /* rows reduced together: each pivot row is read once per block, not once per row */
 
-/* y[c * BLOCK + r] += m[r] * v[t] at the columns c = col[t] of a pivot's tail, all BLOCK rows at once
- * (delayed reduction: no mod). m[r] and v[t] are below 2**32, so every product is one 32 x 32 -> 64-bit
- * vector multiply; AVX2 where the processor has it (checked at run time), else SSE2 (every x86-64), else
- * plain C. */
-#if defined(__x86_64__)
-static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m)
+/* y[c * BLOCK + r] += m[r] * v[t] at the columns c = col[t] of a pivot's tail, all BLOCK rows at once.
+ * m[r] and v[t] are below 2**31, so every product is one 32 x 32 -> 64-bit vector multiply. Delayed
+ * accumulators take the sum as it is; bounded ones (see modulus_t) are brought below p2 again by one
+ * compare and subtract (AVX-512: min(y, y - p2) in unsigned lanes, y - p2 wrapping around when y < p2).
+ * AVX-512 or AVX2 where the processor has it (checked at run time), else SSE2 (every x86-64; bounded:
+ * plain C), else plain C. */
+static void axpy_plain(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m,
+                       uint64_t p2)
 {
+    (void)p2;
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
+        for (int r = 0; r < BLOCK; r++)
+            y[r] += (uint64_t)m[r] * v;
+    }
+}
+
+static void axpy_plain_bounded(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n,
+                               const uint32_t *m, uint64_t p2)
+{
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
+        for (int r = 0; r < BLOCK; r++)
+            y[r] = bound(y[r] + (uint64_t)m[r] * v, p2);
+    }
+}
+
+#if defined(__x86_64__)
+static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m,
+                      uint64_t p2)
+{
+    (void)p2;
     __m128i m01 = _mm_set_epi64x(m[1], m[0]), m23 = _mm_set_epi64x(m[3], m[2]);
     __m128i m45 = _mm_set_epi64x(m[5], m[4]), m67 = _mm_set_epi64x(m[7], m[6]);
     for (int64_t t = 0; t < n; t++) {
@@ -130,8 +228,9 @@ static void axpy_sse2(uint64_t *bacc, const int32_t *col, const int32_t *val, in
 }
 
 __attribute__((target("avx2"))) static void axpy_avx2(uint64_t *bacc, const int32_t *col, const int32_t *val,
-                                                      int64_t n, const uint32_t *m)
+                                                      int64_t n, const uint32_t *m, uint64_t p2)
 {
+    (void)p2;
     __m256i lo = _mm256_set_epi64x(m[3], m[2], m[1], m[0]), hi = _mm256_set_epi64x(m[7], m[6], m[5], m[4]);
     for (int64_t t = 0; t < n; t++) {
         __m256i v = _mm256_set1_epi64x((uint32_t)val[t]);
@@ -140,41 +239,85 @@ __attribute__((target("avx2"))) static void axpy_avx2(uint64_t *bacc, const int3
         _mm256_storeu_si256(y + 1, _mm256_add_epi64(_mm256_loadu_si256(y + 1), _mm256_mul_epu32(hi, v)));
     }
 }
-#else
-static void axpy_plain(uint64_t *bacc, const int32_t *col, const int32_t *val, int64_t n, const uint32_t *m)
+
+/* the sums are below 2**63, so the signed compare y > p2 - 1 is the unsigned one */
+__attribute__((target("avx2"))) static void axpy_avx2_bounded(uint64_t *bacc, const int32_t *col,
+                                                              const int32_t *val, int64_t n, const uint32_t *m,
+                                                              uint64_t p2)
 {
+    __m256i lo = _mm256_set_epi64x(m[3], m[2], m[1], m[0]), hi = _mm256_set_epi64x(m[7], m[6], m[5], m[4]);
+    __m256i q = _mm256_set1_epi64x((int64_t)p2), q1 = _mm256_set1_epi64x((int64_t)p2 - 1);
     for (int64_t t = 0; t < n; t++) {
-        uint64_t v = (uint32_t)val[t], *y = bacc + (int64_t)col[t] * BLOCK;
-        for (int r = 0; r < BLOCK; r++)
-            y[r] += (uint64_t)m[r] * v;
+        __m256i v = _mm256_set1_epi64x((uint32_t)val[t]);
+        __m256i *y = (__m256i *)(bacc + (int64_t)col[t] * BLOCK);
+        __m256i a = _mm256_add_epi64(_mm256_loadu_si256(y), _mm256_mul_epu32(lo, v));
+        __m256i b = _mm256_add_epi64(_mm256_loadu_si256(y + 1), _mm256_mul_epu32(hi, v));
+        a = _mm256_sub_epi64(a, _mm256_and_si256(_mm256_cmpgt_epi64(a, q1), q));
+        b = _mm256_sub_epi64(b, _mm256_and_si256(_mm256_cmpgt_epi64(b, q1), q));
+        _mm256_storeu_si256(y, a);
+        _mm256_storeu_si256(y + 1, b);
+    }
+}
+
+__attribute__((target("avx512f"))) static void axpy_avx512(uint64_t *bacc, const int32_t *col, const int32_t *val,
+                                                           int64_t n, const uint32_t *m, uint64_t p2)
+{
+    (void)p2;
+    __m512i mm = _mm512_set_epi64(m[7], m[6], m[5], m[4], m[3], m[2], m[1], m[0]);
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t *y = bacc + (int64_t)col[t] * BLOCK;
+        __m512i v = _mm512_set1_epi64((uint32_t)val[t]);
+        _mm512_storeu_si512(y, _mm512_add_epi64(_mm512_loadu_si512(y), _mm512_mul_epu32(mm, v)));
+    }
+}
+
+__attribute__((target("avx512f"))) static void axpy_avx512_bounded(uint64_t *bacc, const int32_t *col,
+                                                                   const int32_t *val, int64_t n, const uint32_t *m,
+                                                                   uint64_t p2)
+{
+    __m512i mm = _mm512_set_epi64(m[7], m[6], m[5], m[4], m[3], m[2], m[1], m[0]), q = _mm512_set1_epi64((int64_t)p2);
+    for (int64_t t = 0; t < n; t++) {
+        uint64_t *y = bacc + (int64_t)col[t] * BLOCK;
+        __m512i v = _mm512_set1_epi64((uint32_t)val[t]);
+        __m512i a = _mm512_add_epi64(_mm512_loadu_si512(y), _mm512_mul_epu32(mm, v));
+        _mm512_storeu_si512(y, _mm512_min_epu64(a, _mm512_sub_epi64(a, q)));
     }
 }
 #endif
 
-typedef void (*axpy_t)(uint64_t *, const int32_t *, const int32_t *, int64_t, const uint32_t *);
+typedef void (*axpy_t)(uint64_t *, const int32_t *, const int32_t *, int64_t, const uint32_t *, uint64_t);
 
-static axpy_t pick_axpy(void)
+/* The widest vector version this processor runs, for delayed or bounded accumulators. F4_KERNEL_ISA
+ * (avx512, avx2, sse2 or plain) caps it: a comparison of the versions on one machine. */
+static axpy_t pick_axpy(int delayed)
 {
+    const char *cap = getenv("F4_KERNEL_ISA");
+    int level = 3; /* 3 avx512, 2 avx2, 1 sse2, 0 plain */
+    if (cap)
+        level = !strcmp(cap, "avx2") ? 2 : !strcmp(cap, "sse2") ? 1 : !strcmp(cap, "plain") ? 0 : 3;
 #if defined(__x86_64__)
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2"))
-        return axpy_avx2;
-    return axpy_sse2;
-#else
-    return axpy_plain;
+    if (level >= 3 && __builtin_cpu_supports("avx512f"))
+        return delayed ? axpy_avx512 : axpy_avx512_bounded;
+    if (level >= 2 && __builtin_cpu_supports("avx2"))
+        return delayed ? axpy_avx2 : axpy_avx2_bounded;
+    if (level >= 1 && delayed)
+        return axpy_sse2;
 #endif
+    (void)level;
+    return delayed ? axpy_plain : axpy_plain_bounded;
 }
 
 /* Reduce a block of rows, held interleaved in bacc[c * BLOCK + r], from column first on by every pivot.
  * In echelon mode, at a column without a pivot the first nonzero row of the block that has no lead yet
  * takes it as its lead (lead[r] = c) and the column is eliminated from the other rows without a lead (the
  * block's own Gaussian elimination). Leaves every entry in [0, p). Undesignated rows end zero. */
-static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, const int64_t *pivot_of,
-                        const int64_t *starts, const int64_t *ends, const int32_t *piv_cols, const int32_t *piv_vals,
-                        const int64_t *piv_voff, int64_t npiv, const int32_t *scols, const int32_t *svals, uint64_t p, int delayed,
-                        int echelon, int64_t *lead, axpy_t axpy)
+static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, const pivots_t *pv,
+                        const modulus_t *mod, int echelon, int64_t *lead, axpy_t axpy)
 {
     uint32_t m[BLOCK]; /* 32 x 32 -> 64-bit products: one vector multiply for several rows */
+    const uint64_t p = mod->p, p2 = mod->p2;
+    const int delayed = mod->delayed;
     for (int64_t c = first; c < ncols; c++) {
         uint64_t *a = bacc + c * BLOCK;
         uint64_t any = 0;
@@ -184,8 +327,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
             continue;
         int hits = 0, last = 0;
         for (int r = 0; r < BLOCK; r++) {
-            if (delayed)
-                a[r] %= p;
+            a[r] = reduce(mod, a[r]);
             if (a[r]) {
                 hits++;
                 last = r;
@@ -193,22 +335,20 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
         }
         if (!hits)
             continue;
-        int64_t k = pivot_of[c];
+        int64_t k = pivot_at(pv, c);
         if (k >= 0) {
-            /* the known pivots are read where the caller keeps them, the new ones from the store */
-            const int32_t *pc = (k < npiv ? piv_cols : scols) + starts[k] + 1;
-            const int32_t *pv = k < npiv ? piv_vals + piv_voff[k] + 1 : svals + starts[k] + 1;
-            int64_t n = ends[k] - starts[k] - 1;
+            const int32_t *pc = pv->cols[k] + 1, *pvv = pv->vals[k] + 1;
+            int64_t n = pv->len[k] - 1;
             if (hits == 1) {
                 uint64_t mm = p - a[last], *x = bacc + last;
                 a[last] = 0;
                 if (delayed) {
                     for (int64_t t = 0; t < n; t++)
-                        x[(int64_t)pc[t] * BLOCK] += mm * (uint64_t)pv[t];
+                        x[(int64_t)pc[t] * BLOCK] += mm * (uint64_t)pvv[t];
                 } else {
                     for (int64_t t = 0; t < n; t++) {
                         uint64_t *y = x + (int64_t)pc[t] * BLOCK;
-                        *y = (*y + mm * (uint64_t)pv[t]) % p;
+                        *y = bound(*y + mm * (uint64_t)pvv[t], p2);
                     }
                 }
                 continue;
@@ -217,15 +357,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
                 m[r] = (uint32_t)(a[r] ? p - a[r] : 0); /* pivot rows are monic: add (p - a) times the tail */
                 a[r] = 0;
             }
-            if (delayed) {
-                axpy(bacc, pc, pv, n, m);
-            } else {
-                for (int64_t t = 0; t < n; t++) {
-                    uint64_t v = (uint64_t)pv[t], *y = bacc + (int64_t)pc[t] * BLOCK;
-                    for (int r = 0; r < BLOCK; r++)
-                        y[r] = (y[r] + (uint64_t)m[r] * v) % p;
-                }
-            }
+            axpy(bacc, pc, pvv, n, m, p2);
             continue;
         }
         if (!echelon)
@@ -241,7 +373,7 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
         for (int r = 0; r < nb; r++) {
             if (r == r0 || !a[r] || lead[r] >= 0)
                 continue;
-            uint64_t mm = (p - a[r]) * inv % p;
+            uint64_t mm = reduce(mod, (p - a[r]) * inv);
             a[r] = 0;
             for (int64_t j = c + 1; j < ncols; j++) {
                 uint64_t x = bacc[j * BLOCK + r0];
@@ -249,24 +381,26 @@ static void block_sweep(uint64_t *bacc, int nb, int64_t first, int64_t ncols, co
                     continue;
                 uint64_t *y = bacc + j * BLOCK + r;
                 if (delayed)
-                    *y += mm * (x % p);
+                    *y += mm * reduce(mod, x);
                 else
-                    *y = (*y + mm * x) % p;
+                    *y = bound(*y + mm * reduce(mod, x), p2);
             }
         }
     }
 }
 
-/* Move the nonzero entries of row r of the block from column first on to cols/vals from position w on,
- * times scale mod p (the block is left zero there); returns the position after them. */
+
+/* Copy the nonzero entries of row r of the block from column first on, times scale mod p, to cols and vals
+ * (the block is left zero there); returns their number. */
 static int64_t gather_row(uint64_t *bacc, int r, int64_t first, int64_t ncols, int32_t *cols, int32_t *vals,
-                          int64_t w, uint64_t scale, uint64_t p)
+                          uint64_t scale, const modulus_t *mod)
 {
+    int64_t w = 0;
     for (int64_t c = first; c < ncols; c++) {
         uint64_t v = bacc[c * BLOCK + r];
         if (v) {
             cols[w] = (int32_t)c;
-            vals[w] = (int32_t)(v * scale % p);
+            vals[w] = (int32_t)(scale == 1 ? v : reduce(mod, v * scale));
             w++;
             bacc[c * BLOCK + r] = 0;
         }
@@ -282,168 +416,239 @@ static int ascending(const void *x, const void *y)
 
 void f4_free(void *ptr) { free(ptr); }
 
+/* Reduce blocks of rows (rows[b * BLOCK ...], by their numbers in order) by the pivots, one block at a time
+ * per thread, blocks handed out in order. In echelon mode a row left with a lead becomes a new pivot (monic)
+ * when it wins the compare-and-swap at its lead; when another thread published a pivot there first, the
+ * row is put back and goes on reducing. Else row i's reduced entries go to each[i] (length each_len[i]). */
+static void reduce_blocks(const int64_t *row_indptr, const int32_t *row_cols, const int32_t *row_vals,
+                          const int64_t *row_voff, const int64_t *order, int64_t nrows, int64_t ncols, pivots_t *pv,
+                          const modulus_t *mod, int echelon, int threads, int32_t **each, int64_t *each_len, int *oom)
+{
+    int64_t nblocks = (nrows + BLOCK - 1) / BLOCK, next = 0;
+    (void)nblocks; /* read by OpenMP only */
+    axpy_t axpy = pick_axpy(mod->delayed);
+#pragma omp parallel num_threads(threads) if (threads > 1 && nblocks > 1)
+    {
+        uint64_t *bacc = calloc((size_t)ncols * BLOCK + 1, sizeof(uint64_t));
+        int32_t *scratch = malloc((2 * ncols + 2) * sizeof(int32_t)); /* a row's columns, then its values */
+        if (!bacc || !scratch)
+            __atomic_store_n(oom, 1, __ATOMIC_RELAXED);
+        while (!__atomic_load_n(oom, __ATOMIC_RELAXED)) {
+            int64_t b0 = __atomic_fetch_add(&next, 1, __ATOMIC_RELAXED) * BLOCK;
+            if (b0 >= nrows)
+                break;
+            int nb = nrows - b0 < BLOCK ? (int)(nrows - b0) : BLOCK;
+            int64_t first = ncols, lead[BLOCK], slot[BLOCK];
+            int published[BLOCK]; /* the row is a pivot now (and zero in the block) */
+            for (int r = 0; r < nb; r++) {
+                int64_t row = order[b0 + r];
+                lead[r] = slot[r] = -1;
+                published[r] = 0;
+                const int32_t *rv = row_vals + row_voff[row] - row_indptr[row];
+                for (int64_t t = row_indptr[row]; t < row_indptr[row + 1]; t++)
+                    bacc[(int64_t)row_cols[t] * BLOCK + r] = (uint64_t)rv[t];
+                if (row_indptr[row] < row_indptr[row + 1] && row_cols[row_indptr[row]] < first)
+                    first = row_cols[row_indptr[row]];
+            }
+            while (first < ncols) { /* until every row of the block is published or zero */
+                block_sweep(bacc, nb, first, ncols, pv, mod, echelon, lead, axpy);
+                first = ncols;
+                for (int r = 0; r < nb; r++) {
+                    if (!echelon) {
+                        int64_t row = order[b0 + r];
+                        int64_t n = gather_row(bacc, r, 0, ncols, scratch, scratch + ncols, 1, mod);
+                        each[row] = new_row(scratch, scratch + ncols, n, oom);
+                        each_len[row] = n;
+                        continue;
+                    }
+                    if (lead[r] < 0 || published[r])
+                        continue;
+                    uint64_t inv = (uint64_t)inverse((int64_t)bacc[lead[r] * BLOCK + r], (int64_t)mod->p);
+                    int64_t n = gather_row(bacc, r, lead[r], ncols, scratch, scratch + ncols, inv, mod);
+                    int32_t *row = new_row(scratch, scratch + ncols, n, oom);
+                    if (!row)
+                        break;
+                    if (slot[r] < 0) /* kept through retries: at most one slot per row */
+                        slot[r] = __atomic_fetch_add(&pv->count, 1, __ATOMIC_RELAXED);
+                    int64_t k = slot[r], free_slot = -1;
+                    pv->cols[k] = row;
+                    pv->vals[k] = row + n;
+                    pv->len[k] = n;
+                    if (__atomic_compare_exchange_n(&pv->at[lead[r]], &free_slot, k, 0, __ATOMIC_RELEASE,
+                                                    __ATOMIC_RELAXED)) {
+                        published[r] = 1;
+                        continue;
+                    }
+                    /* another thread published a pivot at this lead first: the row reduces on from there */
+                    pv->len[k] = -1;
+                    for (int64_t t = 0; t < n; t++)
+                        bacc[(int64_t)row[t] * BLOCK + r] = (uint64_t)row[n + t];
+                    first = lead[r] < first ? lead[r] : first;
+                    lead[r] = -1;
+                    free(row);
+                }
+            }
+        }
+        free(bacc);
+        free(scratch);
+    }
+}
+
+/* Sweep every new pivot (slots order[0 .. nnew), by increasing leading column) against all the other pivots,
+ * from the right: then each is reduced (zero at every other pivot's column). The threads take the pivots
+ * in that order and publish each final row (fin); a sweep reads the final rows where they are published
+ * (all of those to its right on one thread: they are sparser) and the others as they were (a row swept by
+ * a pivot that is not final is still fully reduced: the sweep goes on to the columns that pivot brings in).
+ * At the end the final rows replace the rows. */
+static void back_substitute(pivots_t *pv, const int64_t *order, int64_t nnew, int64_t ncols, const modulus_t *mod,
+                            int threads, int *oom)
+{
+    int64_t next = nnew - 1;
+    pv->fin = calloc(pv->count + 1, sizeof(int32_t *));
+    pv->fin_len = calloc(pv->count + 1, sizeof(int64_t));
+    if (!pv->fin || !pv->fin_len)
+        *oom = 1;
+#pragma omp parallel num_threads(threads) if (threads > 1 && nnew > 1)
+    {
+        uint64_t *acc = calloc(ncols + 1, sizeof(uint64_t));
+        int32_t *cols = malloc((2 * ncols + 2) * sizeof(int32_t)), *vals = cols + ncols;
+        if (!acc || !cols)
+            __atomic_store_n(oom, 1, __ATOMIC_RELAXED);
+        while (!__atomic_load_n(oom, __ATOMIC_RELAXED)) {
+            int64_t i = __atomic_fetch_sub(&next, 1, __ATOMIC_RELAXED);
+            if (i < 0)
+                break;
+            int64_t k = order[i], lead = pv->cols[k][0];
+            for (int64_t t = 0; t < pv->len[k]; t++)
+                acc[pv->cols[k][t]] = (uint64_t)pv->vals[k][t];
+            sweep(acc, lead, ncols, pv, mod, lead);
+            int64_t n = gather(acc, lead, ncols, cols, vals);
+            int32_t *row = new_row(cols, vals, n, oom);
+            pv->fin_len[k] = n;
+            __atomic_store_n(&pv->fin[k], row, __ATOMIC_RELEASE);
+        }
+        free(acc);
+        free(cols);
+    }
+    for (int64_t i = 0; i < nnew && !*oom; i++) {
+        int64_t k = order[i];
+        free((void *)pv->cols[k]);
+        pv->cols[k] = pv->fin[k];
+        pv->vals[k] = pv->fin[k] + pv->fin_len[k];
+        pv->len[k] = pv->fin_len[k];
+        pv->fin[k] = NULL;
+    }
+    if (pv->fin)
+        for (int64_t i = 0; i < nnew; i++)
+            free(pv->fin[order[i]]);
+    free(pv->fin);
+    free(pv->fin_len);
+    pv->fin = NULL;
+}
+
 /* Reduce the rows by the monic pivot rows (any order, distinct leading columns). The values of row i of a
  * block are vals[voff[i] :] (one pool may serve many rows: an F4 row repeats the coefficients of the basis
- * element it is a multiple of). echelon != 0: the reduced
- * row echelon form of the reduced rows, nonzero rows only, monic, by increasing leading column; else every
- * row reduced on its own (zero rows kept). The result is returned in malloc'ed arrays, their addresses and
- * the row count in result[0..3] (indptr with rows + 1 entries, cols, vals, rows; free each array with
- * f4_free). Returns 0, or -1 when memory ran out. */
+ * element it is a multiple of). echelon != 0: the reduced row echelon form of the reduced rows, nonzero
+ * rows only, monic, by increasing leading column; else every row reduced on its own (zero rows kept). The
+ * work is shared among up to threads threads (OpenMP; one without it): the result is the same, the reduced
+ * row echelon form being unique. The result is returned in malloc'ed arrays, their addresses and the row
+ * count in result[0..3] (indptr with rows + 1 entries, cols, vals, rows; free each array with f4_free).
+ * Returns 0, or -1 when memory ran out. */
 int f4_sparse_echelon(const int64_t *piv_indptr, const int32_t *piv_cols, const int32_t *piv_vals,
                       const int64_t *piv_voff, int64_t npiv, const int64_t *row_indptr, const int32_t *row_cols,
                       const int32_t *row_vals, const int64_t *row_voff, int64_t nrows,
-                      int64_t ncols, int64_t prime, int echelon, int64_t *result)
+                      int64_t ncols, int64_t prime, int echelon, int threads, int64_t *result)
 {
-    uint64_t p = (uint64_t)prime;
-    int delayed = ((double)npiv + nrows + 1.0) * (prime - 1.0) * (prime - 1.0) + prime < 4611686018427387904.0;
-    int64_t nrow_entries = row_indptr[nrows];
-    int64_t *pivot_of = malloc(ncols * sizeof(int64_t));
-    int64_t *starts = malloc((npiv + nrows + 1) * sizeof(int64_t));
-    int64_t *ends = malloc((npiv + nrows + 1) * sizeof(int64_t));
-    uint64_t *acc = calloc(ncols + 1, sizeof(uint64_t));
-    int64_t *indptr = calloc(nrows + 1, sizeof(int64_t));
-    store_t st = {0}, out = {0};
-    int status = -1;
-    if (!pivot_of || !starts || !ends || !acc || !indptr)
+    const modulus_t mod = modulus((uint64_t)prime, (double)npiv + nrows + 1.0);
+    int64_t total = npiv + nrows, out_rows = 0, nnz = 0;
+    pivots_t pv = {malloc((total + 1) * sizeof(int32_t *)), malloc((total + 1) * sizeof(int32_t *)),
+                   malloc((total + 1) * sizeof(int64_t)), malloc((ncols + 1) * sizeof(int64_t)), npiv, NULL, NULL};
+    int64_t *order = malloc((nrows + 1) * sizeof(int64_t)), *indptr = calloc(nrows + 1, sizeof(int64_t));
+    int32_t **each = echelon ? NULL : calloc(nrows + 1, sizeof(int32_t *));
+    int64_t *each_len = echelon ? NULL : calloc(nrows + 1, sizeof(int64_t));
+    int32_t *cols = NULL, *vals = NULL;
+    int oom = !pv.cols || !pv.vals || !pv.len || !pv.at || !order || !indptr || (!echelon && (!each || !each_len));
+    threads = threads < 1 ? 1 : threads;
+    if (oom)
         goto done;
     for (int64_t c = 0; c < ncols; c++)
-        pivot_of[c] = -1;
-    if (room(&st, ncols > 1024 ? ncols : 1024)) /* the store holds the new pivots only */
-        goto done;
+        pv.at[c] = -1;
     for (int64_t k = 0; k < npiv; k++) {
-        starts[k] = piv_indptr[k];
-        ends[k] = piv_indptr[k + 1];
-        pivot_of[piv_cols[piv_indptr[k]]] = k;
+        pv.cols[k] = piv_cols + piv_indptr[k];
+        pv.vals[k] = piv_vals + piv_voff[k];
+        pv.len[k] = piv_indptr[k + 1] - piv_indptr[k];
+        pv.at[piv_cols[piv_indptr[k]]] = k;
     }
-    int64_t count = npiv;
-    axpy_t axpy = pick_axpy();
-    if (!echelon && room(&out, nrow_entries > 16 ? nrow_entries : 16))
-        goto done;
-    /* rows in blocks of BLOCK; in echelon mode by leading column, so that a block's rows fill in alike */
-    int64_t *row_order = malloc((nrows + 1) * sizeof(int64_t));
-    uint64_t *bacc = calloc((size_t)ncols * BLOCK + 1, sizeof(uint64_t));
-    if (!row_order || !bacc) {
-        free(row_order);
-        free(bacc);
-        goto done;
-    }
+    /* in echelon mode the rows go by leading column, so that a block's rows fill in alike */
     for (int64_t r = 0; r < nrows; r++) {
         int64_t first = row_indptr[r] < row_indptr[r + 1] ? row_cols[row_indptr[r]] : ncols;
-        row_order[r] = echelon ? (first << 32) | r : r;
+        order[r] = echelon ? (first << 32) | r : r;
     }
-    if (echelon)
-        qsort(row_order, nrows, sizeof(int64_t), ascending);
-    for (int64_t b0 = 0; b0 < nrows; b0 += BLOCK) {
-        int nb = nrows - b0 < BLOCK ? (int)(nrows - b0) : BLOCK;
-        int64_t first = ncols, lead[BLOCK];
-        for (int r = 0; r < nb; r++) {
-            int64_t row = row_order[b0 + r] & 0xFFFFFFFF;
-            lead[r] = -1;
-            const int32_t *rv = row_vals + row_voff[row] - row_indptr[row];
-            for (int64_t t = row_indptr[row]; t < row_indptr[row + 1]; t++)
-                bacc[(int64_t)row_cols[t] * BLOCK + r] = (uint64_t)rv[t];
-            if (row_indptr[row] < row_indptr[row + 1] && row_cols[row_indptr[row]] < first)
-                first = row_cols[row_indptr[row]];
-        }
-        block_sweep(bacc, nb, first, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, p,
-                    delayed, echelon, lead, axpy);
-        for (int r = 0; r < nb; r++) {
-            if (!echelon) {
-                if (room(&out, ncols - first)) {
-                    free(row_order);
-                    free(bacc);
-                    goto done;
-                }
-                out.size = gather_row(bacc, r, first, ncols, out.cols, out.vals, out.size, 1, p);
-                indptr[b0 + r + 1] = out.size;
-                continue;
-            }
-            if (lead[r] < 0)
-                continue;
-            if (room(&st, ncols - lead[r])) {
-                free(row_order);
-                free(bacc);
-                goto done;
-            }
-            starts[count] = st.size;
-            uint64_t inv = (uint64_t)inverse((int64_t)bacc[lead[r] * BLOCK + r], prime);
-            st.size = gather_row(bacc, r, lead[r], ncols, st.cols, st.vals, st.size, inv, p);
-            ends[count] = st.size;
-            pivot_of[lead[r]] = count;
-            count++;
-        }
+    if (echelon) {
+        qsort(order, nrows, sizeof(int64_t), ascending);
+        for (int64_t r = 0; r < nrows; r++)
+            order[r] &= 0xFFFFFFFF;
     }
-    free(row_order);
-    free(bacc);
-    int64_t out_rows = nrows;
-    if (!echelon)
-        goto hand_over;
-    /* the new pivots by decreasing leading column, each swept against all the others (those to its right
-     * are final by then) and written back in place, or at the end of the store if it grew */
-    int64_t nnew = count - npiv;
-    int64_t *order = malloc((nnew + 1) * sizeof(int64_t));
-    if (!order)
+    reduce_blocks(row_indptr, row_cols, row_vals, row_voff, order, nrows, ncols, &pv, &mod, echelon, threads, each,
+                  each_len, &oom);
+    if (oom)
         goto done;
-    /* (leading column, index) packed in one key: columns and counts are below 2**31 */
-    for (int64_t i = 0; i < nnew; i++)
-        order[i] = ((int64_t)st.cols[starts[npiv + i]] << 32) | i;
-    qsort(order, nnew, sizeof(int64_t), ascending);
-    for (int64_t i = 0; i < nnew; i++)
-        order[i] &= 0xFFFFFFFF;
-    int64_t total = 0;
-    for (int64_t i = nnew - 1; i >= 0; i--) {
-        int64_t k = npiv + order[i];
-        int64_t s = starts[k], e = ends[k];
-        int64_t lead = st.cols[s];
-        for (int64_t t = s; t < e; t++)
-            acc[st.cols[t]] = (uint64_t)st.vals[t];
-        int64_t nnz = sweep(acc, lead, ncols, pivot_of, starts, ends, piv_cols, piv_vals, piv_voff, npiv, st.cols, st.vals, p,
-                            delayed, lead);
-        if (nnz > e - s) {
-            if (room(&st, nnz)) {
-                free(order);
-                goto done;
-            }
-            s = st.size;
-            st.size += nnz;
-            starts[k] = s;
-        }
-        ends[k] = gather(acc, lead, ncols, st.cols, st.vals, s);
-        total += ends[k] - s;
+    if (echelon) { /* the new pivots (published slots) by leading column */
+        for (int64_t k = npiv; k < pv.count; k++)
+            if (pv.len[k] > 0)
+                order[out_rows++] = ((int64_t)pv.cols[k][0] << 32) | k;
+        qsort(order, out_rows, sizeof(int64_t), ascending);
+        for (int64_t i = 0; i < out_rows; i++)
+            order[i] &= 0xFFFFFFFF;
+        back_substitute(&pv, order, out_rows, ncols, &mod, threads, &oom);
+        if (oom)
+            goto done;
+    } else {
+        out_rows = nrows;
     }
-    if (room(&out, total > 0 ? total : 1)) {
-        free(order);
+    for (int64_t i = 0; i < out_rows; i++)
+        nnz += echelon ? pv.len[order[i]] : each_len[i];
+    cols = malloc((nnz + 1) * sizeof(int32_t));
+    vals = malloc((nnz + 1) * sizeof(int32_t));
+    if (!cols || !vals) {
+        oom = 1;
         goto done;
     }
-    indptr[0] = 0;
-    for (int64_t i = 0; i < nnew; i++) {
-        int64_t k = npiv + order[i], n = ends[k] - starts[k];
-        memcpy(out.cols + out.size, st.cols + starts[k], n * sizeof(int32_t));
-        memcpy(out.vals + out.size, st.vals + starts[k], n * sizeof(int32_t));
-        out.size += n;
-        indptr[i + 1] = out.size;
+    for (int64_t i = 0, w = 0; i < out_rows; i++) {
+        const int32_t *c = echelon ? pv.cols[order[i]] : each[i];
+        int64_t n = echelon ? pv.len[order[i]] : each_len[i];
+        if (n) {
+            memcpy(cols + w, c, n * sizeof(int32_t));
+            memcpy(vals + w, c + n, n * sizeof(int32_t));
+        }
+        w += n;
+        indptr[i + 1] = w;
     }
-    free(order);
-    out_rows = nnew;
-hand_over: /* the caller owns indptr, out.cols and out.vals from here */
-    result[0] = (int64_t)(intptr_t)indptr;
-    result[1] = (int64_t)(intptr_t)out.cols;
-    result[2] = (int64_t)(intptr_t)out.vals;
+    result[0] = (int64_t)(intptr_t)indptr; /* the caller owns indptr, cols and vals from here */
+    result[1] = (int64_t)(intptr_t)cols;
+    result[2] = (int64_t)(intptr_t)vals;
     result[3] = out_rows;
     indptr = NULL;
-    out.cols = out.vals = NULL;
-    status = 0;
+    cols = vals = NULL;
 done:
-    free(pivot_of);
-    free(starts);
-    free(ends);
-    free(acc);
+    if (pv.cols && pv.len)
+        for (int64_t k = npiv; k < pv.count; k++)
+            if (pv.len[k] >= 0)
+                free((void *)pv.cols[k]);
+    if (each)
+        for (int64_t i = 0; i < nrows; i++)
+            free(each[i]);
+    free(pv.cols);
+    free(pv.vals);
+    free(pv.len);
+    free(pv.at);
+    free(order);
     free(indptr);
-    free(st.cols);
-    free(st.vals);
-    free(out.cols);
-    free(out.vals);
-    return status;
+    free(each);
+    free(each_len);
+    free(cols);
+    free(vals);
+    return oom ? -1 : 0;
 }
 
 /* Gebauer-Moeller pair update of analysis/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
@@ -471,6 +676,42 @@ static uint64_t support_mask(const int32_t *e, int64_t n)
     return mask;
 }
 
+/* Divisibility masks (as msolve's divmasks): bit j of variable v (bit (v * bits + j) mod 64) is set when
+ * the exponent reaches thr[v * bits + j]; a divides b only if mask(a) is contained in mask(b), so one AND
+ * rejects most candidates before the exponents are compared. The thresholds spread over 1 .. the largest
+ * exponent of each variable among the rows given (any thresholds keep the test exact). */
+typedef struct {
+    int32_t *thr;
+    int bits;
+} divmask_t;
+
+static int divmask_init(divmask_t *dm, const int32_t *E, int64_t rows, int64_t n)
+{
+    dm->bits = n >= 64 ? 1 : (int)(64 / n);
+    if (dm->bits > 8)
+        dm->bits = 8;
+    dm->thr = malloc((n * dm->bits + 1) * sizeof(int32_t));
+    if (!dm->thr)
+        return -1;
+    for (int64_t v = 0; v < n; v++) {
+        int32_t top = 1;
+        for (int64_t i = 0; i < rows; i++)
+            top = E[i * n + v] > top ? E[i * n + v] : top;
+        for (int j = 0; j < dm->bits; j++)
+            dm->thr[v * dm->bits + j] = 1 + (int32_t)((int64_t)j * (top - 1) / dm->bits);
+    }
+    return 0;
+}
+
+static uint64_t divmask(const divmask_t *dm, const int32_t *e, int64_t n)
+{
+    uint64_t mask = 0;
+    for (int64_t v = 0; v < n; v++)
+        for (int j = 0; j < dm->bits && e[v] >= dm->thr[v * dm->bits + j]; j++)
+            mask |= (uint64_t)1 << ((v * dm->bits + j) & 63);
+    return mask;
+}
+
 static int64_t lcm_degree(const int32_t *a, const int32_t *b, int64_t n)
 {
     int64_t d = 0;
@@ -487,26 +728,39 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
     int64_t *pdeg = malloc((total + 1) * sizeof(int64_t));
     int32_t *L = malloc((total + 1) * n * sizeof(int32_t));
     uint8_t *coprime = malloc(total + 1), *dropped = malloc(total + 1);
+    uint64_t *emask = malloc((total + 1) * sizeof(uint64_t)), *lmask = malloc((total + 1) * sizeof(uint64_t));
+    uint64_t *qmask = malloc((npairs + 1) * sizeof(uint64_t));
+    int64_t *by_degree = malloc((total + 1) * sizeof(int64_t)), *minimal = malloc((total + 1) * sizeof(int64_t));
+    int64_t bucket_cap = 0, *bucket = NULL;
     int64_t cap = 64, count = 0, *out = malloc(cap * 4 * sizeof(int64_t));
     int32_t *out_lcm = malloc(cap * n * sizeof(int32_t) + 4);
+    uint64_t *out_mask = malloc(cap * sizeof(uint64_t));
+    divmask_t dm = {0};
     int status = -1;
-    if (!partners || !pdeg || !L || !coprime || !dropped || !out || !out_lcm)
+    if (!partners || !pdeg || !L || !coprime || !dropped || !emask || !lmask || !qmask || !by_degree || !minimal ||
+        !out || !out_lcm ||
+        !out_mask || divmask_init(&dm, E, total, n))
         goto done;
-    for (int64_t q = 0; q < npairs; q++)
+    for (int64_t g = 0; g < total; g++)
+        emask[g] = divmask(&dm, E + g * n, n);
+    for (int64_t q = 0; q < npairs; q++) {
         keep[q] = 1;
+        qmask[q] = divmask(&dm, lcm + q * n, n);
+    }
     for (int64_t t = 0; t < m; t++) {
         int64_t h = k + t;
         const int32_t *eh = E + h * n;
+        const uint64_t hmask = emask[h];
         /* criterion B on the existing pairs and those of earlier t */
         for (int64_t q = 0; q < npairs; q++) {
-            if (!keep[q] || !divides(eh, lcm + q * n, n))
+            if (!keep[q] || (hmask & ~qmask[q]) || !divides(eh, lcm + q * n, n))
                 continue;
             int64_t d = pairs[3 * q + 2];
             if (lcm_degree(E + pairs[3 * q] * n, eh, n) != d && lcm_degree(E + pairs[3 * q + 1] * n, eh, n) != d)
                 keep[q] = 0;
         }
         for (int64_t q = 0; q < count; q++) {
-            if (out[4 * q + 3] < 0 || !divides(eh, out_lcm + q * n, n))
+            if (out[4 * q + 3] < 0 || (hmask & ~out_mask[q]) || !divides(eh, out_lcm + q * n, n))
                 continue;
             int64_t d = out[4 * q + 2];
             if (lcm_degree(E + out[4 * q] * n, eh, n) != d && lcm_degree(E + out[4 * q + 1] * n, eh, n) != d)
@@ -527,25 +781,65 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
             }
             pdeg[np] = d;
             coprime[np] = d == deg[g] + deg[h];
+            lmask[np] = emask[g] | hmask; /* the mask of a max is the union of the masks */
             np++;
         }
-        /* criterion M (a proper divisor among the partners' lcms) and F (one per equal lcm, none if one of
-         * them is coprime) */
+        /* criterion M (a partner's lcm properly divides this one's: dropped) and F (of the partners with
+         * equal lcms the first is kept, none if one of them is coprime). The partners go by increasing lcm
+         * degree; M is tested against one partner per distinct lcm that M kept (minimal[0 .. nmin), all of
+         * lower degree): a proper divisor that M dropped has a kept one dividing it in turn. So the test is
+         * against the few minimal lcms, not all the partners. */
+        int64_t low = INT64_MAX, high = 0; /* counting sort: the lcm degrees span a short range */
         for (int64_t c = 0; c < np; c++) {
-            dropped[c] = 0;
-            int64_t first = -1, has_coprime = 0;
-            for (int64_t c2 = 0; c2 < np; c2++) {
-                if (pdeg[c2] > pdeg[c] || !divides(E + partners[c2] * n, L + c * n, n))
-                    continue;
-                if (pdeg[c2] < pdeg[c]) {
-                    dropped[c] = 1;
-                    break;
-                }
-                if (first < 0)
-                    first = c2;
-                has_coprime |= coprime[c2];
+            low = pdeg[c] < low ? pdeg[c] : low;
+            high = pdeg[c] > high ? pdeg[c] : high;
+        }
+        if (np && high - low + 2 > bucket_cap) {
+            bucket_cap = 2 * (high - low + 2);
+            int64_t *b = realloc(bucket, bucket_cap * sizeof(int64_t));
+            if (!b)
+                goto done;
+            bucket = b;
+        }
+        if (np) {
+            memset(bucket, 0, (high - low + 2) * sizeof(int64_t));
+            for (int64_t c = 0; c < np; c++)
+                bucket[pdeg[c] - low + 1]++;
+            for (int64_t d = 1; d <= high - low + 1; d++)
+                bucket[d] += bucket[d - 1];
+            for (int64_t c = 0; c < np; c++) /* stable: by degree, then by partner */
+                by_degree[bucket[pdeg[c] - low]++] = (pdeg[c] << 32) | c;
+        }
+        int64_t nmin = 0;
+        for (int64_t s = 0; s < np;) {
+            int64_t e = s; /* by_degree[s .. e): one lcm degree */
+            while (e < np && by_degree[e] >> 32 == by_degree[s] >> 32)
+                e++;
+            for (int64_t i = s; i < e; i++) {
+                int64_t c = by_degree[i] & 0xFFFFFFFF;
+                dropped[c] = 0;
+                for (int64_t j = 0; j < nmin && !dropped[c]; j++)
+                    dropped[c] = !(lmask[minimal[j]] & ~lmask[c]) && divides(L + minimal[j] * n, L + c * n, n);
             }
-            if (dropped[c] || first != c || has_coprime)
+            for (int64_t i = s; i < e; i++) { /* F among the partners of this degree that M kept */
+                int64_t c = by_degree[i] & 0xFFFFFFFF;
+                if (dropped[c] == 1 || dropped[c] == 2)
+                    continue;
+                int64_t has_coprime = coprime[c];
+                for (int64_t i2 = i + 1; i2 < e; i2++) {
+                    int64_t c2 = by_degree[i2] & 0xFFFFFFFF;
+                    if (dropped[c2] || lmask[c2] != lmask[c] || memcmp(L + c2 * n, L + c * n, n * sizeof(int32_t)))
+                        continue;
+                    dropped[c2] = 2; /* same lcm: c (the first, by index) speaks for it */
+                    has_coprime |= coprime[c2];
+                }
+                minimal[nmin++] = c;
+                dropped[c] = has_coprime ? 3 : 0;
+            }
+            s = e;
+        }
+        for (int64_t c = 0; c < np; c++) {
+            if (dropped[c])
                 continue;
             if (count == cap) {
                 cap *= 2;
@@ -557,7 +851,12 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
                 if (!ol)
                     goto done;
                 out_lcm = ol;
+                uint64_t *om = realloc(out_mask, cap * sizeof(uint64_t));
+                if (!om)
+                    goto done;
+                out_mask = om;
             }
+            out_mask[count] = lmask[c];
             out[4 * count] = partners[c];
             out[4 * count + 1] = h;
             out[4 * count + 2] = pdeg[c];
@@ -583,6 +882,14 @@ done:
     free(L);
     free(coprime);
     free(dropped);
+    free(emask);
+    free(lmask);
+    free(qmask);
+    free(by_degree);
+    free(minimal);
+    free(bucket);
+    free(out_mask);
+    free(dm.thr);
     free(out);
     free(out_lcm);
     return status;
@@ -708,22 +1015,30 @@ done:
 }
 
 /* The column of every term of F4 rows (as in f4_new_terms) over the matrix columns (codes ascending; column
- * 0 is the largest code): out[e] = ncols - 1 - position of the code, entry by entry. Every code must be a
- * column. Returns 0, or -1 when memory ran out. */
+ * 0 is the largest code): out[e] = ncols - 1 - position of the code, entry by entry, the rows shared among
+ * up to threads threads (row r's entries start at offset[r]). Every code must be a column. Returns 0, or
+ * -1 when memory ran out. */
 int f4_columns(const uint64_t *pool, const int64_t *starts, const int64_t *lengths, const uint64_t *mult,
-               int64_t nrows, const uint64_t *columns, int64_t ncols, int32_t *out)
+               int64_t nrows, const uint64_t *columns, int64_t ncols, int32_t *out, int threads)
 {
     table_t t;
-    if (table_init(&t, ncols))
+    int64_t *offset = malloc((nrows + 1) * sizeof(int64_t));
+    if (!offset || table_init(&t, ncols)) {
+        free(offset);
         return -1;
+    }
     for (int64_t i = 0; i < ncols; i++)
         t.slot[table_find(&t, columns, columns[i])] = i;
-    int64_t e = 0;
+    offset[0] = 0;
+    for (int64_t r = 0; r < nrows; r++)
+        offset[r + 1] = offset[r] + lengths[r];
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1 && offset[nrows] > 100000)
     for (int64_t r = 0; r < nrows; r++) {
         const uint64_t *terms = pool + starts[r];
         for (int64_t k = 0; k < lengths[r]; k++)
-            out[e++] = (int32_t)(ncols - 1 - t.slot[table_find(&t, columns, terms[k] + mult[r])]);
+            out[offset[r] + k] = (int32_t)(ncols - 1 - t.slot[table_find(&t, columns, terms[k] + mult[r])]);
     }
+    free(offset);
     free(t.slot);
     return 0;
 }

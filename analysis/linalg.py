@@ -21,6 +21,10 @@ keeps the pivot rows sparse: the C one of :mod:`analysis.native` (compiled on fi
 of :mod:`analysis.sparse_kernels` where no C compiler is found; ``"auto"`` (the F4 default) takes the C
 kernel for every matrix, and without it the numba kernel for large matrices with sparse pivot rows and
 numpy otherwise (:func:`sparse_pays`). All must return identical rows.
+
+The ``*_sparse`` operations take ``threads`` (default 1): the C kernel shares its blocks of rows among
+that many OpenMP threads (same rows: the reduced row echelon form is unique); the other backends run on
+one thread whatever it says.
 """
 from __future__ import annotations
 
@@ -184,11 +188,11 @@ def _pivot_dict(pivots: SparseRows) -> dict[int, Row]:
     return {r[0][0]: r for r in pivots.to_rows()}
 
 
-def python_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+def python_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
     return SparseRows.from_rows(python_reduce(_pivot_dict(pivots.compact()), rows.compact().to_rows(), ncols, p))
 
 
-def python_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+def python_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
     return SparseRows.from_rows(python_reduce_each(_pivot_dict(pivots.compact()), rows.compact().to_rows(), ncols, p))
 
 
@@ -515,7 +519,7 @@ def pivot_columns(m: np.ndarray, p: int) -> np.ndarray:
     return np.sort(np.argmax(echelon != 0, axis=1))
 
 
-def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
     pivots, rows = pivots.compact(), rows.compact()
     leads = pivots.leads
     if (leads[1:] < leads[:-1]).any():
@@ -527,7 +531,7 @@ def numpy_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int
     return SparseRows.from_dense(_rref(sub[sub.any(axis=1)], p), free)
 
 
-def numpy_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+def numpy_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
     pivots, rows = pivots.compact(), rows.compact()
     leads = pivots.leads
     if (leads[1:] < leads[:-1]).any():
@@ -546,7 +550,8 @@ def numpy_reduce_each(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p
 # ----------------------------------------------------------------------------------------------
 # sparse backend (compiled)
 # ----------------------------------------------------------------------------------------------
-def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool) -> SparseRows:
+def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, echelon: bool,
+                   threads: int = 1) -> SparseRows:
     from . import native
 
     def arrays(block: SparseRows) -> tuple[np.ndarray, ...]:  # one compiled signature
@@ -562,15 +567,15 @@ def _sparse_kernel(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, ech
         return np.ascontiguousarray(block.indptr[:-1] if block.offsets is None else block.offsets, dtype=np.int64)
 
     return SparseRows(*native.sparse_echelon(*arrays(pivots), offsets(pivots), *arrays(rows), offsets(rows), ncols, p,
-                                             echelon))
+                                             echelon, threads))
 
 
-def sparse_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
-    return _sparse_kernel(pivots, rows, ncols, p, True)
+def sparse_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
+    return _sparse_kernel(pivots, rows, ncols, p, True, threads)
 
 
-def sparse_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
-    return _sparse_kernel(pivots, rows, ncols, p, False)
+def sparse_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
+    return _sparse_kernel(pivots, rows, ncols, p, False, threads)
 
 
 def sparse_reduce(pivots: dict[int, Row], rows: Sequence[Row], ncols: int, p: int) -> list[Row]:
@@ -612,15 +617,15 @@ def sparse_pays(npiv: int, pivot_entries: int, nrows: int, ncols: int) -> bool:
     return nrows * npiv * ncols > (SPARSE_MIN_WORK_LOADED if loaded else SPARSE_MIN_WORK)
 
 
-def auto_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+def auto_reduce_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
     if sparse_pays(len(pivots), len(pivots.cols), len(rows), ncols):
-        return sparse_reduce_sparse(pivots, rows, ncols, p)
+        return sparse_reduce_sparse(pivots, rows, ncols, p, threads)
     return numpy_reduce_sparse(pivots, rows, ncols, p)
 
 
-def auto_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int) -> SparseRows:
+def auto_reduce_each_sparse(pivots: SparseRows, rows: SparseRows, ncols: int, p: int, threads: int = 1) -> SparseRows:
     if sparse_pays(len(pivots), len(pivots.cols), len(rows), ncols):
-        return sparse_reduce_each_sparse(pivots, rows, ncols, p)
+        return sparse_reduce_each_sparse(pivots, rows, ncols, p, threads)
     return numpy_reduce_each_sparse(pivots, rows, ncols, p)
 
 
@@ -637,8 +642,8 @@ class Backend:
     name: str
     reduce: Callable[[dict[int, Row], Sequence[Row], int, int], list[Row]]
     reduce_each: Callable[[dict[int, Row], Sequence[Row], int, int], list[Row]]
-    reduce_sparse: Callable[[SparseRows, SparseRows, int, int], SparseRows]
-    reduce_each_sparse: Callable[[SparseRows, SparseRows, int, int], SparseRows]
+    reduce_sparse: Callable[..., SparseRows]  # (pivots, rows, ncols, p, threads=1)
+    reduce_each_sparse: Callable[..., SparseRows]
 
 
 _BACKENDS = {

@@ -21,6 +21,9 @@ import numpy as np
 
 SOURCE = Path(__file__).with_name("f4_kernels.c")
 FLAGS = ("-O3", "-funroll-loops", "-shared", "-fPIC", "-std=c99")
+OPENMP = ("-fopenmp",)
+"""Added to FLAGS where the compiler has OpenMP (gcc, clang with libomp): the row reduction and the pair
+update then run on ``threads`` threads; without it the library is built single-threaded (same results)."""
 
 _LOCK = threading.Lock()
 _LOADED: list = []  # [library or None] once tried
@@ -50,10 +53,12 @@ def _build() -> Path | None:
     if not SOURCE.exists():
         _WHY.append(f"{SOURCE} is missing")
         return None
-    name = f"f4_kernels-{zlib.crc32(SOURCE.read_bytes() + ' '.join(FLAGS).encode()):08x}.so"
+    names = {flags: f"f4_kernels-{zlib.crc32(SOURCE.read_bytes() + ' '.join(flags).encode()):08x}.so"
+             for flags in (FLAGS + OPENMP, FLAGS)}
     for folder in _cache_dirs():
-        if (folder / name).exists():
-            return folder / name
+        for name in names.values():
+            if (folder / name).exists():
+                return folder / name
     # only a process that compiles pays for these imports
     import shutil
     import subprocess
@@ -71,7 +76,10 @@ def _build() -> Path | None:
         except OSError:
             continue
         try:
-            done = subprocess.run([compiler, *FLAGS, "-o", tmp, str(SOURCE)], capture_output=True, timeout=120)
+            for flags, name in names.items():  # with OpenMP first
+                done = subprocess.run([compiler, *flags, "-o", tmp, str(SOURCE)], capture_output=True, timeout=120)
+                if not done.returncode:
+                    break
             if done.returncode:
                 lines = done.stderr.decode(errors="replace").strip().splitlines()
                 _WHY.append(f"{compiler} failed on {SOURCE.name}: {lines[0] if lines else done.returncode}")
@@ -101,6 +109,11 @@ def kernel():
             lib = None
             path = _build()
             if path is not None:
+                # threads that wait for work sleep instead of spinning: on a machine shared with other
+                # processes a spinning thread takes the core its partner needs (katsura-9 on 2 threads at
+                # load 8 on 2 cores: 2x slower than one thread when spinning, as fast when sleeping).
+                # Read once, when OpenMP starts; a value the user set is kept.
+                os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
                 try:
                     lib = ctypes.CDLL(str(path))
                 except OSError as exc:
@@ -109,12 +122,14 @@ def kernel():
             if lib is not None:
                 lib.f4_sparse_echelon.restype = ctypes.c_int
                 lib.f4_sparse_echelon.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64] + [ctypes.c_void_p] * 4 + [
-                    ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_int, ctypes.c_void_p]
+                    ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_int, ctypes.c_int, ctypes.c_void_p]
                 lib.f4_free.restype = None
                 lib.f4_free.argtypes = [ctypes.c_void_p]
                 lib.f4_update.restype = ctypes.c_int
                 lib.f4_update.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 3 + [ctypes.c_int64] * 3 + [
                     ctypes.c_void_p] * 4
+                lib.f4_openmp.restype = ctypes.c_int
+                lib.f4_openmp.argtypes = []
                 lib.f4_reducers.restype = ctypes.c_int
                 lib.f4_reducers.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
                                             ctypes.c_int64, ctypes.c_void_p]
@@ -123,7 +138,7 @@ def kernel():
                                                                      ctypes.c_void_p]
                 lib.f4_columns.restype = ctypes.c_int
                 lib.f4_columns.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
-                                                                   ctypes.c_void_p]
+                                                                   ctypes.c_void_p, ctypes.c_int]
                 lib.f4_preprocess.restype = ctypes.c_int
                 lib.f4_preprocess.argtypes = [ctypes.c_void_p] * 5 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                               ctypes.c_int64, ctypes.c_void_p, ctypes.c_uint64] + [
@@ -139,7 +154,7 @@ def describe() -> str:
     """One line for a report: which F4 kernels this process runs, and why not the C ones when it cannot."""
     lib = kernel()
     if lib is not None:
-        return f"C kernels ({lib._name})"
+        return f"C kernels ({lib._name}{', OpenMP threads' if lib.f4_openmp() else ', one thread: no OpenMP'})"
     return f"numba/numpy kernels ({_WHY[-1] if _WHY else 'the C kernels are unavailable'})"
 
 
@@ -151,16 +166,18 @@ def _take(address: int, count: int, dtype) -> np.ndarray:
 
 
 def sparse_echelon(piv_indptr, piv_cols, piv_vals, piv_offsets, row_indptr, row_cols, row_vals, row_offsets,
-                   ncols: int, p: int, echelon: bool):
+                   ncols: int, p: int, echelon: bool, threads: int = 1):
     """As :func:`analysis.sparse_kernels.sparse_echelon` (indptr int64, columns and values int32, all
     C-contiguous), by the C kernel, except that the values of row i of a block start at vals[offsets[i]]
-    (int64; indptr[:-1] for the plain layout); returns (indptr int64, cols int32, vals int32)."""
+    (int64; indptr[:-1] for the plain layout), on up to ``threads`` threads (the same result: blocks of
+    rows are reduced concurrently, a new pivot published by compare-and-swap at its leading column; one
+    thread where the library was built without OpenMP); returns (indptr int64, cols int32, vals int32)."""
     lib = kernel()
     result = np.zeros(4, dtype=np.int64)
     status = lib.f4_sparse_echelon(
         piv_indptr.ctypes.data, piv_cols.ctypes.data, piv_vals.ctypes.data, piv_offsets.ctypes.data,
         len(piv_indptr) - 1, row_indptr.ctypes.data, row_cols.ctypes.data, row_vals.ctypes.data,
-        row_offsets.ctypes.data, len(row_indptr) - 1, ncols, p, int(echelon), result.ctypes.data,
+        row_offsets.ctypes.data, len(row_indptr) - 1, ncols, p, int(echelon), int(threads), result.ctypes.data,
     )
     if status:
         raise MemoryError("the C sparse kernel ran out of memory")
@@ -260,14 +277,15 @@ def new_terms(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: n
 
 
 def column_indices(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mult: np.ndarray,
-                   columns: np.ndarray) -> np.ndarray:
+                   columns: np.ndarray, threads: int = 1) -> np.ndarray:
     """The column (int32; len(columns) - 1 - position in the ascending codes columns) of every term of the
-    rows mult[r] * pool[starts[r] : starts[r] + lengths[r]], row after row, by the C kernel."""
+    rows mult[r] * pool[starts[r] : starts[r] + lengths[r]], row after row, by the C kernel on up to
+    ``threads`` threads."""
     lib = kernel()
     args, keep = _rows_args(pool, starts, lengths, mult)
     columns = np.ascontiguousarray(columns)
     out = np.empty(int(np.sum(lengths)), dtype=np.int32)
-    if lib.f4_columns(*args, columns.ctypes.data, len(columns), out.ctypes.data):
+    if lib.f4_columns(*args, columns.ctypes.data, len(columns), out.ctypes.data, threads):
         raise MemoryError("the C column lookup ran out of memory")
     return out
 

@@ -6,8 +6,9 @@ pivots from symbolic preprocessing, and the rows found new so far) the row's ent
 is subtracted. The pivot rows stay sparse and unreduced (each is triangular against the others through
 its leading column), so the accumulator only ever reads the entries that exist. With
 ``npiv * (p - 1)**2 + p < 2**63`` the products are accumulated without reduction and each entry is
-reduced mod p once, when the sweep reaches its column (delayed modular reduction); otherwise every
-update is reduced.
+reduced mod p once, when the sweep reaches its column (delayed modular reduction); otherwise (31-bit
+primes) every entry is kept below p**2 by one compare and subtract per update, and reduced mod p when
+the sweep reaches it.
 
 In echelon mode a row that does not reduce to zero is made monic and becomes a pivot for the rows
 after it; at the end every new pivot row is swept once more against all pivots, which gives the reduced
@@ -69,8 +70,7 @@ def _sweep(acc, first, ncols, pivot_of, starts, ends, store_cols, store_vals, p,
         a = acc[c]
         if a == 0:
             continue
-        if delayed:
-            a %= p
+        a %= p
         if a == 0:
             acc[c] = 0
             continue
@@ -85,10 +85,12 @@ def _sweep(acc, first, ncols, pivot_of, starts, ends, store_cols, store_vals, p,
         if delayed:
             for t in range(s, e):
                 acc[store_cols[t]] += m * store_vals[t]
-        else:
+        else:  # bounded: kept below p**2 by one compare and subtract, no division (sums < 2**63)
+            p2 = p * p
             for t in range(s, e):
                 j = store_cols[t]
-                acc[j] = (acc[j] + m * store_vals[t]) % p
+                x = acc[j] + m * store_vals[t]
+                acc[j] = x - p2 if x >= p2 else x
     return nnz
 
 

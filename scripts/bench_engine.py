@@ -20,10 +20,19 @@ Every child runs under a wall-clock cap (``--cap``, default 300 s); a capped run
 and its ratios are left empty. Each engine runs ``--repeat`` times while a run takes under 2 s (best
 time, largest memory); the bases are compared (``match``: the digests of the two reduced bases agree).
 
-Writes tables/bench_engine.csv, .md and .meta.json (date, commit, dirty flag, machine, versions).
+With ``--threads N`` (N > 1) every system is also run on N threads: the own engine with
+``F4Options(threads=N)`` and msolve with ``-t N``, each alternating with its one-thread run (``--repeat``
+pairs, at least 3), so that both sides of a speedup see the same load; the speedup is the ratio of the best
+times, its spread the least and largest ratio of a pair (``own_speedup_range``); ``threads_match``: the
+basis on N threads has the digest of the one-thread basis.
 
-Usage: python scripts/bench_engine.py [--suite default|small|large|lex|tdoa|all] [--systems NAME ...]
-       [--skip NAME ...] [--repeat 3] [--cap 300] [--no-msolve] [--csv PATH]
+Writes tables/bench_engine.csv, .md and .meta.json (date, commit, dirty flag, machine, versions); at another
+prime than 65521 tables/bench_engine-p<prime>.*, with --threads N tables/bench_engine-t<N>.* (both:
+-p<prime>-t<N>).
+
+Usage: python scripts/bench_engine.py [--suite default|small|large|lex|tdoa|primes|threads|all]
+       [--systems NAME ...] [--skip NAME ...] [--repeat 3] [--cap 300] [--no-msolve] [--prime P] [--threads N]
+       [--csv PATH]
 """
 from __future__ import annotations
 
@@ -65,6 +74,8 @@ SUITES = {
 }
 SUITES["all"] = tuple(name for suite in ("small", "large", "lex", "tdoa") for name in SUITES[suite])
 SUITES["default"] = SUITES["all"]
+SUITES["primes"] = ("katsura-9", "katsura-10", "eco-10", "eco-11")  # issue 35: <= 1x msolve at 30/31-bit primes
+SUITES["threads"] = ("katsura-10", "eco-11", "quadrics-10", "positions-6r3s")  # issue 35: speedup on 2 cores
 PATHS = {ext: ROOT / "tables" / f"bench_engine.{ext}" for ext in ("csv", "md", "meta.json")}
 REPEAT_BELOW_S = 2.0
 """Runs shorter than this are repeated (up to --repeat times); longer ones run once."""
@@ -94,6 +105,16 @@ class Row:
     match: bool | None = None
     max_matrix: str = ""
     status: str = "ok"
+    threads: int = 1
+    own_one_thread_s: float | None = None
+    own_threads_s: float | None = None
+    own_speedup: float | None = None
+    own_speedup_range: str = ""
+    threads_match: bool | None = None
+    msolve_one_thread_s: float | None = None
+    msolve_threads_s: float | None = None
+    msolve_speedup: float | None = None
+    msolve_speedup_range: str = ""
 
 
 COLUMNS = tuple(f.name for f in fields(Row))
@@ -111,12 +132,13 @@ from analysis.f4 import F4Options
 from analysis.benchmarks import basis_digest
 from analysis.quotient import NotZeroDimensional, degree, dimension
 ring, polys = read_system(sys.argv[1]).to_ring({prime}, sys.argv[2])
+threads = int(sys.argv[4]) if len(sys.argv) > 4 else 1
 if sys.argv[3] == "baseline":
     sys.exit(0)
 from analysis.linalg import MatrixTooLarge
 t0 = time.perf_counter()
 try:
-    gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10))
+    gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10, threads=threads))
 except MatrixTooLarge as e:
     print(json.dumps(dict(error=str(e), seconds=time.perf_counter() - t0)))
     sys.exit(0)
@@ -198,13 +220,62 @@ def repeated(argv: list[str], repeat: int, cap: float) -> tuple[Run, list[Run]]:
     return min(runs, key=lambda r: r.wall), runs
 
 
-def own_argv(path: Path, order: str, prime: int, mode: str = "run") -> list[str]:
-    return [sys.executable, "-c", _OWN_CHILD.format(root=str(ROOT), prime=prime), str(path), order, mode]
+def alternating(argvs: list[list[str]], repeat: int, cap: float) -> list[list[Run]]:
+    """Runs of every argv, taking turns (argv 0, 1, ..., 0, 1, ...), repeat rounds or until a run is capped:
+    the runs of a round see about the same load of the machine."""
+    runs: list[list[Run]] = [[] for _ in argvs]
+    for _ in range(repeat):
+        for argv, done in zip(argvs, runs):
+            done.append(run_child(argv, cap))
+            if done[-1].capped:
+                return runs
+    return runs
 
 
-def msolve_argv(exe: str, path: Path, out: Path, order: str) -> list[str]:
+def own_argv(path: Path, order: str, prime: int, mode: str = "run", threads: int = 1) -> list[str]:
+    return [sys.executable, "-c", _OWN_CHILD.format(root=str(ROOT), prime=prime), str(path), order, mode, str(threads)]
+
+
+def msolve_argv(exe: str, path: Path, out: Path, order: str, threads: int = 1) -> list[str]:
     basis = ["-g", "2"] if order == "grevlex" else []  # lex: msolve's parametrization
-    return [exe, *basis, "-t", "1", "-f", str(path), "-o", str(out)]
+    # OMP_NUM_THREADS as well as -t (as analysis.msolve does): this script sets it to 1 for its children;
+    # env execs msolve in the same process, so its time and memory are msolve's
+    return ["env", f"OMP_NUM_THREADS={threads}", exe, *basis, "-t", str(threads), "-f", str(path), "-o", str(out)]
+
+
+def _speedup(one: list[float], many: list[float]) -> tuple[float, str]:
+    """Best one-thread time over best N-thread time, and the least and largest ratio of a round."""
+    ratios = [a / b for a, b in zip(one, many) if b > 0]
+    return min(one) / min(many), f"{min(ratios):.2f}-{max(ratios):.2f}"
+
+
+def bench_threads(row: Row, name: str, path: Path, order: str, args, exe: str | None, startup: float | None,
+                  tmp: Path) -> None:
+    """The speedup of --threads N over one thread, own engine and msolve, each in alternating runs."""
+    row.threads = args.threads
+    repeat = max(args.repeat, 3)
+    if row.own_s is not None:
+        print(f"[{name}] own, 1 and {args.threads} threads ...", flush=True)
+        runs = alternating([own_argv(path, order, args.prime), own_argv(path, order, args.prime, threads=args.threads)],
+                           repeat, args.cap)
+        if not any(r.capped for side in runs for r in side):
+            one, many = ([json.loads(r.stdout.strip().splitlines()[-1]) for r in side] for side in runs)
+            if all("seconds" in r and "error" not in r for r in one + many):
+                row.own_one_thread_s = min(r["seconds"] for r in one)
+                row.own_threads_s = min(r["seconds"] for r in many)
+                row.own_speedup, row.own_speedup_range = _speedup([r["seconds"] for r in one],
+                                                                  [r["seconds"] for r in many])
+                row.threads_match = all(r["digest"] == one[0]["digest"] for r in one + many)
+    if exe and row.msolve_s is not None:
+        print(f"[{name}] msolve, -t 1 and -t {args.threads} ...", flush=True)
+        out = tmp / f"{name}.out"
+        runs = alternating([msolve_argv(exe, path, out, order), msolve_argv(exe, path, out, order, args.threads)],
+                           repeat, args.cap)
+        if not any(r.capped for side in runs for r in side):
+            one, many = ([max(r.wall - startup, 1e-9) for r in side] for side in runs)
+            row.msolve_one_thread_s = min(one)
+            row.msolve_threads_s = min(many)
+            row.msolve_speedup, row.msolve_speedup_range = _speedup(one, many)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -257,6 +328,8 @@ def bench_system(name: str, args, exe: str | None, startup: float | None, tmp: P
                     row.ratio_s = row.own_s / row.msolve_s
                 row.ratio_process = row.own_process_s / row.msolve_process_s
                 row.ratio_mb = row.own_peak_mb / row.msolve_peak_mb
+    if args.threads > 1:
+        bench_threads(row, name, path, order, args, exe, startup, tmp)
     return row
 
 
@@ -292,6 +365,7 @@ def metadata(args, exe: str | None, startup: float | None, baseline: float | Non
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         **prov,
         "prime": args.prime,
+        "threads_compared": args.threads,
         "repeat": args.repeat,
         "cap_s": args.cap,
         "run_s": round(seconds, 1),
@@ -303,7 +377,9 @@ def metadata(args, exe: str | None, startup: float | None, baseline: float | Non
         ),
         "lex": "msolve prints no lex basis: its default rational parametrization is timed for lex systems (no match)",
         "own_baseline_mb": baseline,
-        "msolve": {"path": exe, "version": msolve_version(exe), "options": "-t 1 (-g 2 for grevlex)", "startup_s": startup},
+        "msolve": {"path": exe, "version": msolve_version(exe), "startup_s": startup,
+                   "options": "-t 1 (-g 2 for grevlex)" + (f"; -t {args.threads} in the threads table"
+                                                            if args.threads > 1 else "")},
         "versions": {
             "python": platform.python_version(),
             "numpy": np.__version__,
@@ -340,26 +416,44 @@ def _f(v, spec: str) -> str:
     return "" if v is None else format(v, spec)
 
 
+def _md_table(head: str, body: list[str]) -> list[str]:
+    """A Markdown table: the head line, its rule, the body lines."""
+    return [head, "|" + "---|" * (head.count("|") - 1), *body]
+
+
 def markdown(rows: list[Row], meta: dict) -> str:
-    """The table as Markdown, with a line of provenance."""
-    head = ("| system | order | degree | own s | msolve s | ratio | own process s | msolve process s | ratio | "
-            "own MB | msolve MB | ratio | match | largest matrix | status |")
+    """The table as Markdown, with a line of provenance (and the threads table under --threads N)."""
     lines = [
         f"Engine against msolve {meta['msolve']['version'] or '(absent)'} over GF({meta['prime']}), one thread, "
         f"commit {meta['commit'][:10]}{' (dirty)' if meta['worktree_dirty'] else ''}, {meta['date']}; "
         f"each engine in a fresh process; own MB includes the interpreter and numpy "
         f"({_f(meta['own_baseline_mb'], '.0f')} MB before any computation).",
         "",
-        head,
-        "|" + "---|" * (head.count("|") - 1),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r.system} | {r.order} | {r.degree} | {_f(r.own_s, '.3f')} | {_f(r.msolve_s, '.3f')} | "
-            f"{_f(r.ratio_s, '.2f')} | {_f(r.own_process_s, '.3f')} | {_f(r.msolve_process_s, '.3f')} | "
-            f"{_f(r.ratio_process, '.2f')} | {_f(r.own_peak_mb, '.0f')} | {_f(r.msolve_peak_mb, '.0f')} | "
-            f"{_f(r.ratio_mb, '.2f')} | {'' if r.match is None else r.match} | {r.max_matrix} | {r.status} |"
-        )
+    lines += _md_table(
+        "| system | order | degree | own s | msolve s | ratio | own process s | msolve process s | ratio | "
+        "own MB | msolve MB | ratio | match | largest matrix | status |",
+        [f"| {r.system} | {r.order} | {r.degree} | {_f(r.own_s, '.3f')} | {_f(r.msolve_s, '.3f')} | "
+         f"{_f(r.ratio_s, '.2f')} | {_f(r.own_process_s, '.3f')} | {_f(r.msolve_process_s, '.3f')} | "
+         f"{_f(r.ratio_process, '.2f')} | {_f(r.own_peak_mb, '.0f')} | {_f(r.msolve_peak_mb, '.0f')} | "
+         f"{_f(r.ratio_mb, '.2f')} | {'' if r.match is None else r.match} | {r.max_matrix} | {r.status} |" for r in rows])
+    n = meta["threads_compared"]
+    if n > 1:
+        lines += [
+            "",
+            f"On {n} threads ({meta['machine']['cpus']} cores; load average {meta['load_average_at_start'][0]:.1f} at "
+            f"the start, {meta['machine']['load_average_at_end'][0]:.1f} at the end): one-thread and {n}-thread runs "
+            f"alternating, best of each; spread: the least and largest ratio of an alternating pair.",
+            "",
+        ]
+        lines += _md_table(
+            f"| system | own 1 thread s | own {n} threads s | speedup | spread | same basis | msolve -t 1 s | "
+            f"msolve -t {n} s | speedup | spread |",
+            [f"| {r.system} | {_f(r.own_one_thread_s, '.3f')} | {_f(r.own_threads_s, '.3f')} | "
+             f"{_f(r.own_speedup, '.2f')} | {r.own_speedup_range} | "
+             f"{'' if r.threads_match is None else r.threads_match} | "
+             f"{_f(r.msolve_one_thread_s, '.3f')} | {_f(r.msolve_threads_s, '.3f')} | {_f(r.msolve_speedup, '.2f')} | "
+             f"{r.msolve_speedup_range} |" for r in rows])
     return "\n".join(lines) + "\n"
 
 
@@ -372,6 +466,11 @@ def print_table(rows: list[Row]) -> None:
         print(f"{r.system:<20}{r.degree:>7}{_f(r.own_s, '.3f'):>9}{_f(r.msolve_s, '.3f'):>10}{_f(r.ratio_s, '.2f'):>7}"
               f"{_f(r.ratio_process, '.2f'):>11}{_f(r.own_peak_mb, '.0f'):>8}{_f(r.msolve_peak_mb, '.0f'):>7}"
               f"{_f(r.ratio_mb, '.2f'):>7}  {'-' if r.match is None else r.match!s:5}  {r.status}")
+        if r.threads > 1:
+            print(f"{'':<20}on {r.threads} threads: own {_f(r.own_threads_s, '.3f')} s, speedup "
+                  f"{_f(r.own_speedup, '.2f')} ({r.own_speedup_range}), same basis {r.threads_match}; msolve "
+                  f"{_f(r.msolve_threads_s, '.3f')} s, speedup {_f(r.msolve_speedup, '.2f')} "
+                  f"({r.msolve_speedup_range})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -384,8 +483,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cap", type=float, default=300.0, help="wall-clock seconds before a child is killed")
     parser.add_argument("--no-msolve", action="store_true", help="skip msolve even if installed")
     parser.add_argument("--prime", type=int, default=PRIME)
-    parser.add_argument("--csv", type=Path, default=PATHS["csv"], help="output CSV (.md and .meta.json beside it)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="also run each system on this many threads (own engine and msolve -t), alternating")
+    parser.add_argument("--csv", type=Path, help="output CSV (.md and .meta.json beside it; default tables/"
+                        "bench_engine.csv, -p<prime> at another prime than 65521, -t<N> with --threads N)")
     args = parser.parse_args(argv)
+    if args.threads < 1:
+        parser.error("--threads must be >= 1")
+    if args.csv is None:
+        args.csv = PATHS["csv"].with_name("bench_engine" + (f"-p{args.prime}" if args.prime != PRIME else "")
+                                          + (f"-t{args.threads}" if args.threads > 1 else "") + ".csv")
     names = [s for s in (args.systems or SUITES[args.suite]) if s not in args.skip]
     unknown = [s for s in names if s not in BENCHMARK_SYSTEMS]
     if unknown:

@@ -55,14 +55,19 @@ finishes in a few milliseconds, less than msolve's process start and file exchan
 
 def _nonnegative(option: str):
     """An argparse type: an integer >= 0, with an error naming the option."""
+    return _integer_at_least(option, 0)
+
+
+def _integer_at_least(option: str, minimum: int):
+    """An argparse type: an integer >= minimum, with an error naming the option."""
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-        if value < 0:
-            raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {value}")
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {minimum}, got {value}")
         return value
 
     parse.__name__ = option
@@ -97,7 +102,7 @@ def _f4_options(args: argparse.Namespace):
 
         print(f"[f4] {native.describe()}", file=sys.stderr)
     return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
-                     verbose=args.verbose)
+                     verbose=args.verbose, threads=args.threads)
 
 
 def _export(system, fmt: str, path: str) -> None:
@@ -162,6 +167,9 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
                    help="linear algebra backend: auto (default: the compiled C sparse kernel, built on first use by the "
                    "system's C compiler; without one numba's sparse kernel on large sparse matrices, else numpy; -v "
                    "names the one in use), numpy, sparse or python (reference)")
+    p.add_argument("--threads", type=_integer_at_least("--threads", 1), default=1, metavar="N",
+                   help="threads of the C kernel's row reduction (default 1; the same basis for every N; one where "
+                   "the kernel was built without OpenMP: -v says)")
     p.add_argument("--engine", default="own", choices=("auto", "own", "msolve"),
                    help="Groebner engine: own (default), msolve (an msolve executable, run as an external program, "
                    "checked by the own engine on the second prime where affordable) or auto (msolve when present "

@@ -7,8 +7,9 @@ import pytest
 from analysis.linalg import SparseRows, _rref, _rref_dicts, get_backend, matmul_mod
 
 
-def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3):
-    """Pivot rows (leading 1 at distinct columns) and rows to reduce, as sparse (cols, vals) lists."""
+def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3, rank=None):
+    """Pivot rows (leading 1 at distinct columns) and rows to reduce, as sparse (cols, vals) lists: random
+    combinations of rank (default nrows // 2) random sparse rows."""
     pcols = np.sort(rng.choice(ncols, size=npivots, replace=False))
     pivots = {}
     for c in pcols:
@@ -16,7 +17,8 @@ def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3):
         vals = rng.integers(1, p, len(tail))
         pivots[int(c)] = ([int(c)] + tail.tolist(), [1] + vals.tolist())
     # rows to reduce: low-rank combinations of random sparse rows, so that zero reductions occur
-    base = rng.integers(0, p, (max(1, nrows // 2), ncols)) * (rng.random((max(1, nrows // 2), ncols)) < density)
+    rank = max(1, nrows // 2) if rank is None else rank
+    base = rng.integers(0, p, (rank, ncols)) * (rng.random((rank, ncols)) < density)
     mix = rng.integers(0, p, (nrows, len(base)))
     dense = matmul_mod(mix, base.astype(np.int64), p)
     rows = []
@@ -210,3 +212,51 @@ def test_native_describe_names_why_the_c_kernels_are_not_used(monkeypatch, tmp_p
     assert native.kernel() is None
     line = native.describe()
     assert line.startswith("numba/numpy kernels (") and "no-such-compiler" in line and "broken.c" in line
+
+
+@pytest.mark.parametrize("p", [7, 65521, 1073741827, 2147483647])
+@pytest.mark.parametrize("threads", [1, 2, 3])
+@pytest.mark.parametrize("rank", [80, 140])
+def test_c_kernel_on_threads_matches_reference(p, threads, rank):
+    """The C kernel on 1-3 threads returns the reference backend's rows, in echelon and in "each" mode, at
+    small primes (delayed accumulators) and 30/31-bit ones (accumulators bounded by p**2): many blocks of
+    rows with the same leads make the threads race for the same new pivots (run five times, for several
+    interleavings); of rank 140, nearly every row is a new pivot, so a row lost in a race shows."""
+    from analysis import native
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernel cannot be built")
+    rng = np.random.default_rng(p % 1000 + threads)
+    ncols = 240
+    pivots, rows = _random_f4_matrix(rng, p, ncols, npivots=90, nrows=160, density=0.08, rank=rank)
+    pivot_rows = SparseRows.from_rows([pivots[c] for c in rng.permutation(sorted(pivots))])
+    sparse_rows = SparseRows.from_rows(rows)
+    reference = get_backend("python")
+    reduced = reference.reduce_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
+    each = reference.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p).to_rows()
+    assert len(reduced) > 8 and any(c for c, _ in each)  # new pivots and nonzero remainders to race for
+    sparse = get_backend("sparse")
+    for _ in range(5):
+        assert sparse.reduce_sparse(pivot_rows, sparse_rows, ncols, p, threads).to_rows() == reduced
+        assert sparse.reduce_each_sparse(pivot_rows, sparse_rows, ncols, p, threads).to_rows() == each
+
+
+def test_column_lookup_on_threads_matches_one_thread():
+    """The C column lookup of F4 rows (term codes plus a multiplier) gives the same columns on 2 threads
+    as on one, and as numpy's search, on a matrix large enough (> 100,000 entries) to be shared."""
+    from analysis import native
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernel cannot be built")
+    rng = np.random.default_rng(35)
+    pool = np.sort(rng.choice(1 << 40, size=5000, replace=False)).astype(np.uint64)
+    nrows = 3000
+    starts = rng.integers(0, 4900, nrows)
+    lengths = rng.integers(20, 100, nrows)
+    mult = rng.choice([0, 1 << 41, 1 << 42], size=nrows).astype(np.uint64)
+    codes = np.concatenate([pool[s : s + n] + m for s, n, m in zip(starts, lengths, mult)])
+    assert len(codes) > 100_000
+    columns = np.unique(codes)
+    expected = (len(columns) - 1 - np.searchsorted(columns, codes)).astype(np.int32)
+    for threads in (1, 2):
+        assert np.array_equal(native.column_indices(pool, starts, lengths, mult, columns, threads), expected)
