@@ -1,0 +1,103 @@
+"""First call in a fresh environment: the seconds of a new process's first 9r/3s solve and 10r/6s calibrate.
+
+Each case runs in a new Python process whose caches are empty temporary directories
+(``TDOA_WORKBENCH_CACHE``: the tapes' C libraries and the F4 kernels; ``NUMBA_CACHE_DIR``: numba's
+compiled functions), so it pays everything a new machine, container or CI run pays: imports,
+compiling, the first call, then a second call (the steady state) for comparison. Every phase's
+seconds are printed and written to ``tables/first_call.timing.json`` (untracked: seconds are facts of
+the run, not results). Target (issue 34): first call <= 3 s.
+
+    python scripts/bench_first_call.py [--repeat 2] [--native on|off]
+
+``--native off`` sets ``TDOA_WORKBENCH_NATIVE=off`` (no C compiler: the numba kernels only).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "tables" / "first_call.timing.json"
+
+#: The child's program: imports, first call, second call, each timed; one JSON line on stdout.
+CHILD = {
+    "solve_network 9r/3s": """
+import time, json
+t0 = time.perf_counter()
+import numpy as np
+from solvers.api import solve_network
+from solvers.synthetic import random_network
+t1 = time.perf_counter()
+F = random_network(9, 3, np.random.default_rng(0)).measurements()
+first = solve_network(F)
+t2 = time.perf_counter()
+F = random_network(9, 3, np.random.default_rng(1)).measurements()
+second = solve_network(F)
+t3 = time.perf_counter()
+print(json.dumps({"import": t1 - t0, "first call": t2 - t1, "second call": t3 - t2,
+                  "candidates": [len(first), len(second)]}))
+""",
+    "calibrate 10r/6s": """
+import time, json
+t0 = time.perf_counter()
+import numpy as np
+from solvers import calibrate
+from solvers.synthetic import random_network
+t1 = time.perf_counter()
+rng = np.random.default_rng(0)
+first = calibrate(random_network(10, 6, rng).measurements(0.01, rng), seed=0)
+t2 = time.perf_counter()
+rng = np.random.default_rng(1)
+second = calibrate(random_network(10, 6, rng).measurements(0.01, rng), seed=0)
+t3 = time.perf_counter()
+print(json.dumps({"import": t1 - t0, "first call": t2 - t1, "second call": t3 - t2,
+                  "candidates": [first.status, second.status]}))
+""",
+}
+
+
+def run_case(program: str, native: str) -> dict:
+    """Run `program` in a new process with empty caches; return its timings (and its wall time)."""
+    import time
+
+    with tempfile.TemporaryDirectory(prefix="first-call-") as tmp:
+        env = dict(os.environ, TDOA_WORKBENCH_CACHE=str(Path(tmp) / "cache"), NUMBA_CACHE_DIR=str(Path(tmp) / "numba"),
+                   PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
+        if native == "off":
+            env["TDOA_WORKBENCH_NATIVE"] = "off"
+        t0 = time.perf_counter()
+        done = subprocess.run([sys.executable, "-c", program], cwd=tmp, env=env, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+    if done.returncode:
+        raise RuntimeError(f"the child failed:\n{done.stderr}")
+    record = json.loads(done.stdout.strip().splitlines()[-1])
+    record["process wall"] = wall
+    return record
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each case (each in a fresh environment)")
+    parser.add_argument("--native", choices=("on", "off"), default="on",
+                        help="off: TDOA_WORKBENCH_NATIVE=off (the fallback without a C compiler)")
+    args = parser.parse_args(argv)
+    runs: dict[str, list[dict]] = {name: [] for name in CHILD}
+    for k in range(args.repeat):
+        for name, program in CHILD.items():  # interleaved: a slow phase of the machine hits both cases
+            record = run_case(program, args.native)
+            runs[name].append(record)
+            print(f"{name} (run {k + 1}, native {args.native}): " + ", ".join(
+                f"{key} {value:.2f} s" for key, value in record.items() if isinstance(value, float))
+                + f"; results {record['candidates']}", flush=True)
+    OUT.write_text(json.dumps({"native": args.native, "runs": runs}, indent=2) + "\n", encoding="utf-8")
+    print(f"wrote {OUT.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
