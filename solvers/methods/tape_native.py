@@ -40,9 +40,9 @@ __all__ = ["DISABLE_ENV", "ENTRIES", "FLAGS", "WIDTH", "addresses", "describe", 
 
 FLAGS = ("-O2", "-march=native", "-ffp-contract=off", "-shared", "-fPIC", "-std=gnu99")
 
-#: Tried first where the compiler takes them (GCC): RTL's instruction combiner spent two thirds of the
-#: compile time of a tape's straight-line code (gcc 12 -ftime-report, 9r/3s full tape) for no measurable
-#: speed (9r/3s plain tracks 1.008x the time, the same bits), so a first call waits half as long.
+#: Tried first for the tapes' units where the compiler takes them (GCC): RTL's instruction combiner spent two
+#: thirds of the compile time of a tape's straight-line code (gcc 12 -ftime-report, 9r/3s full tape) for no
+#: measurable speed (9r/3s plain tracks 1.008x the time, the same bits), so a first call waits half as long.
 FAST_COMPILE = ("-fdisable-rtl-combine",)
 
 #: Prototype of a tape's entry point, for the unit that calls the tapes of another unit.
@@ -578,11 +578,16 @@ def _cpu() -> str:
 
 
 def _units(tapes, N: int) -> list[str]:
-    """The library's C source in two translation units compiled side by side (:func:`_compile`): the full tape,
-    and the Newton and residual tapes with the LU and the tracker (about the same compile time each)."""
-    full = source(tapes.full, "tape_full")
-    rest = [_TAPE_PROTOTYPE.format(name="tape_full")] + [source(getattr(tapes, kind), f"tape_{kind}") for kind in KINDS[1:]]
-    return [full, "\n".join(rest + [lu_source(N), tracker_source()])]
+    """The library's C source in three translation units compiled side by side (:func:`_compile`): the full
+    tape; the Newton and residual tapes; the LU and the tracker (:data:`TAPE_UNITS` of them are tapes)."""
+    prototypes = [_TAPE_PROTOTYPE.format(name=f"tape_{kind}") for kind in KINDS]
+    return [source(tapes.full, "tape_full"), "\n".join(source(getattr(tapes, kind), f"tape_{kind}") for kind in KINDS[1:]),
+            "\n".join(prototypes + [lu_source(N), tracker_source()])]
+
+
+#: The first units of :func:`_units` are straight-line tapes, compiled with :data:`FAST_COMPILE`; the LU's and
+#: the tracker's loops keep the combiner (without it 5r/5s plain tracks took up to 1.5x as long).
+TAPE_UNITS = 2
 
 
 def _run_all(commands: list[list[str]]) -> tuple[int, str]:
@@ -624,7 +629,8 @@ def _compile(units: list[str], path: Path) -> None:
             objects.append(str(Path(tmp) / f"unit{k}.o"))
         flags = [f for f in FLAGS if f != "-shared"]
         for extra in (FAST_COMPILE, ()):  # a compiler that refuses the extra flags compiles without them
-            code, why = _run_all([[compiler, *flags, *extra, "-c", "-o", obj, obj[:-2] + ".c"] for obj in objects])
+            code, why = _run_all([[compiler, *flags, *(extra if k < TAPE_UNITS else ()), "-c", "-o", obj, obj[:-2] + ".c"]
+                                  for k, obj in enumerate(objects)])
             if not code:
                 break
         if not code:
