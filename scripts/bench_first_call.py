@@ -1,9 +1,10 @@
 """First call in a fresh environment: the seconds of a new process's first 9r/3s solve and 10r/6s calibrate.
 
 Each case runs in a new Python process whose caches are empty temporary directories
-(``TDOA_WORKBENCH_CACHE``: the tapes' C libraries and the F4 kernels; ``NUMBA_CACHE_DIR``: numba's
-compiled functions), so it pays everything a new machine, container or CI run pays: imports,
-compiling, the first call, then a second call (the steady state) for comparison. Every phase's
+(``TDOA_WORKBENCH_CACHE``: the tapes' C libraries; ``NUMBA_CACHE_DIR``: numba's compiled functions), so
+it pays everything a new machine, container or CI run pays: imports, compiling, the first call, then a
+second call (the steady state) for comparison. (Neither call loads the F4 kernels, whose library sits in
+``analysis/__pycache__``, nor any numba function: checked in a fresh process.) Every phase's
 seconds are printed and written to ``tables/first_call.timing.json`` (untracked: seconds are facts of
 the run, not results): wall seconds, and CPU seconds of the process and the compilers it ran (on a shared,
 loaded machine the wall time stretches; the CPU time is what the work costs). Target (issue 34): first
