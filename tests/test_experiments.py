@@ -5,6 +5,7 @@ skipped with the reason when they are unavailable; the wiring of that path is ch
 stub API that only knows the ground truth of the seeded networks (its numbers are never written).
 """
 
+import json
 import math
 import sys
 import types
@@ -165,10 +166,10 @@ def test_cache_hit_on_rerun(monkeypatch, tmp_path):
     files = sorted((tmp_path / "cache").glob("*.csv"))
     assert len(files) == 1 and files[0].with_suffix(".json").exists()
 
-    def no_work(task):
+    def no_work(self, function, tasks):  # cached batches are computed in workers
         raise AssertionError("cache miss: trials were recomputed")
 
-    monkeypatch.setattr(batches, "_run_chunk", no_work)
+    monkeypatch.setattr(batches.WorkerPool, "imap", no_work)
     second = ex.run_trials("6r4s", "random", 3, sigma=1e-3, seed=11, jobs=1, progress=False)
     pd.testing.assert_frame_equal(first, second)
     assert first.attrs["batch"]["status"] == "computed" and second.attrs["batch"]["status"] == "cache hit"
@@ -197,41 +198,51 @@ def test_table4_writer_has_paper_columns(tmp_path):
     assert table["status"].tolist() == ["ok", "solver unavailable", "ok", "not run"]
     assert table.loc[1, ["median_log10_position_error", "failure_rate"]].isna().all()  # no made-up numbers
 
-    paths = ex.write_table4(table, tmp_path, {"commit": "abc", "mode": "test"})
+    paths = ex.write_table4(table, tmp_path, {"commit": "abc", "date": "monday", "mode": "test", "seeds": "0..2"})
     written = pd.read_csv(paths["csv"])
-    assert list(written.columns) == list(ex.TABLE4_COLUMNS)
+    assert list(written.columns) == [c for c in ex.TABLE4_COLUMNS if not c.endswith("_ms")]  # results only
     md = paths["md"].read_text()
     assert "Position log10 (paper)" in md and "Offset log10 (ours)" in md and "Failure rate" in md
-    assert "| 9r/3s | ours | n/a | -15.00 |" in md and "commit abc" in md
+    assert "| 9r/3s | ours | n/a | -15.00 |" in md and "test run, seeds 0..2" in md
+    assert "abc" not in md and "monday" not in md and "(ms)" not in md
     tex = paths["tex"].read_text()
     assert r"\begin{tabular}" in tex and "9r/3s rand" in tex and tex.count(r"\\") >= 6
 
 
 def test_a_rerun_with_the_same_results_rewrites_no_table(tmp_path):
-    """Table 4 from a rerun that measured other runtimes but the same results: keep_timings gives it the
-    written runtimes, and no file changes (a clean checkout stays clean); other results keep their own."""
-    from solvers.experiments.config import keep_timings
-
+    """Table 4 from a rerun that measured other runtimes, on another commit and date, but the same results:
+    no file changes (the files hold no runtime, commit or date); other results do change them."""
     frames = {(config, "random"): ex.run_trials(config, "random", 3, jobs=1, cache=False, progress=False)
               for config in ("9r3s", "6r4s")}
-    first = keep_timings(ex.table4(frames), tmp_path / "table4.csv")  # nothing written yet: rounded only
-    paths = ex.write_table4(first, tmp_path, {"commit": "abc", "date": "monday"})
+    paths = ex.write_table4(ex.table4(frames), tmp_path, {"commit": "abc", "date": "monday", "mode": "test"})
     before = {p: p.read_bytes() for p in paths.values()}
     slower = ex.table4({key: frame.assign(total_s=frame["total_s"] * 3, lm_s=frame["lm_s"] * 3)
                         for key, frame in frames.items()})
-    assert not slower["median_runtime_ms"].equals(first["median_runtime_ms"])
-    kept = keep_timings(slower, paths["csv"])
-    assert kept["median_runtime_ms"].equals(first["median_runtime_ms"])
-    ex.write_table4(kept, tmp_path, {"commit": "def", "date": "tuesday"})
+    assert not slower["median_runtime_ms"].equals(ex.table4(frames)["median_runtime_ms"])
+    ex.write_table4(slower, tmp_path, {"commit": "def", "date": "tuesday", "mode": "test"})
     assert {p: p.read_bytes() for p in paths.values()} == before
-    other = slower.assign(failure_rate=slower["failure_rate"] + 0.5)
-    assert not keep_timings(other, paths["csv"])["median_runtime_ms"].equals(first["median_runtime_ms"])
-    # one row's results changed: only that row takes the new runtimes, the others keep the written ones
-    one = slower.copy()
-    one.loc[0, "failure_rate"] += 0.5
-    mixed = keep_timings(one, paths["csv"])
-    assert mixed["median_runtime_ms"].iloc[0] != first["median_runtime_ms"].iloc[0]
-    assert mixed["median_runtime_ms"].iloc[1:].equals(first["median_runtime_ms"].iloc[1:])
+    ex.write_table4(slower.assign(failure_rate=slower["failure_rate"] + 0.5), tmp_path, {"mode": "test"})
+    assert all(p.read_bytes() != before[p] for p in paths.values())
+
+
+def test_committed_provenance_holds_results_only(tmp_path):
+    """experiments_provenance.json gets the record without run facts (dates, commit, machine, wall times,
+    runtimes in ms, at any depth); the untracked timing record beside it keeps them all."""
+    from solvers.experiments.provenance import provenance, update_provenance
+
+    path = tmp_path / "experiments_provenance.json"
+    meta = provenance(mode="test", seeds="0..2", rows=[{"failure_rate": 0.5, "median_runtime_ms": 7.5}],
+                      wall_seconds=1.5)
+    update_provenance({"table4": meta}, path)
+    tracked, timing = json.loads(path.read_text()), json.loads(path.with_name(path.stem + ".timing.json").read_text())
+    section = tracked["artefacts"]["table4"]
+    assert section["rows"] == [{"failure_rate": 0.5}] and section["mode"] == "test"
+    assert not {"date", "commit", "machine", "versions", "wall_seconds"} & set(section) and "updated" not in tracked
+    assert timing["artefacts"]["table4"]["rows"][0]["median_runtime_ms"] == 7.5 and "date" in timing["artefacts"]["table4"]
+    before = path.read_bytes()
+    update_provenance({"table4": provenance(mode="test", seeds="0..2", rows=[{"failure_rate": 0.5, "median_runtime_ms": 9.0}],
+                                            wall_seconds=3.0)}, path)
+    assert path.read_bytes() == before  # another run's facts, the same results: the same bytes
 
 
 def test_summary_counts_missing_estimates_as_infinite():

@@ -103,6 +103,7 @@ def _cache_key(config: str, init: str, trials: int, sigma: float, seed: int, opt
         "options": dataclasses.asdict(options),
         "code": code_fingerprint(init),
         "numpy": np.__version__,
+        "blas_kernels": blas_core(),  # the workers' OpenBLAS kernels decide last bits
     }
 
 
@@ -137,6 +138,44 @@ def _frame(records: list[dict]) -> pd.DataFrame:
     return frame.astype({k: v for k, v in _DTYPES.items() if k in frame})
 
 
+#: OpenBLAS kernel set of the workers that run trials, where the CPU has it (x86-64 with AVX2 and FMA): numpy's
+#: and scipy's OpenBLAS otherwise pick kernels for the CPU (SkylakeX on an AVX-512 machine, Haswell on most
+#: others), which give other last bits in the metrics' SVD, the recovery's least squares and the pencil's
+#: eigenvalues; LM from a random start amplifies them into another end point (Fig. 1's bins moved between
+#: machines). Pinned, every such machine computes the same bits.
+BLAS_CORE = "Haswell"
+
+
+def blas_core() -> str:
+    """:data:`BLAS_CORE` where the CPU runs it (AVX2 and FMA3, as numpy detects them), else "" (OpenBLAS's choice)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy < 2
+        try:
+            from numpy.core._multiarray_umath import __cpu_features__ as features
+        except ImportError:
+            return ""
+    return BLAS_CORE if features.get("AVX2") and features.get("FMA3") else ""
+
+
+@contextlib.contextmanager
+def reproducible_blas_env() -> Iterator[None]:
+    """One BLAS thread and the kernels of :func:`blas_core` in the environment, for workers spawned in it (they
+    read it before importing numpy): a trial's bits do not depend on threads, the CPU's kernels or the worker."""
+    core = blas_core()
+    saved = os.environ.get("OPENBLAS_CORETYPE")
+    with single_threaded_blas_env():
+        if core:
+            os.environ["OPENBLAS_CORETYPE"] = core
+        try:
+            yield
+        finally:
+            if saved is None:
+                os.environ.pop("OPENBLAS_CORETYPE", None)
+            else:
+                os.environ["OPENBLAS_CORETYPE"] = saved
+
+
 def _run_chunk(task: tuple[str, str, list[tuple[int, int]], float, TrialOptions]) -> list[dict]:
     config, init, trial_seeds, sigma, options = task
     return [run_trial(config, init, seed, sigma, options, trial) for trial, seed in trial_seeds]
@@ -145,9 +184,10 @@ def _run_chunk(task: tuple[str, str, list[tuple[int, int]], float, TrialOptions]
 class WorkerPool:
     """Spawned worker processes shared by several batches, started on first use.
 
-    Workers are spawned (not forked) with OPENBLAS/OMP/MKL_NUM_THREADS=1 in their environment, so
-    numpy and scipy in each worker use one BLAS thread; starting them costs a few seconds (imports),
-    which is why `reproduce` shares one pool over all its batches. Use as a context manager.
+    Workers are spawned (not forked) in :func:`reproducible_blas_env`: numpy and scipy in each worker use
+    one BLAS thread and the same OpenBLAS kernels on every x86-64 machine with AVX2; starting them costs a
+    few seconds (imports), which is why `reproduce` shares one pool over all its batches (and runs every
+    batch in it, also with one job). Use as a context manager.
     """
 
     def __init__(self, jobs: int = DEFAULT_JOBS) -> None:
@@ -160,7 +200,7 @@ class WorkerPool:
         if self._pool is None:
             import multiprocessing
 
-            with single_threaded_blas_env():
+            with reproducible_blas_env():
                 self._pool = multiprocessing.get_context("spawn").Pool(self.jobs)
         return self._pool.imap(function, tasks)
 
@@ -214,8 +254,9 @@ def run_trials(
         Base seed; trial t uses seed + t.
     options : TrialOptions
     jobs : int
-        Worker processes (spawned with one BLAS thread each); 1, or fewer than 5 chunks of
-        trials, runs in this process.
+        Worker processes (spawned in :func:`reproducible_blas_env`). Uncached batches of jobs 1, or of fewer
+        than 5 chunks of trials, run in this process; cached ones always in workers (the same bits
+        whichever process asked).
     cache : bool
         Read/write ``<cache>/experiments/<config>-<init>-...-<hash>.csv`` (``analysis.paths.cache_dir``),
         keyed by all parameters, CACHE_VERSION and a fingerprint of the numeric code.
@@ -263,13 +304,15 @@ def run_trials(
     bar = _Progress(trials, f"{config_label(key_config)} {INIT_LABEL[init]} sigma={sigma:g}", progress)
     records: list[dict] = []
     try:
-        if pool is None and (jobs <= 1 or len(tasks) < 5):
+        # a batch that goes to the cache is computed in spawned workers (reproducible_blas_env), whose bits do
+        # not depend on this process's BLAS set-up; an uncached one may run here when it is small
+        if pool is None and not cache and (jobs <= 1 or len(tasks) < 5):
             for task in tasks:
                 records += _run_chunk(task)
                 bar.update(len(task[2]))
         else:
             with contextlib.ExitStack() as stack:
-                workers = pool if pool is not None else stack.enter_context(WorkerPool(jobs))
+                workers = pool if pool is not None else stack.enter_context(WorkerPool(max(1, min(jobs, len(tasks)))))
                 for chunk in workers.imap(_run_chunk, tasks):
                     records += chunk
                     bar.update(len(chunk))

@@ -14,8 +14,7 @@ import pandas as pd
 
 from solvers.metrics import log10_error
 
-from .config import (CONFIGS, CSV_FLOAT_FORMAT, FIGURES_DIR, INIT_LABEL, INITS, config_label, keep_timings,
-                     write_output)
+from .config import CONFIGS, CSV_FLOAT_FORMAT, FIGURES_DIR, INIT_LABEL, INITS, config_label, is_timing_column, write_output
 from .provenance import package_version
 from .summary import median_log10
 
@@ -180,7 +179,7 @@ def plot_noise(summary: pd.DataFrame, stem: Path = FIGURES_DIR / "fig2_noise", m
                  f"({trials} trials per point; shaded: interquartile range of 'ours')")
     title = "Fig. 2: median relative error vs noise sigma"
     csv_path = Path(stem).with_suffix(".csv")
-    data = keep_timings(data, csv_path)  # not drawn; a rerun with the same results keeps the file
+    data = data[[c for c in data.columns if not is_timing_column(c)]]  # runtimes: facts of the run, not results
     fresh = write_output(csv_path, data.to_csv(index=False, float_format=CSV_FLOAT_FORMAT))
     paths = _save(fig, Path(stem), title, "Paper Sec. 4.2 Fig. 2 reproduction", meta, fresh)
     plt.close(fig)

@@ -20,7 +20,7 @@ import pandas as pd
 
 from . import batches
 from .batches import CACHE_VERSION, WorkerPool, batch_record, code_fingerprint, noise_sweep, run_trials
-from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INITS, PROVENANCE_PATH, TABLES_DIR, keep_timings
+from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INITS, PROVENANCE_PATH, TABLES_DIR
 from .figures import plot_histograms, plot_noise
 from .provenance import provenance, relative_paths, update_provenance
 from .summary import summarise
@@ -43,13 +43,25 @@ FULL = ReproductionPlan("full", 1000, tuple(float(s) for s in np.logspace(-6, -1
 
 
 @contextlib.contextmanager
-def _shared_pool(pool: WorkerPool | None, jobs: int) -> Iterator[WorkerPool | None]:
-    """Yield `pool`, else a lazily started pool of `jobs` workers (None for jobs <= 1)."""
-    if pool is not None or jobs <= 1:
+def _shared_pool(pool: WorkerPool | None, jobs: int) -> Iterator[WorkerPool]:
+    """Yield `pool`, else a lazily started pool of max(jobs, 1) workers: every trial of a reproduction runs in a
+    spawned worker (:func:`batches.reproducible_blas_env`), never in this process, whose BLAS was set up
+    before (threads, kernels) and whose history could steer a trial elsewhere."""
+    if pool is not None:
         yield pool
     else:
-        with WorkerPool(jobs) as own:
+        with WorkerPool(max(jobs, 1)) as own:
             yield own
+
+
+def _outputs(paths: Sequence[Path | str] | object, tables_dir: Path) -> list[str]:
+    """The written files relative to the output directory (the record does not depend on where it is)."""
+    return [Path(p).relative_to(Path(tables_dir)).as_posix() for p in paths]  # type: ignore[attr-defined]
+
+
+def _blas_kernels() -> str:
+    """The OpenBLAS kernels the trials ran with (they decide last bits, see :data:`batches.BLAS_CORE`)."""
+    return batches.blas_core() or "OpenBLAS's choice for this CPU (no AVX2/FMA: not pinned)"
 
 
 def _solver_inits(echo: Callable[[str], None] | None) -> tuple[tuple[str, ...], bool, str]:
@@ -91,19 +103,19 @@ def build_table4(
                     )
                 else:
                     frames[(config, init)] = "solver unavailable"
-    # the committed runtimes stay when the results are the same (a clean rerun leaves the tree clean)
-    table = keep_timings(table4(frames), Path(tables_dir) / "table4.csv")
+    table = table4(frames)
     meta = provenance(
         mode=mode, seeds=f"{seed}..{seed + trials - 1} (trial t uses seed {seed} + t)", base_seed=seed,
         trials=trials, sigma=0.0, options=dataclasses.asdict(options), jobs=jobs,
         solver_available=available, solver_reason=reason,
         code_fingerprints={init: code_fingerprint(init) for init in INITS}, cache_version=CACHE_VERSION,
+        blas_kernels=_blas_kernels(),
         paper_reference="Sec. 4.1 Table 4: median log10 relative errors, 1000 noiseless trials",
         failure_rule="no candidate, or position/offset error > max(failure_threshold, oracle_factor * oracle error)",
     )
     paths = write_table4(table, Path(tables_dir), meta)
     meta["wall_seconds"] = round(time.perf_counter() - t0, 3)
-    meta["outputs"] = relative_paths(paths.values())
+    meta["outputs"] = _outputs(paths.values(), tables_dir)
     meta["rows"] = json.loads(table.to_json(orient="records"))
     meta["trial_batches"] = batch_record(frames.values())
     meta["failed_seeds"] = {
@@ -144,6 +156,7 @@ def build_figures(
         mode=mode, base_seed=seed, options=dataclasses.asdict(options), jobs=jobs,
         solver_available=available, solver_reason=reason,
         code_fingerprints={init: code_fingerprint(init) for init in INITS}, cache_version=CACHE_VERSION,
+        blas_kernels=_blas_kernels(),
     )
 
     with _shared_pool(pool, jobs) as workers:
@@ -159,7 +172,7 @@ def build_figures(
                            paper_reference="Sec. 4.1 Fig. 1", **common)
         fig1 = plot_histograms(hist_frames, figures_dir / "fig1_histograms", meta1)
         meta1["wall_seconds"] = round(time.perf_counter() - t0, 3)
-        meta1["outputs"] = relative_paths(fig1)
+        meta1["outputs"] = _outputs(fig1, tables_dir)
         meta1["trial_batches"] = batch_record(frames.values())
 
         t0 = time.perf_counter()
@@ -170,7 +183,7 @@ def build_figures(
                        paper_reference="Sec. 4.2 Fig. 2", **common)
     fig2 = plot_noise(noise, figures_dir / "fig2_noise", meta2)
     meta2["wall_seconds"] = round(time.perf_counter() - t0, 3)
-    meta2["outputs"] = relative_paths(fig2)
+    meta2["outputs"] = _outputs(fig2, tables_dir)
     meta2["trial_batches"] = sweep.attrs.get("batches")
     update_provenance({"fig1": meta1, "fig2": meta2}, Path(tables_dir) / PROVENANCE_PATH.name)
     return noise, {"fig1": [str(p) for p in fig1], "fig2": [str(p) for p in fig2]}

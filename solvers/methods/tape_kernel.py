@@ -32,6 +32,8 @@ homotopy continuation" (2021), for tracking many paths of one compiled program.
 """
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 from llvmlite import ir
 from numba import njit, types
@@ -42,7 +44,8 @@ from .tracker import TrackerOptions
 # The tapes' types (solvers.methods.slp.Tape, HomotopyTapes) are named in annotations only as strings:
 # slp imports this module's opcodes, and this module never imports slp (one direction of dependency).
 
-__all__ = ["OPCODES", "PREDICTORS", "capacity", "evaluate", "newton", "run", "run_tape", "taylor", "track", "workspace"]
+__all__ = ["OPCODES", "PREDICTORS", "capacity", "evaluate", "newton", "run", "run_tape", "run_tape_numpy", "taylor", "track",
+           "workspace"]
 
 #: Instruction set of the tape: d = a + b, a - b, a b, -a, imm a, a + imm, a a, imm; fused: c + imm a b
 #: (imm = +-1), a + imm b; OUT copies register a to output row d. a, b, c are registers, imm the
@@ -134,6 +137,45 @@ def run_tape(code, imm, Rr, Ri, Or, Oi, P):
             for p in range(P):
                 Or[d, p] = Rr[a, p]
                 Oi[d, p] = Ri[a, p]
+
+
+def run_tape_numpy(code, imm, Rr, Ri, Or, Oi, P):
+    """:func:`run_tape` in plain numpy, one instruction at a time over all points (the same operations in the
+    same order, so the same bits): the reference interpreter, and the one :func:`run` uses, so that checking a
+    tape at a few points (:func:`solvers.methods.homotopy._agrees`, at every solver's construction) does not
+    make numba compile the interpreter (6 s of a first call in a fresh environment)."""
+    for k in range(code.shape[0]):
+        op, d, a, b, c = (int(v) for v in code[k])
+        ar, ai = Rr[a, :P], Ri[a, :P]
+        if op == MULADD:
+            br, bi = Rr[b, :P], Ri[b, :P]
+            xr = Rr[c, :P] + imm[k] * (ar * br - ai * bi)
+            xi = Ri[c, :P] + imm[k] * (ar * bi + ai * br)
+        elif op == AXPY:
+            xr, xi = ar + imm[k] * Rr[b, :P], ai + imm[k] * Ri[b, :P]
+        elif op == MUL:
+            br, bi = Rr[b, :P], Ri[b, :P]
+            xr, xi = ar * br - ai * bi, ar * bi + ai * br
+        elif op == ADD:
+            xr, xi = ar + Rr[b, :P], ai + Ri[b, :P]
+        elif op == SUB:
+            xr, xi = ar - Rr[b, :P], ai - Ri[b, :P]
+        elif op == CMUL:
+            xr, xi = imm[k] * ar, imm[k] * ai
+        elif op == SQR:
+            xr, xi = ar * ar - ai * ai, 2.0 * ar * ai
+        elif op == CADD:
+            xr, xi = ar + imm[k], ai.copy()
+        elif op == NEG:
+            xr, xi = -ar, -ai
+        elif op == CONST:
+            xr, xi = np.full(P, imm[k]), np.zeros(P)
+        elif op == OUT:
+            Or[d, :P], Oi[d, :P] = ar, ai
+            continue
+        else:
+            raise ValueError(f"unknown opcode {op} at instruction {k}")
+        Rr[d, :P], Ri[d, :P] = xr, xi
 
 
 @njit(cache=True, nogil=True, boundscheck=False, inline="always")
@@ -795,8 +837,9 @@ def workspace(tape: "Tape", capacity: int) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def run(tape: "Tape", inputs: np.ndarray) -> np.ndarray:
-    """Outputs (n_outputs, P) complex of the tape at inputs (n_inputs, P) complex (a reference entry
-    point for tests; trackers keep their workspace and call :func:`run_tape`)."""
+    """Outputs (n_outputs, P) complex of the tape at inputs (n_inputs, P) complex, by the reference interpreter
+    :func:`run_tape_numpy` (checks and tests; trackers keep their workspace and call :func:`run_tape` or the
+    tapes' compiled code)."""
     inputs = np.asarray(inputs, dtype=complex)
     if inputs.shape[0] != tape.n_inputs:
         raise ValueError(f"{inputs.shape[0]} input rows given; the tape has {tape.n_inputs}")
@@ -804,7 +847,7 @@ def run(tape: "Tape", inputs: np.ndarray) -> np.ndarray:
     Rr, Ri, Or, Oi = workspace(tape, P)
     Rr[: tape.n_inputs] = inputs.real
     Ri[: tape.n_inputs] = inputs.imag
-    run_tape(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
+    run_tape_numpy(tape.code, tape.imm, Rr, Ri, Or, Oi, P)
     return Or + 1j * Oi
 
 
@@ -861,14 +904,39 @@ def _segments(q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _native(native: np.ndarray | None) -> np.ndarray:
-    """The compiled entry points as the kernel takes them: the full, Newton and residual tapes, the LU and
-    its solve (zeros: the interpreter and the batched kernels)."""
+    """The compiled entry points as the kernel takes them: the full, Newton and residual tapes, the LU, its
+    solve and the compiled tracker (zeros: the interpreter, the batched kernels and this module's tracker)."""
     if native is None:
-        return np.zeros(5, dtype=np.int64)
+        return np.zeros(6, dtype=np.int64)
     native = np.ascontiguousarray(native, dtype=np.int64)
-    if native.shape != (5,):
-        raise ValueError(f"native: five entry points (full, Newton, residual tape, LU, solve) expected, not {native.shape}")
+    if native.shape != (6,):
+        raise ValueError(f"native: six entry points (full, Newton, residual tape, LU, solve, tracker) expected, "
+                         f"not {native.shape}")
     return native
+
+
+#: ctypes prototype of the compiled tracker (:func:`tape_native.tracker_source`), made once per address.
+_TRACK_PROTOTYPE = ctypes.CFUNCTYPE(ctypes.c_int, *([ctypes.c_long] * 5), *([ctypes.c_void_p] * 5), ctypes.c_long,
+                                    ctypes.c_void_p, ctypes.c_void_p)
+_TRACKERS: dict[int, object] = {}
+
+
+def _batch(tapes: "HomotopyTapes", native: np.ndarray, chord: bool, x0: np.ndarray, q0: np.ndarray, dq: np.ndarray,
+           inst: np.ndarray, opts: np.ndarray, x_out: np.ndarray, stats: np.ndarray) -> None:
+    """One lock-step batch: by the compiled tracker at native[5] where there is one (the same bits as
+    :func:`_track_batch`, which runs otherwise and where the compiled one cannot allocate its arrays)."""
+    if native[5] != 0:
+        call = _TRACKERS.get(int(native[5]))
+        if call is None:
+            call = _TRACKERS[int(native[5])] = _TRACK_PROTOTYPE(int(native[5]))
+        x0, x_out, stats = np.ascontiguousarray(x0), np.ascontiguousarray(x_out), np.ascontiguousarray(stats)
+        q0, dq, opts = np.ascontiguousarray(q0), np.ascontiguousarray(dq), np.ascontiguousarray(opts, dtype=np.float64)
+        if call(int(chord), tapes.n_registers, tapes.full.n_outputs, len(x0), q0.shape[1], x0.ctypes.data, q0.ctypes.data,
+                dq.ctypes.data, inst.ctypes.data, opts.ctypes.data, len(opts), x_out.ctypes.data, stats.ctypes.data) == 0:
+            return
+    _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
+                 tapes.residual.imm, native, chord, tapes.n_registers, tapes.full.n_outputs, x0, q0, dq, inst, opts,
+                 x_out, stats)
 
 
 def _check(tapes: "HomotopyTapes", N: int, Q: int) -> None:
@@ -920,10 +988,9 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
     inst = np.zeros(M, dtype=np.int64) if inst is None else np.ascontiguousarray(inst, dtype=np.int64)
     x = np.empty_like(x0)
     stats = np.zeros((M, 4))
+    native = _native(native)
     for a, b in _chunks(M):
-        _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
-                     tapes.residual.imm, _native(native), corrector == "chord", tapes.n_registers, tapes.full.n_outputs,
-                     x0[a:b], q0, dq, inst[a:b], options.as_array(), x[a:b], stats[a:b])
+        _batch(tapes, native, corrector == "chord", x0[a:b], q0, dq, inst[a:b], options.as_array(), x[a:b], stats[a:b])
     x[(stats[:, 0] != 0) & ~((stats[:, 0] == 1) & (stats[:, 3] >= 1.0 - near_end))] = np.nan
     return x, stats
 
@@ -941,8 +1008,7 @@ def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarra
     stats = np.zeros((M, 4))
     opts = np.zeros(NEWTON_ONLY + 1)
     opts[7], opts[NEWTON_ONLY] = int(steps), 1.0  # final_newton = steps; Newton steps only
+    native = _native(native)
     for a, b in _chunks(M):
-        _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
-                     tapes.residual.imm, _native(native), False, tapes.n_registers, tapes.full.n_outputs, x[a:b], q, np.zeros_like(q),
-                     inst[a:b], opts, out[a:b], stats[a:b])
+        _batch(tapes, native, False, x[a:b], q, np.zeros_like(q), inst[a:b], opts, out[a:b], stats[a:b])
     return out
