@@ -144,7 +144,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H (times det D~[:3,:3] when 3D TDOA's B5..Bn are used)")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
-        help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
+        help="write the (first prime's) system for msolve|m2|singular to PATH and continue; with --saturate or "
+             "--saturate-det-h the saturated one (an extra variable t and t*f - 1)",
     )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, deglex, block:k (default grevlex)")
@@ -269,7 +270,8 @@ def cmd_degree(args: argparse.Namespace) -> int:
         sat = saturating_poly
 
     if args.export:
-        _export(system, args.export[0], args.export[1])
+        # what is exported is what is counted: the saturation goes into the file (t*f - 1)
+        _export(system.saturated_by(sat_terms) if args.saturate else system, args.export[0], args.export[1])
     report = _analyse(args, polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
     return _finish_report(report.as_dict(), report, args)
 
@@ -344,7 +346,10 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
         from analysis.io import System
 
         ring = Ring(config.unknowns, primes[0], args.order)
-        _export(System.from_polys(ring, polys(primes[0])), args.export[0], args.export[1])
+        system = System.from_polys(ring, polys(primes[0]), source=f"formulation {formulation.label}")
+        if args.saturate_det_h:  # what is exported is what is counted: t * det H - 1 goes into the file
+            system = system.saturated_by({e: c for e, c in det_h(primes[0]).terms()})
+        _export(system, args.export[0], args.export[1])
     instance, eqs = equations(primes[0])
     n = config.n_unknowns
     rank = jacobian_rank(eqs, instance.root, primes[0])
