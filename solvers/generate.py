@@ -61,6 +61,11 @@ SOLVERS = {
     "5r5s": "5r5s:B2,B3,C2-C5,minors",
     "4r5s": "4r5s:positions-receivers-orbits",
     "9r5s3d": offset_kernel.offset_kernel_formulation(9),
+    # TOA (synchronised transmitters): the minimal cells, compaction unknowns (H, b) with det H saturated
+    "3r3stoa": "3r3s-toa2d:A,B2,B3,C2-C3",
+    "4r6s3dtoa": "4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4",
+    "5r5s3dtoa": "5r5s-toa3d:A,B2,B3,B4,B5,C2-C5",
+    "6r4s3dtoa": "6r4s-toa3d:A,B2,B3,B4,C2-C6",
 }
 
 #: Configurations solved in a positions formulation (analysis.positions) instead of (H, b, o).
@@ -142,30 +147,34 @@ class Generated:
 # --------------------------------------------------------------------------------------------------
 
 
-def complex_instance(m: int, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A complex network's data F (m, n), normalised by its RMS modulus, and its root in that frame.
+def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2,
+                     model: str = "tdoa") -> tuple[np.ndarray, np.ndarray]:
+    """A complex network's data F (m, n), normalised by its RMS modulus, and its compaction root in that frame.
 
-    Receivers, transmitters and offsets are complex normal; d_ij is a square root of the (complex)
-    squared distance (the equations use only d_ij^2). The root is (H, b, o) with H = (4 S^T S)^-1,
-    b = -1/2 S^-1 s_1 (r_1 translated to 0; transposes, not conjugates), as in solvers.synthetic.
+    Receivers, transmitters and (TDOA) offsets are complex normal, in ``dim`` dimensions (drawn in this
+    order; TOA draws no offsets); d_ij is a square root of the (complex) squared distance (the equations
+    use only d_ij^2). The root is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with
+    H = (4 S^T S)^-1, S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0;
+    transposes, not conjugates), as in solvers.synthetic and analysis.formulations_kd.
     """
-    r = rng.normal(size=(m, 2)) + 1j * rng.normal(size=(m, 2))
-    t = rng.normal(size=(n, 2)) + 1j * rng.normal(size=(n, 2))
-    o = rng.normal(size=n) + 1j * rng.normal(size=n)
-    F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + o[None, :]
+    r = rng.normal(size=(m, dim)) + 1j * rng.normal(size=(m, dim))
+    t = rng.normal(size=(n, dim)) + 1j * rng.normal(size=(n, dim))
+    o = rng.normal(size=n) + 1j * rng.normal(size=n) if model == "tdoa" else np.zeros(0)
+    F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + (o[None, :] if len(o) else 0.0)
     s1 = t[0] - r[0]
-    S = np.column_stack([t[1] - t[0], t[2] - t[0]])
+    S = np.column_stack([t[c + 1] - t[0] for c in range(dim)])
     H = np.linalg.inv(4.0 * S.T @ S)
     b = -0.5 * np.linalg.solve(S, s1)
-    x = np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
+    upper = [H[a, c] for a in range(dim) for c in range(a, dim)]
+    x = np.concatenate([upper, b, o])
     scale = np.sqrt(np.mean(np.abs(F) ** 2))
-    powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
+    powers = np.array([-2.0] * len(upper) + [0.0] * dim + [1.0] * len(o))
     return F / scale, x / scale**powers
 
 
-def _tdoa_start(m: int, n: int) -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
+def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
     def start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        F, x = complex_instance(m, n, rng)
+        F, x = complex_instance(m, n, rng, dim, model)
         return F.ravel(), x
 
     return start
@@ -327,6 +336,7 @@ class HomotopyMethod:
                 "certified": {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
                               "saturated_by": list(system.nonzero)},
                 "config": list(job.config) if job.config else None,
+                **({"unused_parameters": list(system.unused)} if system.unused else {}),
                 "scale_powers": list(system.scale_powers) if system.scale_powers else None}
         coefficients = homotopy.load_coefficients(source)
         if full_report is not None:
@@ -447,7 +457,8 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
     squared = label in SQUARED or label in SQUARE_MINORS
     full = from_formulation(formulation, saturate_det_h=True) if squared else None
     trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
-    return (Job(name, formulation, system, config, _tdoa_start(*config), trials, full,
+    kind = Formulation.parse(formulation).config
+    return (Job(name, formulation, system, config, _tdoa_start(*config, kind.dim, kind.model), trials, full,
                 seeds=(0,) if squared else (0, 1), step_control=STEP_CONTROL.get(label)), chosen, label)
 
 

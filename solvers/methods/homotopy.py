@@ -136,7 +136,7 @@ def structure(system: ParametricSystem) -> tuple[np.ndarray, np.ndarray]:
     return np.array(exps, dtype=np.int64), np.array(eq, dtype=np.int64)
 
 
-_FRACTION = re.compile(r"(?<![\w.])(\d+)/(\d+)")
+_FRACTION = re.compile(r"(?<![\w.])(?<!\*\*)(\d+)/(\d+)")  # not an exponent: u**2/4 is (u**2)/4
 
 
 def _print(expr) -> str:
