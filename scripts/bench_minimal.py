@@ -54,7 +54,8 @@ def minimal_solvers() -> list[tuple[str, int, str]]:
 
 
 def _log(values) -> np.ndarray:
-    return np.log10(np.maximum(np.asarray(values, dtype=float), 1e-17))
+    """log10, clipped to [-17, 300] (a network without any finite candidate has error inf: 300)."""
+    return np.log10(np.clip(np.nan_to_num(np.asarray(values, dtype=float), nan=1e300, posinf=1e300), 1e-17, 1e300))
 
 
 def _q(values, q: float) -> float:

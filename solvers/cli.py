@@ -525,6 +525,10 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
                    "formulation label or system FILE")
     p.add_argument("--out", metavar="DIR", required=True, help="output directory (created if needed)")
     p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")
+    p.add_argument("--evidence", choices=("gf", "monodromy"), default="gf",
+                   help="gf (default): certify the root count over GF(p) first; monodromy: numerical evidence "
+                   "alone (loops until many find no new root), for systems F4 cannot count; the spec and the "
+                   "module's header say the count is not certified")
     p.add_argument("--start", metavar="JSON",
                    help="system FILE only: a start pair, {\"parameters\": [...], \"root\": [...]} with one value per "
                    "parameter and per unknown (numbers or [re, im]); generic complex values, the root satisfying the "
@@ -594,15 +598,17 @@ def cmd_generate(args: argparse.Namespace) -> int:
     command = f"tdoa-workbench generate {shlex.quote(args.target)} --out {shlex.quote(args.out)}"
     command += f" --seed {args.seed}" if args.seed else ""
     command += f" --start {shlex.quote(args.start)}" if args.start else ""
+    command += f" --evidence {args.evidence}" if args.evidence != "gf" else ""
     try:
         if is_file:
             system = parse(_read_text(target), os.path.basename(target))
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
             result = gen.generate(system, out=args.out, name=name, seed=args.seed, start=start, command=command,
-                                  progress=progress)
+                                  progress=progress, evidence=args.evidence)
         else:
-            result = gen.generate(target, out=args.out, seed=args.seed, command=command, progress=progress)
+            result = gen.generate(target, out=args.out, seed=args.seed, command=command, progress=progress,
+                                  evidence=args.evidence)
         print(result.summary())
     except (ParametricError, HomotopyError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None

@@ -14,7 +14,10 @@ directory ``out``, and nowhere else. Methods are strategies behind one interface
   :mod:`solvers.methods.offset_kernel`.
 
 Every homotopy solver's root count is certified over GF(p) first (two primes, two seeds, known root
-checked); monodromy must reach exactly that count. Its start pair (generic complex parameters with
+checked); monodromy must reach exactly that count. When F4 cannot certify (its matrices do not fit, as for
+the 3D TDOA minimal cells), ``evidence="monodromy"`` builds on numerical evidence alone: monodromy loops
+until many bring no new root; the spec then has "evidence" instead of "certified" and the module's header
+says the count is not certified. Its start pair (generic complex parameters with
 one known root) comes from a complex network for TDOA systems, is drawn for a system linear in its
 parameters, or is given by the user; a system not linear in its parameters without one is refused
 before any work. An over-determined formulation is squared by random integer combinations of its
@@ -44,7 +47,7 @@ from .methods import homotopy, offset_kernel, pencil, tracker
 from .methods.spec import METHODS as METHOD_NAMES
 from .methods.spec import TemplateOptions, dump_spec, solver_method
 
-__all__ = ["GENERATED_DIR", "METHODS", "SOLVERS", "Generated", "GenerationError", "committed_command",
+__all__ = ["EVIDENCE", "GENERATED_DIR", "METHODS", "SOLVERS", "Generated", "GenerationError", "committed_command",
            "emit_committed", "generate", "solver_system"]
 
 #: Where the committed solvers live (written by scripts/generate_solvers.py, read by solvers.api).
@@ -135,10 +138,12 @@ class Generated:
     seconds: float
     module: str
     report: dict
+    evidence: str = "gf"
 
     def summary(self) -> str:
         extra = ", ".join(f"{k} {v}" for k, v in self.report.items() if k not in ("method", "degree", "paths", "seconds"))
-        return (f"{self.system}: {self.method}, {self.degree} roots certified over GF(p), {self.candidates} candidates; "
+        how = "by monodromy alone (numerical evidence, not certified)" if self.evidence == "monodromy" else "certified over GF(p)"
+        return (f"{self.system}: {self.method}, {self.degree} roots {how}, {self.candidates} candidates; "
                 f"{extra}; {self.seconds:.1f} s -> {self.module}")
 
 
@@ -246,6 +251,7 @@ class Job:
     full: ParametricSystem | None = None
     seeds: tuple[int, ...] = (0, 1)
     step_control: dict | None = None
+    evidence: str = "gf"
 
 
 @dataclass(frozen=True)
@@ -321,20 +327,33 @@ class HomotopyMethod:
             if not full_report.zero_dimensional or full_report.degree == 0:
                 raise homotopy.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
                                              f"(dimension {full_report.dimension}, degree {full_report.degree})")
-        if progress:
-            progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
-        report = system.degree(seeds=job.seeds)
-        if not report.zero_dimensional:
-            raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
-        if report.degree == 0:
-            raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
         # verified once, below: a squared system on the paths it will track (not on all its roots), a system
         # with its own step control as it will run
         build_options = dataclasses.replace(options, verify_trials=0) if full is not None or job.step_control else options
-        spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
+        if job.evidence == "monodromy":
+            if full is not None:
+                raise GenerationError(f"{system.name}: a squared system needs the full system's GF(p) count")
+            if progress:
+                progress(f"{system.name}: no GF(p) certificate asked; counting by monodromy alone (numerical evidence)")
+            spec, source, build = homotopy.build(system, None, job.start, job.trials, build_options, progress)
+            certified = None
+            evidence = {"method": "monodromy", "degree": spec["degree"], "seed": seed, "loops": spec["monodromy"]["loops"],
+                        "stall_loops": options.stall_loops, "saturated_by": list(system.nonzero),
+                        "note": "numerical evidence only: no GF(p) certificate (F4 could not be run or was not asked)"}
+        else:
+            if progress:
+                progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
+            report = system.degree(seeds=job.seeds)
+            if not report.zero_dimensional:
+                raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
+            if report.degree == 0:
+                raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
+            spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
+            certified = {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
+                         "saturated_by": list(system.nonzero)}
+            evidence = None
         spec = {"name": job.name, **spec, "paths": len(spec["start_roots"]),
-                "certified": {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
-                              "saturated_by": list(system.nonzero)},
+                **({"certified": certified} if certified else {"evidence": evidence}),
                 "config": list(job.config) if job.config else None,
                 **({"unused_parameters": list(system.unused)} if system.unused else {}),
                 "scale_powers": list(system.scale_powers) if system.scale_powers else None}
@@ -357,7 +376,7 @@ class HomotopyMethod:
             # verified on the paths and with the step control it will run with
             build["verified"] = homotopy.verify(full.name if full_report is not None else system.name, spec,
                                                 coefficients, job.trials, options.verify_trials)
-        return Built(spec, source, report.degree, spec["paths"], build)
+        return Built(spec, source, spec["degree"] if certified is None else report.degree, spec["paths"], build)
 
 
 #: Method name -> strategy (names as in solvers.methods.spec.METHODS).
@@ -489,16 +508,25 @@ def write(out: str, name: str, spec: dict, coefficients: str, command: str) -> s
     return py_path
 
 
+#: How a homotopy solver's root count is established: "gf" (certified over GF(p), two primes x two seeds,
+#: before any monodromy) or "monodromy" (numerical evidence alone: loops until HomotopyOptions.stall_loops of
+#: them find no new root; for systems whose F4 count does not fit, e.g. the 3D TDOA minimal cells). The spec
+#: then carries "evidence" instead of "certified", and the module's header says so.
+EVIDENCE = ("gf", "monodromy")
+
+
 def generate(target: "str | ParametricSystem", method: str | None = None, *, out: str, name: str | None = None,
              seed: int = 0, start: Start | None = None, full: ParametricSystem | None = None,
-             command: str | None = None, progress: Callable[[str], None] | None = None) -> Generated:
+             command: str | None = None, progress: Callable[[str], None] | None = None,
+             evidence: str = "gf") -> Generated:
     """Build a solver and write its spec and module into ``out`` (and nowhere else).
 
     target: a committed configuration (:data:`SOLVERS`, e.g. ``"9r3s"``), a TDOA formulation label
     (``"7r3s:B2,B3,C2-C7"``) or a square :class:`ParametricSystem`. method: one of :data:`METHODS`
     (default: ``curve-pencil`` for the pencil's formulation, ``homotopy`` otherwise). out: output
     directory (created). name: file-name prefix (default ``tdoa_<label>``, or the system's name).
-    seed: monodromy seed. start: a start pair (q0, x0) for a system not linear in its parameters
+    seed: monodromy seed. evidence: :data:`EVIDENCE` ("monodromy": no GF(p) certificate, numerical
+    evidence alone, stated in the spec and the module's header). start: a start pair (q0, x0) for a system not linear in its parameters
     (refused without one). full: the over-determined system that a parametric ``target`` squares (its
     count is certified too and only the start roots satisfying it are tracked; same unknowns and
     parameters). command: the regenerating command printed in the module's header (default:
@@ -507,8 +535,14 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     """
     if method is not None and method not in METHODS:
         raise GenerationError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
+    if evidence not in EVIDENCE:
+        raise GenerationError(f"unknown evidence {evidence!r}; valid: {', '.join(EVIDENCE)}")
     t0 = time.perf_counter()
     job, kind, label = _job(target, name, start, method, full)
+    if evidence != "gf":
+        if kind != "homotopy":
+            raise GenerationError(f"{job.name}: evidence {evidence!r} is for the homotopy method, not {kind}")
+        job = dataclasses.replace(job, evidence=evidence)
     built = METHODS[kind].build(job, seed, progress)
     if command is None:
         if label is not None and job.name == f"tdoa_{label}" and os.path.abspath(out) == GENERATED_DIR:
@@ -522,7 +556,7 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     py_path = write(out, job.name, built.spec, built.coefficients, command)
     system = job.system.name if job.system is not None else job.formulation
     return Generated(codegen.module_name(job.name, built.spec), system, kind, built.degree, built.candidates,
-                     time.perf_counter() - t0, py_path, built.report)
+                     time.perf_counter() - t0, py_path, built.report, evidence)
 
 
 def emit_committed(json_path: str) -> tuple[str, str]:

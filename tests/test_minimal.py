@@ -2,6 +2,7 @@
 tapes), the TOA solvers' certified counts, solve_network(F, dim=, model=) on noiseless room networks."""
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 from analysis.formulations import Formulation, gf_equations, sample_gf_instance
 from analysis.parametric import from_formulation
 from solvers import api
-from solvers.generate import SOLVERS, complex_instance
+from solvers.generate import SOLVERS, GenerationError, complex_instance, generate
 from solvers.methods import homotopy as hm
 from solvers.methods import slp, tape_kernel
 from solvers.metrics import position_error
@@ -129,3 +130,42 @@ def test_solve_network_input_errors():
         api.solve_network(F, model="tof")
     with pytest.raises(ValueError, match="too few nodes for 3D TOA"):
         api.solve_network(np.ones((3, 3)), dim=3, model="toa")
+
+
+def _toa_2d_solver():
+    """The 2D TOA 3r/3s system's homotopy solver at a seeded complex start network, and that network's root."""
+    label = SOLVERS["3r3stoa"]
+    system = from_formulation(label, saturate_det_h=True)
+    F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa")
+    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    return system, solver, F.ravel(), x0
+
+
+def test_monodromy_count_resumes_from_its_checkpoint(tmp_path):
+    """Two loops, checkpoint, two more: the same roots as four loops at once (the rng state is saved);
+    with enough loops the count settles at the certified 8."""
+    system, solver, q0, x0 = _toa_2d_solver()
+    options = hm.HomotopyOptions(seed=3, max_loops=4, stall_loops=50)
+    path = str(tmp_path / "count.json")
+    first = hm.monodromy_count(solver, q0, x0, dataclasses.replace(options, max_loops=2), 1e9, path)
+    resumed = hm.monodromy_count(solver, q0, x0, options, 1e9, path)
+    straight = hm.monodromy_count(solver, q0, x0, options, 1e9)
+    assert first.loops == 2 and resumed.loops == straight.loops == 4 and resumed.paths == straight.paths
+    assert np.array_equal(resumed.roots, straight.roots)
+    settled = hm.monodromy_count(solver, q0, x0, hm.HomotopyOptions(seed=3, stall_loops=8), 1e9,
+                                 excluded=hm._excluded(system, q0))
+    assert settled.stall == 8 and len(settled.roots) == 8
+
+
+def test_generate_on_numerical_evidence_alone(tmp_path):
+    """evidence="monodromy": no GF(p) count; the spec says "evidence", not "certified", the header says the
+    count is not certified, and the count found (8) is the certified one."""
+    import json
+
+    result = generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="monodromy")
+    assert result.degree == 8 and result.evidence == "monodromy"
+    spec = json.loads((tmp_path / (result.name + ".json")).read_text())
+    assert "certified" not in spec and spec["evidence"]["method"] == "monodromy" and spec["evidence"]["degree"] == 8
+    assert "NOT certified over GF(p)" in (tmp_path / (result.name + ".py")).read_text()
+    with pytest.raises(GenerationError, match="evidence"):
+        generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="guess")
