@@ -764,7 +764,8 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
     if checkpoint and os.path.exists(checkpoint):
         with open(checkpoint, encoding="utf-8") as fh:
             saved = json.load(fh)
-        if np.allclose(_complex_array(saved["q0"]), q0, rtol=0, atol=1e-15):
+        # the same start instance (the file keeps START_DIGITS significant digits of q0 and the roots)
+        if np.allclose(_complex_array(saved["q0"]), q0, rtol=10.0 ** (1 - START_DIGITS), atol=0):
             roots = _complex_array(saved["roots"])
             loops, paths, stall, spent = saved["loops"], saved["paths"], saved["stall"], saved["seconds"]
             rng.bit_generator.state = saved["rng"]
