@@ -464,3 +464,143 @@ def sample_real_instance_kd(config: TDOAConfig, rng: "np.random.Generator | int"
     return Instance(config, None, tuple(tuple(map(float, r)) for r in F), tuple(tuple(map(float, r)) for r in receivers),
                     tuple(tuple(map(float, s)) for s in transmitters), tuple(map(float, offsets)), root)
 
+
+
+# --------------------------------------------------------------------------------------------------
+# The formulas on any arithmetic (sympy expressions for parametric systems, program values for tapes)
+# --------------------------------------------------------------------------------------------------
+
+
+def _det_generic(a: Sequence[Sequence], zero):
+    """Determinant by cofactors of the first row (K <= 4: at most 24 products), any ring elements."""
+    k = len(a)
+    if k == 1:
+        return a[0][0]
+    if k == 2:
+        return a[0][0] * a[1][1] - a[0][1] * a[1][0]
+    out = zero
+    for c in range(k):
+        sub = [[a[r][q] for q in range(k) if q != c] for r in range(1, k)]
+        term = a[0][c] * _det_generic(sub, zero)
+        out = out + term if c % 2 == 0 else out - term
+    return out
+
+
+def _adjugate_generic(a: Sequence[Sequence], zero) -> list[list]:
+    """adj(A)[r][c] = (-1)^(r+c) det(A without row c and column r)."""
+    k = len(a)
+    if k == 1:
+        return [[zero + 1]]
+    out = [[zero] * k for _ in range(k)]
+    for r in range(k):
+        for c in range(k):
+            minor = _det_generic([[a[i][j] for j in range(k) if j != r] for i in range(k) if i != c], zero)
+            out[r][c] = minor if (r + c) % 2 == 0 else zero - minor
+    return out
+
+
+def formulas(formulation: Formulation, x, f: Sequence[Sequence], zero, quarter, define=None) -> tuple[list, list]:
+    """The equations of any configuration written on given ring elements: (equations, further
+    non-vanishing conditions besides det H), in ``formulation.equations`` order.
+
+    x: mapping unknown name -> element; f: the m x n measurements as elements; zero: the ring's 0;
+    quarter: the element 1/4; define(name, element) -> element: names a data-only subexpression (a
+    parametric system's definition; default: the element itself). The same formulas as the builder above
+    (module docstring): e_ij = f_ij - f_1j, p_ij = f_ij + f_1j, d_ij^2 - d_1j^2 = e (p - 2 o_j) (TOA:
+    e p), D~_ij = c_ij + 2 e_{i+1,1} o_1 - 2 e_{i+1,j+1} o_{j+1} with c_ij = e p - e p; B_j for
+    j >= K + 2 with u = adj(M) D~[:K, j-1], M = D~[:K, :K], multiplied by det(M)^2 (for TDOA det M
+    depends on the offsets and is returned as a condition). Used by analysis.parametric (sympy) and
+    solvers.methods.slp (straight-line programs), so that a system and its program cannot diverge.
+    """
+    config = formulation.config
+    k, m, n, tdoa = config.dim, config.m, config.n, config.model == "tdoa"
+    define = define or (lambda name, value: value)
+    o = [x[f"o{j}"] if tdoa else zero for j in range(1, n + 1)]
+    cache: dict = {}
+
+    def e(i: int, j: int):
+        if ("e", i, j) not in cache:
+            cache["e", i, j] = define(f"e{i}_{j}", f[i - 1][j - 1] - f[0][j - 1])
+        return cache["e", i, j]
+
+    def p(i: int, j: int):
+        if ("p", i, j) not in cache:
+            cache["p", i, j] = define(f"p{i}_{j}", f[i - 1][j - 1] + f[0][j - 1])
+        return cache["p", i, j]
+
+    def d2(i: int, j: int):
+        diff = f[i - 1][j - 1] - o[j - 1] if tdoa else f[i - 1][j - 1]
+        return diff * diff
+
+    def d2_diff(i: int, j: int):  # d_ij^2 - d_1j^2, i >= 2
+        return e(i, j) * (p(i, j) - 2 * o[j - 1]) if tdoa else e(i, j) * p(i, j)
+
+    def comp(i: int, j: int):  # D~_ij, 1-based
+        if ("c", i, j) not in cache:
+            cache["c", i, j] = define(f"c{i}_{j}", e(i + 1, j + 1) * p(i + 1, j + 1) - e(i + 1, 1) * p(i + 1, 1))
+        c = cache["c", i, j]
+        return c + (2 * (e(i + 1, 1) * o[0]) - 2 * (e(i + 1, j + 1) * o[j])) if tdoa else c
+
+    out, conditions = [], []
+    if config.parametrization == "direct":
+        def position(prefix: str, i: int) -> list:
+            return [x.get(f"{prefix}{i}{'xyz'[a]}", zero) for a in range(k)]
+
+        for name in formulation.equations:
+            i, j = (int(v) for v in name[1:].split("_"))
+            dist = zero
+            for ra, sa in zip(position("r", i), position("s", j)):
+                dist = dist + (ra - sa) * (ra - sa)
+            out.append(d2(i, j) - dist)
+        return out, conditions
+    H = [[x[f"h{min(a, c) + 1}{max(a, c) + 1}"] for c in range(k)] for a in range(k)]
+    b = [x[f"b{a + 1}"] for a in range(k)]
+    det, adj = _det_generic(H, zero), _adjugate_generic(H, zero)
+
+    def form(u, v):  # u^T adj(H) v
+        acc = zero
+        for a in range(k):
+            for c in range(k):
+                acc = acc + u[a] * (adj[a][c] * v[c])
+        return acc
+
+    head = None
+    for name in formulation.equations:
+        fam = _family(name)
+        if fam == "A":
+            out.append(d2(1, 1) * det - form(b, b))
+        elif fam == "B" and int(name[1:]) <= k + 1:
+            j = int(name[1:])
+            out.append((d2(1, j) - d2(1, 1)) * det - quarter * adj[j - 2][j - 2] + form(b, [zero + int(a == j - 2) for a in range(k)]))
+        elif fam == "B":
+            j = int(name[1:])
+            if head is None:
+                M = [[comp(a, c) for c in range(1, k + 1)] for a in range(1, k + 1)]
+                dm = _det_generic(M, zero)
+                if tdoa:
+                    conditions.append(dm)
+                else:
+                    dm = define("dm", dm)
+                head = (dm, _adjugate_generic(M, zero))
+            dm, adj_m = head
+            column = [comp(a, j - 1) for a in range(1, k + 1)]
+            u = []
+            for a in range(k):
+                acc = zero
+                for c in range(k):
+                    acc = acc + adj_m[a][c] * column[c]
+                u.append(acc if tdoa else define(f"u{j}_{a + 1}", acc))
+            out.append((d2(1, j) - d2(1, 1)) * (dm * dm) * det - quarter * form(u, u) + dm * form(b, u))
+        elif fam == "C":
+            i = int(name[1:])
+            r = [comp(i - 1, a) for a in range(1, k + 1)]
+            quad, lin = zero, zero
+            for a in range(k):
+                lin = lin + b[a] * r[a]
+                for c in range(k):
+                    quad = quad + H[a][c] * (r[a] * r[c])
+            out.append(d2_diff(i, 1) - quad + 2 * lin)
+        else:
+            rows, cols = _parse_minor(config, name)
+            out.append(_det_generic([[comp(r, c) for c in cols] for r in rows], zero))
+    return out, conditions

@@ -341,6 +341,23 @@ class System:
             polys.append(ring.from_terms(f))
         return ring, polys
 
+    def saturated_by(self, f: Coefficients, name: str = "t") -> "System":
+        """The Rabinowitsch form of the saturation I : f^infinity: one more variable t and the polynomial
+        t*f - 1, so that any CAS reading the file sees exactly the points where f does not vanish.
+
+        ``f`` is in this system's variables; t is appended last (named ``name``, with ``_`` appended
+        until it is free), so the original variables keep their positions. Cox-Little-O'Shea, ch. 4 sec. 4.
+        """
+        if not f:
+            raise InputError(f"{self.source}: saturating by the zero polynomial leaves no point")
+        while name in self.variables:
+            name += "_"
+        lift = [{e + (0,): c for e, c in g.items()} for g in self.polynomials]
+        inverse = {e + (1,): Fraction(c) for e, c in f.items()}
+        inverse[(0,) * (self.nvars + 1)] = inverse.get((0,) * (self.nvars + 1), Fraction(0)) - 1
+        return System(self.variables + (name,), self.characteristic, tuple(lift) + (inverse,),
+                      self.lines + (0,) if self.lines else (), source=f"{self.source} saturated by {name}*f - 1")
+
     @classmethod
     def from_polys(cls, ring: Ring, polys: Iterable[Poly], source: str = "<polys>") -> "System":
         """The system of polynomials over GF(ring.prime) (characteristic ring.prime)."""

@@ -67,6 +67,8 @@ class ParametricSystem:
     definitions: optional auxiliary names ``(name, expression)`` defined from the parameters (and
     earlier definitions) that the equations may use: a factored form keeps coefficients short and
     accurate in floating point (e.g. differences of measurements), the GF(p) counts substitute them.
+    unused: parameters declared on purpose although no equation uses them (a formulation that leaves a
+    measurement out, e.g. 3D TOA 5r/5s's f5_5: its solver still takes the whole data matrix).
     """
 
     name: str
@@ -77,6 +79,7 @@ class ParametricSystem:
     symmetry: tuple[tuple[int, ...], ...] = ()
     scale_powers: tuple[float, ...] | None = None
     definitions: tuple[tuple[str, str], ...] = ()
+    unused: tuple[str, ...] = ()
     gf_sampler: Callable[[int, int], GFSample] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -191,7 +194,7 @@ class ParametricSystem:
         for sym, expr in zip(reversed(self.aux_symbols), reversed(self.aux_exprs)):
             if sym.name in used:
                 used |= {s.name for s in expr.free_symbols}
-        missing = [q for q in self.parameters if q not in used]
+        missing = [q for q in self.parameters if q not in used and q not in self.unused]
         if missing:
             raise ParametricError(f"{self.name}: parameters {missing} do not occur in the equations")
         if not self.parameters:
@@ -412,6 +415,8 @@ def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSys
 
     formulation = as_formulation(formulation)
     config = formulation.config
+    if not config.is_planar_tdoa:
+        return _from_formulation_kd(formulation, saturate_det_h)
     polys, defs = factored_equations(formulation)
     params = tuple(s.name for row in data_symbols(config) for s in row)
     definitions = tuple((s.name, sympy.sstr(defs[s])) for s in definition_order(defs))
@@ -425,6 +430,56 @@ def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSys
                             tuple(sympy.sstr(p.as_expr()) for p in polys),
                             nonzero=("h11*h22 - h12**2",) if saturate_det_h else (),
                             scale_powers=powers, definitions=definitions, gf_sampler=sampler)
+
+
+def _from_formulation_kd(formulation, saturate_det_h: bool) -> ParametricSystem:
+    """Any other configuration (TOA, 3D, the direct parametrization) as a parametric system in the f_ij:
+    :func:`analysis.formulations_kd.formulas` written on sympy symbols.
+
+    Definitions (data only): e<i>_<j> = f_ij - f_1j, p<i>_<j> = f_ij + f_1j, c<i>_<j> the constant part
+    of D~_ij; for TOA with B_j, j >= K + 2, also dm = det M, M = D~[:K, :K], and u<j>_<a> = (adj(M)
+    D~[:K, j-1])_a (B_j multiplied by dm^2: polynomial in the data, the same roots). 3D TDOA's det M
+    depends on the offsets and is a further non-vanishing condition. The sampler is
+    analysis.formulations.sample_gf_instance (known root checked by every count).
+    """
+    from .formulations import data_symbols, sample_gf_instance, unknown_symbols
+    from .formulations_kd import formulas
+
+    config = formulation.config
+    x = dict(zip(config.unknowns, unknown_symbols(config)))
+    f = data_symbols(config)
+    defs: dict[str, sympy.Expr] = {}
+
+    def define(name: str, expr) -> sympy.Symbol:
+        defs[name] = sympy.expand(expr)
+        return sympy.Symbol(name)
+
+    out, nonzero = formulas(formulation, x, f, sympy.Integer(0), sympy.Rational(1, 4), define)
+    nonzero = [sympy.expand(g) for g in nonzero]
+    if config.parametrization == "direct":
+        powers = tuple(1.0 for _ in config.unknowns)
+    else:
+        if saturate_det_h:
+            k = config.dim
+            H = sympy.Matrix(k, k, lambda a, c: x[f"h{min(a, c) + 1}{max(a, c) + 1}"])
+            nonzero.insert(0, sympy.expand(H.det()))
+        powers = tuple(-2.0 if u.startswith("h") else 0.0 if u.startswith("b") else 1.0 for u in config.unknowns)
+    unknowns = tuple(x.values())
+    polys = [sympy.Poly(sympy.expand(expr), *unknowns).as_expr() for expr in out]
+    used = {v.name for g in polys + nonzero for v in sympy.sympify(g).free_symbols}
+    for name in reversed(list(defs)):  # keep the definitions the equations use, and what those use
+        if name in used:
+            used |= {v.name for v in defs[name].free_symbols}
+    params = tuple(s.name for row in f for s in row)
+
+    def sampler(p: int, seed: int) -> GFSample:
+        inst = sample_gf_instance(config, p, seed)
+        return [int(v) for row in inst.F for v in row], [int(v) for v in inst.root]
+
+    return ParametricSystem(formulation.label, tuple(config.unknowns), params, tuple(sympy.sstr(g) for g in polys),
+                            nonzero=tuple(sympy.sstr(g) for g in nonzero), scale_powers=powers,
+                            definitions=tuple((k_, sympy.sstr(v)) for k_, v in defs.items() if k_ in used),
+                            unused=tuple(q for q in params if q not in used), gf_sampler=sampler)
 
 
 def square(system: ParametricSystem, keep: int, seed: int = 0, name: str | None = None) -> ParametricSystem:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import warnings
 from dataclasses import dataclass
 
@@ -21,8 +22,8 @@ import numpy as np
 from .recovery import Calibration, recover, rms_residual
 from .refine import refine as _refine
 
-__all__ = ["SOLVER_ORDER", "SolverChoice", "calibrations", "minimal_configuration", "select_solver",
-           "solve_network", "solve_roots"]
+__all__ = ["KD_SOLVERS", "SOLVER_ORDER", "SolverChoice", "calibrations", "degrees_of_freedom", "minimal_configuration",
+           "select_solver", "select_solver_kd", "solve_network", "solve_roots"]
 
 _GENERATED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated")
 
@@ -54,10 +55,25 @@ POSITIONS = {"4r5s": "receivers-orbits"}
 #: Configurations with as many measurements as degrees of freedom (2m + 3n - 3 = mn).
 MINIMAL = ((6, 3), (4, 5))
 
+#: The committed solvers of the other dimensions and models, (dim, model) -> labels by cost (root count):
+#: the first whose configuration fits inside the network is used. TOA: the minimal cells (2D 3r/3s,
+#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root).
+KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"), (3, "tdoa"): ("9r5s3d",)}
 
-def minimal_configuration(m: int, n: int) -> bool:
-    """Whether an m x n network is a minimal problem (its real solutions all fit the data exactly)."""
-    return (m, n) in MINIMAL
+MODELS = ("tdoa", "toa")
+
+
+def degrees_of_freedom(m: int, n: int, dim: int = 2, model: str = "tdoa") -> int:
+    """Unknowns of an m x n network up to the Euclidean group: K (m + n) positions (+ n offsets for
+    TDOA) minus K (K + 1) / 2 (translations and rotations)."""
+    return dim * (m + n) + (n if model == "tdoa" else 0) - dim * (dim + 1) // 2
+
+
+def minimal_configuration(m: int, n: int, dim: int = 2, model: str = "tdoa") -> bool:
+    """Whether an m x n network is a minimal problem (as many measurements as degrees of freedom, so that
+    its real solutions all fit the data exactly): 2D TDOA 6r/3s, 4r/5s; 3D TDOA 10r/4s, 7r/5s, 6r/6s,
+    5r/9s; 2D TOA 3r/3s; 3D TOA 4r/6s, 5r/5s, 6r/4s."""
+    return m * n == degrees_of_freedom(m, n, dim, model)
 
 
 def _validate(F) -> np.ndarray:
@@ -129,6 +145,30 @@ def _positions_calibration(system, block: np.ndarray, x: np.ndarray, tol: float 
     return Calibration(rec, tra, off, rms_residual(block, rec, tra, off))
 
 
+def _check_kind(dim: int, model: str) -> None:
+    if dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+
+
+def select_solver_kd(m: int, n: int, dim: int, model: str) -> SolverChoice:
+    """The cheapest committed solver of this dimension and model that fits an m x n network
+    (:data:`KD_SOLVERS`; 2D TDOA: :func:`select_solver`)."""
+    _check_kind(dim, model)
+    if (dim, model) == (2, "tdoa"):
+        return select_solver(m, n)
+    labels = KD_SOLVERS.get((dim, model), ())
+    have = []
+    for label in labels:
+        ms, ns = (int(v) for v in re.match(r"(\d+)r(\d+)s", label).groups())
+        have.append(f"{ms}r/{ns}s")
+        if m >= ms and n >= ns:
+            return SolverChoice(label, ms, ns, _module_for(label).__name__)
+    raise ValueError(f"too few nodes for {dim}D {model.upper()}: {m} receivers x {n} transmitters; the solvers need at "
+                     f"least one of {', '.join(have) or 'none (no committed solver)'}")
+
+
 #: The first unknowns of every (H, b, o) formulation; the offsets o_1..o_n follow.
 HBO_UNKNOWNS = ("h11", "h12", "h22", "b1", "b2")
 #: The same in 3D: H's upper triangle, then b.
@@ -160,14 +200,16 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
         from analysis.positions import positions_system
 
         system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
-    elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets):
-        raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b, o) nor a positions formulation's")
+    elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets, HBO_UNKNOWNS,
+                                        HBO_UNKNOWNS_3D):
+        raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b[, o]) nor a positions formulation's")
     h, k = (6, 3) if tuple(module.UNKNOWNS[:9]) == HBO_UNKNOWNS_3D else (3, 2)
+    toa = system is None and len(module.UNKNOWNS) == h + k  # no offsets: synchronised transmitters (TOA)
     out = []
     with np.errstate(all="ignore"):
         for x in roots[np.all(np.isfinite(roots), axis=1)]:
             cal = (_positions_calibration(system, F, x) if system is not None
-                   else recover(F, x[:h], x[h:h + k], x[h + k:]))
+                   else recover(F, x[:h], x[h:h + k], np.zeros(n) if toa else x[h + k:]))
             if cal is not None:
                 out.append(cal)
     return sorted(out, key=lambda c: c.residual)
@@ -215,7 +257,99 @@ def _extend(F: np.ndarray, cal: Calibration, n_used: int) -> Calibration | None:
     return Calibration(cal.receivers, tra, off, res) if np.isfinite(res) else None
 
 
-def solve_network(F, refine: bool = True, max_refined: int = 5) -> list[Calibration]:
+def _place_transmitter(receivers: np.ndarray, f: np.ndarray, toa: bool) -> tuple[np.ndarray, float] | None:
+    """Position and offset (TOA: 0) of one transmitter from its column of measurements, by least squares
+    on the linearised range equations (:func:`multilateration_system`; TOA without the offset column)."""
+    A, rhs = multilateration_system(receivers, f)
+    k = receivers.shape[1]
+    if toa:
+        A = A[:, :k]
+    sol, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=1e-12)
+    if rank < A.shape[1] or not np.all(np.isfinite(sol)):
+        return None
+    return sol[:k], 0.0 if toa else float(sol[k])
+
+
+def _place_receiver(transmitters: np.ndarray, ranges: np.ndarray) -> np.ndarray | None:
+    """Position of one receiver from its ranges d_j = f_ij - o_j to known transmitters (least squares on
+    |r - s_j|^2 - |r - s_1|^2 = d_j^2 - d_1^2, linear in r)."""
+    S = np.asarray(transmitters)
+    A = -2.0 * (S[1:] - S[0])
+    rhs = ranges[1:] ** 2 - ranges[0] ** 2 - np.einsum("ij,ij->i", S[1:], S[1:]) + S[0] @ S[0]
+    sol, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=1e-12)
+    if rank < S.shape[1] or not np.all(np.isfinite(sol)):
+        return None
+    return sol
+
+
+def _extend_kd(F: np.ndarray, cal: Calibration, toa: bool) -> Calibration | None:
+    """Add the transmitters, then the receivers, that a solver's block did not use (any dimension)."""
+    m, n = F.shape
+    ms, ns = cal.m, cal.n
+    k = cal.receivers.shape[1]
+    tra, off = np.empty((n, k)), np.zeros(n)
+    tra[:ns], off[:ns] = cal.transmitters, cal.offsets
+    for j in range(ns, n):
+        got = _place_transmitter(cal.receivers, F[:ms, j], toa)
+        if got is None:
+            return None
+        tra[j], off[j] = got
+    rec = np.empty((m, k))
+    rec[:ms] = cal.receivers
+    for i in range(ms, m):
+        got = _place_receiver(tra, F[i] - off)
+        if got is None:
+            return None
+        rec[i] = got
+    res = rms_residual(F, rec, tra, off)
+    return Calibration(rec, tra, off, res) if np.isfinite(res) else None
+
+
+def _solve_network_kd(F: np.ndarray, dim: int, model: str, refine: bool, max_refined: int) -> list[Calibration]:
+    """:func:`solve_network` for 3D and for TOA: the committed solver's calibrations on its block
+    (:func:`calibrations`), extended to every node, TDOA refined on all measurements."""
+    m, n = F.shape
+    choice = select_solver_kd(m, n, dim, model)
+    module = importlib.import_module(choice.module)
+    toa = model == "toa"
+    cands = []
+    with np.errstate(all="ignore"):
+        for cal in calibrations(module, F[: choice.m, : choice.n]):
+            cal = _extend_kd(F, cal, toa)
+            if cal is not None:
+                cands.append(cal)
+    cands.sort(key=lambda c: c.residual)
+    # solvers.refine estimates offsets: TDOA candidates only
+    return _finish(F, cands, refine and not toa, max_refined, minimal_configuration(m, n, dim, model),
+                   f"{dim}D {model.upper()} {m}r/{n}s", stacklevel=4)
+
+
+def _finish(F: np.ndarray, cands: list[Calibration], refine: bool, max_refined: int, minimal: bool, what: str,
+            stacklevel: int) -> list[Calibration]:
+    """Refine the best candidates (all of them for minimal data) on all measurements, drop repeats and, for
+    minimal data, keep the exact fits (warning when several fit: the data cannot tell them apart)."""
+    if refine:
+        refined = []
+        for cal in cands[: len(cands) if minimal else max_refined]:
+            try:
+                out = _refine(cal, F).calibration
+            except ValueError:
+                continue
+            if np.isfinite(out.residual) and np.all(np.isfinite(out.receivers)) and np.all(np.isfinite(out.transmitters)):
+                refined.append(out)
+        cands = sorted(refined, key=lambda c: c.residual)
+    out = _dedupe(cands)
+    if minimal:
+        scale = np.sqrt(np.mean(F * F))
+        out = [c for c in out if c.residual <= 1e-6 * scale]
+        if len(out) > 1:
+            warnings.warn(f"minimal data ({what}): {len(out)} real solutions fit the "
+                          "measurements exactly; the data cannot tell them apart", stacklevel=stacklevel)
+    return out
+
+
+def solve_network(F, refine: bool = True, max_refined: int = 5, *, dim: int = 2,
+                  model: str = "tdoa") -> list[Calibration]:
     """Candidate calibrations of a network from complete, clean TDOA measurements F[i, j] = |r_i - s_j| + o_j.
 
     The paper's pipeline; for measured data (gaps, gross errors, a status) use :func:`solvers.calibrate`.
@@ -231,9 +365,24 @@ def solve_network(F, refine: bool = True, max_refined: int = 5) -> list[Calibrat
     an empty list when no candidate is real and geometrically valid (e.g. collinear receivers).
     For minimal data all real solutions fit exactly and a warning says that the data cannot tell
     them apart.
-    Raises ValueError for malformed input (wrong shape, NaN/inf, too few nodes).
+    dim, model: 2 or 3; ``"tdoa"`` (unknown transmitter offsets) or ``"toa"`` (synchronised, F[i, j] =
+        |r_i - s_j|). Other than 2D TDOA, the committed solvers of :data:`KD_SOLVERS` run on the first
+        receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s), every
+        real candidate with H positive definite becomes a calibration (:func:`calibrations`), the other
+        transmitters and then receivers are placed by linear least squares, and TDOA candidates are
+        refined (TOA ones are not: solvers.refine frees the offsets). 3D gauge: r_1 = 0, r_2 on +x,
+        r_3 in the xy half-plane y > 0; the mirror image z -> -z fits the data equally and is not
+        returned (one representative per network).
+
+    Raises ValueError for malformed input (wrong shape, NaN/inf, too few nodes, unknown dim or model).
     Paper Section 3.1 (steps 1-4) and 3.2 (trilateration of the remaining transmitters).
     """
+    _check_kind(dim, model)
+    if (dim, model) != (2, "tdoa"):
+        arr = np.asarray(F, dtype=float)
+        if arr.ndim != 2 or not np.all(np.isfinite(arr)):
+            raise ValueError(f"F must be a finite 2-D (receivers x transmitters) array, got shape {arr.shape}")
+        return _solve_network_kd(arr, dim, model, refine, max_refined)
     F = _validate(F)
     choice = select_solver(*F.shape)
     roots = solve_roots(F)
@@ -251,28 +400,8 @@ def solve_network(F, refine: bool = True, max_refined: int = 5) -> list[Calibrat
             if cal is not None:
                 cands.append(cal)
     cands.sort(key=lambda c: c.residual)
-    minimal = minimal_configuration(*F.shape)
-    if minimal:
-        max_refined = len(cands)
-    if refine:
-        refined = []
-        for cal in cands[:max_refined]:
-            try:
-                out = _refine(cal, F).calibration
-            except ValueError:
-                continue
-            if np.isfinite(out.residual) and np.all(np.isfinite(out.receivers)) and np.all(np.isfinite(out.transmitters)):
-                refined.append(out)
-        cands = refined
-        cands.sort(key=lambda c: c.residual)
-    out = _dedupe(cands)
-    if minimal:
-        scale = np.sqrt(np.mean(F * F))
-        out = [c for c in out if c.residual <= 1e-6 * scale]
-        if len(out) > 1:
-            warnings.warn(f"minimal data ({F.shape[0]}r/{F.shape[1]}s): {len(out)} real solutions fit the "
-                          "measurements exactly; the data cannot tell them apart", stacklevel=2)
-    return out
+    return _finish(F, cands, refine, max_refined, minimal_configuration(*F.shape), f"{F.shape[0]}r/{F.shape[1]}s",
+                   stacklevel=3)
 
 
 def _dedupe(cands: list[Calibration], tol: float = 1e-8) -> list[Calibration]:

@@ -149,7 +149,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H (times det D~[:3,:3] when 3D TDOA's B5..Bn are used)")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
-        help="write the (first prime's) system for msolve|m2|singular to PATH and continue",
+        help="write the (first prime's) system for msolve|m2|singular to PATH and continue; with --saturate or "
+             "--saturate-det-h the saturated one (an extra variable t and t*f - 1)",
     )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, deglex, block:k (default grevlex)")
@@ -277,7 +278,8 @@ def cmd_degree(args: argparse.Namespace) -> int:
         sat = saturating_poly
 
     if args.export:
-        _export(system, args.export[0], args.export[1])
+        # what is exported is what is counted: the saturation goes into the file (t*f - 1)
+        _export(system.saturated_by(sat_terms) if args.saturate else system, args.export[0], args.export[1])
     report = _analyse(args, polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
     return _finish_report(report.as_dict(), report, args)
 
@@ -352,7 +354,10 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
         from analysis.io import System
 
         ring = Ring(config.unknowns, primes[0], args.order)
-        _export(System.from_polys(ring, polys(primes[0])), args.export[0], args.export[1])
+        system = System.from_polys(ring, polys(primes[0]), source=f"formulation {formulation.label}")
+        if args.saturate_det_h:  # what is exported is what is counted: t * det H - 1 goes into the file
+            system = system.saturated_by({e: c for e, c in det_h(primes[0]).terms()})
+        _export(system, args.export[0], args.export[1])
     instance, eqs = equations(primes[0])
     n = config.n_unknowns
     rank = jacobian_rank(eqs, instance.root, primes[0])
@@ -528,6 +533,10 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
                    "formulation label or system FILE")
     p.add_argument("--out", metavar="DIR", required=True, help="output directory (created if needed)")
     p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")
+    p.add_argument("--evidence", choices=("gf", "monodromy"), default="gf",
+                   help="gf (default): certify the root count over GF(p) first; monodromy: numerical evidence "
+                   "alone (loops until many find no new root), for systems F4 cannot count; the spec and the "
+                   "module's header say the count is not certified")
     p.add_argument("--start", metavar="JSON",
                    help="system FILE only: a start pair, {\"parameters\": [...], \"root\": [...]} with one value per "
                    "parameter and per unknown (numbers or [re, im]); generic complex values, the root satisfying the "
@@ -597,15 +606,17 @@ def cmd_generate(args: argparse.Namespace) -> int:
     command = f"tdoa-workbench generate {shlex.quote(args.target)} --out {shlex.quote(args.out)}"
     command += f" --seed {args.seed}" if args.seed else ""
     command += f" --start {shlex.quote(args.start)}" if args.start else ""
+    command += f" --evidence {args.evidence}" if args.evidence != "gf" else ""
     try:
         if is_file:
             system = parse(_read_text(target), os.path.basename(target))
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
             result = gen.generate(system, out=args.out, name=name, seed=args.seed, start=start, command=command,
-                                  progress=progress)
+                                  progress=progress, evidence=args.evidence)
         else:
-            result = gen.generate(target, out=args.out, seed=args.seed, command=command, progress=progress)
+            result = gen.generate(target, out=args.out, seed=args.seed, command=command, progress=progress,
+                                  evidence=args.evidence)
         print(result.summary())
     except (ParametricError, HomotopyError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None

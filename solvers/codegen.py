@@ -240,8 +240,12 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
     shape = ", ".join(map(str, pshape))
     return ModuleParts(
         summary=f"parameter homotopy with {paths} paths in {nvars} unknowns.",
-        description=(f"The {paths} roots of a generic complex start instance (certified count over GF(p), found by\n"
-                     f"monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.{tracked}"),
+        description=((f"The {paths} roots of a generic complex start instance (certified count over GF(p), found by\n"
+                      f"monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.{tracked}")
+                     if "evidence" not in spec else
+                     (f"The {paths} roots of a generic complex start instance (NOT certified over GF(p): numerical\n"
+                      f"evidence alone, monodromy until {spec['evidence']['stall_loops']} loops found no new root) are "
+                      f"tracked to the data\nby the compiled tracker of solvers.methods.tracker.{tracked}")),
         rows=paths, pshape=pshape, config=tuple(config) if config else None,
         imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import homotopy as _method",
         method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"

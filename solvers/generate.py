@@ -14,7 +14,10 @@ directory ``out``, and nowhere else. Methods are strategies behind one interface
   :mod:`solvers.methods.offset_kernel`.
 
 Every homotopy solver's root count is certified over GF(p) first (two primes, two seeds, known root
-checked); monodromy must reach exactly that count. Its start pair (generic complex parameters with
+checked); monodromy must reach exactly that count. When F4 cannot certify (its matrices do not fit, as for
+the 3D TDOA minimal cells), ``evidence="monodromy"`` builds on numerical evidence alone: monodromy loops
+until many bring no new root; the spec then has "evidence" instead of "certified" and the module's header
+says the count is not certified. Its start pair (generic complex parameters with
 one known root) comes from a complex network for TDOA systems, is drawn for a system linear in its
 parameters, or is given by the user; a system not linear in its parameters without one is refused
 before any work. An over-determined formulation is squared by random integer combinations of its
@@ -44,7 +47,7 @@ from .methods import homotopy, offset_kernel, pencil, tracker
 from .methods.spec import METHODS as METHOD_NAMES
 from .methods.spec import TemplateOptions, dump_spec, solver_method
 
-__all__ = ["GENERATED_DIR", "METHODS", "SOLVERS", "Generated", "GenerationError", "committed_command",
+__all__ = ["EVIDENCE", "GENERATED_DIR", "METHODS", "SOLVERS", "Generated", "GenerationError", "committed_command",
            "emit_committed", "generate", "solver_system"]
 
 #: Where the committed solvers live (written by scripts/generate_solvers.py, read by solvers.api).
@@ -61,6 +64,11 @@ SOLVERS = {
     "5r5s": "5r5s:B2,B3,C2-C5,minors",
     "4r5s": "4r5s:positions-receivers-orbits",
     "9r5s3d": offset_kernel.offset_kernel_formulation(9),
+    # TOA (synchronised transmitters): the minimal cells, compaction unknowns (H, b) with det H saturated
+    "3r3stoa": "3r3s-toa2d:A,B2,B3,C2-C3",
+    "4r6s3dtoa": "4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4",
+    "5r5s3dtoa": "5r5s-toa3d:A,B2,B3,B4,B5,C2-C5",
+    "6r4s3dtoa": "6r4s-toa3d:A,B2,B3,B4,C2-C6",
 }
 
 #: Configurations solved in a positions formulation (analysis.positions) instead of (H, b, o).
@@ -130,10 +138,12 @@ class Generated:
     seconds: float
     module: str
     report: dict
+    evidence: str = "gf"
 
     def summary(self) -> str:
         extra = ", ".join(f"{k} {v}" for k, v in self.report.items() if k not in ("method", "degree", "paths", "seconds"))
-        return (f"{self.system}: {self.method}, {self.degree} roots certified over GF(p), {self.candidates} candidates; "
+        how = "by monodromy alone (numerical evidence, not certified)" if self.evidence == "monodromy" else "certified over GF(p)"
+        return (f"{self.system}: {self.method}, {self.degree} roots {how}, {self.candidates} candidates; "
                 f"{extra}; {self.seconds:.1f} s -> {self.module}")
 
 
@@ -142,30 +152,34 @@ class Generated:
 # --------------------------------------------------------------------------------------------------
 
 
-def complex_instance(m: int, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A complex network's data F (m, n), normalised by its RMS modulus, and its root in that frame.
+def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2,
+                     model: str = "tdoa") -> tuple[np.ndarray, np.ndarray]:
+    """A complex network's data F (m, n), normalised by its RMS modulus, and its compaction root in that frame.
 
-    Receivers, transmitters and offsets are complex normal; d_ij is a square root of the (complex)
-    squared distance (the equations use only d_ij^2). The root is (H, b, o) with H = (4 S^T S)^-1,
-    b = -1/2 S^-1 s_1 (r_1 translated to 0; transposes, not conjugates), as in solvers.synthetic.
+    Receivers, transmitters and (TDOA) offsets are complex normal, in ``dim`` dimensions (drawn in this
+    order; TOA draws no offsets); d_ij is a square root of the (complex) squared distance (the equations
+    use only d_ij^2). The root is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with
+    H = (4 S^T S)^-1, S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0;
+    transposes, not conjugates), as in solvers.synthetic and analysis.formulations_kd.
     """
-    r = rng.normal(size=(m, 2)) + 1j * rng.normal(size=(m, 2))
-    t = rng.normal(size=(n, 2)) + 1j * rng.normal(size=(n, 2))
-    o = rng.normal(size=n) + 1j * rng.normal(size=n)
-    F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + o[None, :]
+    r = rng.normal(size=(m, dim)) + 1j * rng.normal(size=(m, dim))
+    t = rng.normal(size=(n, dim)) + 1j * rng.normal(size=(n, dim))
+    o = rng.normal(size=n) + 1j * rng.normal(size=n) if model == "tdoa" else np.zeros(0)
+    F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + (o[None, :] if len(o) else 0.0)
     s1 = t[0] - r[0]
-    S = np.column_stack([t[1] - t[0], t[2] - t[0]])
+    S = np.column_stack([t[c + 1] - t[0] for c in range(dim)])
     H = np.linalg.inv(4.0 * S.T @ S)
     b = -0.5 * np.linalg.solve(S, s1)
-    x = np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
+    upper = [H[a, c] for a in range(dim) for c in range(a, dim)]
+    x = np.concatenate([upper, b, o])
     scale = np.sqrt(np.mean(np.abs(F) ** 2))
-    powers = np.array([-2.0] * 3 + [0.0] * 2 + [1.0] * n)
+    powers = np.array([-2.0] * len(upper) + [0.0] * dim + [1.0] * len(o))
     return F / scale, x / scale**powers
 
 
-def _tdoa_start(m: int, n: int) -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
+def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
     def start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        F, x = complex_instance(m, n, rng)
+        F, x = complex_instance(m, n, rng, dim, model)
         return F.ravel(), x
 
     return start
@@ -237,6 +251,7 @@ class Job:
     full: ParametricSystem | None = None
     seeds: tuple[int, ...] = (0, 1)
     step_control: dict | None = None
+    evidence: str = "gf"
 
 
 @dataclass(frozen=True)
@@ -312,21 +327,35 @@ class HomotopyMethod:
             if not full_report.zero_dimensional or full_report.degree == 0:
                 raise homotopy.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
                                              f"(dimension {full_report.dimension}, degree {full_report.degree})")
-        if progress:
-            progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
-        report = system.degree(seeds=job.seeds)
-        if not report.zero_dimensional:
-            raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
-        if report.degree == 0:
-            raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
         # verified once, below: a squared system on the paths it will track (not on all its roots), a system
         # with its own step control as it will run
         build_options = dataclasses.replace(options, verify_trials=0) if full is not None or job.step_control else options
-        spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
+        if job.evidence == "monodromy":
+            if full is not None:
+                raise GenerationError(f"{system.name}: a squared system needs the full system's GF(p) count")
+            if progress:
+                progress(f"{system.name}: no GF(p) certificate asked; counting by monodromy alone (numerical evidence)")
+            spec, source, build = homotopy.build(system, None, job.start, job.trials, build_options, progress)
+            certified = None
+            evidence = {"method": "monodromy", "degree": spec["degree"], "seed": seed, "loops": spec["monodromy"]["loops"],
+                        "stall_loops": options.stall_loops, "saturated_by": list(system.nonzero),
+                        "note": "numerical evidence only: no GF(p) certificate (F4 could not be run or was not asked)"}
+        else:
+            if progress:
+                progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
+            report = system.degree(seeds=job.seeds)
+            if not report.zero_dimensional:
+                raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
+            if report.degree == 0:
+                raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
+            spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
+            certified = {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
+                         "saturated_by": list(system.nonzero)}
+            evidence = None
         spec = {"name": job.name, **spec, "paths": len(spec["start_roots"]),
-                "certified": {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
-                              "saturated_by": list(system.nonzero)},
+                **({"certified": certified} if certified else {"evidence": evidence}),
                 "config": list(job.config) if job.config else None,
+                **({"unused_parameters": list(system.unused)} if system.unused else {}),
                 "scale_powers": list(system.scale_powers) if system.scale_powers else None}
         coefficients = homotopy.load_coefficients(source)
         if full_report is not None:
@@ -347,7 +376,7 @@ class HomotopyMethod:
             # verified on the paths and with the step control it will run with
             build["verified"] = homotopy.verify(full.name if full_report is not None else system.name, spec,
                                                 coefficients, job.trials, options.verify_trials)
-        return Built(spec, source, report.degree, spec["paths"], build)
+        return Built(spec, source, spec["degree"] if certified is None else report.degree, spec["paths"], build)
 
 
 #: Method name -> strategy (names as in solvers.methods.spec.METHODS).
@@ -447,7 +476,8 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
     squared = label in SQUARED or label in SQUARE_MINORS
     full = from_formulation(formulation, saturate_det_h=True) if squared else None
     trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
-    return (Job(name, formulation, system, config, _tdoa_start(*config), trials, full,
+    kind = Formulation.parse(formulation).config
+    return (Job(name, formulation, system, config, _tdoa_start(*config, kind.dim, kind.model), trials, full,
                 seeds=(0,) if squared else (0, 1), step_control=STEP_CONTROL.get(label)), chosen, label)
 
 
@@ -478,16 +508,25 @@ def write(out: str, name: str, spec: dict, coefficients: str, command: str) -> s
     return py_path
 
 
+#: How a homotopy solver's root count is established: "gf" (certified over GF(p), two primes x two seeds,
+#: before any monodromy) or "monodromy" (numerical evidence alone: loops until HomotopyOptions.stall_loops of
+#: them find no new root; for systems whose F4 count does not fit, e.g. the 3D TDOA minimal cells). The spec
+#: then carries "evidence" instead of "certified", and the module's header says so.
+EVIDENCE = ("gf", "monodromy")
+
+
 def generate(target: "str | ParametricSystem", method: str | None = None, *, out: str, name: str | None = None,
              seed: int = 0, start: Start | None = None, full: ParametricSystem | None = None,
-             command: str | None = None, progress: Callable[[str], None] | None = None) -> Generated:
+             command: str | None = None, progress: Callable[[str], None] | None = None,
+             evidence: str = "gf") -> Generated:
     """Build a solver and write its spec and module into ``out`` (and nowhere else).
 
     target: a committed configuration (:data:`SOLVERS`, e.g. ``"9r3s"``), a TDOA formulation label
     (``"7r3s:B2,B3,C2-C7"``) or a square :class:`ParametricSystem`. method: one of :data:`METHODS`
     (default: ``curve-pencil`` for the pencil's formulation, ``homotopy`` otherwise). out: output
     directory (created). name: file-name prefix (default ``tdoa_<label>``, or the system's name).
-    seed: monodromy seed. start: a start pair (q0, x0) for a system not linear in its parameters
+    seed: monodromy seed. evidence: :data:`EVIDENCE` ("monodromy": no GF(p) certificate, numerical
+    evidence alone, stated in the spec and the module's header). start: a start pair (q0, x0) for a system not linear in its parameters
     (refused without one). full: the over-determined system that a parametric ``target`` squares (its
     count is certified too and only the start roots satisfying it are tracked; same unknowns and
     parameters). command: the regenerating command printed in the module's header (default:
@@ -496,8 +535,14 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     """
     if method is not None and method not in METHODS:
         raise GenerationError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
+    if evidence not in EVIDENCE:
+        raise GenerationError(f"unknown evidence {evidence!r}; valid: {', '.join(EVIDENCE)}")
     t0 = time.perf_counter()
     job, kind, label = _job(target, name, start, method, full)
+    if evidence != "gf":
+        if kind != "homotopy":
+            raise GenerationError(f"{job.name}: evidence {evidence!r} is for the homotopy method, not {kind}")
+        job = dataclasses.replace(job, evidence=evidence)
     built = METHODS[kind].build(job, seed, progress)
     if command is None:
         if label is not None and job.name == f"tdoa_{label}" and os.path.abspath(out) == GENERATED_DIR:
@@ -511,7 +556,7 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     py_path = write(out, job.name, built.spec, built.coefficients, command)
     system = job.system.name if job.system is not None else job.formulation
     return Generated(codegen.module_name(job.name, built.spec), system, kind, built.degree, built.candidates,
-                     time.perf_counter() - t0, py_path, built.report)
+                     time.perf_counter() - t0, py_path, built.report, evidence)
 
 
 def emit_committed(json_path: str) -> tuple[str, str]:

@@ -181,22 +181,23 @@ def room_network(
     ----------
     m, n, rng :
         As for :func:`random_network` (the same order of draws).
-    room : (3,) floats
-        The box [0, room[0]] x [0, room[1]] x [0, room[2]] in metres (default :data:`ROOM`, 8 x 6 x 3 m).
+    room : (3,) floats, or (2,) for a 2D network
+        The box [0, room[0]] x [0, room[1]] x [0, room[2]] in metres (default :data:`ROOM`, 8 x 6 x 3 m);
+        two extents give a 2D network in the rectangle (e.g. ``ROOM[:2]``, the room's floor).
     offset_sigma : float
         Standard deviation of the zero-mean normal offsets in metres (0 gives a TOA network).
 
     Returns
     -------
-    Network with dim 3.
+    Network with dim len(room) (3 by default).
     """
     if m < 1 or n < 1:
         raise ValueError(f"need m >= 1 and n >= 1, got m={m}, n={n}")
     box = np.asarray(room, dtype=float)
-    if box.shape != (3,) or not np.all(box > 0):
-        raise ValueError(f"room must be three positive extents (x, y, z), got {room!r}")
-    receivers = rng.uniform(0.0, 1.0, (m, 3)) * box
-    transmitters = rng.uniform(0.0, 1.0, (n, 3)) * box
+    if box.shape not in ((2,), (3,)) or not np.all(box > 0):
+        raise ValueError(f"room must be three (or, in 2D, two) positive extents (x, y[, z]), got {room!r}")
+    receivers = rng.uniform(0.0, 1.0, (m, len(box))) * box
+    transmitters = rng.uniform(0.0, 1.0, (n, len(box))) * box
     offsets = offset_sigma * rng.standard_normal(n)
     return Network(receivers, transmitters, offsets)
 

@@ -176,3 +176,84 @@ def test_degree_imports_only_what_it_needs(argv):
     out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
+
+
+
+SATURATED_2D = ("degree", "--tdoa", "6r3s", "--equations", "A,B2,B3,C2-C6", "--prime", "65521", "--json")
+"""Table 2's 6r/3s: 181 as generated, 180 after saturating by det H (fast; the 3D case below is slow)."""
+SATURATED_3D = ("degree", "--tdoa", "6r9s", "--dim", "3", "--equations", "A,B2,B3,B4,C2-C6,minors", "--json")
+"""A 3D cell whose system has a spurious det H = 0 component of dimension 1; saturated, degree 38."""
+
+
+def _msolve_dimension_degree(exe: str, path: Path, out: Path) -> tuple[int, int | None]:
+    """msolve's own verdict on a file: (dimension, degree) from its rational parametrization, whose first
+    entries are the dimension and, for dimension 0, [characteristic, variables, degree, ...]."""
+    import re
+    import subprocess
+
+    done = subprocess.run([exe, "-t", "1", "-f", str(path), "-o", str(out)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    text = out.read_text()
+    match = re.match(r"\s*\[\s*(-?\d+)\s*,\s*\[\s*(\d+)\s*,\s*(\d+)\s*,\s*(-?\d+)", text)
+    if match:
+        return int(match.group(1)), int(match.group(4))
+    match = re.match(r"\s*\[\s*(-?\d+)\s*,", text)
+    assert match, text[:200]
+    return int(match.group(1)), None
+
+
+@pytest.mark.parametrize("fmt", ["msolve", "m2", "singular"])
+def test_export_carries_the_saturation(capsys, tmp_path, fmt):
+    """--saturate-det-h --export writes t * det H - 1 after the equations, in every format; the msolve
+    file read back has the printed degree (own engine; without t it would be 181)."""
+    target = tmp_path / f"sat.{fmt}"
+    code, out, _ = run(capsys, *SATURATED_2D, "--saturate-det-h", "--export", fmt, str(target))
+    assert code == 0 and json.loads(out)["degree"] == 180
+    text = target.read_text()
+    assert "o3, t" in text or "o3,t" in text  # t appended after the unknowns
+    assert text.count("*t") == 2  # t * det H, det H = h11*h22 - h12^2: one t per term
+    if fmt == "msolve":
+        code, out, _ = run(capsys, "degree", str(target), "--json")
+        assert code == 0 and json.loads(out)["degree"] == 180
+
+
+def test_export_of_a_file_carries_its_saturation(capsys, tmp_path):
+    path = write(tmp_path, "x,y\n0\nx*(x-1),x*(y-2),y*(y-2)\n")
+    target = tmp_path / "sat.ms"
+    _, out, _ = run(capsys, "degree", path, "--json", "--saturate", "x", "--export", "msolve", str(target))
+    assert json.loads(out)["degree"] == 1
+    assert target.read_text().splitlines()[0] == "x,y,t"
+    _, out, _ = run(capsys, "degree", str(target), "--json")
+    assert json.loads(out)["degree"] == 1
+
+
+def _need_msolve() -> str:
+    from analysis.msolve import INSTALL_HINT, find_msolve
+
+    exe = find_msolve()
+    if exe is None:
+        pytest.skip(f"msolve not installed ({INSTALL_HINT})")
+    return exe
+
+
+def test_msolve_counts_the_exported_saturation(capsys, tmp_path):
+    """msolve itself, on the exported file: 180, the degree printed, not the unsaturated 181."""
+    exe = _need_msolve()
+    saturated = tmp_path / "sat.ms"
+    run(capsys, *SATURATED_2D, "--saturate-det-h", "--export", "msolve", str(saturated))
+    assert _msolve_dimension_degree(exe, saturated, tmp_path / "sat.out") == (0, 180)
+
+
+@pytest.mark.slow
+def test_msolve_counts_the_exported_saturation_3d(capsys, tmp_path):
+    """3D 6r/9s: msolve finds degree 38 in the saturated export, dimension > 0 in the plain one (the
+    det H = 0 component); the own engine agrees on both files (about 10 s per formulation build)."""
+    exe = _need_msolve()
+    saturated, plain = tmp_path / "sat.ms", tmp_path / "plain.ms"
+    code, out, _ = run(capsys, *SATURATED_3D, "--saturate-det-h", "--export", "msolve", str(saturated))
+    assert code == 0 and json.loads(out)["degree"] == 38
+    run(capsys, *SATURATED_3D, "--export", "msolve", str(plain))
+    assert _msolve_dimension_degree(exe, saturated, tmp_path / "sat.out") == (0, 38)
+    assert _msolve_dimension_degree(exe, plain, tmp_path / "plain.out")[0] > 0
+    assert json.loads(run(capsys, "degree", str(saturated), "--json")[1])["degree"] == 38
+    assert json.loads(run(capsys, "degree", str(plain), "--json")[1])["dimension"] == 1

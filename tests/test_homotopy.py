@@ -318,7 +318,9 @@ def test_start_system_is_complete(name):
     assert solver.x0.shape == (spec["paths"], len(spec["unknowns"]))
     # a Newton step no longer moves them (to the build's tolerance)
     step = solver.newton(solver.x0, solver.q0[None]) - solver.x0
-    tol = 1e-7 if "positions" in spec["system"] else 1e-9  # Newton noise ~ eps x condition; degree-10 positions equations are ill-conditioned
+    # Newton noise ~ eps x condition: degree-10 positions equations are ill-conditioned, and so are the 3D
+    # TOA B_j, j >= 5, whose coefficients carry det(M)^2 (degree 14 in the data; 4r/6s: 4e-9 measured)
+    tol = 1e-7 if "positions" in spec["system"] else 1e-8 if spec["coefficient_degree"] > 10 else 1e-9
     assert np.max(np.linalg.norm(step, axis=1) / (1 + np.linalg.norm(solver.x0, axis=1))) < tol
     assert not hm._has_duplicates(solver.x0)
 
@@ -334,7 +336,7 @@ def _known_root_errors(module, seeds: int) -> np.ndarray:
         if "positions" in module.SYSTEM:
             F, x = sample_real_positions(m, n, seed, module.SYSTEM.split("positions-")[1])
         else:
-            inst = sample_real_instance(f"{m}r{n}s", seed)
+            inst = sample_real_instance(module.SYSTEM.split(":")[0], seed)  # the model and dimension of the label
             F, x = np.array(inst.F), np.array(inst.root)
         roots = module.solve(F)
         assert roots.shape == (module.PATHS, len(module.UNKNOWNS))

@@ -96,8 +96,11 @@ def test_room_network_is_seeded_and_inside_the_room():
     assert np.array_equal(a.receivers, b.receivers) and np.array_equal(a.offsets, b.offsets) and a.dim == 3
     for points in (a.receivers, a.transmitters):
         assert np.all(points >= 0) and np.all(points <= np.array(ROOM))
-    with pytest.raises(ValueError, match="room"):
-        room_network(9, 5, np.random.default_rng(0), room=(8.0, 6.0))
+    floor = room_network(9, 5, np.random.default_rng(4), room=ROOM[:2])  # two extents: a 2D network
+    assert floor.dim == 2 and np.all(floor.receivers <= np.array(ROOM[:2]))
+    for bad in ((8.0,), (8.0, -6.0, 3.0)):
+        with pytest.raises(ValueError, match="room"):
+            room_network(9, 5, np.random.default_rng(0), room=bad)
 
 
 def test_3d_gauge_is_a_rotation_and_recover_takes_the_true_root():

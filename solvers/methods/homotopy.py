@@ -31,6 +31,7 @@ homotopy continuation).
 from __future__ import annotations
 
 import dataclasses
+import os
 import json
 import re
 import time
@@ -135,7 +136,7 @@ def structure(system: ParametricSystem) -> tuple[np.ndarray, np.ndarray]:
     return np.array(exps, dtype=np.int64), np.array(eq, dtype=np.int64)
 
 
-_FRACTION = re.compile(r"(?<![\w.])(\d+)/(\d+)")
+_FRACTION = re.compile(r"(?<![\w.])(?<!\*\*)(\d+)/(\d+)")  # not an exponent: u**2/4 is (u**2)/4
 
 
 def _print(expr) -> str:
@@ -655,42 +656,50 @@ def affine_start(system: ParametricSystem, coefficients: Callable, rng: np.rando
     return q0, x0
 
 
+def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Generator,
+                    options: HomotopyOptions, excluded: Callable[[np.ndarray], np.ndarray] | None) -> tuple[np.ndarray, int]:
+    """One monodromy loop (a triangle q0 -> qa -> qb -> q0 through random complex parameters) from all known
+    roots: (the known roots with the new ones appended, the number of paths tracked).
+
+    New endpoints count only when Newton's method has converged on them and, with ``excluded`` (a mask of
+    points on the locus of the non-vanishing conditions), when they lie off that locus; a new root is one
+    farther than 1e-6 (relative) from every known root.
+    """
+    scale = np.sqrt(np.mean(np.abs(q0) ** 2))
+    qa = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
+    qb = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
+    xs, paths = roots, 0
+    for a, b in ((q0, qa), (qa, qb), (qb, q0)):
+        paths += len(xs)
+        xs, _ = solver.track(a[None], b[None], xs)
+        xs = xs[np.all(np.isfinite(xs), axis=1)]
+    if len(xs):
+        xs = solver.newton(xs, q0[None], steps=3)
+        step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
+        keep = step < START_TOL
+        if excluded is not None:
+            keep &= ~excluded(xs)
+        xs = xs[keep & np.all(np.isfinite(xs), axis=1)]
+    for x in xs:
+        d = np.linalg.norm(roots - x, axis=1)
+        if np.min(d) > 1e-6 * (1.0 + np.linalg.norm(x)):
+            roots = np.vstack([roots, x])
+    return roots, paths
+
+
 def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int, rng: np.random.Generator,
               options: HomotopyOptions, progress: Callable[[str], None] | None = None,
               excluded: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, int]:
-    """All ``count`` roots of the system at q0 from the roots x0, by monodromy loops (triangles).
-
-    New endpoints count only when Newton's method has converged on them and, with ``excluded`` (a
-    mask of points on the locus of the non-vanishing conditions), when they lie off that locus.
+    """All ``count`` roots of the system at q0 from the roots x0, by monodromy loops (:func:`_monodromy_loop`).
 
     Stops when ``count`` distinct roots are known; raises :class:`HomotopyError` after
     ``max_loops`` loops or ``stall_loops`` loops without a new root.
     """
     roots = np.array(x0, dtype=complex).reshape(-1, solver.nvars)
-    scale = np.sqrt(np.mean(np.abs(q0) ** 2))
     stall = 0
     for loop in range(1, options.max_loops + 1):
-        qa = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
-        qb = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
-        xs = roots
-        for a, b in ((q0, qa), (qa, qb), (qb, q0)):
-            xs, _ = solver.track(a[None], b[None], xs)
-            xs = xs[np.all(np.isfinite(xs), axis=1)]
-        if len(xs):
-            xs = solver.newton(xs, q0[None], steps=3)
-            # keep converged roots off the excluded locus (non-vanishing conditions)
-            step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
-            keep = step < START_TOL
-            if excluded is not None:
-                keep &= ~excluded(xs)
-            xs = xs[keep]
         before = len(roots)
-        for x in xs:
-            if not np.all(np.isfinite(x)):
-                continue
-            d = np.linalg.norm(roots - x, axis=1)
-            if np.min(d) > 1e-6 * (1.0 + np.linalg.norm(x)):
-                roots = np.vstack([roots, x])
+        roots, _ = _monodromy_loop(solver, q0, roots, rng, options, excluded)
         stall = 0 if len(roots) > before else stall + 1
         if progress:
             progress(f"monodromy loop {loop}: {len(roots)}/{count} roots")
@@ -703,6 +712,79 @@ def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int
             break
     raise HomotopyError(f"monodromy found {len(roots)} of the certified {count} roots in {loop} loops "
                         f"(seed {options.seed}); the solver would miss roots")
+
+
+@dataclass(frozen=True)
+class MonodromyCount:
+    """A root count by monodromy alone (no certificate): the roots at q0, the loops run, the paths tracked,
+    the loops since the last new root and the seconds (this run and the checkpoints it resumed)."""
+
+    roots: np.ndarray
+    loops: int
+    paths: int
+    stall: int
+    seconds: float
+
+
+def start_solver(system: ParametricSystem, q0: np.ndarray, x0: np.ndarray,
+                 seed: int = 0) -> tuple[HomotopySolver, np.ndarray]:
+    """A solver of ``system`` with the one start pair (q0, x0) and no certified count, for counting roots by
+    monodromy (:func:`monodromy_count`): (solver, x0 refined by Newton's method). Raises
+    :class:`HomotopyError` when x0 is not a root at q0."""
+    coefficients = load_coefficients(coefficient_source(system))
+    exps, eq = structure(system)
+    q0 = np.asarray(q0, dtype=complex)
+    spec = {"format": SPEC_FORMAT, "kind": "homotopy", "system": system.name, "unknowns": list(system.unknowns),
+            "parameters": list(system.parameters), "degree": 0, "coefficient_degree": int(max(system.coefficient_degrees)),
+            "monodromy": {"seed": seed}, "tracker": {}, "term_equation": eq.tolist(), "exponents": exps.tolist(),
+            "start_parameters": _pairs(q0), "start_roots": _pairs(np.atleast_2d(x0))}
+    solver = HomotopySolver(spec, coefficients)
+    x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
+    if solver.residual(x0, q0[None]).max() > 1e-8:
+        raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
+    return solver, x0
+
+
+def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, options: HomotopyOptions,
+                    seconds: float, checkpoint: str | None = None,
+                    progress: Callable[[str], None] | None = None,
+                    excluded: Callable[[np.ndarray], np.ndarray] | None = None) -> MonodromyCount:
+    """Grow the roots at q0 by monodromy loops until ``options.stall_loops`` loops bring nothing new, or
+    ``options.max_loops`` loops, or ``seconds`` have passed (then the count is a lower bound).
+
+    checkpoint: a JSON file (plain text: q0, roots, loops, paths, stall, seconds, the rng state) written
+    after every loop and resumed from when it exists for the same q0, so that a long count survives an
+    interruption. Numerical evidence only: a root count without the GF(p) certificate of :func:`build`.
+    """
+    roots = np.array(x0, dtype=complex).reshape(-1, solver.nvars)
+    loops = paths = stall = 0
+    spent = 0.0
+    rng = np.random.default_rng(options.seed)
+    if checkpoint and os.path.exists(checkpoint):
+        with open(checkpoint, encoding="utf-8") as fh:
+            saved = json.load(fh)
+        # the same start instance (the file keeps START_DIGITS significant digits of q0 and the roots)
+        if np.allclose(_complex_array(saved["q0"]), q0, rtol=10.0 ** (1 - START_DIGITS), atol=0):
+            roots = _complex_array(saved["roots"])
+            loops, paths, stall, spent = saved["loops"], saved["paths"], saved["stall"], saved["seconds"]
+            rng.bit_generator.state = saved["rng"]
+    t0 = time.perf_counter()
+    while loops < options.max_loops and stall < options.stall_loops and time.perf_counter() - t0 < seconds:
+        before = len(roots)
+        roots, tracked = _monodromy_loop(solver, q0, roots, rng, options, excluded)
+        loops, paths = loops + 1, paths + tracked
+        stall = 0 if len(roots) > before else stall + 1
+        if checkpoint:
+            record = {"q0": _pairs(q0), "roots": _pairs(roots), "loops": loops, "paths": paths, "stall": stall,
+                      "seconds": round(spent + time.perf_counter() - t0, 1), "rng": rng.bit_generator.state}
+            tmp = checkpoint + ".tmp"
+            with open(tmp, "w", encoding="utf-8") as fh:
+                json.dump(record, fh)
+            os.replace(tmp, checkpoint)
+        if progress:
+            progress(f"monodromy loop {loops}: {len(roots)} roots ({paths} paths, {stall} loop(s) without a new one, "
+                     f"{spent + time.perf_counter() - t0:.0f} s)")
+    return MonodromyCount(roots, loops, paths, stall, spent + time.perf_counter() - t0)
 
 
 def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
@@ -789,12 +871,13 @@ def full_system_roots(full: ParametricSystem, spec: dict, coefficients: Callable
     return tracked.tolist()
 
 
-def build(system: ParametricSystem, count: int, start: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]] | None = None,
+def build(system: ParametricSystem, count: int | None, start: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]] | None = None,
           trials: Callable[[int], tuple[np.ndarray, np.ndarray]] | None = None,
           options: HomotopyOptions = HomotopyOptions(), progress: Callable[[str], None] | None = None) -> tuple[dict, str, dict]:
     """Spec, coefficient source and build report of the homotopy solver of a square system.
 
-    count: the certified number of roots (GF(p), two primes). start: rng -> (q0, x0) generic complex
+    count: the certified number of roots (GF(p), two primes), or None: numerical evidence alone, monodromy
+    until ``options.stall_loops`` loops find no new root (the count is then what it found). start: rng -> (q0, x0) generic complex
     parameters with one known root (default :func:`affine_start`). trials: seed -> (q real, known
     root) for the verification on seeded real instances (skipped when None).
     """
@@ -814,7 +897,7 @@ def build(system: ParametricSystem, count: int, start: Callable[[np.random.Gener
         "system": system.name,
         "unknowns": list(system.unknowns),
         "parameters": list(system.parameters),
-        "degree": int(count),
+        "degree": int(count or 0),  # set by the monodromy count when None
         "coefficient_degree": int(max(system.coefficient_degrees)),
         "monodromy": {"seed": options.seed},
         "tracker": {},
@@ -828,7 +911,16 @@ def build(system: ParametricSystem, count: int, start: Callable[[np.random.Gener
     x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
     if solver.residual(x0, q0[None]).max() > 1e-8:
         raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
-    roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress, _excluded(system, solver.q0))
+    if count is None:  # numerical evidence alone: loops until options.stall_loops of them bring nothing new
+        grown = monodromy_count(solver, solver.q0, x0, options, float("inf"), progress=progress,
+                                excluded=_excluded(system, solver.q0))
+        if grown.stall < options.stall_loops:
+            raise HomotopyError(f"{system.name}: monodromy still found new roots after {grown.loops} loops "
+                                f"({len(grown.roots)} so far); no solver from an unsettled count")
+        roots, loops, count = grown.roots, grown.loops, len(grown.roots)
+        spec["degree"] = count
+    else:
+        roots, loops = monodromy(solver, solver.q0, x0, count, rng, options, progress, _excluded(system, solver.q0))
     roots = solver.newton(roots, solver.q0[None], steps=3)
     step = np.max(np.linalg.norm(solver.newton(roots, solver.q0[None]) - roots, axis=1) / (1.0 + np.linalg.norm(roots, axis=1)))
     if step > START_TOL or _has_duplicates(roots):

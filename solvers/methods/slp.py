@@ -34,7 +34,7 @@ import numpy as np
 
 __all__ = ["OPCODES", "HomotopyTapes", "Program", "Tape", "Value", "derivative", "expanded_equations",
            "homotopy_program", "homotopy_tapes", "positions_equations", "squared_equations", "system_equations",
-           "system_homotopy_tapes", "tdoa_equations", "tdoa_homotopy_tapes"]
+           "system_homotopy_tapes", "kd_equations", "tdoa_equations", "tdoa_homotopy_tapes"]
 
 from .tape_kernel import ADD, AXPY, CADD, CMUL, CONST, MUL, MULADD, NEG, OPCODES, OUT, SQR, SUB  # noqa: F401
 
@@ -506,6 +506,8 @@ def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Val
     formulation = as_formulation(formulation)
     config = formulation.config
     m, n = config.m, config.n
+    if not config.is_planar_tdoa:
+        return kd_equations(formulation)
     for name in formulation.equations:
         if _family(name) not in ("A", "B", "C", "minors"):
             raise ValueError(f"{formulation.label}: equation {name} has no unexpanded program (families A, B, C, minors)")
@@ -546,6 +548,25 @@ def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Val
                 d2_diff = e[i - 1, 0] * (p[i - 1, 0] - 2.0 * o[0])
                 out.append(d2_diff - quad + 2.0 * lin)
         return out
+
+    return equations
+
+
+def kd_equations(formulation) -> Callable[[list[Value], list[Value]], list[Value]]:
+    """``equations(x, q)`` of any other configuration (TOA, 3D, direct parametrization): the formulas of
+    :func:`analysis.formulations_kd.formulas`, the same ones its parametric system is written from,
+    on program values (products and determinants unexpanded); parameters f_ij row by row."""
+    from analysis.formulations import as_formulation
+    from analysis.formulations_kd import formulas
+
+    formulation = as_formulation(formulation)
+    config = formulation.config
+    m, n = config.m, config.n
+
+    def equations(x: list[Value], q: list[Value]) -> list[Value]:
+        prog = x[0].program
+        f = [q[i * n:(i + 1) * n] for i in range(m)]
+        return formulas(formulation, dict(zip(config.unknowns, x)), f, prog.constant(0.0), 0.25)[0]
 
     return equations
 
