@@ -742,13 +742,15 @@ def _fraction_str(c: Fraction) -> str:
     return num if c.denominator == 1 else f"{num}/{_int_to_digits(c.denominator)}"
 
 
-def format_polynomial(poly: Mapping[tuple[int, ...], Fraction], variables: Sequence[str], spaced: bool = True) -> str:
-    """``x^2*y - 3/4*x + 1``: terms in grevlex order, explicit '*' and '^', rationals as a/b."""
+def format_polynomial(poly: Mapping[tuple[int, ...], Fraction], variables: Sequence[str], spaced: bool = True,
+                      key=_grevlex_key) -> str:
+    """``x^2*y - 3/4*x + 1``: terms in decreasing order (grevlex, or of ``key``: exponents -> sort key),
+    explicit '*' and '^', rationals as a/b."""
     if not poly:
         return "0"
     plus, minus = (" + ", " - ") if spaced else ("+", "-")
     out = []
-    for k, m in enumerate(sorted(poly, key=_grevlex_key, reverse=True)):
+    for k, m in enumerate(sorted(poly, key=key, reverse=True)):
         c = Fraction(poly[m])
         mono = "*".join(v if e == 1 else f"{v}^{e}" for v, e in zip(variables, m) if e)
         a = abs(c)
