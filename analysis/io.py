@@ -275,7 +275,7 @@ class System:
     Parameters
     ----------
     variables: distinct variable names (as msolve reads them: see ``_VARIABLE_RULE``).
-    characteristic: 0 (coefficients in Q) or a prime 2 < p < 2^31. For p > 0 the coefficients are
+    characteristic: 0 (coefficients in Q) or a prime 2 <= p < 2^31. For p > 0 the coefficients are
         normalised to integers in (-p/2, p/2].
     polynomials: one ``{exponent tuple: coefficient}`` per polynomial; zero coefficients are dropped, so
         a zero polynomial is an empty dict. Treat them as read-only.

@@ -18,7 +18,7 @@ MAX_PRIME = 2**31
 
 
 class BadPrime(ValueError):
-    """The characteristic is not a prime in the supported range 2 < p < 2**31."""
+    """The characteristic is not a prime in the supported range 2 <= p < 2**31."""
 
 
 def is_prime(n: int) -> bool:
@@ -50,8 +50,8 @@ def check_prime(p: int) -> int:
     """Return p if it is a supported characteristic, else raise :class:`BadPrime`."""
     if not isinstance(p, int) or isinstance(p, bool):
         raise BadPrime(f"characteristic must be an integer, got {p!r}")
-    if not 2 < p < MAX_PRIME:
-        raise BadPrime(f"characteristic {p} out of range: need a prime 2 < p < 2^31")
+    if not 2 <= p < MAX_PRIME:
+        raise BadPrime(f"characteristic {p} out of range: need a prime 2 <= p < 2^31")
     if not is_prime(p):
         raise BadPrime(f"characteristic {p} is not prime")
     return p
@@ -64,7 +64,7 @@ class Ring:
     Parameters
     ----------
     variables: variable names (distinct identifiers).
-    prime: the characteristic, a prime 2 < p < 2**31.
+    prime: the characteristic, a prime 2 <= p < 2**31.
     order: "grevlex", "lex", "block:k1,k2,..." or a :class:`MonomialOrder`.
     """
 

@@ -224,7 +224,7 @@ ERRORS = [
     ("x\n65520\nx\n", ["line 2", "not prime"]),
     ("x\n2147483659\nx\n", ["line 2", "out of range", "2^31"]),
     ("x\n2147483648\nx\n", ["out of range"]),
-    ("x\n2\nx\n", ["out of range"]),
+    ("x\n1\nx\n", ["out of range"]),
     ("x\n-7\nx\n", ["out of range"]),
     ("x\nabc\nx\n", ["line 2", "must be an integer", "'abc'"]),
     ("x\n7.0\nx\n", ["must be an integer"]),
