@@ -602,7 +602,8 @@ class _Parser:
     def atom(self) -> _Expr:
         tok = self.take()
         if tok.kind == "num":
-            return _Expr({0: _int_from_digits(tok.text)})
+            value = _int_from_digits(tok.text)
+            return _Expr({0: value} if value else {})  # the zero polynomial has no terms
         if tok.kind == "name":
             i = self.index.get(tok.text)
             if i is None:

@@ -14,8 +14,8 @@ Singular 4 (``std`` with ``option(redSB)``; saturation by elimination of a Rabin
 sympy's ``groebner`` (grevlex, lex and deglex, no saturation: other cases are counted as skipped).
 
 Outcomes per case: ``agree`` (same dimension, degree and reduced basis, made monic), ``disagree`` (a
-wrong answer: the only failure that counts against the engine), ``refused`` (the engine stopped with a
-one-line error, e.g. a matrix cap or the exponent limit; not a wrong answer, but counted), ``skipped``
+wrong answer), ``crash`` (a traceback: a bug), ``refused`` (the engine stopped with a one-line error,
+e.g. a matrix cap or the exponent limit; not a wrong answer, but counted), ``skipped``
 (the reference cannot do the case). Results of a run are appended to ``fuzz_engine.cases.jsonl`` in the
 cache directory (one line per case); ``--summary`` counts the latest result of every case there into
 ``tables/fuzz_engine.csv`` and ``.md`` (no timings; byte-identical for the same results).
@@ -192,6 +192,8 @@ def run_engine(case: dict, workdir: Path) -> dict:
             code = main(argv)
     except _Timeout:
         return {"status": "refused", "error": f"timeout after {CASE_SECONDS} s"}
+    except Exception as e:  # a traceback is a bug of the engine: counted, and the run goes on
+        return {"status": "crash", "error": f"{type(e).__name__}: {e}"}
     finally:
         signal.alarm(0)
     if code != 0:
@@ -334,7 +336,7 @@ def monic_set(basis: list[dict], case: dict) -> frozenset:
 def compare(case: dict, mine: dict, ref: dict | None) -> tuple[str, str]:
     """(outcome, detail) of one case."""
     if mine["status"] != "ok":
-        return "refused", mine["error"]
+        return mine["status"], mine["error"]
     if ref is None:
         return "skipped", "the reference cannot do this case"
     if ref["dimension"] is not None and mine["dimension"] != ref["dimension"]:
@@ -371,14 +373,14 @@ def run(cases: range, reference: str, batch: int = 50) -> dict[str, int]:
                 ref = refs.get(case["id"]) if exe else refs[case["id"]]
                 if exe and ref is None:
                     ref = {"dimension": None, "degree": None, "basis": None}
-                    outcome, detail = ("refused", mine["error"]) if mine["status"] != "ok" else \
+                    outcome, detail = (mine["status"], mine["error"]) if mine["status"] != "ok" else \
                         ("skipped", "Singular gave no answer")
                 else:
                     outcome, detail = compare(case, mine, ref)
                 counts[outcome] = counts.get(outcome, 0) + 1
                 log.write(json.dumps({"id": case["id"], "category": case["category"], "reference": reference,
                                       "outcome": outcome, "detail": detail}) + "\n")
-                if outcome == "disagree":
+                if outcome in ("disagree", "crash"):
                     print(f"case {case['id']} ({case['category']}, seed {case['id']}): {detail}\n{system_text(case)}",
                           file=sys.stderr)
             log.flush()
@@ -392,7 +394,7 @@ def summary(out_dir: Path) -> None:
     for line in results_path().read_text().splitlines():
         row = json.loads(line)
         latest[row["id"]] = row
-    outcomes = ("agree", "disagree", "refused", "skipped")
+    outcomes = ("agree", "disagree", "crash", "refused", "skipped")
     table: dict[tuple[str, str], dict[str, int]] = {}
     for row in latest.values():
         cell = table.setdefault((row["category"], row["reference"]), dict.fromkeys(outcomes, 0))
@@ -441,7 +443,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     counts = run(args.cases, args.reference)
     print(json.dumps(counts))
-    return 1 if counts.get("disagree") else 0
+    return 1 if counts.get("disagree") or counts.get("crash") else 0
 
 
 if __name__ == "__main__":

@@ -419,3 +419,9 @@ def test_integers_of_any_length(tmp_path):
         parse_msolve("x\n" + "1" * 5000 + "\nx\n")
     with pytest.raises(InputError, match="exponent of 5000 digits too large"):
         parse_msolve("x\n0\nx^" + "9" * 5000 + "\n")
+
+
+@pytest.mark.parametrize("text", ["x + 0", "x+0*x^2", "0 + x", "x - 0*x", "(x + 0)^2 - x^2 + x", "x+00"])
+def test_a_zero_term_is_no_term(text):
+    """'x+0' once raised KeyError (a zero constant kept as a term with coefficient 0; found by the fuzz)."""
+    assert parse_msolve(f"x\n0\n{text}\n").polynomials == ({(1,): Fraction(1)},)
