@@ -28,6 +28,7 @@ univariate partial fractions", SYMSAC 1981 (rational reconstruction).
 """
 from __future__ import annotations
 
+import hashlib
 import random
 from dataclasses import dataclass
 from fractions import Fraction
@@ -35,7 +36,7 @@ from math import comb, gcd, isqrt
 from typing import Callable, Iterator, Sequence
 
 from .degree import DegreeReport, PrimeDisagreement, PrimeResult, _agreed
-from .io import Coefficients, System
+from .io import Coefficients, System, to_msolve
 from .orderings import MonomialOrder
 from .ring import is_prime
 
@@ -57,6 +58,10 @@ MAX_SKIPPED = 50
 """Random primes rejected by :func:`unlucky_reason` before giving up (an input with 50 rejected 31-bit
 primes in a row has a leading coefficient or denominator of more than 1500 digits' worth of them)."""
 
+MAX_FRESH_UNLUCKY = 3
+"""Fresh primes in a row whose leading monomials differ from the majority's before the majority itself is
+taken for unlucky (:class:`PrimeDisagreement`)."""
+
 MAX_RECONSTRUCTION_PRIMES = 400
 """Primes spent on one reconstruction of a basis over Q: coefficients of up to about 6,000 digits."""
 
@@ -66,6 +71,17 @@ DEFAULT_PRIME_SEED = 0
 
 class ReconstructionFailed(RuntimeError):
     """The basis over Q was not recovered within :data:`MAX_RECONSTRUCTION_PRIMES` primes."""
+
+
+def input_seed(variables: Sequence[str], exact: Sequence[Coefficients], seed: int = DEFAULT_PRIME_SEED) -> int:
+    """A seed for :func:`random_primes` drawn from the input itself (SHA-256 of its msolve text) and ``seed``.
+
+    With a fixed seed, an input built from the primes it draws (a determinant that is their product) is
+    answered wrongly by all of them; with the seed a hash of the input, building one means finding an input
+    whose own hash picks primes dividing it, which is as hard as inverting the hash. Reruns stay identical.
+    """
+    text = to_msolve(System(tuple(variables), 0, tuple(exact))) + f"seed {seed}\n"
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "big")
 
 
 def random_primes(seed: int = DEFAULT_PRIME_SEED, exclude: Sequence[int] = ()) -> Iterator[int]:
@@ -280,7 +296,7 @@ def rational_basis(
     for r in used:
         combine(r)
     draw = random_primes(seed + 1, exclude=rational.computed)
-    fresh_unlucky = 0
+    fresh_unlucky = in_a_row = 0
     while True:
         candidate: dict[tuple, Coefficients] | None = {}
         for (lead, e), x in values.items():
@@ -297,6 +313,14 @@ def rational_basis(
                 if signature(check) == target:
                     break
                 fresh_unlucky += 1
+                in_a_row += 1
+                if in_a_row >= MAX_FRESH_UNLUCKY:
+                    raise PrimeDisagreement(
+                        f"{in_a_row} fresh primes in a row (last {q}: degree {check.degree}, dimension "
+                        f"{check.dimension}) disagree with the majority of {len(rational.report.per_prime)} primes "
+                        f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
+                        "another --prime-seed")
+        in_a_row = 0
         if candidate is not None and len(candidate) == len(target[2]) and _reduce_mod(candidate, q) == \
                 _coefficient_table(check):
             basis = [candidate[lead] for lead in sorted(candidate, key=order_key(order, nvars))]

@@ -89,7 +89,9 @@ def _default_max_memory() -> str:
     return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
 
 
-def _f4_options(args: argparse.Namespace):
+def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
+    """F4 options of the command line; ``linear_substitution`` for system files (analysis.f4.F4Options: the
+    TDOA formulations keep F4 on their inputs, whose matrix statistics the tables record)."""
     from analysis.f4 import F4Options
 
     if args.verbose and args.backend in ("auto", "sparse"):
@@ -97,7 +99,7 @@ def _f4_options(args: argparse.Namespace):
 
         print(f"[f4] {native.describe()}", file=sys.stderr)
     return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
-                     verbose=args.verbose)
+                     verbose=args.verbose, linear_substitution=linear_substitution)
 
 
 def _export(system, fmt: str, path: str) -> None:
@@ -151,7 +153,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
     p.add_argument("--prime-seed", type=_nonnegative("--prime-seed"), default=0, metavar="N",
-                   help="seed of the random 31-bit primes of a characteristic-0 system (default 0)")
+                   help="characteristic 0: the random 31-bit primes are drawn by a seed hashed from the system and N "
+                   "(default 0); another N draws other primes")
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, deglex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
     p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
@@ -254,7 +257,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
                 f"the file has characteristic {system.characteristic}; --prime {','.join(map(str, primes))} conflicts"
             )
         primes = (system.characteristic,)
-    options = _f4_options(args)
+    options = _f4_options(args, linear_substitution=True)
 
     def polys(p: int):
         try:
@@ -293,7 +296,7 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
     from analysis.degree import CHECK_CELLS, analyse_prime
     from analysis.io import format_polynomial
     from analysis.linalg import MatrixTooLarge
-    from analysis.modular import analyse_rational, order_key, rational_basis
+    from analysis.modular import analyse_rational, input_seed, order_key, rational_basis
 
     exact = list(system.polynomials) + ([sat_terms] if sat_terms is not None else [])
     computed: list[int] = []
@@ -312,8 +315,9 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
         return analyse_prime(f, options, sat(p) if sat else None, "rabinowitsch", "own" if exe is None else "msolve",
                              exe)
 
+    seed = input_seed(system.variables, exact, args.prime_seed)
     try:
-        rational = analyse_rational(exact, args.order, system.nvars, compute, primes, args.prime_seed)
+        rational = analyse_rational(exact, args.order, system.nvars, compute, primes, seed)
     except ValueError as e:
         raise UserError(str(e)) from None
     report = rational.report
@@ -325,7 +329,7 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
                         "own engine outvoted or not run (above its check cap); msolve's primes agree")
     gb = None
     if args.gb:
-        basis, gb_status = rational_basis(rational, exact, args.order, system.nvars, compute, args.prime_seed)
+        basis, gb_status = rational_basis(rational, exact, args.order, system.nvars, compute, seed)
         key = order_key(args.order, system.nvars)
         gb = [format_polynomial(f, system.variables, key=key) for f in basis]
         out["groebner_basis_status"] = gb_status
