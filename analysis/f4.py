@@ -118,7 +118,7 @@ class GroebnerResult:
 
 def _exponent_field(top: int) -> np.dtype:
     """The narrowest unsigned field (uint8, uint16 or uint32) holding exponents up to top with its top bit
-    free (the parser's limit, total degree 65535, needs uint32 from 32768 on)."""
+    free (exponents from 32768 on need uint32; the parser allows total degrees below 2^31)."""
     if top < 128:
         return np.dtype(np.uint8)
     if top < 32768:

@@ -52,8 +52,16 @@ __all__ = [
 Coefficients = dict[tuple[int, ...], Fraction]
 """A polynomial over Q (or GF(p) with integer representatives): exponent vector -> nonzero coefficient."""
 
-MAX_DEGREE = (1 << FIELD_BITS) - 1
-"""Largest total degree the ring's packed monomial keys support; larger exponents are input errors."""
+MAX_EXPANSION = (1 << 16) - 1
+"""Largest power of a sum the parser expands ((x + y)^65535 already has 65,536 terms of 65,535-bit
+coefficients); powers of a single term (x^100000) go up to MAX_DEGREE."""
+
+MAX_COEFFICIENT_BITS = 1 << 22
+"""Largest coefficient a power may produce (about 1.26 million digits): 9^9^9 would have 370 million."""
+
+MAX_DEGREE = (1 << 31) - 1
+"""Largest total degree accepted (the ring's packed keys hold 2^FIELD_BITS - 1; F4's packed divisibility
+tests need the top bit of a 32-bit field free); larger exponents are input errors."""
 
 _OPERATORS = r"\s+\-*/^(),#"
 MSOLVE_NAME = rf"[^{_OPERATORS}0-9.][^{_OPERATORS}]*"
@@ -587,6 +595,12 @@ class _Parser:
         n = int(e)
         if n > MAX_DEGREE or n * max(base.exact_degree(self.nvars), 0) > MAX_DEGREE:
             raise self.fail(start, f"exponent {_short(n)} too large (total degrees are limited to {MAX_DEGREE})")
+        if len(base.terms) > 1 and n > MAX_EXPANSION:
+            raise self.fail(start, f"exponent {_short(n)} too large for expanding a sum (at most {MAX_EXPANSION})")
+        bits = max((abs(c).bit_length() for c in base.terms.values()), default=1) + base.den.bit_length() - 2
+        if n * bits > MAX_COEFFICIENT_BITS:  # bits: about log2 of the largest numerator and the denominator
+            raise self.fail(start, f"exponent {_short(n)} too large: the coefficient would have about "
+                                   f"{n * bits * 3 // 10} digits (at most {MAX_COEFFICIENT_BITS * 3 // 10})")
         if len(base.terms) == 1:  # a term: no expansion needed (the common case x^5 in a file)
             ((m, c),) = base.terms.items()
             return _Expr({m * n: c**n}, base.den**n, base.deg * n)

@@ -16,10 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-FIELD_BITS = 16
-"""Width of one packed row value: every row value (e.g. a total degree) must stay below 2**16.
+FIELD_BITS = 32
+"""Width of one packed row value: every row value (e.g. a total degree) must stay below 2**32 (the parser
+allows total degrees below 2**31, see analysis.io.MAX_DEGREE; 16 bits refused x^65536 - 1).
 
-A multiple of 8, so that keys decode in bulk through their bytes (see Ring.decode_many)."""
+A multiple of 8 dividing 64, so that keys decode in bulk through their bytes (see Ring.decode_many) and
+whole fields fill 64-bit words (see MonomialCodes.to_keys)."""
 
 OrderName = Literal["grevlex", "lex", "deglex", "block", "graded"]
 ORDER_NAMES = ("grevlex", "lex", "deglex", "block")

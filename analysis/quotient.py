@@ -123,7 +123,12 @@ def _standard_waves(lm_exps: np.ndarray):
 
 WAVE_COUNT_LIMIT = 200_000
 """count_standard_monomials enumerates B wave by wave (arrays) when the box of the pure powers bounds |B| by
-this; above it, it counts by the memoised split, which never lists B."""
+this and there are at most WAVE_DEGREE_LIMIT waves; otherwise it counts by the memoised split, which never
+lists B."""
+
+WAVE_DEGREE_LIMIT = 2_000
+"""Most waves (degrees) of the wave count: one wave per degree costs ~50 us of numpy calls, so x^65536 - 1
+(65,537 waves of one monomial, 3.8 s) is counted by the split instead (one slice)."""
 
 
 def degree(gb: GroebnerResult) -> int:
@@ -332,7 +337,7 @@ def count_standard_monomials(gb: GroebnerResult) -> int:
     lm_exps = _lead_exponents(gb)
     single = (lm_exps > 0).sum(axis=1) == 1  # pure powers x_i^a (each variable has one: zero-dimensional)
     pure = np.where(lm_exps[single] > 0, lm_exps[single], np.iinfo(np.int64).max).min(axis=0)
-    if math.prod(int(a) for a in pure) <= WAVE_COUNT_LIMIT:  # B lies in the box of the pure powers
+    if math.prod(int(a) for a in pure) <= WAVE_COUNT_LIMIT and int(pure.sum()) <= WAVE_DEGREE_LIMIT:  # B in the box
         return sum(len(wave) for wave in _standard_waves(lm_exps))
     memo: dict[tuple, int] = {}
 

@@ -117,3 +117,11 @@ def test_issue_x1024_lex(capsys, tmp_path):
     x = y^683 / 4 since y^683 = x^2049 = 4 x."""
     report = degree_json(capsys, tmp_path, "x,y\n0\nx^1024-2, y-x^3\n", "--order", "lex", "--gb")
     assert report["degree"] == 1024 and report["groebner_basis"] == ["y^1024 - 8", "x - 1/4*y^683"]
+
+
+@pytest.mark.parametrize("text, degree", [("x\n0\nx^65536-1\n", 65536), ("x,y\n0\nx^100000-2, y^2-x\n", 200000),
+                                          ("x,y\n7\nx^70000*y-1, y^2-x\n", 140001)])  # y^140001 = 1
+def test_issue_exponents_past_65535(capsys, tmp_path, text, degree):
+    """Refused before (16-bit monomial fields); the count of a univariate-like quotient is by the split,
+    not degree by degree (65,537 waves took 3.8 s)."""
+    assert degree_json(capsys, tmp_path, text)["degree"] == degree

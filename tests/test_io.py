@@ -252,7 +252,8 @@ ERRORS = [
     ("x\n0\nx^(1/2)\n", ["non-integer exponent 1/2"]),
     ("x,y\n0\nx^y\n", ["exponent must be a nonnegative integer"]),
     ("x\n0\nx^\n", ["missing exponent"]),
-    ("x\n0\nx^99999999\n", ["exponent 99999999 too large"]),
+    ("x\n0\nx^9999999999\n", ["exponent 9999999999 too large"]),
+    ("x\n0\n(x+1)^70000\n", ["exponent 70000 too large for expanding a sum"]),
     ("x\n0\n9^9^9\n", ["too large"]),
 ]
 
