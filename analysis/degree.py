@@ -107,9 +107,9 @@ def groebner_in_order(polys: Sequence[Poly], options: F4Options, engine: Engine 
               ) -> GroebnerResult:
     """Reduced Gröbner basis in the ring's order; for orders other than grevlex, through grevlex and FGLM
     when the ideal is zero-dimensional (F4 in lex can swell far beyond the ideal's degree: katsura-4,
-    16 solutions, outgrew 24 GB), a positive-dimensional lex basis through homogenization
-    (:mod:`analysis.homogenize`: F4 in lex stopped at a 400M-cell cap on two cubics in 3 unknowns), other
-    orders directly (own engine only). msolve computes the grevlex basis."""
+    16 solutions, outgrew 24 GB), a positive-dimensional lex or block basis through homogenization
+    (:mod:`analysis.homogenize`: F4 in lex stopped at a 400M-cell cap on two cubics in 3 unknowns), deglex
+    directly (own engine only). msolve computes the grevlex basis."""
     ring = polys[0].ring
     if engine == "msolve":
         from .msolve import groebner_msolve
@@ -131,10 +131,10 @@ def groebner_in_order(polys: Sequence[Poly], options: F4Options, engine: Engine 
     gb = groebner([graded.from_terms(f.terms()) for f in polys], options)
     if is_zero_dimensional(gb):
         return fglm(gb, ring)
-    if ring.order.name == "lex":
-        from .homogenize import lex_by_homogenization
+    if ring.order.name in ("lex", "block"):
+        from .homogenize import by_homogenization
 
-        return lex_by_homogenization(polys, options)
+        return by_homogenization(polys, options)
     return groebner(polys, options)
 
 

@@ -1124,6 +1124,8 @@ def sample_gf_instance(config: TDOAConfig | str, p: int, rng: "np.random.Generat
     """
     config = _as_config(config)
     p = check_prime(p)
+    if p == 2:  # every prime is a characteristic of the engine; the sampler takes square roots
+        raise BadPrime("the instance sampler needs an odd prime (it takes square roots of squared distances)")
     if not config.is_planar_tdoa:
         from .formulations_kd import sample_gf_instance_kd
 

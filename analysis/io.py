@@ -52,8 +52,16 @@ __all__ = [
 Coefficients = dict[tuple[int, ...], Fraction]
 """A polynomial over Q (or GF(p) with integer representatives): exponent vector -> nonzero coefficient."""
 
-MAX_DEGREE = (1 << FIELD_BITS) - 1
-"""Largest total degree the ring's packed monomial keys support; larger exponents are input errors."""
+MAX_EXPANSION = (1 << 16) - 1
+"""Largest power of a sum the parser expands ((x + y)^65535 already has 65,536 terms of 65,535-bit
+coefficients); powers of a single term (x^100000) go up to MAX_DEGREE."""
+
+MAX_COEFFICIENT_BITS = 1 << 22
+"""Largest coefficient a power may produce (about 1.26 million digits): 9^9^9 would have 370 million."""
+
+MAX_DEGREE = (1 << 31) - 1
+"""Largest total degree accepted (the ring's packed keys hold 2^FIELD_BITS - 1; F4's packed divisibility
+tests need the top bit of a 32-bit field free); larger exponents are input errors."""
 
 _OPERATORS = r"\s+\-*/^(),#"
 MSOLVE_NAME = rf"[^{_OPERATORS}0-9.][^{_OPERATORS}]*"
@@ -275,7 +283,7 @@ class System:
     Parameters
     ----------
     variables: distinct variable names (as msolve reads them: see ``_VARIABLE_RULE``).
-    characteristic: 0 (coefficients in Q) or a prime 2 < p < 2^31. For p > 0 the coefficients are
+    characteristic: 0 (coefficients in Q) or a prime 2 <= p < 2^31. For p > 0 the coefficients are
         normalised to integers in (-p/2, p/2].
     polynomials: one ``{exponent tuple: coefficient}`` per polynomial; zero coefficients are dropped, so
         a zero polynomial is an empty dict. Treat them as read-only.
@@ -604,6 +612,12 @@ class _Parser:
         n = int(e)
         if n > MAX_DEGREE or n * max(base.exact_degree(self.nvars), 0) > MAX_DEGREE:
             raise self.fail(start, f"exponent {_short(n)} too large (total degrees are limited to {MAX_DEGREE})")
+        if len(base.terms) > 1 and n > MAX_EXPANSION:
+            raise self.fail(start, f"exponent {_short(n)} too large for expanding a sum (at most {MAX_EXPANSION})")
+        bits = max((abs(c).bit_length() for c in base.terms.values()), default=1) + base.den.bit_length() - 2
+        if n * bits > MAX_COEFFICIENT_BITS:  # bits: about log2 of the largest numerator and the denominator
+            raise self.fail(start, f"exponent {_short(n)} too large: the coefficient would have about "
+                                   f"{n * bits * 3 // 10} digits (at most {MAX_COEFFICIENT_BITS * 3 // 10})")
         if len(base.terms) == 1:  # a term: no expansion needed (the common case x^5 in a file)
             ((m, c),) = base.terms.items()
             return _Expr({m * n: c**n}, base.den**n, base.deg * n)
@@ -619,7 +633,8 @@ class _Parser:
     def atom(self) -> _Expr:
         tok = self.take()
         if tok.kind == "num":
-            return _Expr({0: _int_from_digits(tok.text)})
+            value = _int_from_digits(tok.text)
+            return _Expr({0: value} if value else {})  # the zero polynomial has no terms
         if tok.kind == "name":
             i = self.index.get(tok.text)
             if i is None:
@@ -759,13 +774,15 @@ def _fraction_str(c: Fraction) -> str:
     return num if c.denominator == 1 else f"{num}/{_int_to_digits(c.denominator)}"
 
 
-def format_polynomial(poly: Mapping[tuple[int, ...], Fraction], variables: Sequence[str], spaced: bool = True) -> str:
-    """``x^2*y - 3/4*x + 1``: terms in grevlex order, explicit '*' and '^', rationals as a/b."""
+def format_polynomial(poly: Mapping[tuple[int, ...], Fraction], variables: Sequence[str], spaced: bool = True,
+                      key=_grevlex_key) -> str:
+    """``x^2*y - 3/4*x + 1``: terms in decreasing order (grevlex, or of ``key``: exponents -> sort key),
+    explicit '*' and '^', rationals as a/b."""
     if not poly:
         return "0"
     plus, minus = (" + ", " - ") if spaced else ("+", "-")
     out = []
-    for k, m in enumerate(sorted(poly, key=_grevlex_key, reverse=True)):
+    for k, m in enumerate(sorted(poly, key=key, reverse=True)):
         c = Fraction(poly[m])
         mono = "*".join(v if e == 1 else f"{v}^{e}" for v, e in zip(variables, m) if e)
         a = abs(c)

@@ -16,13 +16,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-FIELD_BITS = 16
-"""Width of one packed row value: every row value (e.g. a total degree) must stay below 2**16.
+FIELD_BITS = 32
+"""Width of one packed row value: every row value (e.g. a total degree) must stay below 2**32 (the parser
+allows total degrees below 2**31, see analysis.io.MAX_DEGREE; 16 bits refused x^65536 - 1).
 
-A multiple of 8, so that keys decode in bulk through their bytes (see Ring.decode_many)."""
+A multiple of 8 dividing 64, so that keys decode in bulk through their bytes (see Ring.decode_many) and
+whole fields fill 64-bit words (see MonomialCodes.to_keys)."""
 
-OrderName = Literal["grevlex", "lex", "deglex", "block"]
+OrderName = Literal["grevlex", "lex", "deglex", "block", "graded"]
 ORDER_NAMES = ("grevlex", "lex", "deglex", "block")
+"""The orders a user names; "graded" (total degree, then another order on all variables but the last) is
+built by :mod:`analysis.homogenize` for the homogenizing variable."""
 
 
 def _grevlex_rows(nvars: int, offset: int, total: int) -> list[list[int]]:
@@ -43,13 +47,21 @@ class MonomialOrder:
         block is eliminated first).
     nvars: number of variables.
     blocks: for "block", the sizes of the consecutive variable blocks (summing to nvars).
+    inner: for "graded", the order (name, blocks) that breaks ties of total degree on the first nvars - 1
+        variables (the last, a homogenizing variable, only counts in the degree). graded(lex) is deglex.
     """
 
     name: OrderName
     nvars: int
     blocks: tuple[int, ...] = ()
+    inner: tuple = ()
 
     def __post_init__(self) -> None:
+        if self.name == "graded":
+            if not self.inner or self.nvars < 2:
+                raise ValueError("a graded order needs an inner order and at least two variables")
+            MonomialOrder(self.inner[0], self.nvars - 1, tuple(self.inner[1]))
+            return
         if self.name not in ORDER_NAMES:
             raise ValueError(f"unknown monomial order {self.name!r}; valid: {', '.join(ORDER_NAMES)}")
         if self.nvars < 1:
@@ -77,6 +89,9 @@ class MonomialOrder:
     def weight_rows(self) -> list[list[int]]:
         """The weight matrix, most significant row first."""
         n = self.nvars
+        if self.name == "graded":
+            inner = MonomialOrder(self.inner[0], n - 1, tuple(self.inner[1])).weight_rows
+            return [[1] * n] + [row + [0] for row in inner]
         if self.name == "grevlex":
             return _grevlex_rows(n, 0, n)
         if self.name == "lex":
@@ -104,6 +119,8 @@ class MonomialOrder:
         return (1 << FIELD_BITS) - 1
 
     def __str__(self) -> str:
+        if self.name == "graded":
+            return f"graded({MonomialOrder(self.inner[0], self.nvars - 1, tuple(self.inner[1]))})"
         if self.name == "block":
             return "block:" + ",".join(map(str, self.blocks))
         return self.name

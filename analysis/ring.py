@@ -16,9 +16,12 @@ from .orderings import FIELD_BITS, MonomialOrder
 
 MAX_PRIME = 2**31
 
+_PER_WORD = 64 // FIELD_BITS
+"""Key fields per 64-bit word."""
+
 
 class BadPrime(ValueError):
-    """The characteristic is not a prime in the supported range 2 < p < 2**31."""
+    """The characteristic is not a prime in the supported range 2 <= p < 2**31."""
 
 
 def is_prime(n: int) -> bool:
@@ -50,8 +53,8 @@ def check_prime(p: int) -> int:
     """Return p if it is a supported characteristic, else raise :class:`BadPrime`."""
     if not isinstance(p, int) or isinstance(p, bool):
         raise BadPrime(f"characteristic must be an integer, got {p!r}")
-    if not 2 < p < MAX_PRIME:
-        raise BadPrime(f"characteristic {p} out of range: need a prime 2 < p < 2^31")
+    if not 2 <= p < MAX_PRIME:
+        raise BadPrime(f"characteristic {p} out of range: need a prime 2 <= p < 2^31")
     if not is_prime(p):
         raise BadPrime(f"characteristic {p} is not prime")
     return p
@@ -64,7 +67,7 @@ class Ring:
     Parameters
     ----------
     variables: variable names (distinct identifiers).
-    prime: the characteristic, a prime 2 < p < 2**31.
+    prime: the characteristic, a prime 2 <= p < 2**31.
     order: "grevlex", "lex", "block:k1,k2,..." or a :class:`MonomialOrder`.
     """
 
@@ -283,9 +286,9 @@ class MonomialCodes:
         weights = [sum(rows[r][i] << (self.bits * (nrows - 1 - r)) for r in range(nrows)) for i in range(ring.nvars)]
         self._weights = np.array(weights, dtype=self.dtype)
         # field j, least significant first (weight row nrows-1-j), sits at bit bits*j of a code and at
-        # bit 16*(j % 4) of word j // 4 of a key
+        # bit FIELD_BITS*(j % _PER_WORD) of word j // _PER_WORD of a key
         self._code_shifts = np.arange(nrows, dtype=np.uint64) * np.uint64(self.bits)
-        self._key_shifts = np.arange(nrows, dtype=np.uint64) % np.uint64(4) * np.uint64(FIELD_BITS)
+        self._key_shifts = np.arange(nrows, dtype=np.uint64) % np.uint64(_PER_WORD) * np.uint64(FIELD_BITS)
         # the total degree is a combination of a few fields (for grevlex the top one alone)
         degree_weights = ring._winv_t.sum(axis=1)
         self._degree_fields = np.flatnonzero(degree_weights)
@@ -323,7 +326,7 @@ class MonomialCodes:
         if self.wide:
             return codes.tolist()
         placed = self._fields(codes) << self._key_shifts
-        words = [np.bitwise_or.reduce(placed[:, j : j + 4], axis=1) for j in range(0, placed.shape[1], 4)]
+        words = [np.bitwise_or.reduce(placed[:, j : j + _PER_WORD], axis=1) for j in range(0, placed.shape[1], _PER_WORD)]
         keys = words[-1].tolist()
         for word in reversed(words[:-1]):
             keys = [k << 64 | w for k, w in zip(keys, word.tolist())]

@@ -94,7 +94,9 @@ def _default_max_memory() -> str:
     return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
 
 
-def _f4_options(args: argparse.Namespace):
+def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
+    """F4 options of the command line; ``linear_substitution`` for system files (analysis.f4.F4Options: the
+    TDOA formulations keep F4 on their inputs, whose matrix statistics the tables record)."""
     from analysis.f4 import F4Options
 
     if args.verbose and args.backend in ("auto", "sparse"):
@@ -102,7 +104,7 @@ def _f4_options(args: argparse.Namespace):
 
         print(f"[f4] {native.describe()}", file=sys.stderr)
     return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
-                     verbose=args.verbose, threads=args.threads)
+                     verbose=args.verbose, threads=args.threads, linear_substitution=linear_substitution)
 
 
 def _export(system, fmt: str, path: str) -> None:
@@ -127,8 +129,11 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
             "Compute the reduced Groebner basis of a system and report its degree |B| (the number of "
             "standard monomials), or its dimension if it is not zero-dimensional. FILE is in msolve's "
             "format: line 1 comma-separated variables, line 2 the characteristic (0 or a prime), then "
-            "comma-separated polynomials. Characteristic 0 systems are reduced modulo two primes "
-            "(default 65521 and 32749, or those given with --prime) which must agree."
+            "comma-separated polynomials. Characteristic 0 systems are reduced modulo random 31-bit primes "
+            "(seeded by --prime-seed) until at least 3 agree and are a majority, primes dividing a leading "
+            "coefficient or denominator skipped; --gb then prints the basis over Q (Chinese remaindering and "
+            "rational reconstruction, checked modulo a fresh prime). --prime P (repeatable) computes modulo the "
+            "given primes instead, which must agree. See docs/engine.md."
         ),
     )
     p.add_argument("file", nargs="?", help="system in msolve format ('-' for stdin)")
@@ -153,12 +158,16 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
              "--saturate-det-h the saturated one (an extra variable t and t*f - 1)",
     )
     p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
+    p.add_argument("--prime-seed", type=_nonnegative("--prime-seed"), default=0, metavar="N",
+                   help="characteristic 0: the random 31-bit primes are drawn by a seed hashed from the system and N "
+                   "(default 0); another N draws other primes")
     p.add_argument("--order", default="grevlex", help="monomial order: grevlex, lex, deglex, block:k (default grevlex)")
     p.add_argument("--saturate", metavar="POLY", help="saturate the ideal by this polynomial first")
     p.add_argument("--basis", action="store_true", help="also print the standard monomial basis")
     p.add_argument("--basis-limit", type=_nonnegative("--basis-limit"), default=BASIS_LIMIT, metavar="N",
                    help=f"--basis lists at most N standard monomials (default {BASIS_LIMIT})")
-    p.add_argument("--gb", action="store_true", help="also print the reduced Groebner basis (first prime)")
+    p.add_argument("--gb", action="store_true",
+                   help="also print the reduced Groebner basis (over Q for characteristic 0, else over GF(p))")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=400_000_000,
                    help="cap on F4 matrix rows*cols")
@@ -198,6 +207,14 @@ def _analyse(args: argparse.Namespace, polys, primes, options, **saturation):
     """analysis.degree.analyse with the engine of --engine: the own engine, or msolve checked by it."""
     from analysis.degree import analyse, analyse_by_msolve
 
+    exe = _engine(args, polys(primes[0]))
+    if exe is None:
+        return analyse(polys, primes, options, **saturation)
+    return analyse_by_msolve(polys, exe, primes, options, check=not args.no_check, **saturation)
+
+
+def _engine(args: argparse.Namespace, polys) -> str | None:
+    """The msolve executable that --engine chooses for these polynomials, or None for the own engine."""
     if args.no_check and args.engine == "own":
         raise UserError("--no-check applies to --engine msolve or auto")
     exe = None if args.engine == "own" else _msolve_path(args)
@@ -205,11 +222,9 @@ def _analyse(args: argparse.Namespace, polys, primes, options, **saturation):
         from analysis.msolve import INSTALL_HINT
 
         raise UserError(f"--engine msolve: no msolve executable found; install one ({INSTALL_HINT}) or give --msolve PATH")
-    if args.engine == "auto" and exe is not None and _bezout_bound(polys(primes[0])) < AUTO_MSOLVE_BEZOUT:
+    if args.engine == "auto" and exe is not None and _bezout_bound(polys) < AUTO_MSOLVE_BEZOUT:
         exe = None
-    if exe is None:
-        return analyse(polys, primes, options, **saturation)
-    return analyse_by_msolve(polys, exe, primes, options, check=not args.no_check, **saturation)
+    return exe
 
 
 def _bezout_bound(polys) -> int:
@@ -222,7 +237,6 @@ def _bezout_bound(polys) -> int:
 
 
 def cmd_degree(args: argparse.Namespace) -> int:
-    from analysis.degree import DEFAULT_PRIMES
     from analysis.io import InputError, System, decode_text, parse_msolve, parse_polynomial
     from analysis.ring import check_prime, BadPrime
 
@@ -252,9 +266,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
                 f"the file has characteristic {system.characteristic}; --prime {','.join(map(str, primes))} conflicts"
             )
         primes = (system.characteristic,)
-    elif primes is None:
-        primes = DEFAULT_PRIMES
-    options = _f4_options(args)
+    options = _f4_options(args, linear_substitution=True)
 
     def polys(p: int):
         try:
@@ -264,7 +276,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
         except ValueError as e:
             raise UserError(str(e)) from None
 
-    sat = None
+    sat, sat_terms = None, None
     if args.saturate:
         try:
             sat_terms = parse_polynomial(args.saturate, system.variables, system.characteristic)
@@ -280,18 +292,71 @@ def cmd_degree(args: argparse.Namespace) -> int:
     if args.export:
         # what is exported is what is counted: the saturation goes into the file (t*f - 1)
         _export(system.saturated_by(sat_terms) if args.saturate else system, args.export[0], args.export[1])
-    report = _analyse(args, polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
-    return _finish_report(report.as_dict(), report, args)
+    if system.characteristic:
+        report = _analyse(args, polys, primes, options, saturate_by=sat, saturation="rabinowitsch")
+        return _finish_report(report.as_dict(), report, args)
+    return _degree_rational(args, system, polys, sat, sat_terms, primes, options)
 
 
-def _finish_report(out: dict, report, args: argparse.Namespace, header: str | None = None) -> int:
-    """Print a degree report with the requested listings; a standard basis above --basis-limit is not
-    listed (its size is, and the exit status is 2)."""
+def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, primes, options) -> int:
+    """Degree (and --gb / --basis) of a characteristic-0 system: a majority of random 31-bit primes, or
+    the user's primes, with unlucky primes rejected (analysis.modular); --gb over Q."""
+    import dataclasses
+
+    from analysis.degree import CHECK_CELLS, analyse_prime
+    from analysis.io import format_polynomial
+    from analysis.linalg import MatrixTooLarge
+    from analysis.modular import analyse_rational, input_seed, order_key, rational_basis
+
+    exact = list(system.polynomials) + ([sat_terms] if sat_terms is not None else [])
+    computed: list[int] = []
+
+    def compute(p: int):
+        """One prime's result; with msolve, the second prime is the own engine's (the check, when affordable)."""
+        f = polys(p)
+        exe = _engine(args, f)
+        computed.append(p)
+        if exe is not None and not args.no_check and len(computed) == 2:
+            capped = dataclasses.replace(options, max_matrix_cells=min(CHECK_CELLS, options.max_matrix_cells))
+            try:
+                return analyse_prime(f, capped, sat(p) if sat else None, "rabinowitsch")
+            except MatrixTooLarge:
+                pass
+        return analyse_prime(f, options, sat(p) if sat else None, "rabinowitsch", "own" if exe is None else "msolve",
+                             exe)
+
+    seed = input_seed(system.variables, exact, args.prime_seed)
+    try:
+        rational = analyse_rational(exact, args.order, system.nvars, compute, primes, seed)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    report = rational.report
+    out = {**report.as_dict(), "status": rational.status}
+    if "engines" in out:
+        own = [r.prime for r in report.per_prime if r.engine == "own"]
+        out["check"] = (f"own engine on {own[0]} agrees (degree, dimension, leading monomials)" if own else
+                        "none (not requested)" if args.no_check else
+                        "own engine outvoted or not run (above its check cap); msolve's primes agree")
+    gb = None
+    if args.gb:
+        basis, gb_status = rational_basis(rational, exact, args.order, system.nvars, compute, seed)
+        key = order_key(args.order, system.nvars)
+        gb = [format_polynomial(f, system.variables, key=key) for f in basis]
+        out["groebner_basis_status"] = gb_status
+    return _finish_report(out, report, args, groebner_basis=gb)
+
+
+def _finish_report(out: dict, report, args: argparse.Namespace, header: str | None = None,
+                   groebner_basis: list[str] | None = None) -> int:
+    """Print a degree report with the requested listings (``groebner_basis``: the basis as text when it is
+    not the first prime's, e.g. over Q); a standard basis above --basis-limit is not listed (its size is,
+    and the exit status is 2)."""
     too_many = args.basis and report.degree is not None and report.degree > args.basis_limit
     if args.basis and not too_many:
         out["standard_basis"] = report.standard_basis()
     if args.gb:
-        out["groebner_basis"] = [str(g) for g in report.per_prime[0].gb.basis]
+        out["groebner_basis"] = groebner_basis if groebner_basis is not None else \
+            [str(g) for g in report.per_prime[0].gb.basis]
     if header and not args.json:
         print(header)
     _print_report(out, args.json)
@@ -416,9 +481,12 @@ def _print_report(out: dict, as_json: bool) -> None:
     print(f"primes {primes}; Groebner basis: {out['gb_size']} elements; {matrix}{out['seconds']:.3f} s")
     if "engines" in out:
         print(f"check: {out['check']}")
+    if "status" in out:
+        print(f"status: {out['status']}")
     for key in ("standard_basis", "groebner_basis"):
         if key in out:
-            print(f"{key.replace('_', ' ')}:")
+            status = out.get(f"{key}_status")
+            print(f"{key.replace('_', ' ')}" + (f" ({status})" if status else "") + ":")
             for s in out[key]:
                 print(f"  {s}")
 
@@ -922,7 +990,7 @@ def _user_error(e: Exception) -> tuple[str, int] | None:
     def cls(module: str, name: str) -> type:
         return getattr(sys.modules.get(module), name, ())
 
-    if isinstance(e, cls("analysis.degree", "PrimeDisagreement")):
+    if isinstance(e, (cls("analysis.degree", "PrimeDisagreement"), cls("analysis.modular", "ReconstructionFailed"))):
         return str(e), 3
     if isinstance(e, cls("analysis.msolve", "MsolveError")):
         return f"{e}; --engine own computes without it", 2
@@ -964,9 +1032,27 @@ def _run(args: argparse.Namespace) -> int:
         return status
 
 
+VALUE_OPTIONS = ("--saturate",)
+"""Options whose value may start with '-' (a polynomial such as -x-1): the word after the option is always
+its value, as it is with ``--saturate=-x-1`` (argparse would take ``-x-1`` for an option)."""
+
+
+def _join_values(argv: list[str]) -> list[str]:
+    """argv with ``--saturate VALUE`` written as ``--saturate=VALUE`` (see :data:`VALUE_OPTIONS`)."""
+    out, k = [], 0
+    while k < len(argv):
+        if argv[k] in VALUE_OPTIONS and k + 1 < len(argv) and argv[k + 1].startswith("-"):
+            out.append(f"{argv[k]}={argv[k + 1]}")
+            k += 2
+        else:
+            out.append(argv[k])
+            k += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_values(sys.argv[1:] if argv is None else list(argv)))
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -26,7 +26,7 @@ def test_degree_json_of_katsura4(capsys):
     report = json.loads(out)
     assert code == 0
     assert report["degree"] == 16 and report["dimension"] == 0 and report["zero_dimensional"]
-    assert report["primes"] == [65521, 32749] and report["gb_size"] > 0 and report["seconds"] >= 0
+    assert len(report["primes"]) >= 3 and all(p > 2**30 for p in report["primes"]) and report["gb_size"] > 0 and report["seconds"] >= 0
 
 
 def test_standard_basis_is_printed(capsys, tmp_path):
@@ -135,7 +135,7 @@ def test_lex_order_goes_through_fglm(capsys):
     code, out, _ = run(capsys, "degree", str(EXAMPLE), "--order", "lex", "--gb", "--json")
     report = json.loads(out)
     assert code == 0 and report["degree"] == 16 and len(report["groebner_basis"]) == 5
-    assert report["groebner_basis"][0].startswith("x4^16 +")
+    assert report["groebner_basis"][0].startswith("x4^16 - 8/7*x4^15 + ")  # over Q
 
 
 def test_saturate_det_h_by_action_matrix_rank(capsys):

@@ -84,3 +84,23 @@ def test_tail_reduction_by_f4_equals_the_division_fallback(seed, monkeypatch):
     monkeypatch.setattr(homogenize, "interreduce", overflow)
     by_division = lex_by_homogenization(polys)
     assert by_f4.basis == by_division.basis and len(by_f4.basis) >= 2
+
+
+@pytest.mark.parametrize("blocks, seed", [((1, 2), 0), ((2, 1), 1), ((1, 1, 1), 2)])
+def test_positive_dimensional_block_basis_is_sympys(blocks, seed):
+    """Block orders take the homogenized route too (issue 35: two dense cubics in block:1,1,1 were refused
+    by a 40668 x 157247 matrix); the graded order of the homogenizing ring breaks degree ties by the
+    block order."""
+    from sympy.polys.orderings import ProductOrder, grevlex
+
+    from analysis.degree import groebner_in_order
+    from analysis.homogenize import by_homogenization
+
+    nvars = sum(blocks)
+    ring = Ring(tuple("xyzw"[:nvars]), 32003, "block:" + ",".join(map(str, blocks)))
+    polys = dense_random_system(nvars, (3, 2), 32003, seed, ring)
+    cuts = [sum(blocks[:k]) for k in range(len(blocks) + 1)]
+    order = ProductOrder(*[(grevlex, (lambda a, b: lambda m: m[a:b])(a, b)) for a, b in zip(cuts, cuts[1:])])
+    gb = by_homogenization(polys)
+    assert list(gb.basis) == _sympy_basis(ring, polys, order)
+    assert groebner_in_order(polys, F4Options(max_matrix_cells=1_000_000)).basis == gb.basis

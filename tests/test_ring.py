@@ -68,10 +68,15 @@ def test_arithmetic_with_integers_and_evaluation():
     assert str(ring.from_sympy("x**2 - 1/2")) == "x^2 + 3"
 
 
-@pytest.mark.parametrize("p", [2, 4, 2**31 + 11, 1, -7])
+@pytest.mark.parametrize("p", [4, 2**31 + 11, 2**31, 1, 0, -7])
 def test_bad_primes_are_rejected(p):
     with pytest.raises(BadPrime):
         check_prime(p)
+
+
+@pytest.mark.parametrize("p", [2, 3, 2**31 - 1])
+def test_every_prime_below_2_31_is_a_characteristic(p):
+    assert check_prime(p) == p
 
 
 def test_unknown_variable_is_named():
