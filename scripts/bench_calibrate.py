@@ -1,6 +1,13 @@
 """Benchmark solvers.calibrate: is the default call (sigma estimated) never confidently wrong?
 
-Writes tables/calibration.csv, tables/calibration.md and tables/calibration.meta.json.
+Writes tables/calibration.csv, tables/calibration.md and tables/calibration.meta.json; with --dim 3
+tables/calibration3d.{csv,md} (no run facts in them: the seconds per call and the provenance go to
+the untracked calibration3d.timing.json).
+
+3D grid (--dim 3): cells 9r/5s, 10r/6s, 12r/8s, 16r/10s, 24r/16s in an 8 x 6 x 3 m room
+(solvers.synthetic.room_network: positions uniform in the room, offsets N(0, 1 m)) x sigma 1e-4, 1e-3,
+1e-2 m x the same conditions (gaps keep >= 4 per receiver, >= 5 per transmitter); scale row 100r/60s,
+20 % missing, sigma 1e-2, clean.
 
 Grid: cells 9r/3s, 7r/3s, 6r/4s, 5r/5s, 8r/5s, 10r/8s, 20r/10s, 12r/20s x noise sigma 1e-4, 1e-3, 1e-2
 (the scene is 10 across: positions uniform in [-5, 5]^2, offsets uniform in [-2, 2]) x condition
@@ -49,25 +56,32 @@ import numpy as np  # noqa: E402
 
 from solvers.calibration import STATUSES, calibrate  # noqa: E402
 from solvers.metrics import calibration_errors, standardised_node_errors  # noqa: E402
-from solvers.synthetic import Network, corrupt_measurements  # noqa: E402
+from solvers.synthetic import Network, corrupt_measurements, room_network  # noqa: E402
 
 CELLS = ((9, 3), (7, 3), (6, 4), (5, 5), (8, 5), (10, 8), (20, 10), (12, 20))
+CELLS_3D = ((9, 5), (10, 6), (12, 8), (16, 10), (24, 16))
+SCALE_3D = ((100, 60),)
 SIGMAS = (1e-4, 1e-3, 1e-2)
 CONDITIONS = {"clean": (0.0, 0.0), "gross 5%": (0.0, 0.05), "missing 30%": (0.3, 0.0)}
 SCALE = ((100, 100), (200, 150))
 SCALE_CONDITION = ("missing 20%", 0.2, 0.0)
 
 
-def network(m, n, sigma, missing, gross, seed):
+def network(m, n, sigma, missing, gross, seed, dim=2):
     """(network, F, gross-error mask) of one seeded trial."""
     rng = np.random.default_rng(seed)
+    if dim == 3:
+        net = room_network(m, n, rng)
+        F, bad = corrupt_measurements(net.measurements(sigma, rng), rng, missing, gross, min_per_receiver=4,
+                                      min_per_transmitter=5)
+        return net, F, bad
     net = Network(rng.uniform(-5, 5, (m, 2)), rng.uniform(-5, 5, (n, 2)), rng.uniform(-2, 2, n))
     F, bad = corrupt_measurements(net.measurements(sigma, rng), rng, missing, gross)
     return net, F, bad
 
 
 def one_call(net, F, bad, sigma_true, given: bool, seed: int) -> dict:
-    res = calibrate(F, sigma=sigma_true if given else None, seed=seed)
+    res = calibrate(F, sigma=sigma_true if given else None, dim=net.dim, seed=seed)
     good = np.isfinite(F) & ~bad
     placed = bool(np.isfinite(res.receivers).all() and np.isfinite(res.transmitters).all())
     err = calibration_errors(res, net).position if placed else np.inf
@@ -81,17 +95,17 @@ def one_call(net, F, bad, sigma_true, given: bool, seed: int) -> dict:
     }
 
 
-def warm_up() -> None:
+def warm_up(dim: int = 2) -> None:
     """Load the solvers and compiled kernels once per process, so that no timed call pays for it."""
-    for m, n in ((8, 5), (9, 3)):  # the pencil and a homotopy solver (the tape kernel)
-        net, F, _ = network(m, n, 1e-3, 0.0, 0.0, 0)
-        calibrate(F, seed=0)
-        calibrate(F, sigma=1e-3, seed=0)
+    for m, n in ((8, 5), (9, 3)) if dim == 2 else ((12, 8),):  # 2D: the pencil and a homotopy solver
+        net, F, _ = network(m, n, 1e-3, 0.0, 0.0, 0, dim)
+        calibrate(F, seed=0, dim=dim)
+        calibrate(F, sigma=1e-3, seed=0, dim=dim)
 
 
 def trial(args) -> dict:
-    (m, n), sigma, cond, missing, gross, seed = args
-    net, F, bad = network(m, n, sigma, missing, gross, seed)
+    (m, n), sigma, cond, missing, gross, seed, dim = args
+    net, F, bad = network(m, n, sigma, missing, gross, seed, dim)
     return {"given": one_call(net, F, bad, sigma, True, seed), "estimated": one_call(net, F, bad, sigma, False, seed)}
 
 
@@ -129,9 +143,9 @@ def summarise(cell: str, sigma: float, cond: str, mode: str, trials: list[dict])
 
 
 def markdown(rows: list[dict]) -> str:
-    cols = ["cell", "sigma", "condition", "sigma_mode", "networks", "kept", "gross_rejected", "placed",
-            "err_ratio_med", "err_ratio_p95", "sigma_ratio", "sigma_within2", "over3std", "ok_over5std",
-            *STATUSES[::-1], "sec_med", "sec_p95"]
+    cols = [c for c in ["cell", "sigma", "condition", "sigma_mode", "networks", "kept", "gross_rejected", "placed",
+                        "err_ratio_med", "err_ratio_p95", "sigma_ratio", "sigma_within2", "over3std", "ok_over5std",
+                        *STATUSES[::-1], "sec_med", "sec_p95"] if c in rows[0]]
     out = ["# calibrate: sigma given and estimated (scripts/bench_calibrate.py)", "",
            "Columns: see the script's docstring. err_ratio: position error over the sigma-given call's on the "
            "same networks; over3std: share of nodes with error > 3 reported std; ok_over5std: share of networks "
@@ -161,28 +175,29 @@ def summary(rows: list[dict]) -> str:
     for cell in cells:
         c, g, e = get(cell, "clean", "estimated"), get(cell, "gross 5%", "given"), get(cell, "gross 5%", "estimated")
         cols = [f"{c['kept']} / {c['placed']} / {c['sigma_ratio']} / {c['ok']}·{c['uncontrolled']}·"
-                f"{other(c, 'ok', 'uncontrolled')} / {c['sec_med']}" if c else "",
+                f"{other(c, 'ok', 'uncontrolled')} / {c.get('sec_med', '-')}" if c else "",
                 f"{g['gross_rejected']} / {g['kept']} / {g['ok']}·{g['uncontrolled']}·{g['partial']}·"
                 f"{other(g, 'ok', 'uncontrolled', 'partial')}" if g else "",
                 f"{e['gross_rejected']} / {e['kept']} / {e['ok']}·{e['uncontrolled']}·{e['inconsistent']}·"
-                f"{e['ambiguous']}·{other(e, 'ok', 'uncontrolled', 'inconsistent', 'ambiguous')} / {e['sec_med']}"
+                f"{e['ambiguous']}·{other(e, 'ok', 'uncontrolled', 'inconsistent', 'ambiguous')} / {e.get('sec_med', '-')}"
                 if e else ""]
         out.append(f"| {cell} | " + " | ".join(cols) + " |")
     for r in rows:
         if r["condition"] == SCALE_CONDITION[0] and r["sigma_mode"] == "estimated":
             given = next((x for x in rows if x["cell"] == r["cell"] and x["condition"] == r["condition"]
                           and x["sigma_mode"] == "given"), None)
-            note = f" (σ given {given['sec_med']})" if given else ""
+            note = f" (σ given {given.get('sec_med', '-')})" if given else ""
             out.append(f"| {r['cell']}, {r['condition']} | {r['kept']} / {r['placed']} / {r['sigma_ratio']} / "
-                       f"{r['ok']}·{r['uncontrolled']}·{other(r, 'ok', 'uncontrolled')} / {r['sec_med']}{note} | | |")
+                       f"{r['ok']}·{r['uncontrolled']}·{other(r, 'ok', 'uncontrolled')} / {r.get('sec_med', '-')}{note} "
+                       "| | |")
     return "\n".join(out) + "\n"
 
 
-def render(out_dir: str) -> None:
-    """Rewrite calibration.md from calibration.csv (no computing)."""
-    with open(os.path.join(out_dir, "calibration.csv"), newline="") as handle:
+def render(out_dir: str, name: str = "calibration") -> None:
+    """Rewrite NAME.md from NAME.csv (no computing)."""
+    with open(os.path.join(out_dir, f"{name}.csv"), newline="") as handle:
         rows = list(csv.DictReader(handle))
-    with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
+    with open(os.path.join(out_dir, f"{name}.md"), "w") as handle:
         handle.write(markdown(rows))
 
 
@@ -198,18 +213,21 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="10 networks a cell, 1 per scale row, into tables/quick/")
     ap.add_argument("--out", help="output directory (default tables/, or tables/quick/ with --quick)")
     ap.add_argument("--render", action="store_true", help="only rewrite calibration.md from calibration.csv")
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="3: the 3D grid into calibration3d.* "
+                    "(see the docstring)")
     args = ap.parse_args(argv)
+    name = "calibration" if args.dim == 2 else "calibration3d"
     networks = 10 if args.quick else args.networks
     scale_networks = 1 if args.quick else args.scale_networks
     out_dir = args.out or os.path.join(ROOT, "tables", "quick" if args.quick else "")
     os.makedirs(out_dir, exist_ok=True)
     if args.render:
-        render(out_dir)
+        render(out_dir, name)
         return 0
     only = set(args.only.split(",")) if args.only else None
 
     jobs = []
-    for (m, n) in CELLS:
+    for (m, n) in (CELLS if args.dim == 2 else CELLS_3D):
         if only and f"{m}r{n}s" not in only:
             continue
         for sigma in SIGMAS:
@@ -219,7 +237,7 @@ def main(argv=None) -> int:
                 count = args.gross_networks if gross and args.gross_networks else networks
                 jobs.append(((m, n), sigma, cond, missing, gross, count))
     if not only or "scale" in only:
-        for (m, n) in SCALE:
+        for (m, n) in (SCALE if args.dim == 2 else SCALE_3D):
             jobs.append(((m, n), 1e-2, SCALE_CONDITION[0], SCALE_CONDITION[1], SCALE_CONDITION[2], scale_networks))
 
     # provenance read before anything is written (the outputs themselves would make the tree dirty)
@@ -229,11 +247,12 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     rows = []
     if args.jobs <= 1:
-        warm_up()
-    with ProcessPoolExecutor(max_workers=args.jobs, initializer=warm_up) if args.jobs > 1 else _Serial() as pool:
+        warm_up(args.dim)
+    with (ProcessPoolExecutor(max_workers=args.jobs, initializer=warm_up, initargs=(args.dim,)) if args.jobs > 1
+          else _Serial()) as pool:
         for shape, sigma, cond, missing, gross, count in jobs:
             t0 = time.perf_counter()
-            tasks = [(shape, sigma, cond, missing, gross, args.seed + 1000 * k + 7) for k in range(count)]
+            tasks = [(shape, sigma, cond, missing, gross, args.seed + 1000 * k + 7, args.dim) for k in range(count)]
             trials = list(pool.map(trial, tasks))
             cell = f"{shape[0]}r/{shape[1]}s"
             for mode in ("given", "estimated"):
@@ -246,11 +265,15 @@ def main(argv=None) -> int:
                       f"part {row['partial']} {row['sec_med']:.2f}s/{row['sec_p95']:.2f}s", file=sys.stderr, flush=True)
             print(f"  ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
 
-    with open(os.path.join(out_dir, "calibration.csv"), "w", newline="") as handle:
+    seconds = {f"{r['cell']} {r['sigma']} {r['condition']} {r['sigma_mode']}": [r["sec_med"], r["sec_p95"]]
+               for r in rows}
+    if args.dim == 3:  # results only: the seconds are run facts (calibration3d.timing.json)
+        rows = [{k: v for k, v in r.items() if k not in ("sec_med", "sec_p95")} for r in rows]
+    with open(os.path.join(out_dir, f"{name}.csv"), "w", newline="") as handle:
         w = csv.DictWriter(handle, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    with open(os.path.join(out_dir, "calibration.md"), "w") as handle:
+    with open(os.path.join(out_dir, f"{name}.md"), "w") as handle:
         handle.write(markdown(rows))
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -266,11 +289,16 @@ def main(argv=None) -> int:
         "threads": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
-    with open(os.path.join(out_dir, "calibration.meta.json"), "w") as handle:
+    if args.dim == 3:
+        meta["networks"] = ("solvers.synthetic.room_network: uniform in an 8 x 6 x 3 m room, offsets N(0, 1 m), Gaussian "
+                            "noise sigma; network k of a cell uses numpy.random.default_rng(seed + 1000 k + 7)")
+        meta["corruption"] = meta["corruption"].replace(">= 3 per receiver, >= 4", ">= 4 per receiver, >= 5")
+        meta["seconds_per_call"] = seconds  # median, p95
+    meta_name = f"{name}.meta.json" if args.dim == 2 else f"{name}.timing.json"
+    with open(os.path.join(out_dir, meta_name), "w") as handle:
         json.dump(meta, handle, indent=2)
         handle.write("\n")
-    print(f"wrote {out_dir}/calibration.csv, calibration.md, calibration.meta.json in {meta['seconds']} s",
-          file=sys.stderr)
+    print(f"wrote {out_dir}/{name}.csv, {name}.md, {meta_name} in {meta['seconds']} s", file=sys.stderr)
     return 0
 
 

@@ -48,7 +48,7 @@ def problem(m, n, seed=0):
     net = Network(rng.uniform(-5, 5, (m, 2)), rng.uniform(-5, 5, (n, 2)), rng.uniform(-2, 2, n))
     F, _ = corrupt_measurements(net.measurements(1e-2, rng), rng, 0.2, 0.0)
     R, S = to_gauge(net.receivers, net.transmitters)
-    p = make_problem(F, np.isfinite(F), np.arange(m), np.arange(n))
+    p = make_problem(F, np.isfinite(F), np.arange(m), np.arange(n), dim=2)
     x0 = pack(R, S, net.offsets) + 0.05 * rng.standard_normal(2 * m + 3 * n - 3)
     return p, x0
 

@@ -361,7 +361,7 @@ def write_json(report: dict, path: str) -> None:
 def plot_calibration(result, path: str, measurements: Measurements | None = None, units: str | None = None) -> None:
     """Map of the calibration: receivers (triangles), transmitters (circles), 1-sigma circles, and
     every rejected measurement as a dashed red line between its receiver and transmitter; `units`
-    labels the axes."""
+    labels the axes. A 3D calibration is drawn as its three projections (xy, xz, yz)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -369,31 +369,33 @@ def plot_calibration(result, path: str, measurements: Measurements | None = None
 
     names_r = measurements.receivers if measurements else [str(i + 1) for i in range(result.m)]
     names_t = measurements.transmitters if measurements else [str(j + 1) for j in range(result.n)]
-    fig, ax = plt.subplots(figsize=(7, 7))
+    views = [(0, 1)] if result.dim == 2 else [(0, 1), (0, 2), (1, 2)]
+    fig, axs = plt.subplots(1, len(views), figsize=(7 * len(views), 7), squeeze=False)
     R, S = result.receivers, result.transmitters
     rejected = ~result.inliers & np.isfinite(result.residuals)
-    first = True
-    for i, j in zip(*np.nonzero(rejected)):
-        ax.plot([R[i, 0], S[j, 0]], [R[i, 1], S[j, 1]], "--", color="tab:red", lw=0.8,
-                label="rejected measurement" if first else None)
-        first = False
-    ax.plot(R[:, 0], R[:, 1], "^", color="tab:blue", ms=8, label="receivers")
-    ax.plot(S[:, 0], S[:, 1], "o", color="tab:orange", ms=7, label="transmitters")
-    for P, std, names in ((R, result.receiver_std, names_r), (S, result.transmitter_std, names_t)):
-        for k, name in enumerate(names):
-            if not np.all(np.isfinite(P[k])):
-                continue
-            ax.annotate(name, P[k], textcoords="offset points", xytext=(4, 4), fontsize=8)
-            if np.isfinite(std[k]) and std[k] > 0:
-                ax.add_patch(plt.Circle(P[k], std[k], fill=False, color="gray", lw=0.5))
-    ax.set_aspect("equal")
-    if units:
-        ax.set_xlabel(f"x [{units}]")
-        ax.set_ylabel(f"y [{units}]")
-    ax.set_title(f"{result.status}: rms {result.rms:.3g}, {int((~result.inliers & np.isfinite(result.residuals)).sum())} "
+    for ax, (a, b) in zip(axs[0], views):
+        first = True
+        for i, j in zip(*np.nonzero(rejected)):
+            ax.plot([R[i, a], S[j, a]], [R[i, b], S[j, b]], "--", color="tab:red", lw=0.8,
+                    label="rejected measurement" if first else None)
+            first = False
+        ax.plot(R[:, a], R[:, b], "^", color="tab:blue", ms=8, label="receivers")
+        ax.plot(S[:, a], S[:, b], "o", color="tab:orange", ms=7, label="transmitters")
+        for P, std, names in ((R, result.receiver_std, names_r), (S, result.transmitter_std, names_t)):
+            for k, name in enumerate(names):
+                if not np.all(np.isfinite(P[k])):
+                    continue
+                ax.annotate(name, P[k, [a, b]], textcoords="offset points", xytext=(4, 4), fontsize=8)
+                if np.isfinite(std[k]) and std[k] > 0:
+                    ax.add_patch(plt.Circle(P[k, [a, b]], std[k], fill=False, color="gray", lw=0.5))
+        ax.set_aspect("equal")
+        unit = f" [{units}]" if units else ""
+        ax.set_xlabel("xyz"[a] + unit)
+        ax.set_ylabel("xyz"[b] + unit)
+        ax.legend(loc="best", fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{result.status}: rms {result.rms:.3g}, {int((~result.inliers & np.isfinite(result.residuals)).sum())} "
                  f"rejected, {len(result.warnings)} warning(s)")
-    ax.legend(loc="best", fontsize=8)
-    ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -773,11 +773,13 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    "first column (receiver names) hold names (default: auto, see the README)")
     p.add_argument("--transpose", action="store_true", help="the file has one row per transmitter and one column "
                    "per receiver")
+    p.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2: a network in the plane (default); 3: in "
+                   "space (gauge r1 = 0, r2 on +x, r3 in the xy half-plane y > 0; the mirror z -> -z is undecidable)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random sampling (default 0)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.add_argument("--out", metavar="FILE.json", help="also write the JSON result to FILE.json")
-    p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red) to FILE.png "
-                   "(or .pdf, .svg, ...)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red; 3D: three "
+                   "projections) to FILE.png (or .pdf, .svg, ...)")
     p.set_defaults(func=cmd_calibrate)
 
 
@@ -786,6 +788,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     from solvers.api import select_solver
     from solvers.calibration import calibrate
+    from solvers.calibration.adjustment import min_measurements, n_unknowns
     from solvers.calibrate_io import (MeasurementFileError, check_output_path, plot_calibration, plot_formats,
                                       read_measurements, report_dict, write_json)
 
@@ -809,6 +812,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     m, n = meas.F.shape
 
     def solvable(rows: int, cols: int) -> bool:
+        if args.dim == 3:  # enough nodes and entries for the unknowns (the 3D pipeline needs no fixed block)
+            need_r, need_t = min_measurements(3)
+            return rows >= need_t and cols >= need_r and rows * cols >= n_unknowns(rows, cols, 3)
         try:
             select_solver(rows, cols)
         except ValueError:
@@ -822,7 +828,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   else "drop --transpose if the file's rows are receivers")
         raise UserError(f"{meas.source}: {layout} cannot be calibrated (too few receivers or transmitters for every "
                         f"solver), but {n} receivers x {m} transmitters can: {advice}")
-    result = calibrate(meas.F, sigma=args.sigma, seed=args.seed)
+    result = calibrate(meas.F, sigma=args.sigma, dim=args.dim, seed=args.seed)
     report = report_dict(result, meas, args.units)
     if args.out:
         try:
@@ -858,16 +864,17 @@ def _print_calibration(result, meas, units: str | None = None) -> None:
         print(f"adjustment: {result.dof} degrees of freedom; {test}; outlier test |w| <= {result.critical_value:.3g}; "
               f"{n_unc} measurement(s) uncontrolled (redundancy number < 0.01)")
         bracket = f" [{units}]" if units else ""
-        print(f"{'node':<12} {'x' + bracket:>12} {'y' + bracket:>12} {'offset' + bracket:>12} {'std' + bracket:>10} "
-              f"{'reliab.' + bracket:>10}")
+        axes = "xyz"[: result.dim]
+        print(f"{'node':<12} " + " ".join(f"{a + bracket:>12}" for a in axes) + f" {'offset' + bracket:>12} "
+              f"{'std' + bracket:>10} {'reliab.' + bracket:>10}")
         rel_r = result.receiver_reliability if result.receiver_reliability is not None else [float('nan')] * result.m
         rel_t = result.transmitter_reliability if result.transmitter_reliability is not None else [float('nan')] * result.n
         for k, name in enumerate(meas.receivers):
-            x, y = result.receivers[k]
-            print(f"{'r ' + name:<12} {x:12.5g} {y:12.5g} {'':>12} {result.receiver_std[k]:10.3g} {rel_r[k]:10.3g}")
+            xyz = " ".join(f"{v:12.5g}" for v in result.receivers[k])
+            print(f"{'r ' + name:<12} {xyz} {'':>12} {result.receiver_std[k]:10.3g} {rel_r[k]:10.3g}")
         for k, name in enumerate(meas.transmitters):
-            x, y = result.transmitters[k]
-            print(f"{'s ' + name:<12} {x:12.5g} {y:12.5g} {result.offsets[k]:12.5g} {result.transmitter_std[k]:10.3g} "
+            xyz = " ".join(f"{v:12.5g}" for v in result.transmitters[k])
+            print(f"{'s ' + name:<12} {xyz} {result.offsets[k]:12.5g} {result.transmitter_std[k]:10.3g} "
                   f"{rel_t[k]:10.3g}")
     for w in result.warnings:
         print(f"warning: {w}")

@@ -143,12 +143,11 @@ def calibration_errors(calibration: object, network: object) -> CalibrationError
 def standardised_node_errors(result: object, network: object) -> np.ndarray:
     """|position error| / reported std of every placed node of a calibration result, in its gauge.
 
-    The truth is moved into the result's gauge (`result.gauge`: the receiver at the origin, the one on
-    the positive x axis and, in 3D, the one in the xy half-plane y > 0; the reflection the gauge
-    leaves free, y -> -y in 2D and z -> -z in 3D, is the one that fits better), so that the error and
-    the reported std (sqrt of the sum of the coordinate variances, `receiver_std`, `transmitter_std`)
-    refer to the same coordinates. Gauge receivers with std 0 are left out. For a 2-D normal error,
-    the share above 3 is between 1e-4 (isotropic) and 2.7e-3 (one-dimensional).
+    The truth is moved into the result's gauge (`result.gauge`: the receiver at the origin, the one
+    on the positive x axis, in 3D the one in the xy half-plane y > 0; the reflection the gauge leaves
+    free is the one that fits better), so that the error and the reported std (the root of the sum
+    of the coordinates' variances, `receiver_std`, `transmitter_std`) refer to the same coordinates. The gauge receiver at the origin (std 0) is left out. For a 2-D
+    normal error, the share above 3 is between 1e-4 (isotropic) and 2.7e-3 (one-dimensional).
     """
     from .recovery import to_gauge
 
@@ -156,7 +155,8 @@ def standardised_node_errors(result: object, network: object) -> np.ndarray:
     if gauge is None:
         return np.array([])
     m, dim = network.receivers.shape  # type: ignore[attr-defined]
-    order = list(gauge) + [i for i in range(m) if i not in gauge]
+    fixed = [int(g) for g in gauge]
+    order = fixed + [i for i in range(m) if i not in fixed]
     moved = to_gauge(network.receivers[order], network.transmitters)  # type: ignore[attr-defined]
     if moved is None:
         return np.array([])
@@ -165,7 +165,8 @@ def standardised_node_errors(result: object, network: object) -> np.ndarray:
     truth = np.vstack([truth_r, moved[1]])
     est = np.vstack([result.receivers, result.transmitters])  # type: ignore[attr-defined]
     std = np.concatenate([result.receiver_std, result.transmitter_std])  # type: ignore[attr-defined]
-    errors = [np.linalg.norm(est - truth * np.array([1.0] * (dim - 1) + [flip]), axis=1) for flip in (1.0, -1.0)]
+    # the reflection the gauge leaves free: y -> -y in the plane, z -> -z in space
+    errors = [np.linalg.norm(est - truth * np.r_[np.ones(dim - 1), flip], axis=1) for flip in (1.0, -1.0)]
     err = min(errors, key=lambda e: float(np.nansum(e)))
     keep = np.isfinite(err) & np.isfinite(std) & (std > 0)
     return err[keep] / std[keep]

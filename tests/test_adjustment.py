@@ -96,7 +96,7 @@ def test_prediction_test_of_a_left_out_entry_equals_its_in_fit_w_test():
 
     only = np.zeros_like(mask)
     only[i, j] = True
-    e, h = st2.hat(make_problem(F, only, st2.problem.rows, st2.problem.cols))
+    e, h = st2.hat(make_problem(F, only, st2.problem.rows, st2.problem.cols, dim=2))
     w_pred = e[0] / (1e-2 * np.sqrt(1.0 + h[0]))
     assert np.isclose(w_pred, st.w[k], rtol=1e-3)
 

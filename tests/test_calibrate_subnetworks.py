@@ -24,7 +24,7 @@ def test_unguided_subnetworks_determine_their_nodes_with_the_asked_redundancy():
     rng = np.random.default_rng(0)
     mask = rng.random((8, 5)) > 0.1
     for _ in range(30):
-        rows, cols = _sample_subnetwork(mask, rng, None)
+        rows, cols = _sample_subnetwork(mask, rng, None, dim=2)
         sub = mask[np.ix_(rows, cols)]
         assert (sub.sum(axis=1) >= MIN_RECEIVER_MEASUREMENTS).all()
         assert (sub.sum(axis=0) >= MIN_TRANSMITTER_MEASUREMENTS).all()
@@ -38,7 +38,7 @@ def test_guided_subnetworks_leave_out_a_node_of_the_suspicious_entry_and_never_r
     suspicious = np.array([[2, 3]])
     tried: set = set()
     drawn = []
-    while (block := _sample_subnetwork(mask, rng, tried, suspicious)) is not None:
+    while (block := _sample_subnetwork(mask, rng, tried, suspicious, dim=2)) is not None:
         rows, cols = block
         assert 2 not in rows or 3 not in cols
         drawn.append((tuple(rows), tuple(cols)))

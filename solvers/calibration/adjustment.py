@@ -5,8 +5,9 @@ adjustment reports for every fit (Baarda, "A testing procedure for use in geodet
 Teunissen, "Testing theory", 2006; open-source adjustment software such as JAG3D):
 
 * the fit itself (`robust_refine`): (iteratively reweighted) Levenberg-Marquardt on the measured
-  entries e_ij = F_ij - o_j - |r_i - s_j| in the gauge r_1 = 0, r_2 on the x axis, with the normal
-  matrix accumulated from the 5 non-zeros of each Jacobian row;
+  entries e_ij = F_ij - o_j - |r_i - s_j| in the gauge r_1 = 0, r_2 on the x axis (3D: r_3 in the xy
+  plane), in 2D or 3D (the arrays' second axis), with the normal matrix accumulated from the
+  2 dim + 1 non-zeros of each Jacobian row;
 * `adjustment_statistics`: the normal matrix N = J^T J and its (pseudo-)inverse, the a-posteriori
   variance factor from the residuals of a fit with positive redundancy (SSR / (entries - unknowns)),
   the global test of the model (SSR / sigma^2 against chi^2 with that many degrees of freedom, when
@@ -16,7 +17,7 @@ Teunissen, "Testing theory", 2006; open-source adjustment software such as JAG3D
   bias (internal reliability), its largest effect on a node (external reliability), and the
   gauge-fixed covariance sigma^2 N^-1 reduced to per-node standard deviations.
 
-The normal matrix is (2m + 3n - 3)^2 and is inverted once per fit; nothing here forms the dense
+The normal matrix is (2m + 3n - 3)^2 (3D: (3m + 4n - 6)^2) and is inverted once per fit; nothing here forms the dense
 Jacobian of all entries (a 200 x 150 network has 24,000 entries and 847 unknowns).
 """
 from __future__ import annotations
@@ -28,6 +29,8 @@ from typing import Literal
 import numpy as np
 
 from ..recovery import to_gauge
+from ..refine import _free_receiver_coordinates, pack, parameter_count
+from ..refine import unpack as _unpack
 
 __all__ = [
     "AdjustmentStatistics",
@@ -40,9 +43,20 @@ __all__ = [
 
 Loss = Literal["soft_l1", "huber", "cauchy", "linear"]
 
-#: Measurements a node needs to be determined (receiver: 2 unknowns; transmitter: 2 + offset).
-MIN_RECEIVER_MEASUREMENTS = 3
-MIN_TRANSMITTER_MEASUREMENTS = 4
+def min_measurements(dim: int) -> tuple[int, int]:
+    """Measurements a (receiver, transmitter) needs to be determined in `dim` dimensions: a receiver
+    has dim unknowns, a transmitter dim + 1 (its offset); one more each, so that a node is not fixed
+    exactly by its own measurements (2D: 3, 4; 3D: 4, 5)."""
+    return dim + 1, dim + 2
+
+
+def n_unknowns(n_receivers: int, n_transmitters: int, dim: int) -> int:
+    """Unknowns of a network after the gauge: 2m + 3n - 3 in 2D, 3m + 4n - 6 in 3D (solvers.refine)."""
+    return parameter_count(n_receivers, n_transmitters, dim)
+
+
+#: Measurements a node needs in the plane (receiver: 2 unknowns; transmitter: 2 + offset); see min_measurements.
+MIN_RECEIVER_MEASUREMENTS, MIN_TRANSMITTER_MEASUREMENTS = min_measurements(2)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -55,9 +69,10 @@ class Problem:
     """The measured entries between placed nodes, in a gauge-fixed parameterisation.
 
     rows, cols: placed receivers / transmitters (global indices); local receiver 0 is fixed at the
-    origin and local receiver 1 on the x axis; parameters as in solvers.refine.pack:
-    [r_1x, r_2x, r_2y, ..., s_0x, s_0y, ..., o_0, ...] (local indices). slots[k] holds the parameter
-    columns of entry k's derivatives by (r_x, r_y, s_x, s_y, o); n_params marks a fixed coordinate.
+    origin, local receiver 1 on the x axis (3D: local receiver 2 in the xy plane); parameters as in
+    solvers.refine.pack: [free receiver coordinates, s_0 (dim), s_1 (dim), ..., o_0, ...] (local indices).
+    slots[k] holds the parameter columns of entry k's derivatives by (r (dim), s (dim), o);
+    n_params marks a fixed coordinate.
     """
 
     F: np.ndarray
@@ -65,48 +80,42 @@ class Problem:
     cols: np.ndarray
     ii: np.ndarray  # local receiver index per entry
     jj: np.ndarray  # local transmitter index per entry
-    slots: np.ndarray  # (k, 5)
+    slots: np.ndarray  # (k, 2 dim + 1)
+    dim: int = 2
 
     @property
     def n_params(self) -> int:
-        return 2 * len(self.rows) + 3 * len(self.cols) - 3
+        return n_unknowns(len(self.rows), len(self.cols), self.dim)
 
     def slots_of(self, receivers: bool) -> np.ndarray:
-        """Parameter columns of each local receiver's (x, y), or each transmitter's (x, y, offset);
-        n_params marks a fixed gauge coordinate."""
-        ma, na, u = len(self.rows), len(self.cols), self.n_params
-        k0 = 1 + 2 * (ma - 2)
-        if receivers:
-            out = np.full((ma, 2), u)
-            if ma > 1:
-                out[1, 0] = 0
-            out[2:] = 1 + np.arange(2 * (ma - 2)).reshape(ma - 2, 2)
-            return out
-        j = np.arange(na)
-        return np.stack([k0 + 2 * j, k0 + 2 * j + 1, k0 + 2 * na + j], axis=1)
+        """Parameter columns of each local receiver's coordinates (ma, dim), or each transmitter's
+        (coordinates, offset) (na, dim + 1); n_params marks a fixed gauge coordinate."""
+        return _slot_tables(len(self.rows), len(self.cols), self.dim)[0 if receivers else 1]
 
 
-def make_problem(F: np.ndarray, use: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> Problem:
-    ma, na = len(rows), len(cols)
-    n_params = 2 * ma + 3 * na - 3
+def _slot_tables(ma: int, na: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """(receiver slots (ma, dim), transmitter slots (na, dim + 1)) of the solvers.refine.pack layout."""
+    u = n_unknowns(ma, na, dim)
+    free = _free_receiver_coordinates(ma, dim)
+    rs = np.full(ma * dim, u)
+    rs[free] = np.arange(len(free))
+    k0 = len(free)
+    j = np.arange(na)
+    ts = np.column_stack([k0 + dim * j + a for a in range(dim)] + [k0 + dim * na + j]) if na else \
+        np.zeros((0, dim + 1), int)
+    return rs.reshape(ma, dim), ts.reshape(na, dim + 1)
+
+
+def make_problem(F: np.ndarray, use: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, dim: int) -> Problem:
+    """The entries `use` between receivers `rows` and transmitters `cols` (the first dim rows fix the gauge)."""
     ii, jj = np.nonzero(use[np.ix_(rows, cols)])
-    k0 = 1 + 2 * (ma - 2)
-    rx = np.where(ii == 0, n_params, np.where(ii == 1, 0, 1 + 2 * (ii - 2)))
-    ry = np.where(ii >= 2, 2 + 2 * (ii - 2), n_params)
-    slots = np.stack([rx, ry, k0 + 2 * jj, k0 + 2 * jj + 1, k0 + 2 * na + jj], axis=1)
-    return Problem(F[np.ix_(rows, cols)], rows, cols, ii, jj, slots)
+    rs, ts = _slot_tables(len(rows), len(cols), dim)
+    slots = np.concatenate([rs[ii], ts[jj]], axis=1)
+    return Problem(F[np.ix_(rows, cols)], rows, cols, ii, jj, slots, dim)
 
 
 def unpack(x: np.ndarray, p: Problem):
-    from ..refine import unpack as _unpack  # the same parameter layout as solvers.refine
-
-    return _unpack(x, len(p.rows), len(p.cols))
-
-
-def pack(R, S, O) -> np.ndarray:
-    from ..refine import pack as _pack
-
-    return _pack(R, S, O)
+    return _unpack(x, len(p.rows), len(p.cols), p.dim)  # the parameter layout of solvers.refine
 
 
 def entry_residuals(x: np.ndarray, p: Problem):
@@ -118,7 +127,7 @@ def entry_residuals(x: np.ndarray, p: Problem):
 
 
 def jacobian_values(diff: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """(k, 5) derivatives of e_k by (r_x, r_y, s_x, s_y, o) of its receiver and transmitter."""
+    """(k, 2 dim + 1) derivatives of e_k by (r, s, o) of its receiver and transmitter."""
     u = diff / np.maximum(dist, 1e-300)[:, None]
     return np.column_stack([-u, u, -np.ones(len(dist))])
 
@@ -131,7 +140,7 @@ def dense_jacobian(p: Problem, diff: np.ndarray, dist: np.ndarray) -> np.ndarray
 
 
 def normal_equations(p: Problem, diff, dist, w, e) -> tuple[np.ndarray, np.ndarray]:
-    """J^T W J and J^T W e, accumulated from the 5 non-zeros per row (no sparse matrices)."""
+    """J^T W J and J^T W e, accumulated from the 2 dim + 1 non-zeros per row (no sparse matrices)."""
     v = jacobian_values(diff, dist)
     size = p.n_params + 1
     idx = (p.slots[:, :, None] * size + p.slots[:, None, :]).ravel()
@@ -228,28 +237,41 @@ class Refined:
 
 
 def gauge_order(R: np.ndarray, use: np.ndarray) -> np.ndarray:
-    """Placed receivers, the two gauge receivers first: the first two (by index) with at least
-    MIN_RECEIVER_MEASUREMENTS entries in `use` (else the first two placed), then the rest by index.
+    """Placed receivers, the dim gauge receivers first, then the rest by index.
 
+    The gauge receivers are the first (by index) with at least min_measurements(dim) entries in `use`
+    (else the first placed); in 3D the third is the first such receiver off the line of the first two
+    (by more than 1e-6 of the network's extent), else the next one.
     A gauge receiver whose own position the data do not fix would leave the whole network free to
     rotate about it (a rank-deficient fit that wanders off).
     """
+    dim = R.shape[1]
     placed = np.flatnonzero(np.isfinite(R[:, 0]))
-    good = placed[use[placed].sum(axis=1) >= MIN_RECEIVER_MEASUREMENTS]
-    first = list(good[:2]) if len(good) >= 2 else list(placed[:2])
-    return np.array(first + [i for i in placed if i not in first], dtype=int)
+    good = placed[use[placed].sum(axis=1) >= min_measurements(dim)[0]]
+    pool = list(good) if len(good) >= dim else list(placed)
+    first = pool[:2]
+    if dim == 3 and len(first) == 2:
+        a, b = R[first[0]], R[first[1]]
+        axis = (b - a) / max(float(np.linalg.norm(b - a)), 1e-300)
+        extent = max(float(np.nanmax(np.abs(R[placed] - a))), 1e-300)
+        rest = pool[2:]
+        off = [i for i in rest if np.linalg.norm(np.cross(R[i] - a, axis)) > 1e-6 * extent]
+        first += (off or rest)[:1]
+    first = np.array(first, dtype=int)
+    return np.concatenate([first, placed[~np.isin(placed, first)]]).astype(int)
 
 
 def _gauged_problem(F, use, R, S, O):
     """(problem, x) on the entries `use` between placed nodes, or None if the gauge cannot be fixed."""
+    dim = R.shape[1]
     placed_r = gauge_order(R, use)
     placed_t = np.flatnonzero(np.isfinite(S[:, 0]))
-    if len(placed_r) < 2 or len(placed_t) < 1:
+    if len(placed_r) < dim or len(placed_t) < 1:
         return None
     gauged = to_gauge(R[placed_r], S[placed_t])
     if gauged is None:
         return None
-    p = make_problem(F, use, placed_r, placed_t)
+    p = make_problem(F, use, placed_r, placed_t, dim=dim)
     return p, pack(gauged[0], gauged[1], O[placed_t])
 
 
@@ -358,8 +380,9 @@ class AdjustmentStatistics:
         return e, h
 
     def node_std(self, m: int, n: int):
-        """(receiver_std (m,), transmitter_std (n,), offset_std (n,)): sqrt(var_x + var_y), the offset's
-        std; inf for a coordinate in the null space, NaN for a node not in the fit."""
+        """(receiver_std (m,), transmitter_std (n,), offset_std (n,)): the square root of the sum of the
+        coordinates' variances, the offset's std; inf for a coordinate in the null space, NaN for a node
+        not in the fit."""
         var = self.sigma**2 * np.diag(self.Ninv)[:-1].copy()
         var[self.null] = np.inf
         var = np.append(var, 0.0)  # fixed gauge coordinates
@@ -367,8 +390,8 @@ class AdjustmentStatistics:
         rstd, tstd, ostd = np.full(m, np.nan), np.full(n, np.nan), np.full(n, np.nan)
         rs, ts = p.slots_of(True), p.slots_of(False)
         rstd[p.rows] = np.sqrt(var[rs].sum(axis=1))
-        tstd[p.cols] = np.sqrt(var[ts[:, :2]].sum(axis=1))
-        ostd[p.cols] = np.sqrt(var[ts[:, 2]])
+        tstd[p.cols] = np.sqrt(var[ts[:, : p.dim]].sum(axis=1))
+        ostd[p.cols] = np.sqrt(var[ts[:, p.dim]])
         return rstd, tstd, ostd
 
     def external_reliability(self, m: int, n: int, chunk: int = 2048):
@@ -378,15 +401,15 @@ class AdjustmentStatistics:
         p = self.problem
         _, diff, dist = entry_residuals(self.x, p)
         v = jacobian_values(diff, dist)
-        rs, ts = p.slots_of(True), p.slots_of(False)[:, :2]
-        node_slots = np.vstack([rs, ts])  # (nodes, 2)
+        rs, ts = p.slots_of(True), p.slots_of(False)[:, : p.dim]
+        node_slots = np.vstack([rs, ts])  # (nodes, dim)
         best = np.zeros(len(node_slots))
         finite = np.flatnonzero(np.isfinite(self.mdb))
         for start in range(0, len(finite), chunk):
             k = finite[start : start + chunk]
             # shift of every parameter: N^-1[:, slots_k] v_k mdb_k  -> (n_params + 1, len(k))
             shift = np.einsum("pkc,kc->pk", self.Ninv[:, p.slots[k]], v[k] * self.mdb[k, None])
-            disp = np.hypot(shift[node_slots[:, 0]], shift[node_slots[:, 1]])  # (nodes, len(k))
+            disp = np.sqrt(np.sum(shift[node_slots] ** 2, axis=1))  # (nodes, len(k))
             best = np.maximum(best, disp.max(axis=1))
         rel_r, rel_t = np.full(m, np.nan), np.full(n, np.nan)
         rel_r[p.rows] = best[: len(rs)]
@@ -450,8 +473,8 @@ def estimate_covariance(F, use, R, S, O, sigma: float):
     """Gauge-fixed covariance sigma^2 (J^T J)^-1 on the entries `use`, reduced to per-node stds.
 
     Returns (receiver_std (m,), transmitter_std (n,), offset_std (n,), rank_deficient). Position std
-    = sqrt(var_x + var_y); parameters in the null space of J (not determined) get inf; nodes not
-    placed get NaN. Gauge: first placed receiver fixed, second placed receiver's y fixed.
+    = sqrt of the sum of the coordinates' variances; parameters in the null space of J (not
+    determined) get inf; nodes not placed get NaN. Gauge: that of gauge_order and to_gauge.
     """
     m, n = F.shape
     st = adjustment_statistics(F, use, R, S, O, sigma) if use.any() else None

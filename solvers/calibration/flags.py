@@ -1,9 +1,9 @@
-"""Flags: what the data cannot decide (collinear nodes, mirror positions, alternative hypotheses)."""
+"""Flags: what the data cannot decide (collinear or coplanar nodes, mirror positions, alternative hypotheses)."""
 from __future__ import annotations
 
 import numpy as np
 
-from .adjustment import robust_refine
+from .adjustment import n_unknowns, robust_refine
 from .placement import _node_residuals
 from .scoring import _Model, _residual_matrix
 
@@ -14,41 +14,43 @@ from .scoring import _Model, _residual_matrix
 
 
 def _principal_ratio(P: np.ndarray) -> float:
-    """Smaller / larger principal spread of a point set (0 = collinear)."""
+    """Smallest / largest principal spread of a point set: 0 when the points lie on a line (2D) or in a
+    plane (3D), the hyperplane across which a node they measure has a mirror image."""
     P = P[np.isfinite(P[:, 0])]
-    if len(P) < 3:
+    if len(P) < P.shape[1] + 1:
         return 0.0
     s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
-    return float(s[1] / s[0]) if s[0] > 0 else 0.0
+    return float(s[-1] / s[0]) if s[0] > 0 else 0.0
 
 
-def _reflect_across_line(x: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """Reflection of point x across the principal line of the points P."""
+def _reflect_across_hyperplane(x: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Reflection of point x across the principal hyperplane of the points P (a line in 2D, a plane in 3D)."""
     c = P.mean(axis=0)
     _, _, Vt = np.linalg.svd(P - c)
-    d = Vt[0]
+    normal = Vt[-1]  # full_matrices: defined for as few points as the hyperplane needs
     v = x - c
-    return c + 2.0 * (v @ d) * d - v
+    return x - 2.0 * (v @ normal) * normal
 
 
 def _mirror_alternatives(F, inl, R, S, O) -> list[tuple[str, int, np.ndarray, float, float]]:
-    """For every placed node: its mirror image across the principal line of its inlier partners,
-    re-fitted to those measurements by Gauss-Newton (partners fixed).
+    """For every placed node: its mirror image across the principal hyperplane (2D: line, 3D: plane) of
+    its inlier partners, re-fitted to those measurements by Gauss-Newton (partners fixed).
 
-    Returns (kind "receiver"/"transmitter", index, alternative (x, y[, offset]), SSR of the
+    Returns (kind "receiver"/"transmitter", index, alternative (coordinates[, offset]), SSR of the
     alternative, SSR of the current position) per node with enough partners (flip ambiguity).
     """
     out = []
+    dim = R.shape[1]
     for kind, X, partners in (("receiver", R, S), ("transmitter", np.column_stack([S, O]), R)):
         with_offset = kind == "transmitter"
         for k in np.flatnonzero(np.isfinite(X[:, 0])):
             idx = np.flatnonzero(inl[:, k] if with_offset else inl[k])
-            if len(idx) < (3 if with_offset else 2):
+            if len(idx) < (dim + 1 if with_offset else dim):
                 continue
             G = F[idx, k] if with_offset else F[k, idx] - O[idx]
             P = partners[idx]
             alt = X[k].copy()
-            alt[:2] = _reflect_across_line(X[k, :2], P)
+            alt[:dim] = _reflect_across_hyperplane(X[k, :dim], P)
             for _ in range(8):
                 e, diff, dist = _node_residuals(alt, G, P, with_offset)
                 u = diff / np.maximum(dist, 1e-300)[:, None]
@@ -61,16 +63,19 @@ def _mirror_alternatives(F, inl, R, S, O) -> list[tuple[str, int, np.ndarray, fl
 
 
 def _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor) -> list[str]:
-    """Nodes whose mirror image across the line of their partners fits nearly as well."""
+    """Nodes whose mirror image across the line (3D: plane) of their partners fits nearly as well."""
     out = []
     var = max(sigma, floor) ** 2
+    dim = R.shape[1]
+    across = "line" if dim == 2 else "plane"
     for kind, k, alt, ssr_alt, ssr_now in _mirror_alternatives(F, inl, R, S, O):
         X, std = (R, rstd) if kind == "receiver" else (S, tstd)
         delta = (ssr_alt - ssr_now) / var
-        apart = np.linalg.norm(alt[:2] - X[k]) > max(3.0 * np.nan_to_num(std[k], nan=0.0, posinf=0.0), 1e3 * floor)
+        apart = np.linalg.norm(alt[:dim] - X[k]) > max(3.0 * np.nan_to_num(std[k], nan=0.0, posinf=0.0), 1e3 * floor)
         if apart and delta < opts.ambiguity_chi2:
             partners = "transmitters" if kind == "receiver" else "receivers"
-            out.append(f"{kind} {k + 1}: its mirror position ({alt[0]:.4g}, {alt[1]:.4g}) across the line of its "
+            where = ", ".join(f"{v:.4g}" for v in alt[:dim])
+            out.append(f"{kind} {k + 1}: its mirror position ({where}) across the {across} of its "
                        f"{partners} fits its measurements as well (cost {delta:+.2g} sigma^2)")
     return out
 
@@ -90,8 +95,16 @@ def _repair_flips(F, inl, R, S, O, sigma, floor):
             if kind == "receiver":
                 R[k] = alt
             else:
-                S[k], O[k] = alt[:2], alt[2]
+                S[k], O[k] = alt[: R.shape[1]], alt[R.shape[1]]
     return R, S, O, changed
+
+
+#: Directions of the jumps of _probe_basins: 8 in the plane; in space the 6 axes and 8 diagonals.
+_PROBE_DIRECTIONS = {
+    2: np.column_stack([np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4)]),
+    3: np.vstack([np.vstack([np.eye(3), -np.eye(3)]),
+                  np.array([[a, b, c] for a in (1, -1) for b in (1, -1) for c in (1, -1)]) / np.sqrt(3.0)]),
+}
 
 
 def _probe_basins(F, work, inl, R, S, O, sigma, opts):
@@ -99,7 +112,7 @@ def _probe_basins(F, work, inl, R, S, O, sigma, opts):
     measurements were rejected (a gross error pulls its node during the robust stage; the refit
     without it can stay in that basin: a simulated room left a receiver 22 cm off, every node 12-15
     std off, at a minimum 6 sigma^2 above the truth's). Each such node (fewest inliers first, at most
-    `probe_nodes`) jumps by `probe_radii` x the network's spread in 8 directions; least squares on the
+    `probe_nodes`) jumps by `probe_radii` x the network's spread in 8 directions (3D: 14, _PROBE_DIRECTIONS); least squares on the
     inliers follows. Returns (R, S, O, better, alternative): the best minimum found (`better` when it
     beats the answer by more than sigma^2), and a distinct minimum within ambiguity_chi2 sigma^2 of
     it, as (extra cost in sigma^2, node label), or None.
@@ -108,8 +121,8 @@ def _probe_basins(F, work, inl, R, S, O, sigma, opts):
     rejected = work & ~inl & placed_r[:, None] & placed_t[None, :]
     nodes = [("r", i, int(inl[i].sum())) for i in np.flatnonzero(rejected.any(axis=1))]
     nodes += [("s", j, int(inl[:, j].sum())) for j in np.flatnonzero(rejected.any(axis=0))]
-    n_params = 2 * int(placed_r.sum()) + 3 * int(placed_t.sum()) - 3
-    dof = int(inl.sum()) - n_params
+    dim = R.shape[1]
+    dof = int(inl.sum()) - n_unknowns(int(placed_r.sum()), int(placed_t.sum()), dim)
     if not nodes or dof < 1:
         return R, S, O, False, None
     nodes = sorted(nodes, key=lambda t: t[2])[: opts.probe_nodes]
@@ -127,10 +140,10 @@ def _probe_basins(F, work, inl, R, S, O, sigma, opts):
     found = [(ssr0, "", (R, S, O))]
     for kind, k, _ in nodes:
         for radius in opts.probe_radii:
-            for a in np.arange(8) * (np.pi / 4):
+            for direction in _PROBE_DIRECTIONS[dim]:
                 R2, S2 = R.copy(), S.copy()
                 X = R2 if kind == "r" else S2
-                X[k] += radius * spread * np.array([np.cos(a), np.sin(a)])
+                X[k] += radius * spread * direction
                 ls = robust_refine(F, work, R2, S2, O, loss="linear", max_iter=opts.max_iterations, use=inl)
                 found.append((ssr_of(ls.R, ls.S, ls.O), f"{'receiver' if kind == 'r' else 'transmitter'} {k + 1}",
                               (ls.R, ls.S, ls.O)))
@@ -164,9 +177,12 @@ def _distinct(a: _Model, b: _Model, tol: float) -> bool:
 
 
 def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, search, best, sigma_given, rms,
-           already=()):
-    """Warnings for what the data cannot decide (see CalibrationResult.warnings)."""
+           already=()) -> tuple[list[str], list[str]]:
+    """(warnings, undecided): warnings for what the data cannot decide (see CalibrationResult.warnings),
+    and among them those that leave two answers the data do not tell apart (a node's mirror image, an
+    alternative calibration of similar cost): the status is then "ambiguous", never "ok"."""
     out = []
+    undecided: list[str] = []
     placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
     for i in np.flatnonzero(~placed_r & work.any(axis=1)):
         if not any(w.startswith(f"receiver {i + 1}: ") for w in already):
@@ -174,33 +190,42 @@ def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, sea
     for j in np.flatnonzero(~placed_t & work.any(axis=0)):
         if not any(w.startswith(f"transmitter {j + 1}: ") for w in already):
             out.append(f"transmitter {j + 1}: could not be placed from its measurements")
+    dim = R.shape[1]
+    shape, across = ("collinear", "line") if dim == 2 else ("coplanar", "plane")
     ratio = _principal_ratio(R)
     if ratio < opts.collinear_ratio:
-        out.append(f"receivers are nearly collinear (spread ratio {ratio:.2g}): transmitters have mirror "
-                   "positions across their line that fit about as well")
+        out.append(f"receivers are nearly {shape} (spread ratio {ratio:.2g}): transmitters have mirror "
+                   f"positions across their {across} that fit about as well")
     ratio = _principal_ratio(S)
     if ratio < opts.collinear_ratio:
-        out.append(f"transmitters are nearly collinear (spread ratio {ratio:.2g}): receivers have mirror "
-                   "positions across their line that fit about as well")
+        out.append(f"transmitters are nearly {shape} (spread ratio {ratio:.2g}): receivers have mirror "
+                   f"positions across their {across} that fit about as well")
     n_in, rejected = int(inl.sum()), int((work & ~inl & placed_r[:, None] & placed_t[None, :]).sum())
-    redundancy = n_in - (2 * int(placed_r.sum()) + 3 * int(placed_t.sum()) - 3)
+    redundancy = n_in - n_unknowns(int(placed_r.sum()), int(placed_t.sum()), dim)
     if rejected and redundancy <= 3 * rejected:
         out.append(f"low redundancy: {n_in} inliers for {n_in - redundancy} unknowns with {rejected} measurements "
                    "rejected; another choice of rejected measurements may fit as well")
     if deficient:
         out.append("the Jacobian on the inliers is rank-deficient: some coordinates are not determined by the data "
                    "(their std is inf)")
-    out += _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor)
+    mirrors = _mirror_warnings(F, inl, R, S, O, sigma, rstd, tstd, opts, floor)
+    out += mirrors
+    if mirrors:
+        undecided.append(f"{len(mirrors)} node(s) have a mirror position that fits their measurements as well "
+                         f"(first: {mirrors[0]})")
     # An alternative hypothesis (after local optimisation) of similar cost that is a different network.
     var = max(sigma, floor) ** 2
     best_cost = float(np.sum(np.minimum(_residual_matrix(F, R, S, O)[work] ** 2, (opts.threshold_sigmas ** 2) * var)))
+    answer = _Model(R, S, O, best_cost, 0.0)  # the final answer, not the search's best hypothesis before it
     for other in search.others:
         E = _residual_matrix(F, other.R, other.S, other.O)[work]
         cost = float(np.sum(np.minimum(np.nan_to_num(E, nan=np.inf) ** 2, (opts.threshold_sigmas ** 2) * var)))
-        if (cost - best_cost) / var < opts.ambiguity_chi2 and _distinct(other, best, 1e-3):
-            out.append(f"an alternative calibration fits nearly as well (cost +{(cost - best_cost) / var:.2g} sigma^2); "
-                       "the data may not decide between them")
+        if (cost - best_cost) / var < opts.ambiguity_chi2 and _distinct(other, answer, 1e-3):
+            note = (f"an alternative calibration fits nearly as well (cost +{(cost - best_cost) / var:.2g} sigma^2); "
+                    "the data may not decide between them")
+            out.append(note)
+            undecided.append(note)
             break
     if sigma_given is not None and sigma_given > 0 and rms > 3.0 * sigma_given:
         out.append(f"the inlier RMS {rms:.3g} is {rms / sigma_given:.1f} x the given sigma; is sigma right?")
-    return out
+    return out, undecided

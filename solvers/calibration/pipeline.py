@@ -14,9 +14,11 @@ from .adjustment import (
     critical_value,
     gauge_order,
     make_problem,
+    min_measurements,
+    n_unknowns,
     robust_refine,
 )
-from .flags import _flags, _probe_basins, _repair_flips
+from .flags import _flags, _principal_ratio, _probe_basins, _repair_flips
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
@@ -24,11 +26,11 @@ from .sampling import _ransac, available_solvers
 from .scoring import MAD_TO_SIGMA, _Model, _prune, _residual_matrix, _score, _Search
 
 
-def _failed(F, message, t0, seed, search: _Search | None = None, warnings=()) -> CalibrationResult:
+def _failed(F, message, t0, seed, search: _Search | None = None, warnings=(), dim: int = 2) -> CalibrationResult:
     m, n = F.shape
     nan = np.full
     return CalibrationResult(
-        status="failed", message=message, receivers=nan((m, 2), np.nan), transmitters=nan((n, 2), np.nan),
+        status="failed", message=message, receivers=nan((m, dim), np.nan), transmitters=nan((n, dim), np.nan),
         offsets=nan(n, np.nan), inliers=np.zeros((m, n), bool), residuals=nan((m, n), np.nan), rms=float("nan"),
         sigma=float("nan"), sigma_estimated=True, receiver_std=nan(m, np.nan), transmitter_std=nan(n, np.nan),
         offset_std=nan(n, np.nan), warnings=tuple(warnings),
@@ -57,9 +59,10 @@ def _check_input(F) -> np.ndarray:
     return arr
 
 
-def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
+def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None = 0,
               options: CalibrationOptions | None = None) -> CalibrationResult:
-    """Calibrate a 2D TDOA network from measurements F[i, j] = |r_i - s_j| + o_j (+ noise, gross errors).
+    """Calibrate a TDOA network in the plane or in space from measurements F[i, j] = |r_i - s_j| + o_j
+    (+ noise, gross errors).
 
     Parameters
     ----------
@@ -68,6 +71,8 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
     sigma : noise standard deviation of the inlier measurements (units of F), > 0; None = estimate it
         from the residuals of the final least-squares fit (SSR / redundancy), never from a fit without
         redundancy: with too little redundancy the status says so and asks for sigma.
+    dim : 2 (the plane) or 3 (space); one pipeline for both. 3D gauge: r_1 = 0, r_2 on +x, r_3 in the xy
+        half-plane y > 0; the mirror z -> -z cannot be decided by distances (the answer is one of two).
     seed : seed of numpy.random.default_rng for the sampling; the same seed gives the same result.
     options : CalibrationOptions (thresholds, test levels, RANSAC budget, loss).
 
@@ -75,7 +80,7 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
     -------
     CalibrationResult; its `status` says what was checked (see there). Never raises for data that
     merely cannot be calibrated; raises ValueError for malformed input (not 2-D, not numeric, infinite
-    values) or a sigma that is not a finite positive number.
+    values), a sigma that is not a finite positive number, or a dim other than 2 or 3.
 
     Reference: the paper's pipeline (Sec. 3) inside LO-RANSAC with extension and robust refinement
     (Larsson et al., EUSIPCO 2021); the final adjustment and its tests after Baarda (1968).
@@ -86,11 +91,13 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
     if sigma is not None and not (sigma > 0 and np.isfinite(sigma)):
         raise ValueError(f"sigma must be a finite number > 0 (the noise level of real measurements is never 0; "
                          f"None estimates it), got {sigma}")
-    result = _calibrate_once(F, sigma, seed, opts, t0)
+    if dim not in (2, 3) or isinstance(dim, bool):
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    result = _calibrate_once(F, sigma, seed, opts, t0, dim)
     rejected = int((np.isfinite(F) & ~result.inliers).sum()) if result.status != "failed" else 0
     if opts.stability_check and rejected and result.status not in ("failed", "unconverged"):
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
-        other = _calibrate_once(F, sigma, seed2, opts, t0)
+        other = _calibrate_once(F, sigma, seed2, opts, t0, dim)
         if other.status != "failed" and _differs(result, other):
             cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, 1e-9 * _data_scale(F, np.isfinite(F)))
             unusable = ("failed", "unconverged", "inconsistent")
@@ -110,7 +117,25 @@ def calibrate(F, sigma: float | None = None, *, seed: int | None = 0,
                 note = (f"a second search (seed {second.seed}) found a worse answer (cost +{gap:.3g} sigma^2, {n_diff} "
                         f"measurements classified differently); this one is kept")
                 result = replace(first, warnings=first.warnings + (note,))
+    if dim == 2 and result.status in ("inconsistent", "unconverged", "failed"):
+        result = _suggest_3d(F, sigma, seed, opts, t0, result)
     return replace(result, seconds=time.perf_counter() - t0, seed=seed)
+
+
+def _suggest_3d(F, sigma, seed, opts: CalibrationOptions, t0, result: CalibrationResult) -> CalibrationResult:
+    """A 2D calibration the model does not explain: fit in 3D too, and where that passes its checks
+    (status ok: the global test with the given sigma, or an estimated sigma the spread of the data
+    supports), say so in the message (the 2D answer and its status are kept)."""
+    m, n = F.shape
+    need_r, need_t = min_measurements(3)
+    if m < need_t or n < need_r or int(np.isfinite(F).sum()) <= n_unknowns(m, n, 3):
+        return result
+    other = _calibrate_once(F, sigma, seed, replace(opts, stability_check=False), t0, 3)
+    if other.status != "ok":
+        return result
+    note = (f"the data fit a 3D network (dim=3: status ok, rms {other.rms:.3g}, sigma {other.sigma:.3g}): calibrate "
+            "with dim=3 (--dim 3)")
+    return replace(result, message=f"{result.message} - {note}", warnings=result.warnings + (note,))
 
 
 def _truncated_costs(a: CalibrationResult, b: CalibrationResult, sigma, opts: CalibrationOptions, floor: float):
@@ -188,7 +213,7 @@ def _robust_scale(F, work, best: _Model, floor, opts: CalibrationOptions):
     own entries, which fit it exactly, never set it).
     Returns (scale, statistics of the last robust fit or None)."""
     R, S, O = best.R, best.S, best.O
-    med, _, _ = _score(_residual_matrix(F, R, S, O), work, None, floor, best.redundancy)
+    med, _, _ = _score(_residual_matrix(F, R, S, O), work, None, floor, best.redundancy, dim=R.shape[1])
     s = max(MAD_TO_SIGMA * math.sqrt(med), floor) if np.isfinite(med) else floor
     st = None
     for _ in range(3):
@@ -234,7 +259,7 @@ def _snoop(F, work, R, S, O, inl, sigma, opts: CalibrationOptions):
         placed = np.isfinite(R[:, 0])[:, None] & np.isfinite(S[:, 0])[None, :]
         cand = work & ~inl & placed
         if cand.any():
-            q = make_problem(F, cand, st.problem.rows, st.problem.cols)
+            q = make_problem(F, cand, st.problem.rows, st.problem.cols, dim=st.problem.dim)
             if len(q.ii):
                 e, h = st.hat(q)
                 wq = e / (st.sigma * np.sqrt(1.0 + h))
@@ -402,7 +427,7 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
     if passed:
         return R, S, O, use, converged, "all data"
     n_fit = int(use.sum())
-    dof_all = n_fit - (2 * int(np.isfinite(R[:, 0]).sum()) + 3 * int(np.isfinite(S[:, 0]).sum()) - 3)
+    dof_all = n_fit - n_unknowns(int(np.isfinite(R[:, 0]).sum()), int(np.isfinite(S[:, 0]).sum()), R.shape[1])
     if sigma is None and dof_all < opts.min_dof_for_sigma:
         # Too little redundancy to estimate sigma robustly: a robust fit would explain a subset exactly
         # and call the rest outliers. Only classic data snooping from the all-data fit remains: the
@@ -418,7 +443,7 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
         fin = _polish(F, work, R, S, O, thr, floor, opts, rng, opts.max_iterations, rounds=4)
     # converged: that of the final least squares (the robust stage only warm-starts it)
     R2, S2, O2, inl, converged = _snoop(F, work, fin.R, fin.S, fin.O, fin.inliers, sigma, opts)
-    kept_dof = int(inl.sum()) - (2 * int(np.isfinite(R2[:, 0]).sum()) + 3 * int(np.isfinite(S2[:, 0]).sum()) - 3)
+    kept_dof = int(inl.sum()) - n_unknowns(int(np.isfinite(R2[:, 0]).sum()), int(np.isfinite(S2[:, 0]).sum()), R2.shape[1])
     if sigma is None and kept_dof < opts.min_dof_for_sigma:
         # The robust route kept too little redundancy to say what the noise is: its rejections rest on a
         # scale it cannot estimate. Only classic snooping from the all-data fit is justified.
@@ -427,29 +452,31 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
     return R2, S2, O2, inl, converged, "robust"
 
 
-def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> CalibrationResult:
+def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int) -> CalibrationResult:
     m, n = F.shape
     mask = np.isfinite(F)
     rng = np.random.default_rng(seed)
     warnings: list[str] = []
+    need_r, need_t = min_measurements(dim)
 
-    rows_ok, cols_ok = _prune(mask)
+    rows_ok, cols_ok = _prune(mask, dim)
     for i in np.flatnonzero(~rows_ok):
         warnings.append(f"receiver {i + 1}: only {int(mask[i].sum())} measured transmitters usable "
-                        f"(needs {3}); not placed")
+                        f"(needs {need_r}); not placed")
     for j in np.flatnonzero(~cols_ok):
         warnings.append(f"transmitter {j + 1}: only {int(mask[:, j].sum())} measured receivers usable "
-                        f"(needs {4}); not placed")
+                        f"(needs {need_t}); not placed")
     work = mask & rows_ok[:, None] & cols_ok[None, :]
-    n_params = 2 * int(rows_ok.sum()) + 3 * int(cols_ok.sum()) - 3
-    if rows_ok.sum() < 3 or cols_ok.sum() < 3 or work.sum() < n_params:
+    n_params = n_unknowns(int(rows_ok.sum()), int(cols_ok.sum()), dim)
+    if rows_ok.sum() < need_r or cols_ok.sum() < need_r or work.sum() < n_params:
         hint = ""
-        if m < 4 <= n or n < 4 <= m:
-            hint = (f" ({m} receivers x {n} transmitters: a network needs >= 3 receivers with >= 3 transmitters each "
-                    "and transmitters with >= 4 receivers each; is the matrix transposed?)")
+        if m < need_t <= n or n < need_t <= m:
+            hint = (f" ({m} receivers x {n} transmitters: a {dim}D network needs >= {need_r} receivers with >= "
+                    f"{need_r} transmitters each and transmitters with >= {need_t} receivers each; is the matrix "
+                    "transposed?)")
         return _failed(F, f"too few measurements: {int(work.sum())} usable entries between {int(rows_ok.sum())} "
                        f"receivers and {int(cols_ok.sum())} transmitters for {max(n_params, 0)} unknowns{hint}",
-                       t0, seed, warnings=warnings)
+                       t0, seed, warnings=warnings, dim=dim)
 
     data_scale = _data_scale(F, work)
     floor = 1e-9 * data_scale
@@ -462,11 +489,11 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng, memo)
         return fits[id(model)][-1]
 
-    best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(), accept,
-                           0.0 if sigma is not None else opts.confirm_outliers)
+    best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(dim), accept,
+                           0.0 if sigma is not None else opts.confirm_outliers, dim=dim)
     if best is None:
         return _failed(F, "no hypothesis: every minimal-solver sample and sub-network fit failed (degenerate geometry?)",
-                       t0, seed, search, warnings)
+                       t0, seed, search, warnings, dim=dim)
 
     notes: list[str] = []
     R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)), notes)
@@ -481,11 +508,11 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
     E = _residual_matrix(F, R, S, O)
     rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
 
-    # Gauge of the report: receiver 1 at 0 and receiver 2 on +x, or the first two receivers with
-    # enough inliers (see gauge_order); the statistics use the same gauge.
+    # Gauge of the report: receiver 1 at 0 and receiver 2 on +x (3D: receiver 3 in the xy half-plane
+    # y > 0), or the first receivers with enough inliers (see gauge_order); the statistics use it too.
     placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
     order = gauge_order(R, inl)
-    gauged = to_gauge(R[order], S[placed_t]) if len(order) >= 2 else None
+    gauged = to_gauge(R[order], S[placed_t]) if len(order) >= dim else None
     if gauged is not None:
         R[order], S[placed_t] = gauged
     st = adjustment_statistics(F, inl, R, S, O, sigma, alpha=opts.alpha, power=opts.power,
@@ -504,7 +531,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         redundancy[i, j], w_test[i, j], mdb[i, j] = st.redundancy, st.w, st.mdb
         cand = work & ~inl & placed_r[:, None] & placed_t[None, :]
         if cand.any():
-            q = make_problem(F, cand, st.problem.rows, st.problem.cols)
+            q = make_problem(F, cand, st.problem.rows, st.problem.cols, dim=dim)
             e, h = st.hat(q)
             w_test[q.rows[q.ii], q.cols[q.jj]] = e / (st.sigma * np.sqrt(1.0 + h))
         uncontrolled = np.zeros((m, n), bool)
@@ -522,11 +549,27 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         deficient = True if st is None else st.deficient
         rstd = np.where(placed_r, rstd, np.nan)
         tstd, ostd = np.where(placed_t, tstd, np.nan), np.where(placed_t, ostd, np.nan)
-    warnings += _flags(F, work, inl, R, S, O, sig_cov, rstd, tstd, opts, floor, deficient, search, best,
-                       sigma, rms, already=tuple(warnings))
+    flagged, undecided = _flags(F, work, inl, R, S, O, sig_cov, rstd, tstd, opts, floor, deficient, search, best,
+                                sigma, rms, already=tuple(warnings))
+    warnings += flagged
 
     # Status: the most severe finding; each one also becomes the first warnings, in order.
     found: list[tuple[str, str]] = []
+    # Degenerate geometry first: it explains the findings that follow (an unconverged or rank-deficient fit).
+    enough = placed_r.sum() > dim and placed_t.sum() > dim  # the shapes below mean something
+    flat_all = _principal_ratio(np.vstack([R[placed_r], S[placed_t]])) if dim == 3 and enough else 1.0
+    shape, across = ("collinear", "line") if dim == 2 else ("coplanar", "plane")
+    if flat_all < opts.collinear_ratio:
+        found.append(("ambiguous", f"every node lies nearly in one plane (spread ratio {flat_all:.2g}): the data are "
+                      "planar, each node's mirror image across that plane fits as well; calibrate in 2D (dim=2, "
+                      "--dim 2)"))
+    else:
+        for kind, other, P in (("receivers", "transmitter", R[placed_r]), ("transmitters", "receiver", S[placed_t])):
+            ratio = _principal_ratio(P)
+            if enough and ratio < opts.collinear_ratio:
+                found.append(("ambiguous", f"the {kind} are nearly {shape} (spread ratio {ratio:.2g}): every {other}'s "
+                              f"mirror image across their {across} fits its measurements as well; the data cannot "
+                              "decide the side"))
     if not converged:
         found.append(("unconverged", "the refinement did not converge within its iteration budget"))
     spread = float(np.nanmax(np.abs(np.vstack([R[placed_r], S[placed_t]])))) if placed_r.any() else np.inf
@@ -545,6 +588,8 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
     if sigma is None and st is not None and np.isfinite(st.sigma_post) and st.sigma_post > 0.02 * max(spread_f, 1e-300):
         found.append(("inconsistent", f"the estimated noise {st.sigma_post:.3g} is {100 * st.sigma_post / spread_f:.0f} % "
                       "of the spread of the data: the model does not fit (transposed matrix, wrong units, not TDOA data?)"))
+    for note in undecided:
+        found.append(("ambiguous", note))
     if other_minimum is not None:
         found.append(("ambiguous", f"a second least-squares minimum on the same inliers (reached by moving "
                       f"{other_minimum[1]}) fits within {other_minimum[0]:.2g} sigma^2: the data do not decide"))
@@ -577,7 +622,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0) -> Calibration
         (float(st.global_statistic), float(st.global_critical), bool(st.global_passed)),
         redundancy=redundancy, w_test=w_test, critical_value=float(crit), mdb=mdb,
         receiver_reliability=rrel, transmitter_reliability=trel, uncontrolled=uncontrolled, measured=mask,
-        gauge=(int(order[0]), int(order[1])) if gauged is not None else None,
+        gauge=tuple(int(g) for g in order[:dim]) if gauged is not None else None,
     )
     return replace(res, message=_message(status, res, found[0][1] if found else route_note(route)))
 

@@ -24,38 +24,41 @@ def _solve_batched(A: np.ndarray, b: np.ndarray, rcond: float = 1e-12) -> tuple[
 def _linear_system(g: np.ndarray, P: np.ndarray, with_offset: bool) -> tuple[np.ndarray, np.ndarray]:
     """Rows of the linearised multilateration |p - P_k|^2 = (g_k - q)^2 in (p, [q,] |p|^2 - q^2).
 
-    -2 P_k.p [+ 2 g_k q] + t = g_k^2 - |P_k|^2; g (..., K), P (..., K, 2) -> A (..., K, 3|4), rhs (..., K).
+    -2 P_k.p [+ 2 g_k q] + t = g_k^2 - |P_k|^2; g (..., K), P (..., K, dim) -> A (..., K, dim + 1|2), rhs (..., K).
     """
     cols = [-2.0 * P] + ([2.0 * g[..., None]] if with_offset else []) + [np.ones(g.shape + (1,))]
     return np.concatenate(cols, axis=-1), g * g - np.einsum("...k,...k->...", P, P)
 
 
 def _node_residuals(X: np.ndarray, G: np.ndarray, P: np.ndarray, with_offset: bool):
-    """e_k = g_k - q - |p - P_k| for nodes X (..., 2|3) against partners P (K, 2); also p - P and |p - P|."""
-    diff = X[..., None, :2] - P
+    """e_k = g_k - q - |p - P_k| for nodes X (..., dim [+ 1 offset]) against partners P (K, dim); also
+    p - P and |p - P|."""
+    d = P.shape[-1]
+    diff = X[..., None, :d] - P
     dist = np.sqrt(np.einsum("...k,...k->...", diff, diff))
-    q = X[..., 2:3] if with_offset else 0.0
+    q = X[..., d : d + 1] if with_offset else 0.0
     return G - q - dist, diff, dist
 
 
 def _multilaterate(G, P, with_offset, X, c, rng, trials=24, steps=3):
     """Robust batched multilateration of nodes (rows of G) against placed partners P.
 
-    Each node solves g_k - q = |p - P_k| over its measured partners k (G finite): position p (2)
+    Each node solves g_k - q = |p - P_k| over its measured partners k (G finite): position p (dim)
     and, for a transmitter, its offset q. Nodes without an estimate (NaN rows of X) start from the
     best of the all-partner linear solution and `trials` linear solutions of random minimal subsets
-    (3 partners for a receiver, 4 for a transmitter), scored by the median e^2 (LMedS); then `steps`
-    Cauchy-IRLS Gauss-Newton steps. Nodes with too few partners keep their value.
+    (dim + 1 partners for a receiver, dim + 2 for a transmitter), scored by the median e^2 (LMedS);
+    then `steps` Cauchy-IRLS Gauss-Newton steps. Nodes with too few partners keep their value.
     """
     N, K = G.shape
-    need = 4 if with_offset else 3
+    d = P.shape[-1]
+    need = d + 2 if with_offset else d + 1
     use = np.isfinite(G)
     able = use.sum(axis=1) >= need
     X = X.copy()
     start = np.flatnonzero(able & ~np.isfinite(X[:, 0]))
     if start.size:
         Gs, us = G[start], use[start]
-        A, rhs = _linear_system(np.where(us, Gs, 0.0), np.broadcast_to(P, (len(start), K, 2)), with_offset)
+        A, rhs = _linear_system(np.where(us, Gs, 0.0), np.broadcast_to(P, (len(start), K, d)), with_offset)
         w = us.astype(float)
         full, _ = _solve_batched(np.einsum("nk,nki,nkj->nij", w, A, A), np.einsum("nk,nki,nk->ni", w, A, rhs))
         keys = rng.random((trials, len(start), K))
@@ -115,7 +118,8 @@ def _place(F, mask, R, S, O, c, rng, receivers: bool, fresh=None, refine_all=Tru
         X[new] = _multilaterate(G[new], P, not receivers, X[new], c, rng, trials)
     if receivers:
         return X, S, O
-    return R, X[:, :2].copy(), X[:, 2].copy()
+    d = R.shape[1]
+    return R, X[:, :d].copy(), X[:, d].copy()
 
 
 def _extend(F, mask, R, S, O, c, rng, sample_r, best_ratio=None, trials=10):

@@ -47,7 +47,8 @@ class CalibrationOptions:
     subnetwork_max_params, subnetwork_convergence : see subnetwork_samples
     runners_up : in a small network searched by sub-networks, this many of the best hypotheses that
         did not beat the best one before local optimisation get it afterwards
-    collinear_ratio : warn when the smaller/larger principal spread of receivers or transmitters is below
+    collinear_ratio : warn when the smallest/largest principal spread of receivers or transmitters is below
+        (2D: collinear, 3D: coplanar)
     ambiguity_chi2 : an alternative (mirror) position or hypothesis whose cost exceeds the best one by
         less than this many sigma^2 is reported as ambiguous
     alpha : level of each entry's outlier test (Baarda's alpha_0; critical value 3.29 for 0.001)
@@ -61,7 +62,7 @@ class CalibrationOptions:
         time); the result then asks for sigma
     max_snooping_rounds : refits of the data snooping (rejection / readmission) loop
     probe_nodes, probe_radii : after the adjustment, up to probe_nodes nodes with rejected measurements
-        jump by each radius (x the network's spread) in 8 directions and least squares follows: a better
+        jump by each radius (x the network's spread) in 8 directions (3D: 14) and least squares follows: a better
         minimum is taken, a distinct one about as good makes the answer ambiguous
     loo_candidates : with sigma unknown and little redundancy (below min_dof_for_sigma), the entries
         (largest linearised test statistic first) refitted without themselves to test them exactly
@@ -71,6 +72,9 @@ class CalibrationOptions:
         after as many more samples as an all-inlier sample needs at this share of gross errors (14
         for a 6 x 4 block) without a better one: a fit distorted by gross errors can pass the test
         on its own inflated scale
+    max_confirm_samples : at most this many confirming samples (confirm_outliers): a 3D block of 60
+        entries would need 98 (2D 6 x 4 blocks: 14); beyond 30 the samples cost seconds and found
+        nothing better in the 3D benchmark (tables/calibration3d.md)
     stability_check : when entries were rejected, repeat the search with a second seed and report the
         result as "ambiguous" (with the other answer) if it differs
     """
@@ -106,6 +110,7 @@ class CalibrationOptions:
     stability_check: bool = True
     unknown_sigma_outliers: float = 0.1
     confirm_outliers: float = 0.05
+    max_confirm_samples: int = 30
 
     def __post_init__(self) -> None:
         if self.loss not in _LOSSES:
@@ -139,15 +144,18 @@ class CalibrationResult:
         "unconverged": the refinement hit its budget or diverged;
         "failed": no calibration; arrays are NaN; `message` says why
     message : one line summarising the outcome
-    receivers (m, 2), transmitters (n, 2), offsets (n,) : NaN for a node that could not be placed;
-        gauge: receiver 1 at 0, receiver 2 on the positive x axis (or the first two determined receivers)
+    receivers (m, dim), transmitters (n, dim), offsets (n,) : NaN for a node that could not be placed;
+        gauge: receiver 1 at 0, receiver 2 on the positive x axis (or the first two determined
+        receivers); 3D: also receiver 3 in the xy plane with y > 0. The reflection the gauge leaves
+        free (2D: y -> -y, 3D: z -> -z) cannot be decided by distances: the answer is one of the two
     inliers : (m, n) bool, False for missing or rejected measurements
     residuals : (m, n) F - o_j - |r_i - s_j| (NaN where missing or a node is unplaced)
     rms : RMS residual over the inliers
     sigma : noise level used (given, or estimated from the inlier residuals)
     sigma_estimated : True when sigma was estimated
     receiver_std, transmitter_std, offset_std : per-node standard deviations from the gauge-fixed
-        covariance sigma^2 (J^T J)^-1 (position std = sqrt(var_x + var_y); inf if not determined)
+        covariance sigma^2 (J^T J)^-1 (position std = sqrt of the sum of the coordinates' variances;
+        inf if not determined)
     warnings : what the data cannot decide, one sentence each
     solver : labels of the minimal solvers that produced hypotheses ("subnetworks": least squares on
         sub-networks from random starts)
@@ -167,7 +175,9 @@ class CalibrationResult:
         position shift an undetected error of one entry's MDB causes in the node
     uncontrolled : (m, n) inlier entries with redundancy number below the bound (not testable)
     alternative : when status is "ambiguous", the other answer (a dict as `to_dict` gives), else None
-    gauge : (i, k), the receivers (0-based) fixed at the origin and on the positive x axis
+    gauge : (i, k) (3D: (i, k, l)), the receivers (0-based) fixed at the origin, on the positive x
+        axis (and in the xy half-plane y > 0)
+    dim : 2 or 3, the dimension of the positions
     measured : (m, n) bool, the entries of F that hold a measurement
     """
 
@@ -200,8 +210,12 @@ class CalibrationResult:
     transmitter_reliability: np.ndarray | None = None
     uncontrolled: np.ndarray | None = None
     alternative: dict | None = None
-    gauge: tuple[int, int] | None = None
+    gauge: tuple[int, ...] | None = None
     measured: np.ndarray | None = None
+
+    @property
+    def dim(self) -> int:
+        return int(self.receivers.shape[1])
 
     @property
     def ok(self) -> bool:
@@ -259,5 +273,6 @@ class CalibrationResult:
             "uncontrolled": clean(self.uncontrolled),
             "alternative": self.alternative,
             "gauge": None if self.gauge is None else [int(g) for g in self.gauge],
+            "dim": self.dim,
         }
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .adjustment import MIN_RECEIVER_MEASUREMENTS, MIN_TRANSMITTER_MEASUREMENTS, robust_refine
+from .adjustment import min_measurements, n_unknowns, robust_refine
 from .placement import _fill, _place
 from .result import CalibrationOptions
 from .scoring import MAD_TO_SIGMA, _classify, _residual_matrix, _score
@@ -20,7 +20,7 @@ def _replace_weak(F, mask, R, S, O, t, rng):
     changed = False
     for receivers in (True, False):
         inl = _classify(_residual_matrix(F, R, S, O), mask, t)
-        axis, minimum = (1, MIN_RECEIVER_MEASUREMENTS) if receivers else (0, MIN_TRANSMITTER_MEASUREMENTS)
+        axis, minimum = (1, min_measurements(R.shape[1])[0]) if receivers else (0, min_measurements(R.shape[1])[1])
         placed = np.isfinite(R[:, 0]) if receivers else np.isfinite(S[:, 0])
         weak = placed & (inl.sum(axis=axis) < np.maximum(minimum, 0.75 * mask.sum(axis=axis)))
         if not weak.any():
@@ -48,8 +48,8 @@ class _Polished:
 
 
 def _n_params(R, S) -> int:
-    """2m + 3n - 3 over the placed nodes."""
-    return 2 * int(np.isfinite(R[:, 0]).sum()) + 3 * int(np.isfinite(S[:, 0]).sum()) - 3
+    """Unknowns of the placed nodes (2m + 3n - 3; 3D: 3m + 4n - 6)."""
+    return n_unknowns(int(np.isfinite(R[:, 0]).sum()), int(np.isfinite(S[:, 0]).sum()), R.shape[1])
 
 
 def _estimate_sigma(E, mask, inliers, n_params: int, k: float, floor: float) -> float:
@@ -81,11 +81,11 @@ def _polish(F, mask, R, S, O, thr, floor, opts: CalibrationOptions, rng, max_ite
     `rounds` rounds or until the inlier set is stable. The local optimisation of LO-RANSAC with
     rounds=1; the final refinement with more. `redundancy`: the hypothesis's approximate redundancy
     numbers (`hypothesis_redundancy`), for the first scale estimate when sigma is unknown."""
-    _, _, t = _score(_residual_matrix(F, R, S, O), mask, thr, floor, redundancy)
+    _, _, t = _score(_residual_matrix(F, R, S, O), mask, thr, floor, redundancy, dim=R.shape[1])
     ref = robust_refine(F, mask, R, S, O, loss=opts.loss, scale=t / opts.threshold_sigmas, max_iter=max_iter)
     R, S, O = _fill(F, mask, ref.R, ref.S, ref.O, t, rng)
     converged = ref.converged
-    _, _, t = _score(_residual_matrix(F, R, S, O), mask, thr, floor)
+    _, _, t = _score(_residual_matrix(F, R, S, O), mask, thr, floor, dim=R.shape[1])
     R, S, O, changed = _replace_weak(F, mask, R, S, O, t, rng)
     if changed:
         ref = robust_refine(F, mask, R, S, O, loss=opts.loss, scale=t / opts.threshold_sigmas, max_iter=max_iter)
@@ -116,22 +116,23 @@ def _polish(F, mask, R, S, O, thr, floor, opts: CalibrationOptions, rng, max_ite
 
 
 def _drop_undetermined(F, work, R, S, O, inl, max_iter):
-    """Unplace nodes with fewer inlier measurements than they need (3 / 4), repeatedly, and refit the
+    """Unplace nodes with fewer inlier measurements than they need (min_measurements), repeatedly, and refit the
     rest by least squares on the inliers. A node the data do not fix would otherwise be reported at an
     arbitrary place and keep the refinement from converging. Returns (R, S, O, inl, warnings, fit)."""
     R, S, O, inl = R.copy(), S.copy(), O.copy(), inl.copy()
     out = []
+    need_r, need_t = min_measurements(R.shape[1])
     while True:
-        weak_r = np.isfinite(R[:, 0]) & (inl.sum(axis=1) < MIN_RECEIVER_MEASUREMENTS)
-        weak_t = np.isfinite(S[:, 0]) & (inl.sum(axis=0) < MIN_TRANSMITTER_MEASUREMENTS)
+        weak_r = np.isfinite(R[:, 0]) & (inl.sum(axis=1) < need_r)
+        weak_t = np.isfinite(S[:, 0]) & (inl.sum(axis=0) < need_t)
         if not (weak_r.any() or weak_t.any()):
             break
         for i in np.flatnonzero(weak_r):
             out.append(f"receiver {i + 1}: only {int(inl[i].sum())} of its {int(work[i].sum())} measurements are "
-                       f"inliers (needs {MIN_RECEIVER_MEASUREMENTS}); not placed")
+                       f"inliers (needs {need_r}); not placed")
         for j in np.flatnonzero(weak_t):
             out.append(f"transmitter {j + 1}: only {int(inl[:, j].sum())} of its {int(work[:, j].sum())} measurements "
-                       f"are inliers (needs {MIN_TRANSMITTER_MEASUREMENTS}); not placed")
+                       f"are inliers (needs {need_t}); not placed")
         R[weak_r], S[weak_t], O[weak_t] = np.nan, np.nan, np.nan
         inl[weak_r], inl[:, weak_t] = False, False
     if not out:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..recovery import recover
-from .adjustment import robust_refine
+from .adjustment import n_unknowns, robust_refine
 from .placement import _extend
 from .result import CalibrationOptions
 from .robust import _polish
@@ -34,10 +34,12 @@ class MinimalSolver:
     m, n : int
         Size of the fully measured sub-block it needs (receivers x transmitters).
     solve : callable
-        F_sub (m, n) -> list of candidate (receivers (m, 2), transmitters (n, 2), offsets (n,)),
-        real and geometrically valid, any order.
+        (F_sub (m, n), sigma or None) -> list of candidate (receivers (m, dim), transmitters (n, dim),
+        offsets (n,)), real and geometrically valid, any order; sigma, the noise level when it is
+        known, lets a solver tell a degenerate sample from noise (it may ignore it).
     cost_ms : float
         Relative cost per call (the pencil 1, a homotopy its number of paths), to try the cheapest first.
+    dim : 2 or 3
     """
 
     label: str
@@ -45,6 +47,7 @@ class MinimalSolver:
     n: int
     solve: Callable[[np.ndarray], list[Hypothesis]]
     cost_ms: float
+    dim: int = 2
 
 
 def _solver_via_api(m: int, n: int) -> Callable[[np.ndarray], list[Hypothesis]]:
@@ -54,7 +57,7 @@ def _solver_via_api(m: int, n: int) -> Callable[[np.ndarray], list[Hypothesis]]:
 
     choice = api.select_solver(m, n)
 
-    def solve(F_sub: np.ndarray) -> list[Hypothesis]:
+    def solve(F_sub: np.ndarray, sigma: float | None = None) -> list[Hypothesis]:
         out: list[Hypothesis] = []
         with np.errstate(all="ignore"):
             for x in api.solve_roots(F_sub):
@@ -69,15 +72,21 @@ def _solver_via_api(m: int, n: int) -> Callable[[np.ndarray], list[Hypothesis]]:
     return solve
 
 
-@functools.lru_cache(maxsize=1)
-def available_solvers() -> tuple[MinimalSolver, ...]:
-    """The minimal solvers hypotheses are drawn from, cheapest first.
+@functools.lru_cache(maxsize=2)
+def available_solvers(dim: int = 2) -> tuple[MinimalSolver, ...]:
+    """The block solvers hypotheses are drawn from, cheapest first.
 
-    Every generated solver of solvers.api (:data:`solvers.api.SOLVER_ORDER`): the 6r/4s curve pencil
-    (~1 ms) and the homotopy solvers, whose cost grows with their number of paths (9r/3s 75 ... 4r/5s
-    344; tables/solvers.csv).
+    2D: every generated solver of solvers.api (:data:`solvers.api.SOLVER_ORDER`): the 6r/4s curve
+    pencil (~1 ms) and the homotopy solvers, whose cost grows with their number of paths (9r/3s 75 ...
+    4r/5s 344; tables/solvers.csv). 3D: the stratified block solvers of :mod:`.stratified`
+    (over-determined, noise-robust) and the generated 9r/5s offset kernel (exactly determined).
     """
     from .. import api
+
+    if dim == 3:
+        return _solvers_3d()
+    if dim != 2:
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
 
     solvers = []
     for label, m, n in api._available():
@@ -92,6 +101,37 @@ def available_solvers() -> tuple[MinimalSolver, ...]:
         solvers.append(MinimalSolver(label, m, n, _solver_via_api(m, n), cost))
     return tuple(sorted(solvers, key=lambda s: s.cost_ms))
 
+
+
+#: 3D block shapes of the stratified solver, largest first: 12 receivers average more noise away
+#: (share of 12r/5s blocks in the right basin at sigma 1 mm / 1 cm: 0.92 / 0.63, 10r/5s 0.66 / 0.30;
+#: docs/calibration-3d.md), 10 is the fewest it can use.
+STRATIFIED_BLOCKS = ((12, 5), (10, 5))
+
+
+def _stratified_solve(F_sub: np.ndarray, sigma: float | None = None) -> list[Hypothesis]:
+    from ..methods.stratified import solve_block
+
+    out = solve_block(F_sub, sigma)
+    return [(out.receivers, out.transmitters, out.offsets)] if out.solved else []
+
+
+def _kernel_solve_3d(F_sub: np.ndarray, sigma: float | None = None) -> list[Hypothesis]:
+    """The generated 9r/5s offset kernel (exactly determined: exact without noise, rough with it)."""
+    from .. import api
+
+    with np.errstate(all="ignore"):
+        cals = api.calibrations(api._module_for("9r5s3d"), F_sub)
+    return [(c.receivers, c.transmitters, c.offsets) for c in cals]
+
+
+def _solvers_3d() -> tuple[MinimalSolver, ...]:
+    """3D block solvers: the stratified solver on 12r/5s and 10r/5s blocks, then the 9r/5s offset kernel
+    (for networks of nine receivers); all cost about the same (sub-millisecond), larger blocks first."""
+    solvers = [MinimalSolver(f"{m}r{n}s-stratified", m, n, _stratified_solve, 1.0 + k, 3)
+               for k, (m, n) in enumerate(STRATIFIED_BLOCKS)]
+    solvers.append(MinimalSolver("9r5s3d", 9, 5, _kernel_solve_3d, 1.0 + len(STRATIFIED_BLOCKS), 3))
+    return tuple(solvers)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -140,7 +180,7 @@ def _local_optimisation(F, mask, model: _Model, thr, floor, opts: CalibrationOpt
     """LO step of LO-RANSAC: `_polish` with a small budget, rescored."""
     out = _polish(F, mask, model.R, model.S, model.O, thr, floor, opts, rng, opts.lo_iterations, rounds=1,
                   redundancy=model.redundancy)
-    score, ratio, _ = _score(_residual_matrix(F, out.R, out.S, out.O), mask, thr, floor)
+    score, ratio, _ = _score(_residual_matrix(F, out.R, out.S, out.O), mask, thr, floor, dim=out.R.shape[1])
     return _Model(out.R, out.S, out.O, score, ratio, True, out.converged)
 
 
@@ -154,7 +194,7 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
     exactly (RMS cannot rank them), so up to `minimal_candidates` of those.
     """
     block = F[np.ix_(rows, cols)]
-    cands = solver.solve(block)
+    cands = solver.solve(block, thr / opts.threshold_sigmas if thr is not None else None)
     search.samples += 1
     if not cands:
         return []
@@ -165,10 +205,14 @@ def _hypotheses_from_block(F, mask, solver: MinimalSolver, rows, cols, thr, floo
         return []
     # Unknown sigma: a clean block's RMS is about 0.35 sigma (3 redundant entries of 24 or 27).
     c = thr if thr is not None else max(floor, 8.0 * best_rms)
-    minimal = solver.m * solver.n == 2 * solver.m + 3 * solver.n - 3
+    minimal = solver.m * solver.n == n_unknowns(solver.m, solver.n, solver.dim)
     per_sample = opts.minimal_candidates if minimal else opts.candidates_per_sample
     keep = [k for k in np.argsort(rms)[:per_sample] if rms[k] <= max(10.0 * best_rms, c)]
     return _extended_hypotheses(F, mask, [cands[k] for k in keep], rows, cols, c, thr, floor, rng, search, best_ratio)
+
+
+#: Blocks with more redundant entries than this are polished with a robust loss (_extended_hypotheses).
+ROBUST_BLOCK_REDUNDANCY = 5
 
 
 def _extended_hypotheses(F, mask, cands, rows, cols, c, thr, floor, rng, search: _Search, best_ratio):
@@ -182,24 +226,30 @@ def _extended_hypotheses(F, mask, cands, rows, cols, c, thr, floor, rng, search:
     block_mask = np.isfinite(block)
     seen: list[np.ndarray] = []
     for cand in cands:
-        R, S, O = np.full((m, 2), np.nan), np.full((n, 2), np.nan), np.full(n, np.nan)
+        dim = cand[0].shape[1]
+        R, S, O = np.full((m, dim), np.nan), np.full((n, dim), np.nan), np.full(n, np.nan)
         # A few least-squares steps on the block: on noisy data the solver's root satisfies a subset
         # of the equations exactly, and its error grows when extended; the block optimum is better.
-        pol = robust_refine(block, block_mask, *cand, loss="linear", max_iter=4)
+        # A block with many more entries than unknowns (3D: 12 x 5, 10 redundant) holds a gross error
+        # more often than it is clean; a redescending loss at the inlier threshold lets it out.
+        if int(block_mask.sum()) - n_unknowns(len(rows), len(cols), dim) > ROBUST_BLOCK_REDUNDANCY:
+            pol = robust_refine(block, block_mask, *cand, loss="cauchy", scale=c, max_iter=8)
+        else:
+            pol = robust_refine(block, block_mask, *cand, loss="linear", max_iter=4)
         R[rows], S[cols], O[cols] = (pol.R, pol.S, pol.O) if np.all(np.isfinite(pol.R)) else cand
         if any(np.allclose(O[cols], o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())) for o in seen):
             continue  # two roots polished into the same block solution
         seen.append(O[cols].copy())
         R, S, O = _extend(F, mask, R, S, O, c, rng, sample_r, best_ratio)
         rr = hypothesis_redundancy(mask, rows, cols, R, S)
-        score, ratio, _ = _score(_residual_matrix(F, R, S, O), mask, thr, floor, rr)
+        score, ratio, _ = _score(_residual_matrix(F, R, S, O), mask, thr, floor, rr, dim=R.shape[1])
         search.hypotheses += 1
         out.append(_Model(R, S, O, score, ratio, redundancy=rr))
     return out
 
 
 def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | None, suspicious: np.ndarray | None = None,
-                       redundancy: int = 2, attempts: int = 20):
+                       redundancy: int = 2, attempts: int = 20, *, dim: int):
     """A random sub-network (gaps allowed) that determines its nodes with little redundancy.
 
     Unguided (suspicious None or empty): nodes are left out one at a time in random order as long
@@ -216,12 +266,12 @@ def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | 
     m, n = mask.shape
 
     def pruned(rows, cols):
-        keep_r, keep_c = _prune(mask & rows[:, None] & cols[None, :])
+        keep_r, keep_c = _prune(mask & rows[:, None] & cols[None, :], dim)
         keep_r &= rows
         keep_c &= cols
         sub = mask & keep_r[:, None] & keep_c[None, :]
-        ok = keep_r.sum() >= 3 and keep_c.sum() >= 3
-        return keep_r, keep_c, int(sub.sum()) - (2 * int(keep_r.sum()) + 3 * int(keep_c.sum()) - 3) if ok else -1
+        ok = keep_r.sum() >= dim + 1 and keep_c.sum() >= dim + 1
+        return keep_r, keep_c, int(sub.sum()) - n_unknowns(int(keep_r.sum()), int(keep_c.sum()), dim) if ok else -1
 
     for _ in range(attempts):
         rows, cols = np.ones(m, bool), np.ones(n, bool)
@@ -258,17 +308,17 @@ def _sample_subnetwork(mask: np.ndarray, rng: np.random.Generator, tried: set | 
     return None
 
 
-def _random_start(F, mask, rows, cols, rng):
+def _random_start(F, mask, rows, cols, rng, dim: int):
     """Receivers, transmitters and offsets of rows x cols drawn at the scale of the data."""
     spread = float(np.percentile(F[mask], 90) - np.percentile(F[mask], 10)) or 1.0
     sub = F[np.ix_(rows, cols)]
     centre = np.array([np.median(v[np.isfinite(v)]) for v in sub.T])
-    return (0.5 * spread * rng.standard_normal((len(rows), 2)), 0.5 * spread * rng.standard_normal((len(cols), 2)),
+    return (0.5 * spread * rng.standard_normal((len(rows), dim)), 0.5 * spread * rng.standard_normal((len(cols), dim)),
             centre - 0.5 * spread + 0.1 * spread * rng.standard_normal(len(cols)))
 
 
 def _hypotheses_from_subnetwork(F, mask, rows, cols, thr, floor, opts, rng, search: _Search, best_ratio,
-                                start: _Model | None = None):
+                                start: _Model | None = None, *, dim: int):
     """Least squares on a sub-network's measured entries, extended and scored.
 
     The multi-start local optimisation of a non-minimal sample: it needs no fully measured block
@@ -287,7 +337,7 @@ def _hypotheses_from_subnetwork(F, mask, rows, cols, thr, floor, opts, rng, sear
             x0 = None
     # Least squares first: a redescending loss far from any solution gives every entry the same tiny
     # weight and stalls; near a basin, the LO step's robust loss then sheds the outliers.
-    ls = robust_refine(block, sub_mask, *(x0 or _random_start(F, mask, rows, cols, rng)), loss="linear",
+    ls = robust_refine(block, sub_mask, *(x0 or _random_start(F, mask, rows, cols, rng, dim)), loss="linear",
                        max_iter=3 * opts.lo_iterations)
     if not np.all(np.isfinite(ls.R)):
         return []
@@ -315,7 +365,8 @@ def _needed(w: float, k: int, confidence: float, success: float = 1.0) -> float:
 
 
 def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
-            accept: Callable[[_Model], bool] | None = None, confirm: float = 0.0) -> tuple[_Model | None, _Search]:
+            accept: Callable[[_Model], bool] | None = None, confirm: float = 0.0, *,
+            dim: int) -> tuple[_Model | None, _Search]:
     """LO-RANSAC over the minimal solvers on fully measured sub-blocks, then over sub-networks solved
     by least squares from random starts (see module docstring).
 
@@ -352,7 +403,8 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
                     search.accepted = True
                     return True
                 pending[0] = search.samples
-                pending[1] = min(_needed(1.0 - confirm, k_now[0], opts.confidence), opts.max_samples)
+                pending[1] = min(_needed(1.0 - confirm, k_now[0], opts.confidence), opts.max_samples,
+                                 opts.max_confirm_samples)
         return changed
 
     # [samples drawn when the current best passed `accept`, samples needed to confirm it]
@@ -413,7 +465,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         return best, search
     confident = best is not None and ((needed == 0 and search.samples >= floor_samples)
                                       or search.samples >= max(needed, opts.min_samples))
-    small = _n_params_mask(mask) <= opts.subnetwork_max_params
+    small = _n_params_mask(mask, dim) <= opts.subnetwork_max_params
     if confident or (best is not None and not small and search.samples >= opts.min_samples):
         return best, search
     # Sub-networks: the blocks ran out before the adaptive count was reached in a small network (few
@@ -431,10 +483,11 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         guided = best is not None and drawn_sub % 2 == 1
         suspicious = None
         if guided:
-            _, _, t = _score(_residual_matrix(F, best.R, best.S, best.O), mask, thr, floor, best.redundancy)
+            _, _, t = _score(_residual_matrix(F, best.R, best.S, best.O), mask, thr, floor, best.redundancy,
+                                 dim=best.R.shape[1])
             suspicious = np.argwhere(mask & ~_classify(_residual_matrix(F, best.R, best.S, best.O), mask, t))
         # Unguided draws may repeat a sub-network: each gets a new random start.
-        block = _sample_subnetwork(mask, rng, tried if guided else None, suspicious)
+        block = _sample_subnetwork(mask, rng, tried if guided else None, suspicious, dim=dim)
         if block is None:
             if guided:
                 drawn_sub += 1
@@ -444,7 +497,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         drawn_sub += 1
         if offer(_hypotheses_from_subnetwork(F, mask, *block, thr, floor, opts, rng, search,
                                              best.inlier_ratio if best is not None else None,
-                                             best if guided else None)):
+                                             best if guided else None, dim=dim)):
             needed_sub = _needed(ratio_of(best), k, opts.confidence, opts.subnetwork_convergence)
     # The runners-up get their local optimisation too: with low redundancy a hypothesis in the right
     # basin, pulled off by a gross error, can score worse than a wrong one before LO and better after.
@@ -460,6 +513,6 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     return best, search
 
 
-def _n_params_mask(mask: np.ndarray) -> int:
-    """Unknowns 2m + 3n - 3 of the nodes that have measurements."""
-    return 2 * int(mask.any(axis=1).sum()) + 3 * int(mask.any(axis=0).sum()) - 3
+def _n_params_mask(mask: np.ndarray, dim: int) -> int:
+    """Unknowns (2m + 3n - 3; 3D: 3m + 4n - 6) of the nodes that have measurements."""
+    return n_unknowns(int(mask.any(axis=1).sum()), int(mask.any(axis=0).sum()), dim)
