@@ -58,6 +58,11 @@ def _multilaterate(G, P, with_offset, X, c, rng, trials=24, steps=3):
     start = np.flatnonzero(able & ~np.isfinite(X[:, 0]))
     if start.size:
         Gs, us = G[start], use[start]
+        # A transmitter's offset only shifts its row: solve for q - g_ref with g_ref its first measured
+        # entry, since offsets of seconds x the speed of sound (hundreds of metres beside distances of a
+        # few) make the linear system's minimal subsets look singular (3D rooms from audio).
+        ref = Gs[np.arange(len(start)), np.argmax(us, axis=1)] if with_offset else np.zeros(len(start))
+        Gs = Gs - ref[:, None]
         A, rhs = _linear_system(np.where(us, Gs, 0.0), np.broadcast_to(P, (len(start), K, d)), with_offset)
         w = us.astype(float)
         full, _ = _solve_batched(np.einsum("nk,nki,nkj->nij", w, A, A), np.einsum("nk,nki,nk->ni", w, A, rhs))
@@ -74,6 +79,8 @@ def _multilaterate(G, P, with_offset, X, c, rng, trials=24, steps=3):
         cost[~np.isfinite(cand).all(axis=2)] = np.inf
         pick = np.argmin(cost, axis=0)
         X[start] = cand[pick, np.arange(len(start))]
+        if with_offset:
+            X[start, d] += ref
     active = np.flatnonzero(able & np.isfinite(X[:, 0]))
     ua = use[active]
     G0 = np.where(ua, G[active], 0.0)
