@@ -21,11 +21,13 @@ nodes it placed (`unplaced` counts those it reports as not determined), and each
 of its reported standard deviation (`max_err_over_std`).
 In 3D the table also gives the Cramer-Rao bound of each network (`crb_position_rms_m`,
 solvers.metrics.cramer_rao_position_rms): the least rms position error after alignment that any
-unbiased estimator can reach from the entries the calibration kept (its inliers), at the noise level of
-the signal chain measured against the simulator's truth (`inlier_noise_m`, the rms of F - F_true over
+unbiased estimator can reach for the placed nodes from the entries the calibration kept (its inliers),
+at the noise level of the signal chain measured against the simulator's truth (`inlier_noise_m`, the rms of F - F_true over
 the measured entries that are not gross errors, |F - F_true| <= 10 cm; not the calibration's own
 estimate `sigma_estimated_m`, so that an estimator cannot lower its own bar); `rms_over_crb` is the
-calibration's error over it. The md ends with the count of rooms that place every node within 2 x
+calibration's error over it. `crb_clean_entries_m` is the bound of all nodes from every measured entry
+without a gross error: what the signal chain allows (inf: some node is heard correctly too rarely for any
+estimator to place it). The md ends with the count of rooms that place every node within 2 x
 their bound.
 Writes tables/NAME.csv and .md (one row per room; NAME defaults to room_simulation, room_simulation3d).
 
@@ -211,7 +213,7 @@ def run(seed: int, mics: int, sources: int, rt60: tuple[float, float], snr_db: f
         row.update({"flagged": "", "false_rejects": "", "rms_position_err_m": "", "relative_position_err": "",
                     "offset_rms_err_m": "", "sigma_estimated_m": "", "max_err_over_std": ""})
         if dim == 3:
-            row.update({"crb_position_rms_m": "", "rms_over_crb": ""})
+            row.update({"crb_position_rms_m": "", "rms_over_crb": "", "crb_clean_entries_m": ""})
         return row
     # Errors over the placed nodes (a node the data do not fix is reported as not placed).
     aligned = align_rigid(X[placed], Y[placed]).apply(X[placed])
@@ -229,11 +231,15 @@ def run(seed: int, mics: int, sources: int, rt60: tuple[float, float], snr_db: f
         "max_err_over_std": float(f"{np.max(standardised_node_errors(res, net), initial=0.0):.3g}"),
     })
     if dim == 3:
-        # the bound of the network as measured: the kept entries, the noise level they really have
-        crb = cramer_rao_position_rms(net.receivers, net.transmitters, res.inliers, noise)
-        # inf: the kept entries do not determine every node (a source heard by fewer than 4 microphones)
+        # The bound of the placed nodes from the entries the calibration kept, at the noise level they
+        # really have; and of every node from every entry without a gross error (what the signal chain
+        # allows: inf when a node has too few, no estimator could place it).
+        pr, pt = placed[:mics], placed[mics:]
+        crb = cramer_rao_position_rms(net.receivers[pr], net.transmitters[pt], res.inliers[np.ix_(pr, pt)], noise)
+        clean = cramer_rao_position_rms(net.receivers, net.transmitters, measured & ~gross, noise)
         row.update({"crb_position_rms_m": float(f"{crb:.3g}"),
-                    "rms_over_crb": float(f"{rms / crb:.3g}") if np.isfinite(crb) else ""})
+                    "rms_over_crb": float(f"{rms / crb:.3g}") if np.isfinite(crb) else "",
+                    "crb_clean_entries_m": float(f"{clean:.3g}")})
     return row
 
 
