@@ -7,10 +7,11 @@ sources emit distinct white-noise bursts or linear chirps (`--signal`) at unknow
 within 0.5 s, overlapping; 3D: 0.3 s within 3 s, see RoomSetup); the `--mics` microphones record them
 all together. SNR: in 3D that of the recordings at the microphones; in 2D nominal (the noise power is
 the source power / 20 x 10^(-SNR/10); one room measured 31 dB at the microphones for a stated 20 dB;
-kept so that the committed 2D tables reproduce). For every (microphone, source) pair the arrival time of the
-direct sound is the peak of the GCC-PHAT cross-correlation of the recording with the source's emitted
-waveform (the reference; in 3D the earliest peak of at least half the highest within 20 ms before it,
-since floor and ceiling reflections can beat the direct sound), refined by parabolic interpolation:
+kept so that the committed 2D tables reproduce). For every (microphone, source) pair the arrival time
+of the direct sound is the peak of the GCC-PHAT cross-correlation of the recording with the source's
+emitted waveform (the reference; in 3D the earliest peak of at least half the highest within 20 ms
+before it, since floor and ceiling reflections can beat the direct sound), refined by parabolic
+interpolation:
     f_ij = c * arrival_ij = |r_i - s_j| + c * (emission time_j + filter delay),
 i.e. TDOA data with one unknown offset per source. A peak weaker than `--min-peak` times the
 correlation's RMS is a missed detection (NaN); reflections and overlapping sources that beat the direct
@@ -22,13 +23,13 @@ of its reported standard deviation (`max_err_over_std`).
 In 3D the table also gives the Cramer-Rao bound of each network (`crb_position_rms_m`,
 solvers.metrics.cramer_rao_position_rms): the least rms position error after alignment that any
 unbiased estimator can reach for the placed nodes from the entries the calibration kept (its inliers),
-at the noise level of the signal chain measured against the simulator's truth (`inlier_noise_m`, the rms of F - F_true over
-the measured entries that are not gross errors, |F - F_true| <= 10 cm; not the calibration's own
-estimate `sigma_estimated_m`, so that an estimator cannot lower its own bar); `rms_over_crb` is the
-calibration's error over it. `crb_clean_entries_m` is the bound of all nodes from every measured entry
-without a gross error: what the signal chain allows (inf: some node is heard correctly too rarely for any
-estimator to place it). The md ends with the count of rooms that place every node within 2 x
-their bound.
+at the noise level of the signal chain measured against the simulator's truth (`inlier_noise_m`, the
+rms of F - F_true over the measured entries that are not gross errors, |F - F_true| <= 10 cm; not the
+calibration's own estimate `sigma_estimated_m`, so that an estimator cannot lower its own bar);
+`rms_over_crb` is the calibration's error over it. `crb_clean_entries_m` is the bound of all nodes
+from every measured entry without a gross error: what the signal chain allows (inf: some node is heard
+correctly too rarely for any estimator to place it). The md ends with the count of rooms that place
+every node within 2 x their bound.
 Writes tables/NAME.csv and .md (one row per room; NAME defaults to room_simulation, room_simulation3d).
 
 GCC-PHAT is written here (15 lines) rather than taken from pyroomacoustics or scipy: scipy.signal has
@@ -208,7 +209,7 @@ def run(seed: int, mics: int, sources: int, rt60: tuple[float, float], snr_db: f
     placed = np.isfinite(X[:, 0])
     row["unplaced"] = int((~placed).sum())
     if dim == 3:
-        row["kept"] = f"{int(res.inliers.sum())}/{int(measured.sum())}" if res.status != "failed" else f"0/{int(measured.sum())}"
+        row["kept"] = f"{int(res.inliers.sum())}/{int(measured.sum())}"  # a failed result has no inliers
     if res.status == "failed" or placed.sum() < 3:
         row.update({"flagged": "", "false_rejects": "", "rms_position_err_m": "", "relative_position_err": "",
                     "offset_rms_err_m": "", "sigma_estimated_m": "", "max_err_over_std": ""})
