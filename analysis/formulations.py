@@ -1269,7 +1269,7 @@ class Relabeling:
         itself and {4..n} onto itself.
 
     Why these are symmetries (for generic data). Write E(F) for the polynomial system of equation set E
-    on data F, and g(F) for the relabeled data, g(F)[sigma(i)][tau(j)] = F[i][j].
+    on data F, and g(F) for the relabeled data, ``g(F)[sigma(i)][tau(j)] = F[i][j]``.
 
     * Receivers 2..m: D~ and R~ only have their rows/columns permuted, H, b and the offsets are
       untouched, so C_i(F) = C_{sigma(i)}(g F) identically, minors map to minors up to sign, A and B are

@@ -153,12 +153,12 @@ def markdown(rows: list[dict]) -> str:
            "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         out.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
-    out += ["", "## Summary at sigma 1e-2 (the README's table)", "", summary(rows)]
+    out += ["", "## Summary at sigma 1e-2 (the table of docs/calibrate.md)", "", summary(rows)]
     return "\n".join(out)
 
 
 def summary(rows: list[dict]) -> str:
-    """The compact table of the README: per cell at sigma 1e-2, the clean default call, and the gross-error
+    """The compact table of docs/calibrate.md: per cell at sigma 1e-2, the clean default call, and the gross-error
     cells with sigma given and estimated; then the scale rows. Rows may come from the CSV (strings)."""
     def get(cell, cond, mode):
         for r in rows:

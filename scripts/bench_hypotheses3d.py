@@ -5,8 +5,9 @@ on 12r/5s and 10r/5s blocks, the generated 9r/5s offset kernel) and noise sigma 
 seeded room networks (solvers.synthetic.room_network, 8 x 6 x 3 m, offsets N(0, 1 m)):
 
   hypothesis   share of samples for which the solver returns a hypothesis
-  in_basin     share of samples whose hypothesis, refined by least squares on the block's own entries,
-               ends within 3x the position error of the same least squares started from the truth
+  in_basin     share of samples whose hypothesis, refined by least squares on the block's own entries
+               (those of the receivers it places: a 12r/5s block leaves one out), ends within 3x the
+               position error of the same least squares started from the truth
                (the block's best estimate; "3 sigma-scaled errors"): the hypothesis is in the right basin
   raw_err_med  median RMS position error of the raw hypothesis after rigid alignment, in metres
   coplanar     share of samples with every receiver in one plane (z = 1.5 m) that return a hypothesis
@@ -45,8 +46,12 @@ SIGMAS = (1e-4, 1e-3, 1e-2)
 
 
 def _rms_error(R, S, net) -> float:
+    """RMS position error after rigid alignment over the nodes placed (a trimmed block leaves one out)."""
     X, Y = np.vstack([R, S]), np.vstack([net.receivers, net.transmitters])
-    return float(np.sqrt(np.mean(np.sum((align_rigid(X, Y).apply(X) - Y) ** 2, axis=1))))
+    ok = np.all(np.isfinite(X), axis=1)
+    if ok.sum() < 4:
+        return float("inf")
+    return float(np.sqrt(np.mean(np.sum((align_rigid(X[ok], Y[ok]).apply(X[ok]) - Y[ok]) ** 2, axis=1))))
 
 
 def measure(solver, sigma: float, samples: int) -> tuple[dict, float]:
@@ -63,9 +68,13 @@ def measure(solver, sigma: float, samples: int) -> tuple[dict, float]:
             got += 1
             best = min(cands, key=lambda c: _rms_error(*c[:2], net))
             raw.append(_rms_error(best[0], best[1], net))
-            ref = robust_refine(F, mask, net.receivers, net.transmitters, net.offsets, loss="linear", max_iter=50)
-            pol = robust_refine(F, mask, *best, loss="linear", max_iter=50)
-            if np.all(np.isfinite(pol.R)) and _rms_error(pol.R, pol.S, net) <= 3.0 * _rms_error(ref.R, ref.S, net):
+            # on the receivers the hypothesis places (a trimmed block leaves one out)
+            keep = np.isfinite(best[0][:, 0])
+            sub = Network(net.receivers[keep], net.transmitters, net.offsets)
+            ref = robust_refine(F[keep], mask[keep], sub.receivers, sub.transmitters, sub.offsets, loss="linear",
+                                max_iter=50)
+            pol = robust_refine(F[keep], mask[keep], best[0][keep], best[1], best[2], loss="linear", max_iter=50)
+            if np.all(np.isfinite(pol.R)) and _rms_error(pol.R, pol.S, sub) <= 3.0 * _rms_error(ref.R, ref.S, sub):
                 basin += 1
         R = net.receivers.copy()
         R[:, 2] = 1.5

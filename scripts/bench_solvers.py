@@ -233,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown solvers {', '.join(unknown)}; valid: {', '.join(DEFAULT_SOLVERS)}")
     # dirty: changes beside this script's own outputs (rows of an earlier run not yet committed are not code)
     outputs = [":(exclude)tables/solvers.csv", ":(exclude)tables/solvers.md", ":(exclude)tables/solvers.meta.json",
-               ":(exclude)README.md"]
+               ":(exclude)docs/solvers.md"]
     commit = _git("rev-parse", "--short", "HEAD")
     dirty = bool(_git("status", "--porcelain", "--untracked-files=no", "--", ".", *outputs))
     rows = []
@@ -315,20 +315,22 @@ def _write(args, rows: list[dict], meta_path: str, commit: str, dirty: bool) -> 
     with open(os.path.splitext(args.out)[0] + ".md", "w", encoding="utf-8") as fh:
         fh.write(table)
     if os.path.abspath(args.out) == os.path.join(ROOT, "tables", "solvers.csv"):
-        _update_readme(table)
+        _update_docs_page(table)
 
 
 README_MARKERS = ("<!-- solvers.md -->\n", "<!-- /solvers.md -->\n")
+#: The page that shows tables/solvers.md verbatim between :data:`README_MARKERS`.
+DOCS_PAGE = os.path.join("docs", "solvers.md")
 
 
-def _update_readme(table: str) -> None:
-    """Put the table between the README's markers (the README shows tables/solvers.md verbatim)."""
-    path = os.path.join(ROOT, "README.md")
+def _update_docs_page(table: str) -> None:
+    """Put the table between the markers of docs/solvers.md (the page shows tables/solvers.md verbatim)."""
+    path = os.path.join(ROOT, DOCS_PAGE)
     with open(path, encoding="utf-8") as fh:
         text = fh.read()
     start, end = README_MARKERS
     if start not in text or end not in text:
-        print(f"README.md has no {start.strip()} ... {end.strip()} markers; table not copied", file=sys.stderr)
+        print(f"{DOCS_PAGE} has no {start.strip()} ... {end.strip()} markers; table not copied", file=sys.stderr)
         return
     head, rest = text.split(start, 1)
     _, tail = rest.split(end, 1)
@@ -342,7 +344,7 @@ def _label(solver: str) -> str:
 
 
 def markdown(rows: list[dict]) -> str:
-    """The table of the README (tables/solvers.md): one line per solver."""
+    """The table of docs/solvers.md (tables/solvers.md): one line per solver."""
     out = ["| solver | method | roots (paths) | trials | raw median / p90 log10 error | failures | ms single (x eig of n) "
            "| us per path | generation s |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -79,6 +79,15 @@ def plan(seeds: tuple[int, ...], all_variants: bool) -> list[dict]:
     return rows
 
 
+def compute_row(item: dict) -> dict:
+    """One row of the table: the count of one planned item (:func:`plan`), with its note."""
+    rec = count(item["system"], primes=item.get("primes", DEFAULT_PRIMES), seeds=item["seeds"],
+                subsystem=item.get("subsystem", Subsystem()), saturate=item.get("saturate", "all"),
+                options=F4Options(max_matrix_cells=CAP), check_group=item.get("check", True),
+                check_simple=item.get("check_simple", item.get("check", True)))
+    return dict(rec.row(), note=item["note"])
+
+
 def paper_rows(seeds: tuple[int, ...]) -> list[dict]:
     """The paper's 6r/3s formulation on the project's own instances (analysis.complexity)."""
     t0 = time.perf_counter()
@@ -105,12 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     t_start = time.perf_counter()
     out_rows = []
     for item in plan(seeds, args.all_variants):
-        rec = count(item["system"], primes=item.get("primes", DEFAULT_PRIMES), seeds=item["seeds"],
-                    subsystem=item.get("subsystem", Subsystem()), saturate=item.get("saturate", "all"),
-                    options=F4Options(max_matrix_cells=CAP), check_group=item.get("check", True),
-                    check_simple=item.get("check_simple", item.get("check", True)))
-        row = rec.row()
-        row["note"] = item["note"]
+        row = compute_row(item)
         out_rows.append(row)
         print(f"{row['label']:34s} {row['subsystem'][:28]:28s} sat={row['saturate_by'][:22]:22s} "
               f"{row['status']:9s} degree={row['degree']} dim={row['dimension']} orbits={row['orbits']} "

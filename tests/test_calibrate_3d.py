@@ -133,3 +133,17 @@ def test_3d_data_into_2d_suggests_dim_3():
 def test_dim_is_checked():
     with pytest.raises(ValueError, match="dim must be 2 or 3"):
         calibrate(np.ones((6, 4)), dim=4)
+
+
+@pytest.mark.parametrize("factor", [3.0, 10.0])
+def test_sigma_too_small_is_never_ok_and_drops_no_good_entry(factor):
+    """Data in a unit where the given sigma is `factor` x too small (issue: 'ok' with good data rejected)."""
+    rng = np.random.default_rng(11)
+    true_sigma = 0.03
+    net = Network(rng.uniform(-5, 5, (12, 2)), rng.uniform(-5, 5, (10, 2)), rng.uniform(-2, 2, 10))
+    F = net.measurements(true_sigma, rng)
+    res = calibrate(F, true_sigma / factor, dim=2)
+    assert res.status == "inconsistent", res.message
+    assert "too small" in res.message
+    assert res.inliers.all(), f"{int((~res.inliers).sum())} good measurements rejected"
+    assert 0.5 < res.sigma / true_sigma < 2.0

@@ -211,14 +211,26 @@ def test_determinism_under_a_seed():
     assert np.array_equal(a.inliers, b.inliers) and a.warnings == b.warnings and a.samples == b.samples
 
 
-def test_collinear_receivers_are_warned_about_with_their_mirror_ambiguity():
+def _collinear_receivers():
+    """8 receivers exactly on a line, 5 transmitters off it: every transmitter has a mirror position."""
     rng = np.random.default_rng(3)
     net = random_network(8, 5, rng)
     receivers = np.column_stack([np.linspace(-10, 10, 8), 2.0 * np.linspace(-10, 10, 8) + 1.0])
-    F = np.linalg.norm(receivers[:, None] - net.transmitters[None], axis=2) + net.offsets
-    res = calibrate(F)
-    assert res.status != "ok" or any("receivers are nearly collinear" in w for w in res.warnings), res.warnings
-    assert any("collinear" in w or "mirror" in w for w in res.warnings)
+    return np.linalg.norm(receivers[:, None] - net.transmitters[None], axis=2) + net.offsets
+
+
+def test_collinear_receivers_are_warned_about_with_their_mirror_ambiguity():
+    res = calibrate(_collinear_receivers())
+    assert sum(w.startswith("receivers are nearly collinear") for w in res.warnings) == 1, res.warnings
+    mirrored = {w.split(":")[0] for w in res.warnings if "its mirror position" in w}
+    assert mirrored == {f"transmitter {j}" for j in range(1, 6)}, res.warnings
+
+
+@pytest.mark.xfail(strict=True, reason="issue 34 item 3: the status is 'ok' beside mirror positions that fit as "
+                   "well; the data cannot decide, so it must not be ok (remove this mark when that is fixed)")
+def test_collinear_receivers_are_not_ok():
+    res = calibrate(_collinear_receivers())
+    assert res.status == "ambiguous", res.message
 
 
 def test_too_few_measurements_fail_with_a_reason():

@@ -242,14 +242,31 @@ def test_summary_counts_missing_estimates_as_infinite():
     assert summary.loc[0, "q25_log10_position_error"] == pytest.approx(-3)
 
 
-def test_figures_are_written_with_metadata(tmp_path):
-    frames = {("6r4s", "random"): ex.run_trials("6r4s", "random", 3, jobs=1, cache=False, progress=False)}
-    paths = ex.plot_histograms(frames, tmp_path / "fig1", {"commit": "abc"})
+def test_figures_plot_the_trials_and_say_what_they_are(tmp_path):
+    """Fig. 1's data file holds the trials' log10 errors binned (recounted here with numpy, errors outside
+    the range in the end bins); Fig. 2's holds the summary's medians; the images carry their title."""
+    frame = ex.run_trials("6r4s", "random", 3, jobs=1, cache=False, progress=False)
+    paths = ex.plot_histograms({("6r4s", "random"): frame}, tmp_path / "fig1", {"commit": "abc"})
     assert {p.suffix for p in paths} == {".png", ".pdf", ".csv"}
     assert b"Fig. 1" in (tmp_path / "fig1.png").read_bytes()  # PNG tEXt metadata
+    bins = pd.read_csv(tmp_path / "fig1.csv")
+    edges = np.arange(-17.0, 4.0 + 1e-9, 0.25)
+    for quantity in ("position", "offset"):
+        rows = bins[(bins["config"] == "6r4s") & (bins["init"] == "random") & (bins["quantity"] == quantity)]
+        errors = frame[f"{quantity}_error"].dropna().to_numpy(dtype=float)
+        expected, _ = np.histogram(np.clip(np.log10(errors), edges[0], edges[-1]), bins=edges)
+        assert rows["bin_lo"].tolist() == pytest.approx(edges[:-1].tolist())
+        assert rows["count"].tolist() == expected.tolist() and rows["count"].sum() == len(errors) == 3
+    assert set(bins["config"] + bins["init"]) == {"6r4srandom"}  # no rows for configurations not run
     sweep = ex.noise_sweep(["6r4s"], ["random"], [1e-4, 1e-2], 2, jobs=1, cache=False, progress=False)
-    paths = ex.plot_noise(ex.summarise(sweep), tmp_path / "fig2", {"commit": "abc"})
-    assert all(p.exists() and p.stat().st_size > 0 for p in paths)
+    summary = ex.summarise(sweep)
+    paths = ex.plot_noise(summary, tmp_path / "fig2", {"commit": "abc"})
+    assert b"Fig. 2" in (tmp_path / "fig2.png").read_bytes()
+    plotted = pd.read_csv(tmp_path / "fig2.csv")
+    want = summary[summary["sigma"] > 0].sort_values(["config", "init", "sigma"])
+    assert plotted["sigma"].tolist() == want["sigma"].tolist() == [1e-4, 1e-2]
+    for column in ("median_log10_position_error", "median_log10_offset_error"):
+        assert plotted[column].to_numpy() == pytest.approx(want[column].to_numpy(), rel=1e-5)  # the CSV keeps 6 digits
 
 
 def test_invalid_names_list_the_valid_ones():

@@ -255,8 +255,11 @@ def test_underdetermined_cell_is_positive_dimensional_without_a_groebner_basis()
 
 @pytest.mark.slow
 def test_toa_3d_minimal_counts_and_direct_cross_check():
+    """The minimal 3D TOA cells: 38 networks for 4r/6s and 6r/4s, 42 for 5r/5s (Kuang, Burgess, Torstensson,
+    Åström, ICASSP 2013); the direct parametrization counts each network 2^3 times."""
     counts = {label: cell_degree(f"{label}:all").up_to_gauge for label in ("4r6s-toa3d", "6r4s-toa3d", "5r5s-toa3d")}
-    assert counts["4r6s-toa3d"] == counts["6r4s-toa3d"]  # TOA is symmetric in receivers and transmitters
+    assert counts["4r6s-toa3d"] == counts["6r4s-toa3d"] == 38  # TOA is symmetric in receivers and transmitters
+    assert counts["5r5s-toa3d"] == 42
     direct = cell_degree("4r6s-toa3d-direct:all", max_cells=100_000_000)
     assert direct.degree == 8 * counts["4r6s-toa3d"]
 

@@ -273,9 +273,32 @@ def test_non_square_system_is_refused():
 # --------------------------------------------------------------------------------------------------
 
 
-def test_every_registered_solver_is_committed():
-    have = {f.split("_")[1] for f in os.listdir(GENERATED_DIR) if f.endswith(".json")}
-    assert set(SOLVERS) <= have
+@pytest.mark.parametrize("label", sorted(SOLVERS))
+def test_every_registered_solver_is_committed_with_its_own_spec(label):
+    """One spec and one module per registered configuration; the module was emitted from that very spec
+    (its SPEC_SHA256 is the file's hash), solves the registered system, and its name carries its degree."""
+    import hashlib
+
+    from solvers.generate import POSITIONS, solver_system
+
+    specs = [f for f in os.listdir(GENERATED_DIR) if f.startswith(f"tdoa_{label}_") and f.endswith(".json")]
+    assert len(specs) == 1, specs
+    name = specs[0][:-5]
+    module = _module(name)
+    with open(os.path.join(GENERATED_DIR, specs[0]), "rb") as fh:
+        raw = fh.read()
+    assert module.SPEC_FILE == specs[0] and module.SPEC_SHA256 == hashlib.sha256(raw).hexdigest()
+    spec = json.loads(raw)
+    assert module.SYSTEM == spec.get("system", spec.get("formulation"))
+    assert module.DEGREE == spec["degree"]
+    if "_pencil" in name:  # a pencil's name carries its size, the others' their root count
+        assert name.endswith(f"pencil{module.SIZE[0]}") and module.SYSTEM == SOLVERS[label]
+    elif label in POSITIONS:  # building the positions system takes 10 s: its name is the label's
+        assert name.endswith(f"homotopy{module.DEGREE}") and module.SYSTEM == f"{label}:positions-{POSITIONS[label]}"
+    elif "_homotopy" in name:
+        assert name.endswith(f"homotopy{module.DEGREE}") and module.SYSTEM == solver_system(label).name
+    else:
+        assert name.endswith(f"kernel{module.DEGREE}") and module.SYSTEM == SOLVERS[label]
 
 
 @pytest.mark.parametrize("name", HOMOTOPY_SPECS)

@@ -176,6 +176,24 @@ def _distinct(a: _Model, b: _Model, tol: float) -> bool:
 
 
 
+def _beyond_std(other, R, S, rstd, tstd, floor: float) -> bool:
+    """True when another fit (R, S of `other`) puts a node farther than 3 reported std from (R, S) after
+    a rigid alignment (reflections allowed), or places other nodes."""
+    from ..metrics import align_rigid
+
+    X = np.vstack([R, S])
+    Y = np.vstack([other.R, other.S])
+    ok = np.isfinite(X[:, 0])
+    if not np.array_equal(ok, np.isfinite(Y[:, 0])):
+        return True
+    if ok.sum() <= X.shape[1]:
+        return False
+    shift = np.linalg.norm(align_rigid(Y[ok], X[ok]).apply(Y[ok]) - X[ok], axis=1)
+    std = np.concatenate([rstd, tstd])[ok]
+    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + 1e3 * floor
+    return bool((shift > tol).any())
+
+
 def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, search, best, sigma_given, rms,
            already=()) -> tuple[list[str], list[str]]:
     """(warnings, undecided): warnings for what the data cannot decide (see CalibrationResult.warnings),
@@ -216,11 +234,17 @@ def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, sea
     # An alternative hypothesis (after local optimisation) of similar cost that is a different network.
     var = max(sigma, floor) ** 2
     best_cost = float(np.sum(np.minimum(_residual_matrix(F, R, S, O)[work] ** 2, (opts.threshold_sigmas ** 2) * var)))
-    answer = _Model(R, S, O, best_cost, 0.0)  # the final answer, not the search's best hypothesis before it
     for other in search.others:
         E = _residual_matrix(F, other.R, other.S, other.O)[work]
         cost = float(np.sum(np.minimum(np.nan_to_num(E, nan=np.inf) ** 2, (opts.threshold_sigmas ** 2) * var)))
-        if (cost - best_cost) / var < opts.ambiguity_chi2 and _distinct(other, answer, 1e-3):
+        if (cost - best_cost) / var >= opts.ambiguity_chi2:
+            continue
+        # The search's models are only locally optimised: one is another answer only if least squares on
+        # the same inliers from it ends at another minimum, a node beyond 3 reported std from this one.
+        ls = robust_refine(F, work, other.R, other.S, other.O, loss="linear", max_iter=opts.max_iterations, use=inl)
+        E = _residual_matrix(F, ls.R, ls.S, ls.O)[work]
+        cost = float(np.sum(np.minimum(np.nan_to_num(E, nan=np.inf) ** 2, (opts.threshold_sigmas ** 2) * var)))
+        if (cost - best_cost) / var < opts.ambiguity_chi2 and _beyond_std(ls, R, S, rstd, tstd, floor):
             note = (f"an alternative calibration fits nearly as well (cost +{(cost - best_cost) / var:.2g} sigma^2); "
                     "the data may not decide between them")
             out.append(note)

@@ -94,6 +94,8 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
     if dim not in (2, 3) or isinstance(dim, bool):
         raise ValueError(f"dim must be 2 or 3, got {dim!r}")
     result = _calibrate_once(F, sigma, seed, opts, t0, dim)
+    if sigma is not None:
+        result = _check_sigma(F, sigma, seed, opts, t0, dim, result)
     rejected = int((np.isfinite(F) & ~result.inliers).sum()) if result.status != "failed" else 0
     if opts.stability_check and rejected and result.status not in ("failed", "unconverged"):
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
@@ -120,6 +122,34 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
     if dim == 2 and result.status in ("inconsistent", "unconverged", "failed"):
         result = _suggest_3d(F, sigma, seed, opts, t0, result)
     return replace(result, seconds=time.perf_counter() - t0, seed=seed)
+
+
+def _check_sigma(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result: CalibrationResult) -> CalibrationResult:
+    """A given sigma that rejected measurements or failed the global test is checked against the data:
+    the calibration with sigma estimated (which rejects only what its own scale calls gross) is tested
+    with the given sigma, SSR / sigma^2 = dof (sigma_hat / sigma)^2 against chi^2(dof). If that fails,
+    the given sigma is too small: measurements it rejected are not gross errors. The answer is then the
+    sigma-estimated one, with status "inconsistent" and the sigma the data support in the message."""
+    from scipy import stats
+
+    failed_test = result.global_test is not None and not result.global_test[2]
+    rejected = int((np.isfinite(F) & ~result.inliers).sum()) if result.status != "failed" else 0
+    if result.status == "failed" or not (rejected or failed_test):
+        return result
+    est = _calibrate_once(F, None, seed, replace(opts, stability_check=False), t0, dim)
+    if est.status in ("failed", "unconverged", "inconsistent") or est.dof < opts.min_dof_for_sigma:
+        return result
+    statistic = est.dof * (est.sigma / sigma) ** 2
+    critical = float(stats.chi2.isf(opts.alpha_global, est.dof))
+    if statistic <= critical:
+        return result
+    kept = int(est.inliers.sum()) - int(result.inliers.sum())
+    note = (f"the given sigma {sigma:.3g} is too small for these data: they support sigma {est.sigma:.3g} ({est.dof} "
+            f"degrees of freedom; with the given sigma SSR / sigma^2 = {statistic:.4g} > {critical:.4g}); the answer "
+            f"is the one with sigma estimated, which keeps {kept} more measurement(s) the given sigma would reject: "
+            f"give --sigma {est.sigma:.2g} or omit it")
+    return replace(est, status="inconsistent", message=_message("inconsistent", est, note),
+                   warnings=(note,) + est.warnings)
 
 
 def _suggest_3d(F, sigma, seed, opts: CalibrationOptions, t0, result: CalibrationResult) -> CalibrationResult:

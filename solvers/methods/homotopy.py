@@ -75,19 +75,18 @@ DETOURS = 6
 #: again to s* - d, then around s* through the complex value s* + i d (or s* - i d) to s* + d, then on to the
 #: target, with the plain step control (:meth:`HomotopySolver._local_detours`). A stall is a near-miss of a
 #: point where the path's root meets another solution (5r/5s: det H -> 0, the saturated locus, no other
-#: tracked path near), not a crossing of two of the tracked roots: a small loop around it leaves the root
-#: where it was, and its endpoint is kept only when it is distinct from the instance's other endpoints. 5r/5s,
-#: the 7 of the first 20 seeded networks with a stalled path: d = 0.005 resolved all 9 paths (three runs),
-#: 0.01 27 of 30 tries, 0.02 24 of 33, 0.05 12 of 42 (larger loops enclose more); each instance then took
-#: 2-5 ms more instead of 20-40 (the tight retrack, the detour through a far midpoint, which ended on a
-#: root another path held, and every path's route through that midpoint).
+#: tracked path near), not a crossing of two of the tracked roots, so a small loop around it leaves the root
+#: where it was; its endpoint is kept only when it is distinct from the instance's other endpoints. Small,
+#: because a larger loop encloses more of those points and can swap the root; large enough to leave the
+#: stalled stretch (the values tried and their success rates: docs/findings/homotopy-speed.md, "Local detours
+#: and pooled midpoints").
 LOCAL_DETOUR = 0.005
 
 #: Midpoint routes whose endpoints are pooled for an instance still short of its distinct roots after
-#: the detours (no midpoint root set is complete, or none resolved it). Written for 4r/5s (5-40 of its 344
-#: paths stall on every segment), which now tracks from three start systems instead
-#: (:meth:`HomotopySolver._multistart`); before that, on its 9 seeded networks (of the first 1000) whose
-#: true root was lost and 4 others, one route found all 9 true roots at 4.2-10.8 s per instance.
+#: the detours (no midpoint root set is complete, or none resolved it): a route through a midpoint permutes
+#: the endpoints, so pooling the distinct endpoints of both routes recovers roots that either one alone
+#: lands twice. One route: each costs a full solve, and the paths still stalling after the detours are few
+#: (measurements: docs/findings/homotopy-speed.md, "Local detours and pooled midpoints").
 POOLED_MIDPOINTS = 1
 
 
@@ -216,7 +215,7 @@ EVALUATORS = ("auto", "tape", "monomials")
 
 #: Systems with minors (squared) or in a positions formulation whose programs (slp.system_equations)
 #: "auto" uses: each was validated on seeded networks (failures and error quantiles no worse than the
-#: monomial tracker's on the same networks, tables/NOTES.md).
+#: monomial tracker's on the same networks, docs/findings/homotopy-speed.md).
 VALIDATED_PROGRAMS = frozenset({
     "5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0)",
     "5r5s:B2,B3,C2-C5,M123_123,M124_124,M134_134,M234_234",  # its principal minors (solvers.generate.SQUARE_MINORS)

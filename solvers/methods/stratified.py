@@ -78,7 +78,54 @@ def _offsets(F: np.ndarray) -> tuple[np.ndarray | None, float]:
     return np.concatenate([[z[4] / v.sum()], z[5:] / v]), float(s[-2])
 
 
-def solve_block(F: np.ndarray, sigma: float | None = None) -> BlockOutcome:
+def _trim(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of the sub-block with one receiver left out and the reference transmitter first
+    whose offsets' kernel system fits best (smallest over second smallest singular value of the
+    row-normalised system):
+    a gross error in one entry leaves it out (its row, or as the reference column, all rows), so a
+    sample with at most one gross error still gives its hypothesis."""
+    m, n = F.shape
+    rows = np.array([np.delete(np.arange(m), k) for k in range(m)])  # (m, m - 1)
+    cols = np.array([[c] + [j for j in range(n) if j != c] for c in range(n)])  # (n, n)
+    blocks = F[rows[None, :, :, None], cols[:, None, None, :]]  # (n, m, m - 1, n)
+    c, alpha, beta, _ = compaction_pieces(blocks)
+    M = np.concatenate([c, alpha[..., None], beta], axis=-1)
+    M = M / np.linalg.norm(M, axis=-1, keepdims=True)
+    sv = np.linalg.svd(M, compute_uv=False)
+    # the smallest singular value against the second: a gross error raises the first, and a choice that
+    # makes the kernel ill-determined (both small) is no better for it
+    score = sv[..., -1] / np.maximum(sv[..., -2], 1e-300)  # (n, m)
+    ci, ri = np.unravel_index(int(np.argmin(score)), score.shape)
+    return rows[ri], cols[ci]
+
+
+def solve_block(F: np.ndarray, sigma: float | None = None, trim: bool = False) -> BlockOutcome:
+    """One hypothesis from a fully measured block F (m >= 10 receivers x 5 transmitters) in 3D.
+
+    trim: leave out the receiver (and choose the reference transmitter) that explain the block worst
+    (`_trim`, m >= 11), so that one gross error in the block does not spoil the hypothesis; the
+    receiver left out is returned as NaN (the caller places it from the others).
+    """
+    F = np.asarray(F, dtype=float)
+    m, n = F.shape
+    if trim and m > MIN_RECEIVERS and n == TRANSMITTERS and np.all(np.isfinite(F)):
+        scale = float(np.sqrt(np.mean(F * F))) or 1.0
+        s2 = _offsets(F / scale)[1]  # coplanar on the whole block (a sub-block may look less so)
+        if not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
+            return BlockOutcome(None, None, None, f"coplanar receivers (second kernel singular value {s2:.2g})")
+        rows, cols = _trim(F)
+        out = _solve(F[np.ix_(rows, cols)], sigma, coplanar_checked=True)
+        if not out.solved:
+            return out
+        R = np.full((m, 3), np.nan)
+        S = np.empty((n, 3))
+        O = np.empty(n)
+        R[rows], S[cols], O[cols] = out.receivers, out.transmitters, out.offsets
+        return BlockOutcome(R, S, O)
+    return _solve(F, sigma)
+
+
+def _solve(F: np.ndarray, sigma: float | None = None, coplanar_checked: bool = False) -> BlockOutcome:
     """One hypothesis from a fully measured block F (m >= 10 receivers x 5 transmitters) in 3D.
 
     sigma: the noise level of F when known. Coplanar receivers make D~ of rank 2 at the true offsets, so
@@ -103,7 +150,7 @@ def solve_block(F: np.ndarray, sigma: float | None = None) -> BlockOutcome:
     scale = float(np.sqrt(np.mean(F * F))) or 1.0
     F = F / scale
     o, s2 = _offsets(F)
-    if not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
+    if not coplanar_checked and not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
         return BlockOutcome(None, None, None, f"coplanar receivers (second kernel singular value {s2:.2g})")
     if o is None:
         return BlockOutcome(None, None, None, "offset kernel without a usable solution")
