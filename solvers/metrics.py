@@ -17,9 +17,11 @@ __all__ = [
     "RigidTransform",
     "align_rigid",
     "calibration_errors",
+    "cramer_rao_position_rms",
     "log10_error",
     "offset_error",
     "position_error",
+    "tdoa_jacobian",
 ]
 
 #: Floor applied by `log10_error` so that exact results map to a finite value.
@@ -168,3 +170,80 @@ def standardised_node_errors(result: object, network: object) -> np.ndarray:
     err = min(errors, key=lambda e: float(np.nansum(e)))
     keep = np.isfinite(err) & np.isfinite(std) & (std > 0)
     return err[keep] / std[keep]
+
+
+def tdoa_jacobian(receivers: np.ndarray, transmitters: np.ndarray, measured_mask: np.ndarray) -> np.ndarray:
+    """(k, K (m + n) + n) Jacobian of the measured f_ij = |r_i - s_j| + o_j (row-major over the
+    mask's True entries) by (r_1, ..., r_m, s_1, ..., s_n, o_1, ..., o_n), without a gauge.
+
+    d f_ij / d r_i = u_ij, d f_ij / d s_j = -u_ij, d f_ij / d o_j = 1, u_ij = (r_i - s_j) / |r_i - s_j|.
+    """
+    R = np.asarray(receivers, dtype=float)
+    S = np.asarray(transmitters, dtype=float)
+    (m, K), n = R.shape, S.shape[0]
+    ii, jj = np.nonzero(np.asarray(measured_mask, dtype=bool))
+    diff = R[ii] - S[jj]
+    u = diff / np.linalg.norm(diff, axis=1)[:, None]
+    rows = np.arange(len(ii))
+    J = np.zeros((len(ii), K * (m + n) + n))
+    for a in range(K):
+        J[rows, K * ii + a] = u[:, a]
+        J[rows, K * (m + jj) + a] = -u[:, a]
+    J[rows, K * (m + n) + jj] = 1.0
+    return J
+
+
+def cramer_rao_position_rms(receivers: np.ndarray, transmitters: np.ndarray, measured_mask: np.ndarray,
+                            sigma: float, *, rtol: float = 1e-9) -> float:
+    """Cramer-Rao bound of the rms node position error after the best rigid alignment.
+
+    The model is f_ij = |r_i - s_j| + o_j + e_ij on the entries where `measured_mask` is True, with
+    independent e_ij ~ N(0, sigma^2); every position and offset is unknown. The Fisher information
+    J^T J / sigma^2 (J: `tdoa_jacobian` at the given, true, positions) is singular exactly along the
+    K (K + 1) / 2 rigid motions (K = 3: 3 translations, 3 rotations; they leave every |r_i - s_j| unchanged).
+    Its pseudo-inverse is the covariance of an efficient estimator's error projected off those
+    directions, which to first order is the error left after the best rigid alignment of the
+    estimate onto the truth (solvers.metrics.align_rigid); the offsets are not moved by a rigid
+    motion, so the position block of sigma^2 (J^T J)^+ is that covariance. Returns
+
+        sqrt(trace(position block) / (m + n)),
+
+    the bound on the expected rms position error over all m + n nodes (the figure a calibration's
+    `rms_position_err_m` is compared with; a mean-square bound, so a single network's rms error may
+    fall below it).
+
+    Parameters
+    ----------
+    receivers : (m, K) true receiver positions, K = 2 or 3
+    transmitters : (n, K) true transmitter positions
+    measured_mask : (m, n) bool, True where f_ij is measured (and used: the inliers)
+    sigma : standard deviation of the measurement noise (units of the positions), > 0
+    rtol : singular values of J below rtol * the largest count as zero
+
+    Returns
+    -------
+    float; inf when the measured entries leave more than the rigid motions undetermined (a node
+    with too few entries, a degenerate configuration): no estimator can place every node.
+
+    Reference: Cramer-Rao bound with a singular Fisher information (the constrained / gauge-free
+    bound is the pseudo-inverse, Xavier & Barroso; Stoica & Ng, IEEE SPL 1998); TDOA model of the
+    paper, Sec. 1 eq. (2).
+    """
+    R = np.asarray(receivers, dtype=float)
+    S = np.asarray(transmitters, dtype=float)
+    mask = np.asarray(measured_mask, dtype=bool)
+    (m, K), n = R.shape, S.shape[0]
+    if S.shape != (n, K) or mask.shape != (m, n):
+        raise ValueError(f"shapes do not match: receivers {R.shape}, transmitters {S.shape}, mask {mask.shape}")
+    if not (sigma > 0 and np.isfinite(sigma)):
+        raise ValueError(f"sigma must be a finite number > 0, got {sigma}")
+    J = tdoa_jacobian(R, S, mask)
+    n_rigid = K * (K + 1) // 2
+    if J.shape[0] < J.shape[1] - n_rigid:
+        return float("inf")
+    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    rank = int(np.sum(s > rtol * s[0])) if len(s) else 0
+    if rank < J.shape[1] - n_rigid:
+        return float("inf")
+    V = Vt[:rank].T[: K * (m + n)]  # the position rows of the range directions
+    return float(sigma * np.sqrt(np.sum((V / s[:rank]) ** 2) / (m + n)))

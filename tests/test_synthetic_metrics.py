@@ -126,3 +126,27 @@ def test_log10_error():
     assert log10_error(1e-3) == pytest.approx(-3.0)
     assert np.isfinite(log10_error(0.0))
     np.testing.assert_allclose(log10_error(np.array([1.0, 100.0])), [0.0, 2.0])
+
+
+def test_standardised_node_errors_in_3d_take_the_gauge_and_the_mirror_of_the_result():
+    """A 3D result in the gauge of receivers (2, 0, 4), mirrored z -> -z, with known errors."""
+    from types import SimpleNamespace
+
+    from solvers.metrics import standardised_node_errors
+    from solvers.recovery import to_gauge
+
+    rng = np.random.default_rng(5)
+    net = Network(rng.uniform(0, 5, (7, 3)), rng.uniform(0, 5, (4, 3)), rng.uniform(0, 1, 4))
+    order = [2, 0, 4, 1, 3, 5, 6]
+    R, S = to_gauge(net.receivers[order], net.transmitters)
+    R_back = np.empty_like(R)
+    R_back[order] = R
+    shift = 0.01 * rng.standard_normal((11, 3))
+    shift[[2, 0, 4]] = 0.0  # the gauge receivers are where the gauge puts them
+    est = np.vstack([R_back, S]) * np.array([1.0, 1.0, -1.0]) + shift
+    std = np.full(11, 0.02)
+    std[[2, 0, 4]] = 0.0
+    result = SimpleNamespace(gauge=(2, 0, 4), receivers=est[:7], transmitters=est[7:],
+                             receiver_std=std[:7], transmitter_std=std[7:])
+    z = standardised_node_errors(result, net)
+    np.testing.assert_allclose(z, np.linalg.norm(np.delete(shift, [0, 2, 4], axis=0), axis=1) / 0.02, rtol=1e-9)

@@ -58,6 +58,16 @@ def _multilaterate(G, P, with_offset, X, c, rng, trials=24, steps=3):
     start = np.flatnonzero(able & ~np.isfinite(X[:, 0]))
     if start.size:
         Gs, us = G[start], use[start]
+        # A transmitter's offset only shifts its row: where it dwarfs the partners' extent (offsets of
+        # seconds x the speed of sound beside distances of a few metres: rooms from audio), solve for
+        # q - g_ref, g_ref its first measured entry; the minimal subsets look singular otherwise (3D).
+        # Elsewhere the system is left as it was.
+        ref = np.zeros(len(start))
+        if with_offset:
+            first = Gs[np.arange(len(start)), np.argmax(us, axis=1)]
+            extent = float(np.max(np.linalg.norm(P - P.mean(axis=0), axis=1)))
+            ref = np.where(np.abs(first) > 10.0 * extent, first, 0.0)
+        Gs = Gs - ref[:, None]
         A, rhs = _linear_system(np.where(us, Gs, 0.0), np.broadcast_to(P, (len(start), K, d)), with_offset)
         w = us.astype(float)
         full, _ = _solve_batched(np.einsum("nk,nki,nkj->nij", w, A, A), np.einsum("nk,nki,nk->ni", w, A, rhs))
@@ -74,6 +84,8 @@ def _multilaterate(G, P, with_offset, X, c, rng, trials=24, steps=3):
         cost[~np.isfinite(cand).all(axis=2)] = np.inf
         pick = np.argmin(cost, axis=0)
         X[start] = cand[pick, np.arange(len(start))]
+        if with_offset:
+            X[start, d] += ref
     active = np.flatnonzero(able & np.isfinite(X[:, 0]))
     ua = use[active]
     G0 = np.where(ua, G[active], 0.0)
