@@ -169,8 +169,9 @@ def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: 
     need_r, need_t = min_measurements(dim)
     if n < need_t or m < need_r or int(np.isfinite(F).sum()) <= n_unknowns(n, m, dim):
         return result
-    quick = replace(opts, stability_check=False, max_samples=min(opts.max_samples, 20),
-                    subnetwork_samples=min(opts.subnetwork_samples, 10), max_confirm_samples=5)
+    # blocks only (no sub-networks, no basin probing): a clean transposed file fits at once
+    quick = replace(opts, stability_check=False, max_samples=min(opts.max_samples, 20), subnetwork_samples=0,
+                    max_confirm_samples=5, probe_nodes=0)
     other = _calibrate_once(np.ascontiguousarray(F.T), None, seed, quick, t0, dim)
     if other.status not in ("ok", "uncontrolled", "ambiguous") or not np.isfinite(other.sigma):
         return result
