@@ -75,8 +75,10 @@ __all__ = [
     "ENGINE_VERSION",
     "FormulationResult",
     "InstanceOutcome",
+    "LocalPool",
     "POSITIVE_DIMENSIONAL_CELLS",
     "STATUSES",
+    "SweepTask",
     "compute_formulation",
     "default_cache_dir",
     "jacobian_rank",
@@ -625,6 +627,45 @@ class _Slot:
     partial: list = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class SweepTask:
+    """What every formulation of a sweep is computed with (the limits are the per-task caps).
+
+    timeout: wall-clock seconds per formulation (None: no time cap). options: F4 options as a dict
+    (``max_matrix_cells``, ``max_memory``: the size and memory caps)."""
+
+    primes: tuple[int, ...]
+    seeds: tuple[int, ...]
+    options: dict
+    saturate: bool
+    positive_dimensional_cells: int
+    timeout: float | None
+
+    def key(self, labels: Sequence[str]) -> str:
+        """Content key of a chunk of this task: the same inputs give the same key."""
+        text = json.dumps({"labels": list(labels), "task": dataclasses.asdict(self), "engine": ENGINE_VERSION},
+                          sort_keys=True)
+        return "tdoa-sweep-" + hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+@dataclass(frozen=True)
+class LocalPool:
+    """``jobs`` spawned worker processes on this machine (one BLAS thread each); with ``jobs <= 1`` and no
+    time cap, this process computes the formulations itself."""
+
+    jobs: int = 2
+
+    def run(self, labels: list[str], task: SweepTask, finish: Callable[[FormulationResult], None]) -> None:
+        options = F4Options(**task.options)
+        if self.jobs <= 1 and task.timeout is None:
+            for label in labels:
+                finish(compute_formulation(label, task.primes, task.seeds, options, task.saturate,
+                                           positive_dimensional_cells=task.positive_dimensional_cells))
+            return
+        _run_pool(labels, task.primes, task.seeds, options, task.saturate, max(1, self.jobs),
+                  task.timeout, task.positive_dimensional_cells, finish)
+
+
 def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = DEFAULT_PRIMES,
           seeds: Sequence[int] = DEFAULT_SEEDS, options: F4Options | None = None, saturate: bool = False,
           jobs: int = 2, cache_dir: Path | str | None = None, use_cache: bool = True, progress: bool = True,
@@ -681,8 +722,6 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
             todo.append(label)
     try:
         if todo:
-            from .executors import LocalPool, SweepTask  # executors builds on this module
-
             task = SweepTask(primes, seeds, dataclasses.asdict(options), saturate, positive_dimensional_cells, timeout)
             (executor or LocalPool(jobs)).run(todo, task, finish)
     finally:

@@ -8,7 +8,10 @@ caps (rows x cols and estimated working memory, :class:`analysis.f4.F4Options`) 
 with status ``too-large``. Either way the result names its formulation and goes into the table and
 the cache: a capped task is reported, never dropped.
 
-* :class:`LocalPool`: ``jobs`` spawned worker processes on this machine.
+* :class:`LocalPool`: ``jobs`` spawned worker processes on this machine. It and :class:`SweepTask` are
+  defined in :mod:`analysis.complexity` beside the pool they drive (the default of
+  :func:`~analysis.complexity.sweep`) and re-exported here, so this module builds on that one and not
+  the other way round.
 * :class:`DaskExecutor`: chunks of formulations are submitted to a ``dask.distributed`` scheduler
   (``--dask ADDRESS``) or to a LocalCluster started here (``--dask local``). Each chunk is a Dask task
   whose key is a hash of its content (formulations, primes, seeds, caps, engine version), so a chunk
@@ -22,14 +25,11 @@ dask is imported only by :class:`DaskExecutor` (an optional dependency: ``pip in
 """
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import json
 import re
 from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
-from .complexity import ENGINE_VERSION, FormulationResult, InstanceOutcome, combine
+from .complexity import FormulationResult, InstanceOutcome, LocalPool, SweepTask, combine
 from .f4 import F4Options
 from .formulations import Formulation
 
@@ -40,51 +40,10 @@ class ExecutorError(ValueError):
     """A bad executor specification (e.g. a malformed or unreachable ``--dask`` address)."""
 
 
-@dataclass(frozen=True)
-class SweepTask:
-    """What every formulation of a sweep is computed with (the limits are the per-task caps).
-
-    timeout: wall-clock seconds per formulation (None: no time cap). options: F4 options as a dict
-    (``max_matrix_cells``, ``max_memory``: the size and memory caps)."""
-
-    primes: tuple[int, ...]
-    seeds: tuple[int, ...]
-    options: dict
-    saturate: bool
-    positive_dimensional_cells: int
-    timeout: float | None
-
-    def key(self, labels: Sequence[str]) -> str:
-        """Content key of a chunk of this task: the same inputs give the same key."""
-        text = json.dumps({"labels": list(labels), "task": dataclasses.asdict(self), "engine": ENGINE_VERSION},
-                          sort_keys=True)
-        return "tdoa-sweep-" + hashlib.sha256(text.encode()).hexdigest()[:24]
-
-
 class Executor(Protocol):
     """Computes formulations and hands each result to ``finish`` as soon as it is known."""
 
     def run(self, labels: list[str], task: SweepTask, finish: Callable[[FormulationResult], None]) -> None: ...
-
-
-@dataclass(frozen=True)
-class LocalPool:
-    """``jobs`` spawned worker processes on this machine (one BLAS thread each); with ``jobs <= 1`` and no
-    time cap, this process computes the formulations itself."""
-
-    jobs: int = 2
-
-    def run(self, labels: list[str], task: SweepTask, finish: Callable[[FormulationResult], None]) -> None:
-        from . import complexity
-
-        options = F4Options(**task.options)
-        if self.jobs <= 1 and task.timeout is None:
-            for label in labels:
-                finish(complexity.compute_formulation(label, task.primes, task.seeds, options, task.saturate,
-                                           positive_dimensional_cells=task.positive_dimensional_cells))
-            return
-        complexity._run_pool(labels, task.primes, task.seeds, options, task.saturate, max(1, self.jobs),
-                             task.timeout, task.positive_dimensional_cells, finish)
 
 
 def run_chunk(labels: Sequence[str], task: SweepTask) -> list[dict]:

@@ -43,8 +43,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .formulations import (RECEIVERS_FIRST_LIMIT, Formulation, Instance, SamplingFailed, TDOAConfig, _family,
-                           _parse_minor, _residue_mask, _rng, sqrt_mod)
+from .formulation_base import (RECEIVERS_FIRST_LIMIT, Formulation, Instance, SamplingFailed, TDOAConfig, _family,
+                               _parse_minor, _residue_mask, _rng, sqrt_mod)
 
 __all__ = ["build_equations", "det_h_terms", "nonzero_conditions", "sample_gf_instance_kd", "sample_real_instance_kd", "solve_mod"]
 

@@ -13,51 +13,13 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from .orderings import FIELD_BITS, MonomialOrder
-
-MAX_PRIME = 2**31
+from .polytext import parse_polynomial
+from .primes import MAX_PRIME, BadPrime, check_prime, is_prime  # noqa: F401  (re-exported: imported from here)
 
 _PER_WORD = 64 // FIELD_BITS
 """Key fields per 64-bit word."""
 
 
-class BadPrime(ValueError):
-    """The characteristic is not a prime in the supported range 2 <= p < 2**31."""
-
-
-def is_prime(n: int) -> bool:
-    """Deterministic Miller-Rabin for n < 3.3e24 (enough for every supported characteristic)."""
-    if n < 2:
-        return False
-    small = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41)
-    for q in small:
-        if n % q == 0:
-            return n == q
-    d, s = n - 1, 0
-    while d % 2 == 0:
-        d //= 2
-        s += 1
-    for a in small:
-        x = pow(a, d, n)
-        if x in (1, n - 1):
-            continue
-        for _ in range(s - 1):
-            x = x * x % n
-            if x == n - 1:
-                break
-        else:
-            return False
-    return True
-
-
-def check_prime(p: int) -> int:
-    """Return p if it is a supported characteristic, else raise :class:`BadPrime`."""
-    if not isinstance(p, int) or isinstance(p, bool):
-        raise BadPrime(f"characteristic must be an integer, got {p!r}")
-    if not 2 <= p < MAX_PRIME:
-        raise BadPrime(f"characteristic {p} out of range: need a prime 2 <= p < 2^31")
-    if not is_prime(p):
-        raise BadPrime(f"characteristic {p} is not prime")
-    return p
 
 
 @dataclass(frozen=True, eq=False)
@@ -226,14 +188,12 @@ class Ring:
     def from_sympy(self, expr) -> "Poly":
         """Polynomial from a sympy expression in (a subset of) the ring's variables.
 
-        A string is read by the project's polynomial parser (:func:`analysis.io.parse_polynomial`),
+        A string is read by the project's polynomial parser (:func:`analysis.polytext.parse_polynomial`),
         never evaluated.
         """
         import sympy
 
         if isinstance(expr, str):
-            from .io import parse_polynomial  # io builds on this module; the parser is needed only here
-
             return self.from_terms(parse_polynomial(expr, self.variables))
         syms = sympy.symbols(self.variables)
         expr = sympy.sympify(expr, strict=True)  # strict: objects only, no text parsing
