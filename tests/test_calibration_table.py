@@ -32,3 +32,17 @@ def test_docs_summary_is_the_scripts_summary_of_the_csv():
     table = bench.summary(_rows())
     assert table.count("\n") >= 10  # 8 cells, 2 scale rows, header
     assert table in (ROOT / "docs" / "calibrate.md").read_text()
+
+
+def test_3d_tables_are_rendered_from_their_csv():
+    """tables/calibration3d.md from calibration3d.csv (the same renderer); tables/hypotheses3d.* exist together."""
+    bench = _script()
+    with open(ROOT / "tables" / "calibration3d.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert {r["cell"] for r in rows} >= {"12r/8s", "16r/10s"}
+    assert "sec_med" not in rows[0], "run facts (seconds) belong in the untracked timing file"
+    assert (ROOT / "tables" / "calibration3d.md").read_text() == bench.markdown(rows)
+    with open(ROOT / "tables" / "hypotheses3d.csv", newline="") as handle:
+        hyp = list(csv.DictReader(handle))
+    assert {r["solver"] for r in hyp} >= {"12r5s-stratified", "9r5s3d"}
+    assert all(r["sigma"] + " |" in (ROOT / "tables" / "hypotheses3d.md").read_text() for r in hyp)
