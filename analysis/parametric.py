@@ -466,7 +466,7 @@ def _from_formulation_kd(formulation, saturate_det_h: bool) -> ParametricSystem:
         powers = tuple(-2.0 if u.startswith("h") else 0.0 if u.startswith("b") else 1.0 for u in config.unknowns)
     unknowns = tuple(x.values())
     polys = [sympy.Poly(sympy.expand(expr), *unknowns).as_expr() for expr in out]
-    used = {v.name for g in polys + nonzero for v in sympy.sympify(g).free_symbols}
+    used = {v.name for g in polys + nonzero for v in g.free_symbols}  # sympy expressions, never text
     for name in reversed(list(defs)):  # keep the definitions the equations use, and what those use
         if name in used:
             used |= {v.name for v in defs[name].free_symbols}
