@@ -875,7 +875,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     from solvers.api import select_solver
     from solvers.calibration import calibrate
-    from solvers.calibration.adjustment import min_measurements, n_unknowns
+    from solvers.calibration.adjustment import enough_data
     from solvers.calibrate_io import (MeasurementFileError, check_output_path, plot_calibration, plot_formats,
                                       read_measurements, report_dict, write_json)
 
@@ -900,8 +900,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     def solvable(rows: int, cols: int) -> bool:
         if args.dim == 3:  # enough nodes and entries for the unknowns (the 3D pipeline needs no fixed block)
-            need_r, need_t = min_measurements(3)
-            return rows >= need_t and cols >= need_r and rows * cols >= n_unknowns(rows, cols, 3)
+            return enough_data(rows, cols, rows * cols, 3)
         try:
             select_solver(rows, cols)
         except ValueError:

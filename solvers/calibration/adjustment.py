@@ -55,6 +55,14 @@ def n_unknowns(n_receivers: int, n_transmitters: int, dim: int) -> int:
     return parameter_count(n_receivers, n_transmitters, dim)
 
 
+def enough_data(m: int, n: int, entries: int, dim: int) -> bool:
+    """Whether m receivers and n transmitters with this many measured entries can be calibrated in `dim`
+    dimensions at all: enough receivers for a transmitter, transmitters for a receiver, entries for the
+    unknowns."""
+    need_r, need_t = min_measurements(dim)
+    return m >= need_t and n >= need_r and entries >= n_unknowns(m, n, dim)
+
+
 #: Measurements a node needs in the plane (receiver: 2 unknowns; transmitter: 2 + offset); see min_measurements.
 MIN_RECEIVER_MEASUREMENTS, MIN_TRANSMITTER_MEASUREMENTS = min_measurements(2)
 

@@ -180,13 +180,13 @@ def _distinct(a: _Model, b: _Model, tol: float) -> bool:
 
 
 
-def _beyond_std(other, R, S, rstd, tstd, floor: float) -> bool:
-    """True when another fit (R, S of `other`) puts a node farther than 3 reported std from (R, S) after
-    a rigid alignment (reflections allowed), or places other nodes."""
+def _beyond_std(R2, S2, R, S, rstd, tstd, atol: float) -> bool:
+    """True when another fit (R2, S2) puts a node farther than 3 reported std (plus atol) from (R, S)
+    after a rigid alignment (reflections allowed), or places other nodes."""
     from ..metrics import align_rigid
 
     X = np.vstack([R, S])
-    Y = np.vstack([other.R, other.S])
+    Y = np.vstack([R2, S2])
     ok = np.isfinite(X[:, 0])
     if not np.array_equal(ok, np.isfinite(Y[:, 0])):
         return True
@@ -194,7 +194,7 @@ def _beyond_std(other, R, S, rstd, tstd, floor: float) -> bool:
         return False
     shift = np.linalg.norm(align_rigid(Y[ok], X[ok]).apply(Y[ok]) - X[ok], axis=1)
     std = np.concatenate([rstd, tstd])[ok]
-    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + 1e3 * floor
+    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + atol
     return bool((shift > tol).any())
 
 
@@ -249,7 +249,7 @@ def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, sea
         ls = robust_refine(F, work, other.R, other.S, other.O, loss="linear", max_iter=opts.max_iterations, use=inl)
         E = _residual_matrix(F, ls.R, ls.S, ls.O)[work]
         cost = float(np.sum(np.minimum(np.nan_to_num(E, nan=np.inf) ** 2, (opts.threshold_sigmas ** 2) * var)))
-        if (cost - best_cost) / var < opts.ambiguity_chi2 and _beyond_std(ls, R, S, rstd, tstd, floor):
+        if (cost - best_cost) / var < opts.ambiguity_chi2 and _beyond_std(ls.R, ls.S, R, S, rstd, tstd, 1e3 * floor):
             note = (f"an alternative calibration fits nearly as well (cost +{(cost - best_cost) / var:.2g} sigma^2); "
                     "the data may not decide between them")
             out.append(note)

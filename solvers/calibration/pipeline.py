@@ -12,13 +12,14 @@ from .adjustment import (
     AdjustmentStatistics,
     adjustment_statistics,
     critical_value,
+    enough_data,
     gauge_order,
     make_problem,
     min_measurements,
     n_unknowns,
     robust_refine,
 )
-from .flags import _flags, _principal_ratio, _probe_basins, _repair_flips
+from .flags import _beyond_std, _flags, _principal_ratio, _probe_basins, _repair_flips
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
@@ -166,8 +167,7 @@ def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: 
     transposed: status "inconsistent", and the message says so. A fit of the transposed matrix that is
     merely as good makes the orientation undecided: status "ambiguous"."""
     m, n = F.shape
-    need_r, need_t = min_measurements(dim)
-    if n < need_t or m < need_r or int(np.isfinite(F).sum()) <= n_unknowns(n, m, dim):
+    if not enough_data(n, m, int(np.isfinite(F).sum()), dim):
         return result
     # blocks only (no sub-networks, no basin probing): a clean transposed file fits at once
     quick = replace(opts, stability_check=False, max_samples=min(opts.max_samples, 20), subnetwork_samples=0,
@@ -193,8 +193,7 @@ def _suggest_3d(F, sigma, seed, opts: CalibrationOptions, t0, result: Calibratio
     (status ok: the global test with the given sigma, or an estimated sigma the spread of the data
     supports), say so in the message (the 2D answer and its status are kept)."""
     m, n = F.shape
-    need_r, need_t = min_measurements(3)
-    if m < need_t or n < need_r or int(np.isfinite(F).sum()) <= n_unknowns(m, n, 3):
+    if not enough_data(m, n, int(np.isfinite(F).sum()), 3):
         return result
     other = _calibrate_once(F, sigma, seed, replace(opts, stability_check=False), t0, 3)
     if other.status != "ok":
@@ -227,8 +226,6 @@ def _worst(*statuses: str) -> str:
 def _differs(a: CalibrationResult, b: CalibrationResult) -> bool:
     """True when two results differ: another inlier set, nodes placed in one only, or positions that
     differ (after a rigid alignment, reflections allowed) by more than 3 reported standard deviations."""
-    from ..metrics import align_rigid
-
     if not np.array_equal(a.inliers, b.inliers):
         return True
     pa = np.concatenate([np.isfinite(a.receivers[:, 0]), np.isfinite(a.transmitters[:, 0])])
@@ -236,11 +233,8 @@ def _differs(a: CalibrationResult, b: CalibrationResult) -> bool:
     if not np.array_equal(pa, pb) or pa.sum() < 3:
         return bool(not np.array_equal(pa, pb))
     X = np.vstack([a.receivers, a.transmitters])[pa]
-    Y = np.vstack([b.receivers, b.transmitters])[pa]
-    std = np.concatenate([a.receiver_std, a.transmitter_std])[pa]
-    shift = np.linalg.norm(align_rigid(Y, X).apply(Y) - X, axis=1)
-    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + 1e-9 * max(float(np.abs(X).max()), 1.0)
-    return bool((shift > tol).any())
+    return _beyond_std(b.receivers, b.transmitters, a.receivers, a.transmitters, a.receiver_std, a.transmitter_std,
+                       1e-9 * max(float(np.abs(X).max()), 1.0))
 
 
 def _message(status, res: CalibrationResult, why: str = "") -> str:

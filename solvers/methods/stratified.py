@@ -78,6 +78,11 @@ def _offsets(F: np.ndarray) -> tuple[np.ndarray | None, float]:
     return np.concatenate([[z[4] / v.sum()], z[5:] / v]), float(s[-2])
 
 
+def _coplanar(s2: float, sigma: float | None, scale: float) -> bool:
+    """Whether the second smallest singular value s2 of the offsets' kernel system is noise (solve_block)."""
+    return not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale)
+
+
 def _trim(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(rows, columns) of the sub-block with one receiver left out and the reference transmitter first
     whose offsets' kernel system fits best (smallest over second smallest singular value of the
@@ -111,7 +116,7 @@ def solve_block(F: np.ndarray, sigma: float | None = None, trim: bool = False) -
     if trim and m > MIN_RECEIVERS and n == TRANSMITTERS and np.all(np.isfinite(F)):
         scale = float(np.sqrt(np.mean(F * F))) or 1.0
         s2 = _offsets(F / scale)[1]  # coplanar on the whole block (a sub-block may look less so)
-        if not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
+        if _coplanar(s2, sigma, scale):
             return BlockOutcome(None, None, None, f"coplanar receivers (second kernel singular value {s2:.2g})")
         rows, cols = _trim(F)
         out = _solve(F[np.ix_(rows, cols)], sigma, coplanar_checked=True)
@@ -150,7 +155,7 @@ def _solve(F: np.ndarray, sigma: float | None = None, coplanar_checked: bool = F
     scale = float(np.sqrt(np.mean(F * F))) or 1.0
     F = F / scale
     o, s2 = _offsets(F)
-    if not coplanar_checked and not s2 > max(COPLANAR_KERNEL, 0.0 if sigma is None else COPLANAR_NOISE * sigma / scale):
+    if not coplanar_checked and _coplanar(s2, sigma, scale):
         return BlockOutcome(None, None, None, f"coplanar receivers (second kernel singular value {s2:.2g})")
     if o is None:
         return BlockOutcome(None, None, None, "offset kernel without a usable solution")
