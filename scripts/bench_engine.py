@@ -1,10 +1,10 @@
 """Benchmark the F4 engine against msolve over GF(65521): seconds and peak memory, each in a fresh process.
 
-For every system (names from :data:`analysis.benchmarks.BENCHMARK_SYSTEMS`) the system is written once
+For every system (names from :data:`analysis.sweeps.benchmarks.BENCHMARK_SYSTEMS`) the system is written once
 in msolve's input format, then:
 
 * own engine: a fresh Python process reads that file with the project's parser and computes the
-  reduced Gröbner basis in the system's order (:func:`analysis.degree.groebner_in_order`: grevlex by F4,
+  reduced Gröbner basis in the system's order (:func:`analysis.engine.degree.groebner_in_order`: grevlex by F4,
   lex through grevlex and FGLM when zero-dimensional). ``own_s`` is the engine's time inside the process,
   ``own_process_s`` the whole process (interpreter start, imports, parsing; bytecode cached as in an
   installed package) by wall clock;
@@ -60,9 +60,9 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from analysis.benchmarks import BENCHMARK_SYSTEMS, LEX_SYSTEMS, TDOA_TABLE_SYSTEMS, basis_digest, benchmark_system  # noqa: E402
-from analysis.msolve import find_msolve, msolve_version, parse_msolve_basis, to_msolve_input  # noqa: E402
-from analysis.ring import Ring  # noqa: E402
+from analysis.sweeps.benchmarks import BENCHMARK_SYSTEMS, LEX_SYSTEMS, TDOA_TABLE_SYSTEMS, basis_digest, benchmark_system  # noqa: E402
+from analysis.engine.msolve import find_msolve, msolve_version, parse_msolve_basis, to_msolve_input  # noqa: E402
+from analysis.engine.ring import Ring  # noqa: E402
 
 PRIME = 65521
 SUITES = {
@@ -126,16 +126,16 @@ COLUMNS = tuple(f.name for f in fields(Row))
 _OWN_CHILD = r"""
 import json, sys, time
 sys.path.insert(0, {root!r})
-from analysis.io import read_system
-from analysis.degree import groebner_in_order
-from analysis.f4 import F4Options
-from analysis.benchmarks import basis_digest
-from analysis.quotient import NotZeroDimensional, degree, dimension
+from analysis.engine.io import read_system
+from analysis.engine.degree import groebner_in_order
+from analysis.engine.f4 import F4Options
+from analysis.sweeps.benchmarks import basis_digest
+from analysis.engine.quotient import NotZeroDimensional, degree, dimension
 ring, polys = read_system(sys.argv[1]).to_ring({prime}, sys.argv[2])
 threads = int(sys.argv[4]) if len(sys.argv) > 4 else 1
 if sys.argv[3] == "baseline":
     sys.exit(0)
-from analysis.linalg import MatrixTooLarge
+from analysis.engine.linalg import MatrixTooLarge
 t0 = time.perf_counter()
 try:
     gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10, threads=threads))
@@ -238,7 +238,7 @@ def own_argv(path: Path, order: str, prime: int, mode: str = "run", threads: int
 
 def msolve_argv(exe: str, path: Path, out: Path, order: str, threads: int = 1) -> list[str]:
     basis = ["-g", "2"] if order == "grevlex" else []  # lex: msolve's parametrization
-    # OMP_NUM_THREADS as well as -t (as analysis.msolve does): this script sets it to 1 for its children;
+    # OMP_NUM_THREADS as well as -t (as analysis.engine.msolve does): this script sets it to 1 for its children;
     # env execs msolve in the same process, so its time and memory are msolve's
     return ["env", f"OMP_NUM_THREADS={threads}", exe, *basis, "-t", str(threads), "-f", str(path), "-o", str(out)]
 

@@ -66,7 +66,7 @@ def _truth(module, net) -> np.ndarray:
     """The true root in the solver's unknowns: (H, b, o), or receiver coordinates (positions solvers)."""
     label = getattr(getattr(module, "base", module), "SYSTEM", "")  # a subsystem solver: its base's unknowns
     if "positions" in label:
-        from analysis.positions import _root_from_network, _to_gauge, positions_system
+        from analysis.formulations.positions import _root_from_network, _to_gauge, positions_system
 
         system = positions_system(*module.CONFIG, label.split("positions-")[1])
         rec, tra = _to_gauge(np.asarray(net.receivers, float), np.asarray(net.transmitters, float))

@@ -39,9 +39,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from analysis.io import format_polynomial, parse_polynomial  # noqa: E402
-from analysis.modular import order_key, random_primes  # noqa: E402
-from analysis.paths import cache_dir  # noqa: E402
+from analysis.engine.io import format_polynomial, parse_polynomial  # noqa: E402
+from analysis.engine.modular import order_key, random_primes  # noqa: E402
+from analysis.sweeps.paths import cache_dir  # noqa: E402
 
 CATEGORIES = ("char0", "char0_unlucky", "orders", "block", "saturation", "small_primes", "large_primes",
               "near_univariate")

@@ -64,9 +64,9 @@ def reproduce(out: Path) -> Path:
 
 def _rounds(label: str):
     """F4 statistics of one seeded GF(65521) instance of a TDOA formulation (known root checked)."""
-    from analysis import formulations as tf
-    from analysis.f4 import groebner
-    from analysis.ring import Ring
+    from analysis.formulations import tdoa as tf
+    from analysis.engine.f4 import groebner
+    from analysis.engine.ring import Ring
 
     formulation = tf.as_formulation(label)
     config = formulation.config
@@ -78,7 +78,7 @@ def _rounds(label: str):
 
 def explore(out: Path) -> Path:
     """Matrix sizes of the F4 rounds that give Table 2's degrees 75 (9r/3s) and 181 (6r/3s)."""
-    from analysis.quotient import standard_monomials
+    from analysis.engine.quotient import standard_monomials
 
     fig, ax = plt.subplots(figsize=(6.4, 3.2))
     for label, marker in zip(EXPLORE, "os"):

@@ -1,7 +1,7 @@
 """Reproduce Tables 2 and 3 of the paper (complexity |B| of TDOA formulations) and search beyond them.
 
-Computes (or reads from the user cache, ``analysis.paths.cache_dir('complexity')``) every formulation chosen by
-:func:`analysis.tables.plan_tables`, writes ``tables/table2.{csv,md,tex}``, ``tables/table3.{csv,md,tex}``,
+Computes (or reads from the user cache, ``analysis.sweeps.paths.cache_dir('complexity')``) every formulation chosen by
+:func:`analysis.sweeps.tables.plan_tables`, writes ``tables/table2.{csv,md,tex}``, ``tables/table3.{csv,md,tex}``,
 ``tables/section32.csv``, ``tables/formulations.csv`` and ``tables/provenance.json``, and prints every
 number beside the paper's. A quick run or a run over some cells writes to the user cache's ``tables-partial/``
 unless --out-dir is given, so the full tables are never overwritten by a partial run.
@@ -25,9 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from analysis.complexity import DEFAULT_CELLS  # noqa: E402  (after the thread settings)
-from analysis.executors import make_executor  # noqa: E402
-from analysis.tables import make_tables  # noqa: E402
+from analysis.sweeps.complexity import DEFAULT_CELLS  # noqa: E402  (after the thread settings)
+from analysis.sweeps.executors import make_executor  # noqa: E402
+from analysis.sweeps.tables import make_tables  # noqa: E402
 
 
 def build_parser() -> argparse.ArgumentParser:

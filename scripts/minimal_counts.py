@@ -1,6 +1,6 @@
 """Generic solution counts of the minimal 2D TDOA problems in positions formulations: tables/minimal_counts.csv.
 
-Rows (each a degree agreed by every (prime, seed) instance; analysis.minimal.count):
+Rows (each a degree agreed by every (prime, seed) instance; analysis.sweeps.minimal.count):
 
 * 4r/5s (minimal): ``receivers`` (5 receiver coordinates; degree in the unknowns, orbits of the sign
   group) and ``receivers-orbits`` (invariants: one root per geometric solution), saturated by the listed
@@ -36,10 +36,10 @@ import time  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from analysis.complexity import compute_formulation  # noqa: E402
-from analysis.degree import DEFAULT_PRIMES  # noqa: E402
-from analysis.f4 import F4Options  # noqa: E402
-from analysis.minimal import Subsystem, count  # noqa: E402
+from analysis.sweeps.complexity import compute_formulation  # noqa: E402
+from analysis.engine.degree import DEFAULT_PRIMES  # noqa: E402
+from analysis.engine.f4 import F4Options  # noqa: E402
+from analysis.sweeps.minimal import Subsystem, count  # noqa: E402
 
 FIELDS = ["label", "variant", "config", "subsystem", "saturate_by", "unknowns", "equations", "equation_degrees",
           "group_order", "status", "degree", "dimension", "orbits", "free_action", "simple_roots", "satisfy_full",
@@ -89,7 +89,7 @@ def compute_row(item: dict) -> dict:
 
 
 def paper_rows(seeds: tuple[int, ...]) -> list[dict]:
-    """The paper's 6r/3s formulation on the project's own instances (analysis.complexity)."""
+    """The paper's 6r/3s formulation on the project's own instances (analysis.sweeps.complexity)."""
     t0 = time.perf_counter()
     res = compute_formulation("6r3s:A,B2,B3,C2-C6", DEFAULT_PRIMES, seeds)
     seconds = time.perf_counter() - t0
@@ -160,8 +160,8 @@ def provenance(seeds, args, total: float) -> dict:
         "seeds": list(seeds),
         "seeds_note": "receivers-orbits 4r/5s uses one extra seed; rows marked with one seed use the first; "
                       "--all-variants rows use the first prime and seed only",
-        "instances": "analysis.positions.sample_gf_positions(m, n, p, seed, variant); paper rows: "
-                     "analysis.formulations.sample_gf_instance (analysis.complexity.compute_formulation)",
+        "instances": "analysis.formulations.positions.sample_gf_positions(m, n, p, seed, variant); paper rows: "
+                     "analysis.formulations.tdoa.sample_gf_instance (analysis.sweeps.complexity.compute_formulation)",
         "saturation": "Rabinowitsch variable t_ (t_ * f - 1, f the product of the saturating polynomials) in "
                       "grevlex; degree of I + (t_ f - 1) = degree of I : f^inf",
         "max_matrix_cells": CAP,

@@ -1,6 +1,6 @@
 """Numerical companion of the 4r/5s count: monodromy finds the 344 orbits, then real/physical counts.
 
-The 4r/5s `receivers` formulation (analysis.positions; 5 unknowns, Q_1..Q_5) is solved numerically by
+The 4r/5s `receivers` formulation (analysis.formulations.positions; 5 unknowns, Q_1..Q_5) is solved numerically by
 the project's parameter homotopy in the data F (solvers.methods.homotopy: complex straight segments,
 the compiled tracker, Newton steps on the endpoints):
 
@@ -35,8 +35,8 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from analysis.parametric import from_positions  # noqa: E402
-from analysis.positions import network_from_root, positions_system, sample_real_positions  # noqa: E402
+from analysis.formulations.parametric import from_positions  # noqa: E402
+from analysis.formulations.positions import network_from_root, positions_system, sample_real_positions  # noqa: E402
 from solvers.methods import homotopy  # noqa: E402
 
 M, N = 4, 5

@@ -29,9 +29,9 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from analysis.formulations import Formulation  # noqa: E402
-from analysis.parametric import from_formulation  # noqa: E402
-from analysis.paths import cache_dir  # noqa: E402
+from analysis.formulations.tdoa import Formulation  # noqa: E402
+from analysis.formulations.parametric import from_formulation  # noqa: E402
+from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers.generate import complex_instance  # noqa: E402
 from solvers.methods import homotopy as hm  # noqa: E402
 

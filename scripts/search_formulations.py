@@ -1,6 +1,6 @@
 """Exhaustive search of the Table 3 cells: every relabeling-symmetry class within a stated bound.
 
-Enumerates the classes of each cell (:func:`analysis.search.enumerate_cell`), computes every class on
+Enumerates the classes of each cell (:func:`analysis.sweeps.search.enumerate_cell`), computes every class on
 two primes (cached in the user cache's ``search/``, so an interrupted run resumes), and writes
 ``tables/search.{csv,md}``, ``tables/search_candidates.csv`` (every class and its decision),
 ``tables/search_capped.csv`` (classes stopped by a cap or left open, with the cap) and
@@ -18,13 +18,13 @@ import sys
 import time
 from pathlib import Path
 
-# Every class is computed in a spawned worker that sets one BLAS thread itself (analysis.complexity), so
+# Every class is computed in a spawned worker that sets one BLAS thread itself (analysis.sweeps.complexity), so
 # this process needs no thread settings before numpy is imported.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from analysis.executors import ExecutorError, make_executor  # noqa: E402
-from analysis.search import SearchBound, SearchLimits, cached_cell, run_search  # noqa: E402
-from analysis.tables import parse_cells  # noqa: E402
+from analysis.sweeps.executors import ExecutorError, make_executor  # noqa: E402
+from analysis.sweeps.search import SearchBound, SearchLimits, cached_cell, run_search  # noqa: E402
+from analysis.sweeps.tables import parse_cells  # noqa: E402
 from solvers.cli import _memory_size  # noqa: E402  (the CLI's --max-memory parser)
 
 
@@ -61,7 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _msolve_run(choice: str, timeout: float):
     """The msolve run of ``--msolve`` (None for none, or auto without an executable)."""
-    from analysis.msolve import INSTALL_HINT, MsolveRun, find_msolve
+    from analysis.engine.msolve import INSTALL_HINT, MsolveRun, find_msolve
 
     if timeout <= 0:
         raise ValueError("--msolve-timeout must be positive")
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"reduced ({time.perf_counter() - t0:.1f} s)")
         print(f"total {total} classes")
         return 0
-    from analysis.paths import cache_dir, default_output_dir
+    from analysis.sweeps.paths import cache_dir, default_output_dir
 
     out_dir = args.out_dir or (default_output_dir() if args.cells is None else cache_dir("search-partial"))
     try:

@@ -4,7 +4,7 @@ Cells: every m/n with 5 <= m <= 11, 4 <= n <= 10 (the 3D compaction parametrizat
 n >= 4) whose excess mn - (3m + 4n - 6) lies in EXCESS: the minimal cells (excess 0: 10r/4s, 7r/5s,
 6r/6s, 5r/9s) and their neighbours, which include the cells of the published stratified 3D solvers
 (9r/5s, 7r/6s, 6r/8s). Unknowns H (6), b (3), o1..on, saturated by det H (and det D~[:3, :3] with the
-B_j, j >= 5). Per cell, in this order (analysis.cell_degrees.cell_degree, primes 65521 and 32749, seed 0;
+B_j, j >= 5). Per cell, in this order (analysis.sweeps.cell_degrees.cell_degree, primes 65521 and 32749, seed 0;
 a formulation equal to an earlier one is not repeated):
 
 * ``A,B2-B4,C*,minors``: the paper's family carried to 3D (B only for the transmitters of S~ = I);
@@ -29,8 +29,8 @@ import sys  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from analysis.cell_degrees import run_table_script  # noqa: E402
-from analysis.formulations import Formulation, TDOAConfig  # noqa: E402
+from analysis.sweeps.cell_degrees import run_table_script  # noqa: E402
+from analysis.formulations.tdoa import Formulation, TDOAConfig  # noqa: E402
 
 EXCESS = (-2, 6)
 M_RANGE = range(5, 12)

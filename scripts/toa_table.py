@@ -2,7 +2,7 @@
 
 Cells: every m/n with m, n >= K + 1 (the compaction parametrization's bound), m, n <= MAX_SIDE and
 excess mn - (K(m + n) - K(K+1)/2) between EXCESS[0] and EXCESS[1] (minimal: 0). Per cell two
-formulations (analysis.cell_degrees.cell_degree, primes 65521 and 32749, seed 0):
+formulations (analysis.sweeps.cell_degrees.cell_degree, primes 65521 and 32749, seed 0):
 
 * compaction ``all`` (A, B2..Bn, C2..Cm in the unknowns H, b; paper Section 2.1): solutions with
   det H != 0, each one network up to rotation, reflection and translation; msolve (when installed)
@@ -25,8 +25,8 @@ import sys  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from analysis.cell_degrees import run_table_script  # noqa: E402
-from analysis.formulations import Formulation, TDOAConfig  # noqa: E402
+from analysis.sweeps.cell_degrees import run_table_script  # noqa: E402
+from analysis.formulations.tdoa import Formulation, TDOAConfig  # noqa: E402
 
 EXCESS = (-1, 3)
 MAX_SIDE = {2: 6, 3: 9}

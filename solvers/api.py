@@ -49,7 +49,7 @@ def _module_for(label: str):
 #: whose configuration fits inside the network (m >= m_s and n >= n_s) is used.
 SOLVER_ORDER = ("6r4s", "9r3s", "8r3s", "7r3s", "6r3s", "5r5s", "5r4s", "4r5s")
 
-#: Solvers whose unknowns are receiver coordinates (analysis.positions variant), not (H, b, o).
+#: Solvers whose unknowns are receiver coordinates (analysis.formulations.positions variant), not (H, b, o).
 POSITIONS = {"4r5s": "receivers-orbits"}
 
 #: Configurations with as many measurements as degrees of freedom (2m + 3n - 3 = mn).
@@ -125,7 +125,7 @@ def solve_roots(F) -> np.ndarray:
 
 def _from_positions(F: np.ndarray, choice: SolverChoice, x: np.ndarray, tol: float = 1e-6) -> Calibration | None:
     """A real calibration of the solver's block from a positions root (None for a complex network)."""
-    from analysis.positions import positions_system
+    from analysis.formulations.positions import positions_system
 
     if F.shape[0] > choice.m:
         return None  # receivers beyond the block: a cheaper solver covers such networks
@@ -135,7 +135,7 @@ def _from_positions(F: np.ndarray, choice: SolverChoice, x: np.ndarray, tol: flo
 
 def _positions_calibration(system, block: np.ndarray, x: np.ndarray, tol: float = 1e-6) -> Calibration | None:
     """The calibration of a positions formulation's root x on its data block (None unless real and finite)."""
-    from analysis.positions import network_from_root
+    from analysis.formulations.positions import network_from_root
 
     rec, tra, off = network_from_root(system, x, block)
     parts = np.concatenate([rec.ravel(), tra.ravel(), off])
@@ -182,7 +182,7 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
     committed or written by ``solvers.generate.generate``; F: its (m, n) = ``CONFIG`` data; roots: its
     candidates (default ``module.solve(F)``). (H, b, o) roots, 2D or 3D, go through
     :func:`solvers.recovery.recover`, positions roots (4r/5s) through
-    :func:`analysis.positions.network_from_root`. Returns the real, geometrically valid calibrations
+    :func:`analysis.formulations.positions.network_from_root`. Returns the real, geometrically valid calibrations
     sorted by RMS residual (best first), in the gauge r_1 = 0, r_2 = (r_2x > 0, 0) (3D: r_2 =
     (r_2x > 0, 0, 0), r_3 = (r_3x, r_3y > 0, 0)); a reflection of the plane (3D: of space in the
     plane of r_1, r_2, r_3) is a second solution the data cannot tell apart, one representative is returned. Nothing is refined (:func:`solve_network` and
@@ -197,7 +197,7 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
     system = None
     offsets = tuple(f"o{j}" for j in range(1, n + 1))
     if "positions-" in module.SYSTEM:
-        from analysis.positions import positions_system
+        from analysis.formulations.positions import positions_system
 
         system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
     elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets, HBO_UNKNOWNS,

@@ -29,7 +29,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # F4 matrices are small: BLA
 def _set_numba_cache() -> None:
     """numba's compiled kernels go to the user cache (by default numba writes next to the module, i.e. into
     site-packages for an installed package); only before numba is imported, and never over a user's choice."""
-    from analysis.paths import cache_dir
+    from analysis.sweeps.paths import cache_dir
 
     if "numba" not in sys.modules and "NUMBA_CACHE_DIR" not in os.environ:
         os.environ["NUMBA_CACHE_DIR"] = str(cache_dir("numba"))
@@ -89,18 +89,18 @@ def _memory_size(text: str) -> int:
 
 
 def _default_max_memory() -> str:
-    from analysis.f4 import DEFAULT_MAX_MEMORY
+    from analysis.engine.f4 import DEFAULT_MAX_MEMORY
 
     return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
 
 
 def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
-    """F4 options of the command line; ``linear_substitution`` for system files (analysis.f4.F4Options: the
+    """F4 options of the command line; ``linear_substitution`` for system files (analysis.engine.f4.F4Options: the
     TDOA formulations keep F4 on their inputs, whose matrix statistics the tables record)."""
-    from analysis.f4 import F4Options
+    from analysis.engine.f4 import F4Options
 
     if args.verbose and args.backend in ("auto", "sparse"):
-        from analysis import native
+        from analysis.engine import native
 
         print(f"[f4] {native.describe()}", file=sys.stderr)
     return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
@@ -109,7 +109,7 @@ def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
 
 def _export(system, fmt: str, path: str) -> None:
     """Write the system for another CAS; a path that cannot be written is a one-line user error."""
-    from analysis.io import WRITE_FORMATS, write_system
+    from analysis.engine.io import WRITE_FORMATS, write_system
 
     if fmt not in WRITE_FORMATS:
         raise UserError(f"--export: unknown format {fmt!r}; valid: {', '.join(WRITE_FORMATS)}")
@@ -194,7 +194,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
 
 def _msolve_path(args: argparse.Namespace) -> str | None:
     """The msolve executable of --msolve (a user error if it cannot be run) or the one found, or None."""
-    from analysis.msolve import find_msolve
+    from analysis.engine.msolve import find_msolve
 
     if args.msolve:
         if not (os.path.isfile(args.msolve) and os.access(args.msolve, os.X_OK)):
@@ -204,8 +204,8 @@ def _msolve_path(args: argparse.Namespace) -> str | None:
 
 
 def _analyse(args: argparse.Namespace, polys, primes, options, **saturation):
-    """analysis.degree.analyse with the engine of --engine: the own engine, or msolve checked by it."""
-    from analysis.degree import analyse, analyse_by_msolve
+    """analysis.engine.degree.analyse with the engine of --engine: the own engine, or msolve checked by it."""
+    from analysis.engine.degree import analyse, analyse_by_msolve
 
     exe = _engine(args, polys(primes[0]))
     if exe is None:
@@ -219,7 +219,7 @@ def _engine(args: argparse.Namespace, polys) -> str | None:
         raise UserError("--no-check applies to --engine msolve or auto")
     exe = None if args.engine == "own" else _msolve_path(args)
     if args.engine == "msolve" and exe is None:
-        from analysis.msolve import INSTALL_HINT
+        from analysis.engine.msolve import INSTALL_HINT
 
         raise UserError(f"--engine msolve: no msolve executable found; install one ({INSTALL_HINT}) or give --msolve PATH")
     if args.engine == "auto" and exe is not None and _bezout_bound(polys) < AUTO_MSOLVE_BEZOUT:
@@ -237,8 +237,8 @@ def _bezout_bound(polys) -> int:
 
 
 def cmd_degree(args: argparse.Namespace) -> int:
-    from analysis.io import InputError, System, decode_text, parse_msolve, parse_polynomial
-    from analysis.ring import check_prime, BadPrime
+    from analysis.engine.io import InputError, System, decode_text, parse_msolve, parse_polynomial
+    from analysis.engine.ring import check_prime, BadPrime
 
     if args.tdoa:
         if args.file:
@@ -300,13 +300,13 @@ def cmd_degree(args: argparse.Namespace) -> int:
 
 def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, primes, options) -> int:
     """Degree (and --gb / --basis) of a characteristic-0 system: a majority of random 31-bit primes, or
-    the user's primes, with unlucky primes rejected (analysis.modular); --gb over Q."""
+    the user's primes, with unlucky primes rejected (analysis.engine.modular); --gb over Q."""
     import dataclasses
 
-    from analysis.degree import CHECK_CELLS, analyse_prime
-    from analysis.io import format_polynomial
-    from analysis.linalg import MatrixTooLarge
-    from analysis.modular import analyse_rational, input_seed, order_key, rational_basis
+    from analysis.engine.degree import CHECK_CELLS, analyse_prime
+    from analysis.engine.io import format_polynomial
+    from analysis.engine.linalg import MatrixTooLarge
+    from analysis.engine.modular import analyse_rational, input_seed, order_key, rational_basis
 
     exact = list(system.polynomials) + ([sat_terms] if sat_terms is not None else [])
     computed: list[int] = []
@@ -371,13 +371,13 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
 
     The rank of the Jacobian at the known root comes first (milliseconds): below the number of unknowns,
     the root lies on a positive-dimensional solution set (generic smoothness, see
-    :mod:`analysis.complexity`) and that is the answer, without a Gröbner basis (unless --gb).
+    :mod:`analysis.sweeps.complexity`) and that is the answer, without a Gröbner basis (unless --gb).
     """
-    from analysis import formulations as tf
-    from analysis.complexity import jacobian_rank
-    from analysis.degree import DEFAULT_PRIMES
-    from analysis.formulations_kd import det_h_terms, nonzero_conditions
-    from analysis.ring import BadPrime, Ring, check_prime
+    from analysis.formulations import tdoa as tf
+    from analysis.sweeps.complexity import jacobian_rank
+    from analysis.engine.degree import DEFAULT_PRIMES
+    from analysis.formulations.kd import det_h_terms, nonzero_conditions
+    from analysis.engine.ring import BadPrime, Ring, check_prime
 
     if args.equations is not None and not args.equations.strip():
         raise UserError("--equations is empty; give e.g. 'C2-C6', 'B2,C2-C6,minors' or 'all'")
@@ -416,7 +416,7 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
 
     header = f"formulation {formulation.label} (seed {args.seed})"
     if args.export:
-        from analysis.io import System
+        from analysis.engine.io import System
 
         ring = Ring(config.unknowns, primes[0], args.order)
         system = System.from_polys(ring, polys(primes[0]), source=f"formulation {formulation.label}")
@@ -510,7 +510,7 @@ def _output_dir(args: argparse.Namespace):
     processes inherit it."""
     from pathlib import Path
 
-    from analysis.paths import CACHE_ENV, default_output_dir
+    from analysis.sweeps.paths import CACHE_ENV, default_output_dir
 
     if args.cache_dir:
         os.environ[CACHE_ENV] = str(Path(args.cache_dir).expanduser().resolve())
@@ -547,7 +547,7 @@ def _add_dask_option(p: argparse.ArgumentParser) -> None:
 
 def _executor(args: argparse.Namespace):
     """The sweep's executor for --dask / --jobs (a bad --dask address is a one-line error)."""
-    from analysis.executors import ExecutorError, make_executor
+    from analysis.sweeps.executors import ExecutorError, make_executor
 
     if args.jobs < 1:
         raise UserError("--jobs must be at least 1")
@@ -558,8 +558,8 @@ def _executor(args: argparse.Namespace):
 
 
 def _run_tables(quick: bool, jobs: int, out_dir, use_cache: bool = True, executor=None) -> None:
-    from analysis.executors import ExecutorError
-    from analysis.tables import make_tables
+    from analysis.sweeps.executors import ExecutorError
+    from analysis.sweeps.tables import make_tables
 
     try:
         summary = make_tables(quick=quick, jobs=jobs, use_cache=use_cache, out_dir=out_dir, executor=executor)
@@ -641,7 +641,7 @@ def _read_start(path: str, system) -> tuple:
 def cmd_generate(args: argparse.Namespace) -> int:
     import shlex
 
-    from analysis.parametric import ParametricError, parse
+    from analysis.formulations.parametric import ParametricError, parse
     from solvers import generate as gen
     from solvers.methods.homotopy import HomotopyError
     from solvers.subsystem import SUBSYSTEMS
@@ -729,8 +729,8 @@ def _degree_range(text: str) -> range:
 
 def _file_system(path: str, prime: int, basis: str):
     """Equations over GF(p), unknowns, basis and a description for a user's system file."""
-    from analysis.io import InputError, read_system
-    from analysis.ring import BadPrime, check_prime
+    from analysis.engine.io import InputError, read_system
+    from analysis.engine.ring import BadPrime, check_prime
     from solvers.feasibility import SECOND_PRIME, system_basis
 
     if basis != "grevlex":
@@ -758,7 +758,7 @@ def _file_system(path: str, prime: int, basis: str):
 def cmd_template_check(args: argparse.Namespace) -> int:
     import time
 
-    from analysis.formulations import as_formulation
+    from analysis.formulations.tdoa import as_formulation
     from solvers.feasibility import count_relations, gf_basis, multipliers
 
     if os.path.exists(args.system):
@@ -989,16 +989,16 @@ def _user_error(e: Exception) -> tuple[str, int] | None:
     def cls(module: str, name: str) -> type:
         return getattr(sys.modules.get(module), name, ())
 
-    if isinstance(e, (cls("analysis.degree", "PrimeDisagreement"), cls("analysis.modular", "ReconstructionFailed"))):
+    if isinstance(e, (cls("analysis.engine.degree", "PrimeDisagreement"), cls("analysis.engine.modular", "ReconstructionFailed"))):
         return str(e), 3
-    if isinstance(e, cls("analysis.msolve", "MsolveError")):
+    if isinstance(e, cls("analysis.engine.msolve", "MsolveError")):
         return f"{e}; --engine own computes without it", 2
-    if isinstance(e, cls("analysis.linalg", "MatrixTooLarge")):
+    if isinstance(e, cls("analysis.engine.linalg", "MatrixTooLarge")):
         flag = "--max-memory" if "memory cap" in str(e) else "--max-cells"  # the cap that stopped it
         return f"{e}; raise {flag} if the machine allows, or give a smaller system", 2
-    if isinstance(e, cls("analysis.formulations", "InconsistentSample")):
+    if isinstance(e, cls("analysis.formulations.tdoa", "InconsistentSample")):
         return f"{e}; try another --seed", 2
-    if isinstance(e, (UserError, ValueError, OverflowError, cls("analysis.formulations", "SamplingFailed"))):
+    if isinstance(e, (UserError, ValueError, OverflowError, cls("analysis.formulations.tdoa", "SamplingFailed"))):
         return str(e), 2  # ValueError covers InputError, BadPrime and NotZeroDimensional
     if isinstance(e, MemoryError):
         return "out of memory; lower --max-memory so that the computation stops before the machine's limit", 2

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import sympy
 
-from analysis.formulations import Formulation, definition_order, factored_equations
+from analysis.formulations.tdoa import Formulation, definition_order, factored_equations
 
 from .methods import homotopy
 from .methods.spec import load_spec, spec_sha256

@@ -31,9 +31,9 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
-from analysis.f4 import groebner
-from analysis.linalg import pivot_columns
-from analysis.formulations import (
+from analysis.engine.f4 import groebner
+from analysis.engine.linalg import pivot_columns
+from analysis.formulations.tdoa import (
     Formulation,
     as_formulation,
     evaluate_gf,
@@ -41,9 +41,9 @@ from analysis.formulations import (
     real_equations,
     sample_gf_instance,
 )
-from analysis.orderings import MonomialOrder
-from analysis.quotient import standard_monomials
-from analysis.ring import Ring
+from analysis.engine.orderings import MonomialOrder
+from analysis.engine.quotient import standard_monomials
+from analysis.engine.ring import Ring
 
 __all__ = [
     "BASES",
@@ -213,7 +213,7 @@ def system_basis(equations: Sequence[Mapping[Exponent, int]], variables: Sequenc
 
     Raises ``ValueError`` if the system has no solutions or is not zero-dimensional.
     """
-    from analysis.quotient import is_zero_dimensional
+    from analysis.engine.quotient import is_zero_dimensional
 
     ring = Ring(tuple(variables), prime, "grevlex")
     gb = groebner([ring.from_terms({e: c % prime for e, c in f.items()}) for f in equations])
@@ -262,7 +262,7 @@ def template_numerics(formulation: Formulation | str, family: str, degree: int, 
     * ``"svd"``: projection on the left singular vectors of M_E beyond its exact (GF(p)) rank, then
       least squares for the relations of R (orthogonal, all rows kept; cubic in the template size);
     * ``"lu"``: the square system a sparse-LU solver would factor: a maximal independent set of E
-      columns and then of rows, both chosen over GF(p) (:func:`analysis.linalg.pivot_columns`),
+      columns and then of rows, both chosen over GF(p) (:func:`analysis.engine.linalg.pivot_columns`),
       solved by dense LU with partial pivoting;
     * ``"splu-natural"``, ``"splu-colamd"``: the same square system by SuperLU (scipy), with the
       columns in template order (excess monomials by decreasing degree, then R) or reordered by COLAMD

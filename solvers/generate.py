@@ -1,8 +1,8 @@
 """The one solver generator: a configuration, a formulation or a user's parametric system -> spec + module.
 
 :func:`generate` takes a committed configuration label (:data:`SOLVERS`), a TDOA formulation label
-(``7r3s:B2,B3,C2-C7``) or an :class:`analysis.parametric.ParametricSystem` (e.g. read from a text
-file by :func:`analysis.parametric.parse`) and writes ``<name>_<method><size>.json`` (plain-text
+(``7r3s:B2,B3,C2-C7``) or an :class:`analysis.formulations.parametric.ParametricSystem` (e.g. read from a text
+file by :func:`analysis.formulations.parametric.parse`) and writes ``<name>_<method><size>.json`` (plain-text
 spec) and ``.py`` (the module of :mod:`solvers.codegen`'s one template: do-not-edit header with the
 command that regenerates it and the spec's sha256, coefficient function, ``solve(F)``) into the
 directory ``out``, and nowhere else. Methods are strategies behind one interface (:data:`METHODS`):
@@ -39,8 +39,8 @@ from typing import Callable, Protocol, Union
 
 import numpy as np
 
-from analysis.formulations import Formulation
-from analysis.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
+from analysis.formulations.tdoa import Formulation
+from analysis.formulations.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
 
 from . import codegen
 from .methods import homotopy, offset_kernel, pencil, tracker
@@ -71,11 +71,11 @@ SOLVERS = {
     "6r4s3dtoa": "6r4s-toa3d:A,B2,B3,B4,C2-C6",
 }
 
-#: Configurations solved in a positions formulation (analysis.positions) instead of (H, b, o).
+#: Configurations solved in a positions formulation (analysis.formulations.positions) instead of (H, b, o).
 POSITIONS = {"4r5s": "receivers-orbits"}
 
 #: Over-determined formulations (dependent rank-2 minors): keep this many leading equations and replace
-#: the minors by random integer combinations (analysis.parametric.square); counted on one seed.
+#: the minors by random integer combinations (analysis.formulations.parametric.square); counted on one seed.
 SQUARED = {"5r4s": 7}
 
 #: Over-determined formulations squared by a choice of their minors instead (the square system is the
@@ -160,7 +160,7 @@ def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2,
     order; TOA draws no offsets); d_ij is a square root of the (complex) squared distance (the equations
     use only d_ij^2). The root is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with
     H = (4 S^T S)^-1, S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0;
-    transposes, not conjugates), as in solvers.synthetic and analysis.formulations_kd.
+    transposes, not conjugates), as in solvers.synthetic and analysis.formulations.kd.
     """
     r = rng.normal(size=(m, dim)) + 1j * rng.normal(size=(m, dim))
     t = rng.normal(size=(n, dim)) + 1j * rng.normal(size=(n, dim))
@@ -186,8 +186,8 @@ def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa") -> Callable[[
 
 
 def _positions_start(m: int, n: int, variant: str) -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
-    """Complex networks in the gauge of analysis.positions, normalised by the RMS modulus of F."""
-    from analysis.positions import _root_from_network, _to_gauge, positions_system
+    """Complex networks in the gauge of analysis.formulations.positions, normalised by the RMS modulus of F."""
+    from analysis.formulations.positions import _root_from_network, _to_gauge, positions_system
 
     ps = positions_system(m, n, variant)
 
@@ -205,7 +205,7 @@ def _positions_start(m: int, n: int, variant: str) -> Callable[[np.random.Genera
 
 
 def _positions_trials(m: int, n: int, variant: str, powers) -> Callable[[int], tuple[np.ndarray, np.ndarray]]:
-    from analysis.positions import sample_real_positions
+    from analysis.formulations.positions import sample_real_positions
 
     def trial(seed: int) -> tuple[np.ndarray, np.ndarray]:
         F, root = sample_real_positions(m, n, 10_000 + seed, variant)
@@ -216,7 +216,7 @@ def _positions_trials(m: int, n: int, variant: str, powers) -> Callable[[int], t
 
 
 def _tdoa_trials(label: str, powers: tuple[float, ...]) -> Callable[[int], tuple[np.ndarray, np.ndarray]]:
-    from analysis.formulations import sample_real_instance
+    from analysis.formulations.tdoa import sample_real_instance
 
     def trial(seed: int) -> tuple[np.ndarray, np.ndarray]:
         inst = sample_real_instance(label, 10_000 + seed)

@@ -28,7 +28,7 @@ __all__ = ["SUBSYSTEMS", "FILTER_TOL", "SubsystemSolver", "extra_transmitter_res
            "polish_on_all", "receivers_from_orbits"]
 
 #: Over-determined label -> (square base label, roots of the over-determined system). The count is
-#: established by analysis.positions (tests/test_positions.py::test_4r6s_full_system_keeps_only_the_true_network_two_primes).
+#: established by analysis.formulations.positions (tests/test_positions.py::test_4r6s_full_system_keeps_only_the_true_network_two_primes).
 SUBSYSTEMS = {"4r6s": ("4r5s", 1)}
 
 #: Largest relative residual of an extra transmitter's equation for a candidate to be kept.

@@ -127,7 +127,7 @@ def test_calibrations_from_a_generated_solvers_roots(label):
     net = random_network(*module.CONFIG, np.random.default_rng(3))
     roots = None
     if label == "4r5s":  # its 344 paths take seconds: the true root (orbit invariants) and a complex one
-        from analysis.positions import _to_gauge
+        from analysis.formulations.positions import _to_gauge
         from solvers.subsystem import orbits_from_receivers
 
         truth = orbits_from_receivers(_to_gauge(np.asarray(net.receivers, float), np.asarray(net.transmitters, float))[0])

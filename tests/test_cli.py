@@ -228,7 +228,7 @@ def test_export_of_a_file_carries_its_saturation(capsys, tmp_path):
 
 
 def _need_msolve() -> str:
-    from analysis.msolve import INSTALL_HINT, find_msolve
+    from analysis.engine.msolve import INSTALL_HINT, find_msolve
 
     exe = find_msolve()
     if exe is None:

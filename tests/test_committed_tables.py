@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from analysis.cell_degrees import FIELDS, cell_degree
-from analysis.degree import DEFAULT_PRIMES
-from analysis.msolve import find_msolve
+from analysis.sweeps.cell_degrees import FIELDS, cell_degree
+from analysis.engine.degree import DEFAULT_PRIMES
+from analysis.engine.msolve import find_msolve
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMING = {"seconds"}

@@ -1,4 +1,4 @@
-"""Tests for analysis.complexity and analysis.tables: degrees of the paper's formulations, the majority
+"""Tests for analysis.sweeps.complexity and analysis.sweeps.tables: degrees of the paper's formulations, the majority
 rule, saturation by det H, caching and limits of the sweep, and staleness of tables/formulations.csv.
 """
 from __future__ import annotations
@@ -11,8 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from analysis import complexity, tables
-from analysis.complexity import (
+from analysis.sweeps import complexity, tables
+from analysis.sweeps.complexity import (
     DEFAULT_PRIMES,
     ENGINE_VERSION,
     FormulationResult,
@@ -28,11 +28,11 @@ from analysis.complexity import (
     saturated_degree,
     sweep,
 )
-from analysis.f4 import F4Options, groebner
-from analysis.formulations import Formulation, gf_equations, sample_gf_instance
-from analysis.quotient import action_matrix, saturate, standard_monomials
-from analysis.ring import Ring
-from analysis.tables import (
+from analysis.engine.f4 import F4Options, groebner
+from analysis.formulations.tdoa import Formulation, gf_equations, sample_gf_instance
+from analysis.engine.quotient import action_matrix, saturate, standard_monomials
+from analysis.engine.ring import Ring
+from analysis.sweeps.tables import (
     PAPER_TABLE3,
     QUICK,
     TablePlan,

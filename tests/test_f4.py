@@ -1,9 +1,9 @@
-"""Tests for analysis.f4: reduced Gröbner bases against sympy, known degrees, backends, statistics.
+"""Tests for analysis.engine.f4: reduced Gröbner bases against sympy, known degrees, backends, statistics.
 
 The reference is ``sympy.groebner(..., modulus=p)``; sympy prints GF(p) coefficients in the symmetric
 range (-p/2, p/2], so both sides are compared as sets of monic polynomials of our ring (coefficients
 in [0, p)). Every randomised case is named by (prime, kind, seed) so a failure can be reproduced with
-:func:`analysis.benchmarks.random_small_system`.
+:func:`analysis.sweeps.benchmarks.random_small_system`.
 """
 from __future__ import annotations
 
@@ -11,19 +11,19 @@ import pytest
 import sympy
 from sympy.polys.orderings import ProductOrder, grevlex
 
-from analysis.benchmarks import (
+from analysis.sweeps.benchmarks import (
     SYSTEM_KINDS,
     bezout_number,
     dense_random_system,
     planted_root_system,
     random_small_system,
 )
-from analysis.f4 import F4Options, GroebnerResult, RoundStats, groebner
-from analysis.linalg import BACKENDS, MatrixTooLarge
-from analysis.msolve import INSTALL_HINT, find_msolve, groebner_msolve
-from analysis.quotient import degree, dimension, is_zero_dimensional, standard_monomials
-from analysis.ring import Poly, Ring
-from analysis.systems import cyclic, katsura
+from analysis.engine.f4 import F4Options, GroebnerResult, RoundStats, groebner
+from analysis.engine.linalg import BACKENDS, MatrixTooLarge
+from analysis.engine.msolve import INSTALL_HINT, find_msolve, groebner_msolve
+from analysis.engine.quotient import degree, dimension, is_zero_dimensional, standard_monomials
+from analysis.engine.ring import Poly, Ring
+from analysis.engine.systems import cyclic, katsura
 
 PRIMES = (32003, 65521, 2147483647)
 SEEDS = range(6)
@@ -397,7 +397,7 @@ def test_exponents_up_to_the_parser_limit():
 
 def test_memory_cap_stops_before_allocating():
     """F4 directly in lex on katsura-4 swells (it once outgrew 24 GB); the memory estimate stops it."""
-    from analysis.systems import katsura
+    from analysis.engine.systems import katsura
 
     lex = katsura(4)[0].ring.with_order("lex")
     with pytest.raises(MatrixTooLarge, match="MiB, above the memory cap of 100 MiB"):
@@ -408,8 +408,8 @@ def test_memory_cap_stops_before_allocating():
 def test_pair_update_by_degree_matches_cube(name, monkeypatch):
     """The two ways of choosing the new pairs of a round (all partner pairs at once, or degree by degree
     against the minimal lcms) give the same pairs: same rounds, same basis."""
-    import analysis.f4 as f4
-    from analysis.benchmarks import benchmark_system
+    import analysis.engine.f4 as f4
+    from analysis.sweeps.benchmarks import benchmark_system
 
     polys = benchmark_system(name)
     monkeypatch.setattr(f4, "CUBE_CELLS", 1 << 62)
@@ -423,8 +423,8 @@ def test_pair_update_by_degree_matches_cube(name, monkeypatch):
 
 def test_matrices_assembled_in_blocks_give_the_same_basis(monkeypatch):
     """F4 matrices converted a few entries at a time (block edges inside rows) give the same rounds."""
-    import analysis.f4 as f4
-    from analysis.benchmarks import benchmark_system
+    import analysis.engine.f4 as f4
+    from analysis.sweeps.benchmarks import benchmark_system
 
     polys = benchmark_system("katsura-5")
     whole = groebner(polys)
@@ -437,9 +437,9 @@ def test_matrices_assembled_in_blocks_give_the_same_basis(monkeypatch):
 @pytest.mark.parametrize("prime,kind,seed", [(p, kind, seed) for p in PRIMES[:2] for kind in SYSTEM_KINDS for seed in range(3)]
                          + [(65521, "katsura", 6), (65521, "cyclic", 5)])
 def test_c_kernels_give_the_same_rounds_as_numpy(prime, kind, seed, monkeypatch):
-    """The C kernels (pair update, lookup, reduction: analysis/f4_kernels.c) and the numpy code they replace
+    """The C kernels (pair update, lookup, reduction: analysis/engine/f4_kernels.c) and the numpy code they replace
     give the same pairs round by round (degree, pairs, matrix shape, new elements) and the same basis."""
-    from analysis import native
+    from analysis.engine import native
 
     if native.kernel() is None:
         pytest.skip("no C compiler here: the C kernels cannot be built")
@@ -464,7 +464,7 @@ def test_c_kernels_give_the_same_rounds_as_numpy(prime, kind, seed, monkeypatch)
 def test_threads_give_the_same_basis_at_every_prime(prime):
     """F4 with the C kernel on two threads, on one, and with the numpy backend (dense products, no C)
     gives the same rounds and basis, at a 16-bit prime and at 30- and 31-bit ones (bounded accumulators)."""
-    from analysis import native
+    from analysis.engine import native
 
     if native.kernel() is None:
         pytest.skip("no C compiler here: the C kernels cannot be built")
@@ -492,8 +492,8 @@ def test_threads_give_the_same_basis_on_racing_systems(name, prime):
     its pivot and one that lost it, side by side; before the fix the winner was taken again and the rows
     after it lost: cyclic-7 and tdoa-6r3s-A1B2C5 differed in 3 of 3 runs): two threads, three runs, the
     one-thread basis every time."""
-    from analysis import native
-    from analysis.benchmarks import benchmark_system
+    from analysis.engine import native
+    from analysis.sweeps.benchmarks import benchmark_system
 
     if native.kernel() is None:
         pytest.skip("no C compiler here: the C kernels cannot be built")

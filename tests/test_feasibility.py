@@ -1,5 +1,5 @@
 """Single-template feasibility (solvers.feasibility): relation counts over GF(p), multiplier families,
-the committed evidence for 9r/3s, and pivot selection (analysis.linalg.pivot_columns)."""
+the committed evidence for 9r/3s, and pivot selection (analysis.engine.linalg.pivot_columns)."""
 from __future__ import annotations
 
 import csv
@@ -9,7 +9,7 @@ import flint
 import numpy as np
 import pytest
 
-from analysis.linalg import pivot_columns
+from analysis.engine.linalg import pivot_columns
 from solvers.feasibility import (
     basis_condition,
     count_relations,
@@ -30,9 +30,9 @@ def _two_quadrics(rng):
 def test_macaulay_bound_on_a_regular_sequence():
     # two generic quadrics: their Macaulay matrix is complete in degree d1 + d2 - 1 = 3, i.e. with
     # multipliers of degree <= 1, and not with the equations alone
-    from analysis.f4 import groebner
-    from analysis.quotient import standard_monomials
-    from analysis.ring import Ring
+    from analysis.engine.f4 import groebner
+    from analysis.engine.quotient import standard_monomials
+    from analysis.engine.ring import Ring
 
     eqs = _two_quadrics(np.random.default_rng(0))
     ring = Ring(("x", "y"), P, "grevlex")

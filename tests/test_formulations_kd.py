@@ -1,5 +1,5 @@
-"""TOA beside TDOA and 3D: configurations, the K-dimensional builder, known roots, degrees (analysis.formulations_kd,
-analysis.cell_degrees) checked against an independent sympy construction and sympy's groebner over GF(p)."""
+"""TOA beside TDOA and 3D: configurations, the K-dimensional builder, known roots, degrees (analysis.formulations.kd,
+analysis.sweeps.cell_degrees) checked against an independent sympy construction and sympy's groebner over GF(p)."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import sympy
 
-import analysis.cell_degrees as cell_degrees
-from analysis.cell_degrees import cell_degree, cell_degree_capped, write_table
-from analysis.formulations import (Formulation, InconsistentSample, TDOAConfig, canonical_form, check_root,
+import analysis.sweeps.cell_degrees as cell_degrees
+from analysis.sweeps.cell_degrees import cell_degree, cell_degree_capped, write_table
+from analysis.formulations.tdoa import (Formulation, InconsistentSample, TDOAConfig, canonical_form, check_root,
                                    equation_names, evaluate_gf, gf_equations, parse_equations, real_equations,
                                    sample_gf_instance, sample_real_instance)
-from analysis.formulations_kd import build_equations, det_h_terms, solve_mod
+from analysis.formulations.kd import build_equations, det_h_terms, solve_mod
 
 P = 65521
 

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.degree import DEFAULT_PRIMES
-from analysis.parametric import from_formulation
+from analysis.engine.degree import DEFAULT_PRIMES
+from analysis.formulations.parametric import from_formulation
 from solvers.cli import main
 from solvers.generate import GENERATED_DIR, SOLVERS
 
@@ -153,7 +153,7 @@ def test_certified_root_count_over_two_primes(label):
 
 
 # --------------------------------------------------------------------------------------------------
-# no import circle inside solvers/
+# no import circle inside solvers/ or analysis/; analysis/ in layers
 # --------------------------------------------------------------------------------------------------
 
 
@@ -189,9 +189,11 @@ def _import_graph(package: str = "solvers") -> dict[str, set[str]]:
     return graph
 
 
-def test_no_import_circle_in_solvers():
-    graph = _import_graph()
-    assert "solvers.methods.spec" in graph and "solvers.generate" in graph
+@pytest.mark.parametrize("package, expected", [("solvers", ("solvers.methods.spec", "solvers.generate")),
+                                               ("analysis", ("analysis.engine.f4", "analysis.sweeps.tables"))])
+def test_no_import_circle(package, expected):
+    graph = _import_graph(package)
+    assert all(module in graph for module in expected)
     state: dict[str, int] = {}  # 1 on the stack, 2 done
 
     def visit(node: str, stack: list[str]) -> None:
@@ -207,3 +209,22 @@ def test_no_import_circle_in_solvers():
     for node in sorted(graph):
         if node not in state:
             visit(node, [])
+
+
+def test_analysis_layers():
+    """engine <- formulations <- sweeps: a layer imports only the ones before it (anywhere in a module,
+    inside functions too), and the package analysis/ itself imports nothing."""
+    graph = _import_graph("analysis")
+    layer = {"engine": 0, "formulations": 1, "sweeps": 2}
+    assert graph["analysis"] == set()
+    wrong = []
+    for module, targets in graph.items():
+        parts = module.split(".")
+        if len(parts) < 2:
+            continue
+        assert parts[1] in layer, f"{module}: a module outside the three layers"
+        for target in targets:
+            tparts = target.split(".")
+            if len(tparts) < 2 or layer[tparts[1]] > layer[parts[1]]:
+                wrong.append(f"{module} -> {target}")
+    assert not wrong, "analysis layers broken: " + "; ".join(sorted(wrong))

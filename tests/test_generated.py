@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from analysis.formulations import Formulation, real_equations
+from analysis.formulations.tdoa import Formulation, real_equations
 from solvers.generate import committed_specs, emit_committed
 from solvers.synthetic import random_network, true_root
 
@@ -41,7 +41,7 @@ def test_generated_module_is_fresh_emission(json_path):
 
 @pytest.mark.parametrize("label", ["6r4s"])
 def test_factored_coefficients_equal_the_formulation(label):
-    # the emitted (factored) coefficients against analysis.formulations.real_equations, seeds 0-2
+    # the emitted (factored) coefficients against analysis.formulations.tdoa.real_equations, seeds 0-2
     module = _module(label)
     with open(os.path.join(os.path.dirname(module.__file__), module.SPEC_FILE), encoding="utf-8") as fh:
         spec = json.load(fh)

@@ -1,16 +1,16 @@
-"""Lex bases of positive-dimensional ideals through homogenization (analysis.homogenize), and the deglex
+"""Lex bases of positive-dimensional ideals through homogenization (analysis.engine.homogenize), and the deglex
 order it runs F4 in, against sympy's Buchberger over GF(p)."""
 from __future__ import annotations
 
 import pytest
 import sympy
 
-from analysis.benchmarks import dense_random_system
-from analysis.degree import analyse_prime
-from analysis.f4 import F4Options, groebner
-from analysis.homogenize import lex_by_homogenization
-from analysis.quotient import dimension
-from analysis.ring import Ring
+from analysis.sweeps.benchmarks import dense_random_system
+from analysis.engine.degree import analyse_prime
+from analysis.engine.f4 import F4Options, groebner
+from analysis.engine.homogenize import lex_by_homogenization
+from analysis.engine.quotient import dimension
+from analysis.engine.ring import Ring
 
 
 def _sympy_basis(ring: Ring, polys, order: str) -> list:
@@ -71,8 +71,8 @@ def test_lex_by_homogenization_needs_a_lex_ring():
 def test_tail_reduction_by_f4_equals_the_division_fallback(seed, monkeypatch):
     """The reduced basis from F4's tail reduction (interreduce) equals the one from dividing each tail by
     the others (the fallback where the narrow monomial codes overflow)."""
-    import analysis.homogenize as homogenize
-    from analysis.ring import CodeOverflow
+    import analysis.engine.homogenize as homogenize
+    from analysis.engine.ring import CodeOverflow
 
     ring = Ring(("x", "y", "z"), 32003, "lex")
     polys = dense_random_system(3, (3, 3), 32003, seed, ring)
@@ -93,8 +93,8 @@ def test_positive_dimensional_block_basis_is_sympys(blocks, seed):
     block order."""
     from sympy.polys.orderings import ProductOrder, grevlex
 
-    from analysis.degree import groebner_in_order
-    from analysis.homogenize import by_homogenization
+    from analysis.engine.degree import groebner_in_order
+    from analysis.engine.homogenize import by_homogenization
 
     nvars = sum(blocks)
     ring = Ring(tuple("xyzw"[:nvars]), 32003, "block:" + ",".join(map(str, blocks)))

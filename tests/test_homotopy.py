@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import sympy
 
-from analysis.parametric import ParametricError, from_formulation, parse
+from analysis.formulations.parametric import ParametricError, from_formulation, parse
 from solvers.generate import GENERATED_DIR, SOLVERS
 from solvers.methods import homotopy as hm
 from solvers.methods import tracker
@@ -74,7 +74,7 @@ def test_user_system_errors_are_one_line(text, match):
 
 
 def test_factored_tdoa_system_equals_the_expanded_formulation():
-    from analysis.formulations import Formulation, symbolic_equations
+    from analysis.formulations.tdoa import Formulation, symbolic_equations
 
     system = from_formulation("7r3s:B2,B3,C2-C7")
     ref = symbolic_equations(Formulation.parse("7r3s:B2,B3,C2-C7"))
@@ -186,7 +186,7 @@ def test_further_start_systems_find_a_root_the_direct_segment_loses(index):
     # the direct segment (backtracked from the truth, |x| grows from 2 to 126 before s = 0.53, where it
     # stalls); the segments from the spec's further start systems reach it. 679: its path stalls at s = 1 -
     # 3e-5 on the direct segment (an ill-conditioned root) and is kept for Newton's method on the target.
-    from analysis.positions import _to_gauge
+    from analysis.formulations.positions import _to_gauge
     from solvers.subsystem import orbits_from_receivers
     from solvers.synthetic import random_network
 
@@ -219,7 +219,7 @@ def test_pool_keeps_one_copy_of_each_root_and_pads_with_nan():
 
 @pytest.mark.parametrize("name", [n for n in HOMOTOPY_SPECS if _spec(n)[1].get("full_system")])
 def test_tracked_roots_are_exactly_the_full_systems(name):
-    from analysis.parametric import from_formulation
+    from analysis.formulations.parametric import from_formulation
     from solvers.generate import SOLVERS
 
     _, spec = _spec(name)
@@ -326,9 +326,9 @@ def test_start_system_is_complete(name):
 
 
 def _known_root_errors(module, seeds: int) -> np.ndarray:
-    from analysis.formulations import sample_real_instance
+    from analysis.formulations.tdoa import sample_real_instance
 
-    from analysis.positions import sample_real_positions
+    from analysis.formulations.positions import sample_real_positions
 
     m, n = module.CONFIG
     errs = []

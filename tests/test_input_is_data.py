@@ -1,6 +1,6 @@
 """Input is data (STYLE habit 11): a system file cannot run code, and no module evaluates text.
 
-Every text a user hands in is read by the project's own tokenizer/parser (analysis.io); nothing under
+Every text a user hands in is read by the project's own tokenizer/parser (analysis.engine.io); nothing under
 analysis/ or solvers/ passes text to ``eval``, ``exec``, ``sympify`` or ``parse_expr``.
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from analysis.parametric import ParametricError, parse
+from analysis.formulations.parametric import ParametricError, parse
 from solvers.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,4 +106,4 @@ def test_no_module_evaluates_text():
                     continue
                 if (rel, name) not in ALLOWED:
                     found.append(f"{rel}:{lineno}: {name}(...)")
-    assert not found, "text must be read by analysis.io's parser, not evaluated: " + "; ".join(found)
+    assert not found, "text must be read by analysis.engine.io's parser, not evaluated: " + "; ".join(found)

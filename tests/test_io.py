@@ -1,4 +1,4 @@
-"""analysis.io: msolve-format parsing (checked against sympy.expand), errors, GF(p) maps and writers."""
+"""analysis.engine.io: msolve-format parsing (checked against sympy.expand), errors, GF(p) maps and writers."""
 from __future__ import annotations
 
 import random
@@ -9,7 +9,7 @@ from fractions import Fraction
 import pytest
 import sympy
 
-from analysis.io import (
+from analysis.engine.io import (
     InputError,
     System,
     format_polynomial,
@@ -21,10 +21,10 @@ from analysis.io import (
     to_singular,
     write_system,
 )
-from analysis.f4 import groebner
-from analysis.msolve import INSTALL_HINT, find_msolve, parse_msolve_basis
-from analysis.ring import BadPrime, Ring
-from analysis.systems import katsura
+from analysis.engine.f4 import groebner
+from analysis.engine.msolve import INSTALL_HINT, find_msolve, parse_msolve_basis
+from analysis.engine.ring import BadPrime, Ring
+from analysis.engine.systems import katsura
 
 PRIMES = (65521, 32003)
 

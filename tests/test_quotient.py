@@ -1,6 +1,6 @@
-"""Tests for analysis.quotient: standard monomials, dimension, normal forms, action matrices, saturation.
+"""Tests for analysis.engine.quotient: standard monomials, dimension, normal forms, action matrices, saturation.
 
-Roots are planted over GF(p) (:func:`analysis.benchmarks.planted_root_system`) so that eigenvalues and
+Roots are planted over GF(p) (:func:`analysis.sweeps.benchmarks.planted_root_system`) so that eigenvalues and
 eigenvectors of the action matrices can be checked exactly; normal forms are compared with sympy's
 ``reduced`` remainder mod p.
 """
@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 import sympy
 
-from analysis.benchmarks import (
+from analysis.sweeps.benchmarks import (
     dense_random_system,
     monomials_up_to,
     planted_root_system,
     random_small_system,
 )
-from analysis.f4 import groebner
-from analysis.quotient import (
+from analysis.engine.f4 import groebner
+from analysis.engine.quotient import (
     NotZeroDimensional,
     action_matrix,
     count_standard_monomials,
@@ -32,8 +32,8 @@ from analysis.quotient import (
     saturate,
     standard_monomials,
 )
-from analysis.ring import Poly, Ring
-from analysis.systems import cyclic, katsura
+from analysis.engine.ring import Poly, Ring
+from analysis.engine.systems import cyclic, katsura
 
 
 # ----------------------------------------------------------------------------------------------
@@ -359,7 +359,7 @@ def test_fglm_lex_katsura4_shape_and_sympy():
 
 def test_count_standard_monomials_without_listing():
     """The count agrees with the listing, and 2^40 solutions in 40 variables are counted at once."""
-    from analysis import quotient
+    from analysis.engine import quotient
 
     for system in (katsura(4), cyclic(5), katsura(6)):
         gb = groebner(system)

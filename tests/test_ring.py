@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from analysis.linalg import matmul_mod
-from analysis.ring import BadPrime, CodeOverflow, MonomialCodes, Ring, check_prime
+from analysis.engine.linalg import matmul_mod
+from analysis.engine.ring import BadPrime, CodeOverflow, MonomialCodes, Ring, check_prime
 
 
 @pytest.mark.parametrize("order", ["grevlex", "lex", "block:2,3"])

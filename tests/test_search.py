@@ -9,14 +9,14 @@ import random
 
 import pytest
 
-from analysis import search
-from analysis.complexity import InstanceOutcome, combine, repo_root
-from analysis.degree import PrimeDisagreement
-from analysis.f4 import F4Options
-from analysis.formulations import Formulation, TDOAConfig, canonical_form, equation_names
-from analysis.msolve import find_msolve
-from analysis.search import SearchBound, SearchLimits, enumerate_cell, minor_bound, run_search, summarise_cell
-from analysis.search import two_prime_degree
+from analysis.sweeps import search
+from analysis.sweeps.complexity import InstanceOutcome, combine, repo_root
+from analysis.engine.degree import PrimeDisagreement
+from analysis.engine.f4 import F4Options
+from analysis.formulations.tdoa import Formulation, TDOAConfig, canonical_form, equation_names
+from analysis.engine.msolve import find_msolve
+from analysis.sweeps.search import SearchBound, SearchLimits, enumerate_cell, minor_bound, run_search, summarise_cell
+from analysis.sweeps.search import two_prime_degree
 
 PRIMES = (65521, 32749)
 SEED = 20260521
@@ -111,7 +111,7 @@ def test_search_tables_are_byte_stable_and_the_committed_ones_are_not_stale(tmp_
                        out_dir=tmp_path / "a")
     assert [(r["cell"], r["best_degree"], r["complete"]) for r in first.cells] == [("6/3", 181, "yes"),
                                                                                   ("7/3", 144, "yes")]
-    from analysis import complexity
+    from analysis.sweeps import complexity
 
     original = complexity.sweep
 
@@ -143,7 +143,7 @@ def test_search_tables_are_byte_stable_and_the_committed_ones_are_not_stale(tmp_
 def test_capped_classes_are_decided_by_msolve(tmp_path):
     """A cap small enough to stop the own engine on 9r3s's larger classes: msolve decides them on the same
     primes and instances, with the degrees the own engine gives without the cap."""
-    from analysis.msolve import MsolveRun
+    from analysis.engine.msolve import MsolveRun
 
     capped = run_search([(9, 3)], limits=SearchLimits(60, 300_000, 2 << 30), cache_dir=tmp_path / "a", progress=False,
                         msolve=MsolveRun(find_msolve(), timeout=300))

@@ -91,8 +91,8 @@ def test_programs_need_a_square_system_or_a_known_variant():
 
 
 def test_squared_program_uses_the_generators_combinations():
-    """The squared system's combinations are analysis.parametric.square's (same seed, same draws)."""
-    from analysis.parametric import parse_squared_name, square_combinations, squared_name
+    """The squared system's combinations are analysis.formulations.parametric.square's (same seed, same draws)."""
+    from analysis.formulations.parametric import parse_squared_name, square_combinations, squared_name
 
     assert parse_squared_name(squared_name("5r5s:B2,B3,C2-C5,minors(16)", 3)) == ("5r5s:B2,B3,C2-C5,minors(16)", 3)
     assert parse_squared_name("9r3s:C2-C9") is None

@@ -8,9 +8,9 @@ import os
 import numpy as np
 import pytest
 
-from analysis.cell_degrees import cell_degree
-from analysis.degree import DEFAULT_PRIMES
-from analysis.formulations import Formulation, real_equations, sample_real_instance
+from analysis.sweeps.cell_degrees import cell_degree
+from analysis.engine.degree import DEFAULT_PRIMES
+from analysis.formulations.tdoa import Formulation, real_equations, sample_real_instance
 from solvers.api import calibrations
 from solvers.generate import GENERATED_DIR, SOLVERS, GenerationError, generate
 from solvers.methods import offset_kernel
@@ -136,7 +136,7 @@ def test_bad_input_gives_clear_errors(tmp_path):
     with pytest.raises(TemplateError, match="offset kernel needs a 3D TDOA cell"):
         generate("6r4s:B2,C2-C6,minors(10)", method="offset-kernel", out=str(tmp_path))
     with pytest.raises(GenerationError, match="not 'offset-kernel'"):
-        from analysis.parametric import parse
+        from analysis.formulations.parametric import parse
 
         generate(parse("unknowns: x\nparameters: a\nequations:\nx - a\n", "line"), method="offset-kernel",
                  out=str(tmp_path))

@@ -7,17 +7,17 @@ import random
 
 import pytest
 
-from analysis import tables
-from analysis.complexity import InstanceOutcome, combine, repo_root
-from analysis.f4 import F4Options
-from analysis.formulations import Formulation
-from analysis.tables import make_tables, paper_reference
+from analysis.sweeps import tables
+from analysis.sweeps.complexity import InstanceOutcome, combine, repo_root
+from analysis.engine.f4 import F4Options
+from analysis.formulations.tdoa import Formulation
+from analysis.sweeps.tables import make_tables, paper_reference
 
 SEED = 7
 
 
 def _fake_sweep(order_seed, seconds=0.5, bump=None):
-    """A stand-in for analysis.complexity.sweep: a deterministic made-up result per label (degree = label
+    """A stand-in for analysis.sweeps.complexity.sweep: a deterministic made-up result per label (degree = label
     length, one more for the label ``bump``), each instance taking ``seconds``, handed back in input order
     (order_seed None) or shuffled by the given seed."""
 
@@ -44,7 +44,7 @@ def _fake_sweep(order_seed, seconds=0.5, bump=None):
 def _outputs(out):
     """Every table file's bytes, without the provenance header line (it holds the run's date, to the second:
     two runs straddling a second differed there alone)."""
-    from analysis.paths import HEADER_PREFIXES
+    from analysis.sweeps.paths import HEADER_PREFIXES
 
     return {p.name: b"\n".join(line for line in p.read_bytes().split(b"\n")
                                if not line.startswith(tuple(x.encode() for x in HEADER_PREFIXES)))

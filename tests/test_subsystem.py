@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from analysis.positions import _root_from_network, _to_gauge, positions_system
+from analysis.formulations.positions import _root_from_network, _to_gauge, positions_system
 from solvers.subsystem import (FILTER_TOL, SubsystemSolver, extra_transmitter_residuals, orbits_from_receivers,
                                polish_on_all, receivers_from_orbits)
 from solvers.synthetic import random_network

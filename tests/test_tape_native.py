@@ -10,7 +10,7 @@ import pytest
 
 from solvers.methods import tape_kernel, tape_native
 
-from analysis.native import disabled
+from analysis.engine.native import disabled
 
 # the compiled code is built where a compiler is found, unless TDOA_WORKBENCH_NATIVE=off (as the F4 kernels)
 COMPILED = (shutil.which("cc") is not None or shutil.which("gcc") is not None) and not disabled()

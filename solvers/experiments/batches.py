@@ -19,14 +19,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.complexity import single_threaded_blas_env
-from analysis.paths import cache_dir
-from analysis.progress import Progress
+from analysis.sweeps.complexity import single_threaded_blas_env
+from analysis.sweeps.paths import cache_dir
+from analysis.sweeps.progress import Progress
 
 from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INIT_LABEL, INITS, Init, check_init, config_key, config_label
 from .trial import TRIAL_COLUMNS, TrialOptions, load_solve_network, run_trial
 
-#: Per-batch CSV cache in the user cache directory (analysis.paths), keyed by every parameter that
+#: Per-batch CSV cache in the user cache directory (analysis.sweeps.paths), keyed by every parameter that
 #: changes the numbers.
 CACHE_DIR = cache_dir("experiments")
 
@@ -258,7 +258,7 @@ def run_trials(
         than 5 chunks of trials, run in this process; cached ones always in workers (the same bits
         whichever process asked).
     cache : bool
-        Read/write ``<cache>/experiments/<config>-<init>-...-<hash>.csv`` (``analysis.paths.cache_dir``),
+        Read/write ``<cache>/experiments/<config>-<init>-...-<hash>.csv`` (``analysis.sweeps.paths.cache_dir``),
         keyed by all parameters, CACHE_VERSION and a fingerprint of the numeric code.
     progress : bool
         Progress bar on stderr.

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from analysis.paths import default_output_dir, write_if_changed
+from analysis.sweeps.paths import default_output_dir, write_if_changed
 
 #: Repository root (paths in provenance records are relative to it).
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,8 +17,8 @@ import subprocess
 from collections.abc import Iterable
 from pathlib import Path
 
-from analysis.complexity import THREAD_VARIABLES
-from analysis.paths import write_if_changed
+from analysis.sweeps.complexity import THREAD_VARIABLES
+from analysis.sweeps.paths import write_if_changed
 
 from .config import PROVENANCE_PATH, ROOT
 

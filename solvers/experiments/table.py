@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.paths import DATA_DIR
+from analysis.sweeps.paths import DATA_DIR
 
 from .config import CONFIGS, CSV_FLOAT_FORMAT, INIT_LABEL, INITS, TABLES_DIR, config_label, is_timing_column, write_output
 from .summary import summarise, summarise_noise_text

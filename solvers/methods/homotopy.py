@@ -1,6 +1,6 @@
 """Parameter homotopy: the general solving method, offline build and online solver side by side.
 
-Offline (:func:`build`): from a square :class:`analysis.parametric.ParametricSystem`
+Offline (:func:`build`): from a square :class:`analysis.formulations.parametric.ParametricSystem`
 1. certify the number of roots at generic parameters over GF(p) (two primes, two seeds);
 2. draw a generic complex start instance q0 with one known root (a complex network, or any system
    whose equations are affine in the parameters: pick x0, solve for q0);
@@ -44,7 +44,7 @@ from . import tape_kernel, tape_native, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
-    from analysis.parametric import ParametricSystem
+    from analysis.formulations.parametric import ParametricSystem
 
 __all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "build", "coefficient_source",
            "load_coefficients", "structure", "affine_start"]

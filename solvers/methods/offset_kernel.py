@@ -12,7 +12,7 @@ homogeneous coordinates (h, b, kappa) = N (lambda, mu). On it A (quartic after h
 7 x 5 coefficient matrix, refined by Gauss-Newton in the angle of (lambda, mu).
 
 Offline (:func:`build`): the root count certified over GF(p) (two primes, two seeds, det H saturated,
-known root checked: :func:`analysis.cell_degrees.cell_degree`) must be 1, then the kernel must find
+known root checked: :func:`analysis.sweeps.cell_degrees.cell_degree`) must be 1, then the kernel must find
 the known root on seeded room-sized networks. Online (:class:`OffsetKernelSolver`): SVDs of small
 matrices, batched over a leading axis; numpy only. Generated modules reach it through the functions
 below; this module imports nothing of :mod:`solvers.runtime` or :mod:`solvers.generate`.
@@ -27,7 +27,7 @@ import numpy as np
 from .pencil import compaction_pieces
 
 if TYPE_CHECKING:  # the online kernel needs neither sympy nor the exact algebra
-    from analysis.formulations import Formulation
+    from analysis.formulations.tdoa import Formulation
 
     from .spec import TemplateOptions, TemplateResult
 
@@ -83,9 +83,9 @@ def build(formulation: Formulation | str, options: TemplateOptions | None = None
     on ``options.verify_trials`` seeded room networks the kernel finds the known root (relative error
     below 1e-6) in all but at most 10 %. Raises :class:`~solvers.methods.spec.TemplateError` otherwise.
     """
-    from analysis.cell_degrees import cell_degree
-    from analysis.degree import DEFAULT_PRIMES
-    from analysis.formulations import as_formulation
+    from analysis.sweeps.cell_degrees import cell_degree
+    from analysis.engine.degree import DEFAULT_PRIMES
+    from analysis.formulations.tdoa import as_formulation
 
     from .spec import TemplateError, TemplateOptions, TemplateResult, solver_method, spec_header
 

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 if TYPE_CHECKING:  # the online kernel needs neither sympy nor the exact algebra
-    from analysis.formulations import Formulation
+    from analysis.formulations.tdoa import Formulation
 
     from .spec import TemplateOptions, TemplateResult
 
@@ -65,7 +65,7 @@ def build(formulation: Formulation | str, options: TemplateOptions | None = None
     """
     from scipy.linalg import eigvals
 
-    from analysis.formulations import as_formulation
+    from analysis.formulations.tdoa import as_formulation
 
     from .spec import TemplateError, TemplateOptions, TemplateResult, common_spec, gf_degree, solver_method
 

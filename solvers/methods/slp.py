@@ -494,14 +494,14 @@ def expanded_equations(coefficients: Callable, exponents, term_equation) -> Call
 def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Value]]:
     """``equations(x, q)`` of a TDOA formulation (families A, B, C, minors) written from its formulas.
 
-    Same equations as :func:`analysis.formulations.factored_equations` (and the generated solvers'
+    Same equations as :func:`analysis.formulations.tdoa.factored_equations` (and the generated solvers'
     coefficients): unknowns h11, h12, h22, b1, b2, o1..on; parameters f_ij row by row. e_ij = f_ij -
     f_1j, p_ij = f_ij + f_1j; compaction matrix D~_ij = c_ij + 2 e_{i+1,1} o1 - 2 e_{i+1,j+1} o_{j+1}
     with c_ij = e p - e p; d_ij^2 - d_1j^2 = e_ij (p_ij - 2 o_j); d_11^2 = (f_11 - o1)^2; a minor is the
     determinant of its 3 x 3 submatrix of D~ by cofactors of the first row (the 2 x 2 minors of its last
     two rows are shared between minors with the same rows and columns).
     """
-    from analysis.formulations import _family, _parse_minor, as_formulation
+    from analysis.formulations.tdoa import _family, _parse_minor, as_formulation
 
     formulation = as_formulation(formulation)
     config = formulation.config
@@ -554,10 +554,10 @@ def tdoa_equations(formulation) -> Callable[[list[Value], list[Value]], list[Val
 
 def kd_equations(formulation) -> Callable[[list[Value], list[Value]], list[Value]]:
     """``equations(x, q)`` of any other configuration (TOA, 3D, direct parametrization): the formulas of
-    :func:`analysis.formulations_kd.formulas`, the same ones its parametric system is written from,
+    :func:`analysis.formulations.kd.formulas`, the same ones its parametric system is written from,
     on program values (products and determinants unexpanded); parameters f_ij row by row."""
-    from analysis.formulations import as_formulation
-    from analysis.formulations_kd import formulas
+    from analysis.formulations.tdoa import as_formulation
+    from analysis.formulations.kd import formulas
 
     formulation = as_formulation(formulation)
     config = formulation.config
@@ -573,7 +573,7 @@ def kd_equations(formulation) -> Callable[[list[Value], list[Value]], list[Value
 
 def squared_equations(equations: Callable[[list[Value], list[Value]], list[Value]], keep: int,
                       combinations: np.ndarray) -> Callable[[list[Value], list[Value]], list[Value]]:
-    """``equations(x, q)`` of a system squared by :func:`analysis.parametric.square`: the first ``keep``
+    """``equations(x, q)`` of a system squared by :func:`analysis.formulations.parametric.square`: the first ``keep``
     equations, then the combinations (rows of integer coefficients) of the others."""
     combinations = np.asarray(combinations, dtype=np.int64)
 
@@ -594,10 +594,10 @@ def squared_equations(equations: Callable[[list[Value], list[Value]], list[Value
 
 
 def positions_equations(m: int, n: int, variant: str) -> Callable[[list[Value], list[Value]], list[Value]]:
-    """``equations(x, q)`` of a positions formulation (:mod:`analysis.positions`) written from its formulas
+    """``equations(x, q)`` of a positions formulation (:mod:`analysis.formulations.positions`) written from its formulas
     (determinants and adjugates of the 3 x 3 matrices A~_j unexpanded): the ``receivers-orbits`` variant
     (the committed 4r/5s solver's); parameters f_ij row by row."""
-    from analysis.positions import receivers_orbits_equations
+    from analysis.formulations.positions import receivers_orbits_equations
 
     if variant != "receivers-orbits":
         raise ValueError(f"positions variant {variant!r} has no unexpanded program (receivers-orbits)")
@@ -621,9 +621,9 @@ def system_equations(name: str) -> tuple[Callable[[list[Value], list[Value]], li
     (``4r5s:positions-receivers-orbits``). ValueError for a name of none of these forms or without a
     program. A caller checks the program against the system it stands for (homotopy._agrees).
     """
-    from analysis.formulations import _family, as_formulation, data_symbols
-    from analysis.parametric import parse_squared_name, square_combinations
-    from analysis.positions import positions_system
+    from analysis.formulations.tdoa import _family, as_formulation, data_symbols
+    from analysis.formulations.parametric import parse_squared_name, square_combinations
+    from analysis.formulations.positions import positions_system
 
     match = _POSITIONS_LABEL.match(name)
     if match:
@@ -678,7 +678,7 @@ def homotopy_tapes(equations: Callable[[list[Value], list[Value]], list[Value]],
 
 def tdoa_homotopy_tapes(formulation) -> HomotopyTapes:
     """The homotopy tapes of a TDOA formulation (ValueError for a non-square one)."""
-    from analysis.formulations import as_formulation, data_symbols
+    from analysis.formulations.tdoa import as_formulation, data_symbols
 
     formulation = as_formulation(formulation)
     config = formulation.config

@@ -17,10 +17,10 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 
-from analysis.f4 import F4Options, groebner
-from analysis.formulations import Formulation, as_formulation, coefficient_expressions, gf_equations, sample_gf_instance
-from analysis.quotient import standard_monomials
-from analysis.ring import Ring
+from analysis.engine.f4 import F4Options, groebner
+from analysis.formulations.tdoa import Formulation, as_formulation, coefficient_expressions, gf_equations, sample_gf_instance
+from analysis.engine.quotient import standard_monomials
+from analysis.engine.ring import Ring
 
 __all__ = [
     "METHODS",

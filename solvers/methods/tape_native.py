@@ -16,7 +16,7 @@ the tracker.
 :func:`addresses` returns the entry points (the three tapes, the LU, its solve, the tracker) for
 :func:`tape_kernel.track`, or zeros (the interpreter and numba's tracker run then). The library is
 compiled by the system's C compiler (``$CC``, ``cc`` or ``gcc``) the first time a solver asks, into the
-cache directory (``analysis.paths.cache_dir("tapes")``) under a name hashed from the source, the flags
+cache directory (``analysis.sweeps.paths.cache_dir("tapes")``) under a name hashed from the source, the flags
 and the CPU; later calls, and every later process, load it. ``TDOA_WORKBENCH_NATIVE=off`` (as for the F4
 kernels) or no compiler: the interpreter and numba's tracker only.
 """
@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.native import DISABLE_ENV, disabled
-from analysis.paths import cache_dir
+from analysis.engine.native import DISABLE_ENV, disabled
+from analysis.sweeps.paths import cache_dir
 
 from .tape_kernel import OPCODES, WIDTH
 

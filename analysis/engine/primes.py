@@ -1,7 +1,7 @@
 """Characteristics the engine supports: primes 2 <= p < 2^31, checked by deterministic Miller-Rabin.
 
-The lowest layer of :mod:`analysis`: :mod:`analysis.ring` (which re-exports these names) and the
-polynomial parser :mod:`analysis.polytext` both check a characteristic here.
+The lowest layer of :mod:`analysis`: :mod:`analysis.engine.ring` (which re-exports these names) and the
+polynomial parser :mod:`analysis.engine.polytext` both check a characteristic here.
 """
 from __future__ import annotations
 

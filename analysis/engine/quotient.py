@@ -218,7 +218,7 @@ def saturate(polys: Sequence[Poly], f: Poly, options: F4Options = F4Options()) -
 
 def variable_action_matrices(gb: GroebnerResult, basis: Sequence[int]) -> np.ndarray:
     """Action matrices of all variables on the standard monomials (row convention of
-    :func:`analysis.quotient.action_matrix`: row j is NF(x_i b_j)), shape (nvars, |B|, |B|).
+    :func:`analysis.engine.quotient.action_matrix`: row j is NF(x_i b_j)), shape (nvars, |B|, |B|).
 
     FGLM border recursion: border monomials u = x_i b are visited in increasing order; u is either a
     leading monomial of the reduced basis (NF(u) = -tail) or u = x_k u' with u' a smaller border
@@ -295,7 +295,7 @@ def _flint(M: np.ndarray, p: int) -> "flint.nmod_mat":  # noqa: F821
 def saturated_degree(gb: GroebnerResult, f: Poly, basis: Sequence[int] | None = None) -> int:
     """deg(I : f^inf) for a zero-dimensional I given by its reduced Gröbner basis: rank of M_f^N, N >= |B|.
 
-    Raises :class:`analysis.quotient.NotZeroDimensional` for positive-dimensional ideals.
+    Raises :class:`analysis.engine.quotient.NotZeroDimensional` for positive-dimensional ideals.
     """
     if basis is None:
         basis = standard_monomials(gb)

@@ -19,7 +19,7 @@ __all__ = ["CACHE_ENV", "DATA_DIR", "cache_dir", "default_output_dir", "keep_row
 CACHE_ENV = "TDOA_WORKBENCH_CACHE"
 """Environment variable overriding the cache directory."""
 
-DATA_DIR = Path(__file__).resolve().parent / "data"
+DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 """Reference data shipped with the package (package data in pyproject.toml)."""
 
 
@@ -37,7 +37,7 @@ def cache_dir(kind: str | None = None) -> Path:
 def source_checkout() -> Path | None:
     """The root of the source checkout the code runs from (a directory with pyproject.toml and tables/
     beside ``analysis/``), or None for an installed package."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     return root if (root / "pyproject.toml").is_file() and (root / "tables").is_dir() else None
 
 

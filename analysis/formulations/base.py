@@ -1,9 +1,9 @@
 """Configurations, equation names, formulations and instances: the definitions that
-:mod:`analysis.formulations` (the paper's 2D TDOA builder) and :mod:`analysis.formulations_kd` (TOA, 3D and
+:mod:`analysis.formulations.tdoa` (the paper's 2D TDOA builder) and :mod:`analysis.formulations.kd` (TOA, 3D and
 the direct parametrization) share, with the GF(p) square roots their samplers draw with.
 
 Both modules build on this one, so neither imports the other's foundations; users import these names from
-:mod:`analysis.formulations`, which re-exports them (see its docstring for the paper's equations).
+:mod:`analysis.formulations.tdoa`, which re-exports them (see its docstring for the paper's equations).
 This module never imports ``solvers``.
 """
 from __future__ import annotations
@@ -235,7 +235,7 @@ def equation_names(config: TDOAConfig | str) -> tuple[str, ...]:
     Minors are ordered lexicographically by (rows, cols) with 1-based compaction-matrix indices.
     Other models and dimensions (:class:`TDOAConfig`): TOA has B2..Bn (S~ is known from the data) and no
     minors; 3D TDOA has B2..Bn (B5..Bn with S~ solved from D~[:3, :3], affine in the offsets, and multiplied
-    by its squared determinant: :mod:`analysis.formulations_kd`) and the 4 x 4 minors; the direct
+    by its squared determinant: :mod:`analysis.formulations.kd`) and the 4 x 4 minors; the direct
     parametrization has one range equation ``D<i>_<j>`` per measurement, receiver-major.
     Paper Sections 2.1 (A, B, C), 2.2 (rank constraints), 3.1-3.2 (which ones exist for TDOA).
     """

@@ -4,14 +4,14 @@ This module owns the step "formulation -> polynomials over GF(p) -> Gröbner bas
 monomials" for many formulations at once (paper Sections 3.1-3.2, Tables 2-3):
 
 * :func:`compute_formulation` samples one consistent instance per (prime, seed)
-  (:func:`analysis.formulations.sample_gf_instance`), checks its known root, computes the reduced
+  (:func:`analysis.formulations.tdoa.sample_gf_instance`), checks its known root, computes the reduced
   Gröbner basis (grevlex, F4), and records per instance the degree |B| as generated, the dimension,
   the rank of the Jacobian at the known root and, when cheap, the degree after saturating by
   det H = h11 h22 - h12^2. The reported degree is the one most instances give; disagreement is kept in
   ``instance_degrees`` (reference/NOTES.md: a single consistent instance can be non-generic).
 * :func:`sweep` runs many formulations in worker processes (spawn-safe, one BLAS thread each), with a
   wall-clock timeout per formulation (the worker is killed and replaced), a matrix-size cap through
-  :class:`analysis.f4.F4Options`, a progress bar, and a JSON cache on disk so that a rerun is instant
+  :class:`analysis.engine.f4.F4Options`, a progress bar, and a JSON cache on disk so that a rerun is instant
   and an interrupted sweep resumes.
 
 Why the Jacobian at the known root: the instances are sampled from random networks, so the known root
@@ -27,7 +27,7 @@ algebras, multiplication by f = det H is nilpotent on the factors at roots with 
 on the others, so deg(I : f^inf) = rank(M_f^N) for N >= |B| (M_f the action matrix of f). The action
 matrices of the variables are built by the border recursion of FGLM (numpy, no polynomial division).
 For positive-dimensional ideals saturation needs a Gröbner basis of an extended system
-(:func:`analysis.quotient.saturate`) and runs only when requested (``saturate=True``).
+(:func:`analysis.engine.quotient.saturate`) and runs only when requested (``saturate=True``).
 
 Statuses (``FormulationResult.status``):
 ``ok``                    zero-dimensional; ``degree`` is the majority degree over all instances;
@@ -57,16 +57,16 @@ from typing import Callable, Iterable, Iterator, Literal, Mapping, Sequence
 import flint
 import numpy as np
 
-from .degree import DEFAULT_PRIMES
-from .f4 import F4Options, GroebnerResult, groebner
-from .formulations import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
-from .linalg import MatrixTooLarge
-from .msolve import MsolveRun, MsolveTimeout
+from ..engine.degree import DEFAULT_PRIMES
+from ..engine.f4 import F4Options, GroebnerResult, groebner
+from ..formulations.tdoa import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
+from ..engine.linalg import MatrixTooLarge
+from ..engine.msolve import MsolveRun, MsolveTimeout
 from .paths import cache_dir
 from .progress import Progress
-from .quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
-from .quotient import saturated_degree, variable_action_matrices as _variable_action_matrices
-from .ring import Poly, Ring
+from ..engine.quotient import dimension, is_zero_dimensional, saturate as saturate_ideal, standard_monomials
+from ..engine.quotient import saturated_degree, variable_action_matrices as _variable_action_matrices
+from ..engine.ring import Poly, Ring
 
 __all__ = [
     "DEFAULT_CELLS",
@@ -113,11 +113,11 @@ InstanceStatus = Literal["ok", "positive-dimensional", "too-large", "timeout", "
 
 def repo_root() -> Path:
     """The repository root (the directory holding ``analysis/``), independent of the working directory."""
-    return Path(__file__).resolve().parents[1]
+    return Path(__file__).resolve().parents[2]
 
 
 def default_cache_dir() -> Path:
-    """The ``complexity`` directory of the user cache (:func:`analysis.paths.cache_dir`)."""
+    """The ``complexity`` directory of the user cache (:func:`analysis.sweeps.paths.cache_dir`)."""
     return cache_dir("complexity")
 
 
@@ -136,7 +136,7 @@ class InstanceOutcome:
     constraints; 3 for the 10 minors of 6r/4s, as the paper counts them).
     saturated_degree: |B| of I : (det H)^inf (None when not computed). max_rows/max_cols: the largest
     F4 matrix (0 when F4 did not finish). seconds: wall time of this instance. engine: what computed
-    the Gröbner basis (``"own"``: :func:`analysis.f4.groebner`; ``"msolve"``: the msolve executable).
+    the Gröbner basis (``"own"``: :func:`analysis.engine.f4.groebner`; ``"msolve"``: the msolve executable).
     """
 
     prime: int
@@ -683,13 +683,13 @@ def sweep(formulations: Iterable[Formulation | str], *, primes: Sequence[int] = 
     cache_dir : JSON cache directory (default :func:`default_cache_dir`); each result is stored as
         soon as it is known, keyed by label, primes, seeds and :data:`ENGINE_VERSION`.
     use_cache : read the cache (results are written either way).
-    progress : progress on stderr (:class:`analysis.progress.Progress`), named ``phase``.
+    progress : progress on stderr (:class:`analysis.sweeps.progress.Progress`), named ``phase``.
     timeout : wall-clock seconds per formulation; on expiry the worker is killed and replaced and the
         result has status "timeout" (the instances finished before it are kept).
     on_result : called as ``on_result(result, from_cache)`` with each result as it becomes known (cached
         ones first).
-    executor : where to compute (:mod:`analysis.executors`): default a local pool of ``jobs`` processes;
-        a :class:`analysis.executors.DaskExecutor` runs the same tasks on a Dask cluster.
+    executor : where to compute (:mod:`analysis.sweeps.executors`): default a local pool of ``jobs`` processes;
+        a :class:`analysis.sweeps.executors.DaskExecutor` runs the same tasks on a Dask cluster.
 
     Returns the results in input order.
     """

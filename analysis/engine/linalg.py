@@ -17,8 +17,8 @@ operations, each on row lists (pivots as a dict leading column -> row) and on :c
 Backends: ``"python"`` is the slow, obviously correct reference used in tests; ``"numpy"`` does the
 elimination with dense float64 BLAS products (a blocked triangular solve against the pivot rows) and
 the echelon form with a blocked row-by-row elimination; ``"sparse"`` reduces with a compiled kernel that
-keeps the pivot rows sparse: the C one of :mod:`analysis.native` (compiled on first use), or the numba one
-of :mod:`analysis.sparse_kernels` where no C compiler is found; ``"auto"`` (the F4 default) takes the C
+keeps the pivot rows sparse: the C one of :mod:`analysis.engine.native` (compiled on first use), or the numba one
+of :mod:`analysis.engine.sparse_kernels` where no C compiler is found; ``"auto"`` (the F4 default) takes the C
 kernel for every matrix, and without it the numba kernel for large matrices with sparse pivot rows and
 numpy otherwise (:func:`sparse_pays`). All must return identical rows.
 
@@ -613,7 +613,7 @@ def sparse_pays(npiv: int, pivot_entries: int, nrows: int, ncols: int) -> bool:
         return True
     if not npiv or pivot_entries > SPARSE_MAX_DENSITY * npiv * ncols:
         return False
-    loaded = "analysis.sparse_kernels" in sys.modules
+    loaded = "analysis.engine.sparse_kernels" in sys.modules
     return nrows * npiv * ncols > (SPARSE_MIN_WORK_LOADED if loaded else SPARSE_MIN_WORK)
 
 

@@ -1,16 +1,16 @@
 """Where a sweep's formulations are computed: a local process pool (the default) or a Dask cluster.
 
-:func:`analysis.complexity.sweep` decides *what* to compute (cache look-up, progress, storing each
+:func:`analysis.sweeps.complexity.sweep` decides *what* to compute (cache look-up, progress, storing each
 result as it arrives); an executor decides *where*. Both executors run the same task,
-:func:`analysis.complexity.compute_formulation` on every (prime, seed) instance of one formulation, in
+:func:`analysis.sweeps.complexity.compute_formulation` on every (prime, seed) instance of one formulation, in
 a child process that is killed when it exceeds the wall-clock cap (status ``timeout``); the F4 matrix
-caps (rows x cols and estimated working memory, :class:`analysis.f4.F4Options`) stop a formulation
+caps (rows x cols and estimated working memory, :class:`analysis.engine.f4.F4Options`) stop a formulation
 with status ``too-large``. Either way the result names its formulation and goes into the table and
 the cache: a capped task is reported, never dropped.
 
 * :class:`LocalPool`: ``jobs`` spawned worker processes on this machine. It and :class:`SweepTask` are
-  defined in :mod:`analysis.complexity` beside the pool they drive (the default of
-  :func:`~analysis.complexity.sweep`) and re-exported here, so this module builds on that one and not
+  defined in :mod:`analysis.sweeps.complexity` beside the pool they drive (the default of
+  :func:`~analysis.sweeps.complexity.sweep`) and re-exported here, so this module builds on that one and not
   the other way round.
 * :class:`DaskExecutor`: chunks of formulations are submitted to a ``dask.distributed`` scheduler
   (``--dask ADDRESS``) or to a LocalCluster started here (``--dask local``). Each chunk is a Dask task
@@ -30,8 +30,8 @@ from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
 from .complexity import FormulationResult, InstanceOutcome, LocalPool, SweepTask, combine
-from .f4 import F4Options
-from .formulations import Formulation
+from ..engine.f4 import F4Options
+from ..formulations.tdoa import Formulation
 
 __all__ = ["DaskExecutor", "Executor", "ExecutorError", "LocalPool", "SweepTask", "make_executor", "run_chunk"]
 

@@ -22,7 +22,7 @@ def _git(root: Path, *args: str) -> str:
 def run_facts(modules: Sequence[str] = ("numpy", "flint")) -> dict:
     """``date``, ``commit``, ``worktree_dirty``, ``versions`` (Python and the given modules; None when one is
     not installed) and ``machine`` of this run, read from the source checkout holding ``analysis/``."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     versions = {"python": platform.python_version()}
     for module in modules:
         try:

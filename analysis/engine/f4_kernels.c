@@ -1,6 +1,6 @@
-/* Sparse row reduction mod p for F4 matrices: the C twin of analysis/sparse_kernels.py.
+/* Sparse row reduction mod p for F4 matrices: the C twin of analysis/engine/sparse_kernels.py.
  *
- * Loaded through ctypes by analysis/native.py (compiled there on first use with the system's C compiler
+ * Loaded through ctypes by analysis/engine/native.py (compiled there on first use with the system's C compiler
  * and cached); no Python API. Same results as the numba kernel sparse_echelon, and the same design: the
  * rows are reduced in dense 64-bit accumulators by the sparse, unreduced pivot rows, with delayed modular
  * reduction where the sums cannot overflow (small primes) and accumulators bounded by p**2 by one compare
@@ -25,7 +25,7 @@
 #include <omp.h>
 #endif
 
-/* Built with -fopenmp where the compiler has it (analysis/native.py): the row reduction and the pair update
+/* Built with -fopenmp where the compiler has it (analysis/engine/native.py): the row reduction and the pair update
  * then share their independent work among the threads asked for; without it every pragma is ignored. */
 int f4_openmp(void)
 {
@@ -651,7 +651,7 @@ done:
     return oom ? -1 : 0;
 }
 
-/* Gebauer-Moeller pair update of analysis/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
+/* Gebauer-Moeller pair update of analysis/engine/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
  * one after the other. E: exponents (k + m rows of nvars), deg: their degrees, active: flags of the k old
  * elements (updated in place, k + m entries). Existing pairs: npairs rows (i, j, lcm degree) with lcm
  * exponents lcm; keep[q] is cleared for those criterion B drops. The new pairs (g, h_t, lcm degree), in
@@ -1117,7 +1117,7 @@ static int ascending_u64(const void *x, const void *y)
     return (a > b) - (a < b);
 }
 
-/* Symbolic preprocessing of analysis/f4.py (_preprocess) for narrow codes of a graded order: the terms of
+/* Symbolic preprocessing of analysis/engine/f4.py (_preprocess) for narrow codes of a graded order: the terms of
  * the rows mult[r] * g[index[r]] (element g's term codes pool[el_start[g] : el_start[g] + el_len[g]],
  * leading code lm[g]) are walked wave by wave; every code first seen (not a leading term of a given row when
  * leads_done) whose exponents some active leading monomial divides gets a reducer row, from the first of

@@ -2,11 +2,11 @@
 
 This module owns the question "which formulation of a cell m/n has the smallest degree |B|?" asked of
 *every* symmetry class of equation subsets in a stated family, not of a budgeted, heuristically ordered
-subset as :mod:`analysis.tables` does. Data flow: :func:`enumerate_cell` lists the classes of one cell
-(:func:`analysis.formulations.enumerate_formulations`, one canonical representative per class), each
+subset as :mod:`analysis.sweeps.tables` does. Data flow: :func:`enumerate_cell` lists the classes of one cell
+(:func:`analysis.formulations.tdoa.enumerate_formulations`, one canonical representative per class), each
 class is computed on the smallest configuration holding the receivers it uses
-(:func:`analysis.tables.reduce_formulation`: the same polynomials, so the same generic degree), the
-sweep (:func:`analysis.complexity.sweep`) computes every distinct reduced formulation on two primes,
+(:func:`analysis.sweeps.tables.reduce_formulation`: the same polynomials, so the same generic degree), the
+sweep (:func:`analysis.sweeps.complexity.sweep`) computes every distinct reduced formulation on two primes,
 and :func:`summarise_cell` turns the results into one row of ``tables/search.csv``.
 
 The family of a cell m/n (N = 5 + n unknowns, M minors), stated in every output:
@@ -23,19 +23,19 @@ with k <= k_max minors and more than N + excess equations, are outside the famil
 the bound per cell.
 
 Decisions per class (both primes, one consistent instance each; a disagreement is recomputed on two
-instances per prime and decided by the majority rule of :func:`analysis.complexity.combine`):
+instances per prime and decided by the majority rule of :func:`analysis.sweeps.complexity.combine`):
 
 ``zero-dimensional``  status ok: |B| agreed by both primes;
 ``singular``          the Jacobian at the known root is rank-deficient on both primes: the known root
                       (a generic point of the incidence variety) lies on a positive-dimensional
                       component, so the system is not zero-dimensional (generic smoothness; see
-                      :mod:`analysis.complexity`). No Gröbner basis is computed for these;
+                      :mod:`analysis.sweeps.complexity`). No Gröbner basis is computed for these;
 ``positive-dimensional``  full rank at the root, but the Gröbner basis has dimension > 0;
 ``capped``            a time, matrix-size or memory cap stopped the computation (listed with its cap);
 ``open``              primes disagree or an error: neither computed nor capped (listed).
 
 A class the own engine's caps stop is computed again by msolve when an executable is given
-(:class:`analysis.msolve.MsolveRun`, run as an external program: no matrix cap, a wall-clock limit),
+(:class:`analysis.engine.msolve.MsolveRun`, run as an external program: no matrix cap, a wall-clock limit),
 on the same two primes and instances, the known root checked on its basis; msolve's decision is then
 the class's, and its row says ``engine msolve``. A cell is complete when every class is decided:
 computed (the first three decisions, by either engine) == candidates. The best formulation is the
@@ -55,9 +55,9 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from .complexity import ENGINE_VERSION, FormulationResult
-from .degree import PrimeDisagreement
-from .formulations import Formulation, TDOAConfig, enumerate_formulations
-from .msolve import MsolveRun
+from ..engine.degree import PrimeDisagreement
+from ..formulations.tdoa import Formulation, TDOAConfig, enumerate_formulations
+from ..engine.msolve import MsolveRun
 from .paths import cache_dir as user_cache_dir
 from .paths import write_if_changed
 from .tables import PAPER_TABLE3, _paper_table3_numbers, _same_results, paper_reference, reduce_formulation
@@ -147,9 +147,9 @@ ENUMERATION_VERSION = "search-enumeration/1"
 def _cell_key(m: int, n: int, bound: SearchBound) -> str:
     """The key of a cached enumeration: the bound, :data:`ENUMERATION_VERSION` and the source of the
     modules that canonicalise and reduce (a changed canonical form gives a new key)."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
-    for name in ("formulations.py", "tables.py"):
+    for name in ("formulations/tdoa.py", "sweeps/tables.py"):
         digest.update((here / name).read_bytes())
     digest.update(json.dumps([m, n, dataclasses.asdict(bound), ENGINE_VERSION, ENUMERATION_VERSION]).encode())
     return digest.hexdigest()[:20]
@@ -190,7 +190,7 @@ def classify(result: FormulationResult) -> str:
 def two_prime_degree(result: FormulationResult) -> int:
     """The degree of an ok result, checked to be given by an instance over every prime.
 
-    Raises :class:`analysis.degree.PrimeDisagreement` otherwise (STYLE.md habit 6: a degree counts
+    Raises :class:`analysis.engine.degree.PrimeDisagreement` otherwise (STYLE.md habit 6: a degree counts
     only when two primes agree)."""
     if result.status != "ok" or result.degree is None:
         raise ValueError(f"{result.label} has no degree (status {result.status})")
@@ -313,7 +313,7 @@ def run_search(cells: Sequence[tuple[int, int]], bound: SearchBound = SearchBoun
     import time
 
     from .complexity import sweep
-    from .f4 import F4Options
+    from ..engine.f4 import F4Options
 
     t0 = time.perf_counter()
     cells = sorted(set(cells))  # the tables' rows in Table 3 order whatever order the cells were given in
@@ -359,7 +359,7 @@ def _decide_capped_by_msolve(results: dict[str, FormulationResult], msolve: Msol
     from concurrent.futures import ThreadPoolExecutor
 
     from .complexity import _store, _usable, compute_formulation, load_cached
-    from .f4 import F4Options
+    from ..engine.f4 import F4Options
     from .progress import Progress
 
     todo = sorted(label for label, r in results.items() if classify(r) == "capped")
@@ -397,12 +397,12 @@ VOLATILE_META = ("date", "commit", "worktree_dirty", "versions", "machine", "tim
 
 def _meta(bound: SearchBound, limits: SearchLimits, cells, plans, summary: SearchSummary, jobs, executor,
           msolve: MsolveRun | None = None) -> dict:
-    from .msolve import msolve_version
+    from ..engine.msolve import msolve_version
     from .provenance import run_facts
 
     facts = run_facts()
     return {
-        "generated_by": "scripts/search_formulations.py (analysis.search.run_search)",
+        "generated_by": "scripts/search_formulations.py (analysis.sweeps.search.run_search)",
         "date": facts["date"],
         "commit": facts["commit"],
         "worktree_dirty": facts["worktree_dirty"],

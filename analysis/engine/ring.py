@@ -1,7 +1,7 @@
 """Polynomial rings over GF(p) and their sparse polynomials.
 
 A :class:`Ring` is frozen: variable names, the prime and the monomial order. Monomials are stored as
-order-preserving additive integer keys (see :mod:`analysis.orderings`), so a polynomial is two parallel
+order-preserving additive integer keys (see :mod:`analysis.engine.orderings`), so a polynomial is two parallel
 lists, monomial keys in strictly decreasing order and coefficients in [1, p). The ring caches the
 exponent vector of every key it has seen.
 """
@@ -188,7 +188,7 @@ class Ring:
     def from_sympy(self, expr) -> "Poly":
         """Polynomial from a sympy expression in (a subset of) the ring's variables.
 
-        A string is read by the project's polynomial parser (:func:`analysis.polytext.parse_polynomial`),
+        A string is read by the project's polynomial parser (:func:`analysis.engine.polytext.parse_polynomial`),
         never evaluated.
         """
         import sympy
@@ -226,7 +226,7 @@ class MonomialCodes:
     preprocessing and matrix construction).
 
     A code packs the weight-row values of a monomial into fields of ``bits`` bits, most significant row
-    first: the layout of the ring's keys (see :mod:`analysis.orderings`) with narrower fields. Codes are
+    first: the layout of the ring's keys (see :mod:`analysis.engine.orderings`) with narrower fields. Codes are
     therefore order preserving and additive too, as long as no field overflows. Every row value of the
     supported orders is a partial sum of exponents, so that holds while the total degree is at most
     ``max_degree``; callers check degrees and raise :class:`CodeOverflow` beyond it.

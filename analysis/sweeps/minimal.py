@@ -1,4 +1,4 @@
-"""Generic root counts of the positions formulations (:mod:`analysis.positions`) over GF(p).
+"""Generic root counts of the positions formulations (:mod:`analysis.formulations.positions`) over GF(p).
 
 This module owns the counting protocol for the minimal and near-minimal configurations (4r/5s, 4r/6s,
 6r/3s): a system (or a square subsystem of an over-determined one) is specialised to a consistent
@@ -6,7 +6,7 @@ random GF(p) instance, the nonzero conditions are imposed by the Rabinowitsch va
 ``t_ * f - 1`` (f the product of the chosen saturating polynomials) and a grevlex Gröbner basis is
 computed by F4. Because V(I + (t f - 1)) is isomorphic to V(I) minus V(f), its degree is the degree of
 the saturation I : f^inf, i.e. the number of solutions with f != 0 counted with multiplicity; no
-elimination order is needed (cheaper than :func:`analysis.quotient.saturate`).
+elimination order is needed (cheaper than :func:`analysis.engine.quotient.saturate`).
 
 Per instance it also records: the known root (extended by t = 1/f(root)) vanishing on the basis, the
 Jacobian rank at the known root, whether the sign group acts freely (the ideal plus the coordinates a
@@ -25,13 +25,13 @@ import flint
 import numpy as np
 
 from .complexity import _variable_action_matrices, jacobian_rank
-from .degree import DEFAULT_PRIMES, PrimeDisagreement
-from .f4 import F4Options, groebner
-from .formulations import InconsistentSample
-from .linalg import MatrixTooLarge
-from .positions import PositionsSystem, gf_system, positions_system, sample_gf_positions
-from .quotient import dimension, standard_monomials
-from .ring import Poly, Ring
+from ..engine.degree import DEFAULT_PRIMES, PrimeDisagreement
+from ..engine.f4 import F4Options, groebner
+from ..formulations.tdoa import InconsistentSample
+from ..engine.linalg import MatrixTooLarge
+from ..formulations.positions import PositionsSystem, gf_system, positions_system, sample_gf_positions
+from ..engine.quotient import dimension, standard_monomials
+from ..engine.ring import Poly, Ring
 
 __all__ = ["Subsystem", "InstanceCount", "CountRecord", "count_instance", "count"]
 
@@ -200,7 +200,7 @@ def count_instance(system: PositionsSystem, p: int, seed: int, *, subsystem: Sub
     Parameters
     ----------
     system : a positions formulation.
-    p, seed : prime and sampler seed (:func:`analysis.positions.sample_gf_positions`).
+    p, seed : prime and sampler seed (:func:`analysis.formulations.positions.sample_gf_positions`).
     subsystem : which equations (default all).
     saturate : ``"all"`` (the system's ``saturate_by``), ``"none"``, or sympy strings in the unknowns.
     check_group, check_simple : run the free-action and simple-roots checks (zero-dimensional only).

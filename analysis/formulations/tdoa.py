@@ -43,9 +43,9 @@ by r_1 = 0.
 
 Other models and dimensions: :class:`TDOAConfig` also takes ``model="toa"`` (no offsets), ``dim=3`` and
 ``parametrization="direct"`` (positions as unknowns); their equations, samplers and roots live in
-:mod:`analysis.formulations_kd`, to which the public functions here dispatch. The definitions both share
+:mod:`analysis.formulations.kd`, to which the public functions here dispatch. The definitions both share
 (:class:`TDOAConfig`, :class:`Formulation`, :class:`Instance`, equation names, GF(p) square roots) live in
-:mod:`analysis.formulation_base`, below both, and are re-exported here. The symbolic reference,
+:mod:`analysis.formulations.base`, below both, and are re-exported here. The symbolic reference,
 code generation and the relabeling symmetry stay with the paper's 2D TDOA formulation.
 
 The GF(p) and QQ[f] paths are exact. The float paths (:func:`real_equations`,
@@ -62,14 +62,14 @@ from typing import Iterable, Iterator, Literal, Mapping, Sequence, Union
 import numpy as np
 
 # the shared definitions, re-exported: users and solvers import them from here
-from .formulation_base import (DIMENSIONS, MODELS, PARAMETRIZATIONS, RECEIVERS_FIRST_LIMIT, REJECTION_LIMIT,
+from .base import (DIMENSIONS, MODELS, PARAMETRIZATIONS, RECEIVERS_FIRST_LIMIT, REJECTION_LIMIT,
                                EquationCounts, Exponent, Formulation, GFPolynomial, InconsistentSample, Instance,
                                RealPolynomial, SamplingFailed, TDOAConfig, _as_config, _describe_names, _family,
                                _minor_name, _no_minors, _parse_minor, _powmod_vec, _residue_mask, _rng,
                                as_formulation, equation_names, is_quadratic_residue, parse_equations,
                                require_planar_tdoa, sqrt_mod)
-from .formulations_kd import build_equations, sample_gf_instance_kd, sample_real_instance_kd
-from .ring import BadPrime, check_prime
+from .kd import build_equations, sample_gf_instance_kd, sample_real_instance_kd
+from ..engine.ring import BadPrime, check_prime
 
 # sympy is imported by the functions that use it (the symbolic reference, code generation): the GF(p)
 # and real equations, and with them `tdoa-workbench degree --tdoa`, do without its 0.4 s import.
@@ -190,7 +190,7 @@ def factored_equations(formulation: Formulation) -> tuple[list[sympy.Poly], dict
     data symbols, and the definitions of those symbols in terms of f<i>_<j>.
 
     Symbols: e<i>_<j> = f_ij - f_1j and p<i>_<j> = f_ij + f_1j (i >= 2), c<i>_<j> = e p - e p (the
-    constant of D~_ij), f1_<j>. Same conventions as :func:`analysis.formulations.symbolic_equations`
+    constant of D~_ij), f1_<j>. Same conventions as :func:`analysis.formulations.tdoa.symbolic_equations`
     (paper Sections 2-3); checked against it numerically in tests/test_generated.py.
     """
     import sympy

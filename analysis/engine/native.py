@@ -1,7 +1,7 @@
 """The C kernels of F4 (:file:`f4_kernels.c`: sparse reduction, hashed monomial lookup), compiled on first
 use and loaded by ctypes.
 
-The kernel is the C twin of the numba kernel :func:`analysis.sparse_kernels.sparse_echelon` (same
+The kernel is the C twin of the numba kernel :func:`analysis.engine.sparse_kernels.sparse_echelon` (same
 results; rows reduced a block at a time with vector multiplies, see the source's header). It exists because loading numba and its cached kernel costs a process about
 0.45 s and 110 MB, more than the whole F4 run of most systems; the shared library loads in a millisecond.
 It is compiled once with the system's C compiler (``$CC`` or ``cc``) into ``analysis/__pycache__`` (or the
@@ -167,7 +167,7 @@ def _take(address: int, count: int, dtype) -> np.ndarray:
 
 def sparse_echelon(piv_indptr, piv_cols, piv_vals, piv_offsets, row_indptr, row_cols, row_vals, row_offsets,
                    ncols: int, p: int, echelon: bool, threads: int = 1):
-    """As :func:`analysis.sparse_kernels.sparse_echelon` (indptr int64, columns and values int32, all
+    """As :func:`analysis.engine.sparse_kernels.sparse_echelon` (indptr int64, columns and values int32, all
     C-contiguous), by the C kernel, except that the values of row i of a block start at vals[offsets[i]]
     (int64; indptr[:-1] for the plain layout), on up to ``threads`` threads (the same result: blocks of
     rows are reduced concurrently, a new pivot published by compare-and-swap at its leading column; one
@@ -213,7 +213,7 @@ def index_of(keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
 
 def pair_update(E: np.ndarray, degrees: np.ndarray, active: np.ndarray, k: int, m: int, pairs: np.ndarray,
                 lcms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The Gebauer-Möller update of :meth:`analysis.f4._State.insert` for the new elements k, ..., k + m - 1
+    """The Gebauer-Möller update of :meth:`analysis.engine.f4._State.insert` for the new elements k, ..., k + m - 1
     (E: int32 exponents of all k + m elements, degrees int64, active: bool flags of the k old ones; pairs
     (i, j, lcm degree) int64 with int32 lcm exponents lcms). Returns (keep mask of the existing pairs,
     new pairs, their lcm exponents, active flags of all k + m elements)."""
@@ -293,7 +293,7 @@ def column_indices(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mu
 def preprocess(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lm_codes: np.ndarray, act: np.ndarray,
                act_exps: np.ndarray, shifts: np.ndarray, field_mask: int, winv_t: np.ndarray, mult: np.ndarray,
                index: np.ndarray, leads_done: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Symbolic preprocessing of :func:`analysis.f4._preprocess` in C, for narrow codes of a graded order
+    """Symbolic preprocessing of :func:`analysis.engine.f4._preprocess` in C, for narrow codes of a graded order
     (per element: term pool offsets and lengths, leading codes; the active elements in order of preference
     with their lead exponents; the codes' field shifts, mask and inverse weights). Returns the reducers'
     multipliers (uint64) and elements (int64), wave by wave, and the matrix columns (codes, ascending)."""

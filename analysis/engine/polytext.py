@@ -1,7 +1,7 @@
 """Polynomial text: msolve's polynomial syntax, read exactly over Q by the project's own tokenizer and
 recursive-descent parser (no text is ever evaluated).
 
-:mod:`analysis.ring` (``Ring.from_sympy`` of a string) and :mod:`analysis.io` (whole systems in msolve's
+:mod:`analysis.engine.ring` (``Ring.from_sympy`` of a string) and :mod:`analysis.engine.io` (whole systems in msolve's
 file format, which re-exports :func:`parse_polynomial`, :class:`InputError` and the limits) both build on
 this module; it needs only the orderings' field width and the prime check.
 """
@@ -113,7 +113,7 @@ def _check_variables(names: Sequence[str], where: str) -> tuple[str, ...]:
 
 
 def _check_characteristic(value: object, where: str) -> int:
-    """0 or a supported prime (see :func:`analysis.ring.check_prime`), else :class:`InputError`."""
+    """0 or a supported prime (see :func:`analysis.engine.ring.check_prime`), else :class:`InputError`."""
     if isinstance(value, bool) or not isinstance(value, int):
         raise InputError(f"{where}: characteristic must be an integer (0 or a prime), got {value!r}")
     if value == 0:
@@ -449,7 +449,7 @@ def parse_polynomial(
 
     ``line`` is the line number of the text's first line in its source (for error messages); ``kind``
     is the word for the names in the message about an unknown one (e.g. ``"name"`` where parameters
-    are read as further variables, :mod:`analysis.parametric`). ``identifiers``: names are
+    are read as further variables, :mod:`analysis.formulations.parametric`). ``identifiers``: names are
     identifiers (letters, digits, '_'), not msolve's wider names.
     """
     variables = _check_variables(variables, source)

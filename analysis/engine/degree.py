@@ -4,8 +4,8 @@ A degree counts only when two primes agree (STYLE.md, habit 6): :func:`analyse` 
 modulo every requested prime and raises :class:`PrimeDisagreement` when the primes disagree on the
 dimension or the degree.
 
-Each prime's basis comes from an engine: ``"own"`` (:func:`analysis.f4.groebner`) or ``"msolve"`` (the
-msolve executable run as an external program, :mod:`analysis.msolve`). :func:`analyse_by_msolve` is
+Each prime's basis comes from an engine: ``"own"`` (:func:`analysis.engine.f4.groebner`) or ``"msolve"`` (the
+msolve executable run as an external program, :mod:`analysis.engine.msolve`). :func:`analyse_by_msolve` is
 msolve checked by the own engine: msolve on the first prime, the own engine on the second when that
 is affordable (a smaller matrix cap), msolve on it otherwise; with a single prime the own engine
 recomputes that prime and must give the same reduced basis.
@@ -108,7 +108,7 @@ def groebner_in_order(polys: Sequence[Poly], options: F4Options, engine: Engine 
     """Reduced Gröbner basis in the ring's order; for orders other than grevlex, through grevlex and FGLM
     when the ideal is zero-dimensional (F4 in lex can swell far beyond the ideal's degree: katsura-4,
     16 solutions, outgrew 24 GB), a positive-dimensional lex or block basis through homogenization
-    (:mod:`analysis.homogenize`: F4 in lex stopped at a 400M-cell cap on two cubics in 3 unknowns), deglex
+    (:mod:`analysis.engine.homogenize`: F4 in lex stopped at a 400M-cell cap on two cubics in 3 unknowns), deglex
     directly (own engine only). msolve computes the grevlex basis."""
     ring = polys[0].ring
     if engine == "msolve":
@@ -143,9 +143,9 @@ def analyse_prime(polys: Sequence[Poly], options: F4Options = F4Options(), satur
     """Gröbner basis, dimension and degree over one prime (optionally after saturating by a polynomial).
 
     saturation: "rank" gives the saturated degree of a zero-dimensional ideal as the rank of a power of
-    the action matrix of the saturating polynomial (:func:`analysis.quotient.saturated_degree`; the
+    the action matrix of the saturating polynomial (:func:`analysis.engine.quotient.saturated_degree`; the
     basis kept is then that of the unsaturated ideal); positive-dimensional ideals, and "rabinowitsch",
-    compute the saturated ideal's own basis (:func:`analysis.quotient.saturate`, own engine: it needs an
+    compute the saturated ideal's own basis (:func:`analysis.engine.quotient.saturate`, own engine: it needs an
     elimination order; ``engine`` then names the engine that computed the basis kept).
     """
     if saturation not in ("rank", "rabinowitsch"):

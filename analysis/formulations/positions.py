@@ -1,6 +1,6 @@
 """Positions formulations of 2D TDOA self-calibration: unknowns are coordinates (and offsets), not (H, b).
 
-This module owns a second family of problem definitions, beside :mod:`analysis.formulations` (the
+This module owns a second family of problem definitions, beside :mod:`analysis.formulations.tdoa` (the
 paper's H, b, o formulation). The paper's formulation is positive-dimensional for m = 4 receivers
 (tables/NOTES.md, cells 4/5 and 4/6), so the minimal problem 4r/5s and the over-determined 4r/6s need
 equations written directly in the positions. Everything here is exact (sympy over ZZ, GF(p)); the
@@ -103,8 +103,8 @@ import sympy
 from sympy.polys.rings import PolyElement
 from sympy.polys.rings import ring as poly_ring
 
-from .formulations import InconsistentSample, SamplingFailed, _powmod_vec, _rng, sqrt_mod
-from .ring import Poly, Ring, check_prime
+from .tdoa import InconsistentSample, SamplingFailed, _powmod_vec, _rng, sqrt_mod
+from ..engine.ring import Poly, Ring, check_prime
 
 __all__ = [
     "VARIANTS",
@@ -134,7 +134,7 @@ class PositionsSystem:
     m, n, variant : configuration and variant name (one of :data:`VARIANTS`).
     unknowns : unknown names, in order (``x2, x3, y3, ..., xm, ym`` then ``o1..on`` and/or ``u1, v1, ...``).
     parameters : data names ``f<i>_<j>`` (1-based, row-major: receiver i, transmitter j), the same
-        symbols as :func:`analysis.formulations.data_symbols`.
+        symbols as :func:`analysis.formulations.tdoa.data_symbols`.
     equation_names : one name per equation (``R3``, ``L2_3``, ``T1``, ``E3_1``, ``P2``, ``K4_2``, ``Q5``, ...).
     equations : polynomial sympy expressions in unknowns and parameters (denominators cleared).
     saturate_by : sympy expressions in the unknowns (and parameters) that are nonzero at every
@@ -486,7 +486,7 @@ def _specialise_gf(poly: PolyElement, k: int, values: Sequence[int], p: int) -> 
 def gf_system(system: PositionsSystem, F, p: int, order: str = "grevlex") -> tuple[list[Poly], list[Poly]]:
     """(equations, saturating polynomials) over GF(p) for the data matrix F (m x n integers).
 
-    Both are :class:`analysis.ring.Poly` in one ring over the unknowns (``order``: any order the
+    Both are :class:`analysis.engine.ring.Poly` in one ring over the unknowns (``order``: any order the
     ring accepts).
     """
     p = check_prime(p)

@@ -1,17 +1,17 @@
 """Degree of one formulation of any model and dimension, checked on two primes, for the TOA and 3D tables.
 
 This module owns the computation behind ``tables/toa.*`` and ``tables/table3d.*``: a formulation
-(:class:`analysis.formulations.Formulation` of any :class:`~analysis.formulations.TDOAConfig`) becomes a
+(:class:`analysis.formulations.tdoa.Formulation` of any :class:`~analysis.formulations.tdoa.TDOAConfig`) becomes a
 system over GF(p) on a consistent instance whose known root is checked (:func:`check_root`), the Jacobian
 rank at that root decides at once whether the root is isolated, and otherwise
-:func:`analysis.degree.analyse` computes the degree modulo each prime (:class:`PrimeDisagreement` unless
+:func:`analysis.engine.degree.analyse` computes the degree modulo each prime (:class:`PrimeDisagreement` unless
 they agree). An msolve run on the first prime can confirm the degree (:class:`EngineDisagreement`
 otherwise). :func:`cell_degree_capped` runs one formulation in a child process under a wall-time cap.
 
 Degree counted. Compaction formulations multiply A and B by det H, which adds spurious solutions (in 3D
 even positive-dimensional ones: adj H = 0 when rank H <= 1). The degree reported is that of
 I + (t g - 1) in grevlex with one more unknown t, g = det H (times det D~[:3, :3] when 3D TDOA's B_j,
-j >= 5, are used: :func:`analysis.formulations_kd.nonzero_conditions`): the number of solutions with
+j >= 5, are used: :func:`analysis.formulations.kd.nonzero_conditions`): the number of solutions with
 g != 0, counted with multiplicity (Rabinowitsch; equal to deg I : g^inf). Each such solution is one network up to
 rotation, reflection and translation. Direct formulations need no saturation; their degree is divided by
 the gauge group's order 2^K (:attr:`TDOAConfig.gauge_group_order`), which must divide it.
@@ -25,13 +25,13 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from .complexity import jacobian_rank
-from .degree import DEFAULT_PRIMES, EngineDisagreement, PrimeDisagreement, analyse
-from .f4 import F4Options
-from .formulations import (Formulation, as_formulation, check_root, equation_names, gf_equations,
+from ..engine.degree import DEFAULT_PRIMES, EngineDisagreement, PrimeDisagreement, analyse
+from ..engine.f4 import F4Options
+from ..formulations.tdoa import (Formulation, as_formulation, check_root, equation_names, gf_equations,
                            sample_gf_instance)
-from .formulations_kd import nonzero_conditions
-from .linalg import MatrixTooLarge
-from .ring import Poly, Ring
+from ..formulations.kd import nonzero_conditions
+from ..engine.linalg import MatrixTooLarge
+from ..engine.ring import Poly, Ring
 
 __all__ = ["CellDegree", "NotDivisible", "cell_degree", "cell_degree_capped", "formulation_system"]
 
@@ -361,7 +361,7 @@ def run_table_script(argv: Sequence[str] | None, doc: str, root: str, script: st
     import os
     import sys
 
-    from .msolve import find_msolve, msolve_version
+    from ..engine.msolve import find_msolve, msolve_version
 
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=seconds, help=f"wall-time cap per formulation (default {seconds:g})")
@@ -391,7 +391,7 @@ def run_table_script(argv: Sequence[str] | None, doc: str, root: str, script: st
         "primes": list(DEFAULT_PRIMES), "seed": 0,
         **meta_extra,
         "caps": {"seconds_per_formulation": args.seconds, "max_matrix_cells": args.max_cells},
-        "instances": "analysis.formulations.sample_gf_instance(config, prime, seed 0): gauge-frame positions over GF(p)",
+        "instances": "analysis.formulations.tdoa.sample_gf_instance(config, prime, seed 0): gauge-frame positions over GF(p)",
         "msolve": msolve_version(exe) or "not installed",
         "seconds_total": round(time.perf_counter() - t_start, 1),
     }

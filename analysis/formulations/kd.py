@@ -1,8 +1,8 @@
 """TOA beside TDOA, in 2D and 3D: equations, known roots and samplers of every configuration other than the
-paper's own 2D TDOA formulation (which :mod:`analysis.formulations` builds with its vectorised builder).
+paper's own 2D TDOA formulation (which :mod:`analysis.formulations.tdoa` builds with its vectorised builder).
 
-:mod:`analysis.formulations` dispatches here (``gf_equations``, ``real_equations``, ``sample_gf_instance``,
-``sample_real_instance``) when a :class:`~analysis.formulations.TDOAConfig` has ``model="toa"``,
+:mod:`analysis.formulations.tdoa` dispatches here (``gf_equations``, ``real_equations``, ``sample_gf_instance``,
+``sample_real_instance``) when a :class:`~analysis.formulations.tdoa.TDOAConfig` has ``model="toa"``,
 ``dim=3`` or ``parametrization="direct"``; callers never import this module themselves.
 
 Compaction parametrization in K dimensions (paper Section 2.1, written for any K). With d_ij^2 =
@@ -30,7 +30,7 @@ every solution stands for one network up to rotation, reflection and translation
 Direct parametrization: unknowns the positions in the gauge r_1 = 0, r_2 = (x, 0[, 0]), r_3 = (x, y, 0)
 (3D) and the offsets; equations ``D<i>_<j>``: d_ij^2 - |r_i - s_j|^2. The sign changes of the K
 coordinate axes keep the gauge, so each network appears 2^K times
-(:attr:`~analysis.formulations.TDOAConfig.gauge_group_order`): the cross-check of the compaction degree.
+(:attr:`~analysis.formulations.tdoa.TDOAConfig.gauge_group_order`): the cross-check of the compaction degree.
 
 Instances are drawn in the gauge frame (over GF(p) a rotation into it may not exist, and the compaction
 root does not depend on the frame). Everything over GF(p) is exact; the float path exists to check
@@ -43,7 +43,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .formulation_base import (RECEIVERS_FIRST_LIMIT, Formulation, Instance, SamplingFailed, TDOAConfig, _family,
+from .base import (RECEIVERS_FIRST_LIMIT, Formulation, Instance, SamplingFailed, TDOAConfig, _family,
                                _parse_minor, _residue_mask, _rng, sqrt_mod)
 
 __all__ = ["build_equations", "det_h_terms", "nonzero_conditions", "sample_gf_instance_kd", "sample_real_instance_kd", "solve_mod"]
@@ -301,7 +301,7 @@ class _BuilderKD:
 def build_equations(formulation: Formulation, rows: Sequence[Sequence], p: int | None) -> list[dict]:
     """The equations of a formulation for one data matrix, over GF(p) (ints in [1, p)) or the reals
     (p None, floats); one {exponent: coefficient} dict per equation in the formulation's order. Called by
-    :func:`analysis.formulations.gf_equations` and :func:`~analysis.formulations.real_equations`."""
+    :func:`analysis.formulations.tdoa.gf_equations` and :func:`~analysis.formulations.tdoa.real_equations`."""
     return _BuilderKD(formulation.config, rows, p).build(formulation.equations)
 
 
@@ -387,8 +387,8 @@ def sample_gf_instance_kd(config: TDOAConfig, p: int, rng: "np.random.Generator 
     r_3 in the xy plane), redrawn while a gauge pivot vanishes; each transmitter uniform among the points
     whose squared distance to every receiver is a nonzero quadratic residue (s_{K+1} also redrawn while
     S is singular); TDOA offsets uniform in GF(p) (TOA: zero). f_ij = sqrt(d_ij^2) + o_j with the smaller
-    square root. Raises :class:`~analysis.formulations.SamplingFailed` for more than
-    :data:`~analysis.formulations.RECEIVERS_FIRST_LIMIT` receivers or when the budget runs out.
+    square root. Raises :class:`~analysis.formulations.tdoa.SamplingFailed` for more than
+    :data:`~analysis.formulations.tdoa.RECEIVERS_FIRST_LIMIT` receivers or when the budget runs out.
     """
     gen, seed_text = _rng(rng)
     m, n, k = config.m, config.n, config.dim
@@ -509,7 +509,7 @@ def formulas(formulation: Formulation, x, f: Sequence[Sequence], zero, quarter, 
     (module docstring): e_ij = f_ij - f_1j, p_ij = f_ij + f_1j, d_ij^2 - d_1j^2 = e (p - 2 o_j) (TOA:
     e p), D~_ij = c_ij + 2 e_{i+1,1} o_1 - 2 e_{i+1,j+1} o_{j+1} with c_ij = e p - e p; B_j for
     j >= K + 2 with u = adj(M) D~[:K, j-1], M = D~[:K, :K], multiplied by det(M)^2 (for TDOA det M
-    depends on the offsets and is returned as a condition). Used by analysis.parametric (sympy) and
+    depends on the offsets and is returned as a condition). Used by analysis.formulations.parametric (sympy) and
     solvers.methods.slp (straight-line programs), so that a system and its program cannot diverge.
     """
     config = formulation.config

@@ -13,7 +13,7 @@ The registry :data:`BENCHMARK_SYSTEMS` maps a name to a builder ``prime -> list[
 scripts read it and other modules (e.g. formulations of the paper's Table 2) extend it with
 :func:`register_system`.
 
-msolve's input and output (to compare with it) are :mod:`analysis.msolve`'s.
+msolve's input and output (to compare with it) are :mod:`analysis.engine.msolve`'s.
 """
 from __future__ import annotations
 
@@ -23,8 +23,8 @@ from typing import Callable, Literal, Sequence
 
 import numpy as np
 
-from .ring import Poly, Ring
-from .systems import cyclic, eco, katsura
+from ..engine.ring import Poly, Ring
+from ..engine.systems import cyclic, eco, katsura
 
 SystemKind = Literal["square", "overdetermined", "underdetermined", "inconsistent", "junk"]
 SYSTEM_KINDS: tuple[str, ...] = ("square", "overdetermined", "underdetermined", "inconsistent", "junk")
@@ -196,9 +196,9 @@ BENCHMARK_SYSTEMS: dict[str, SystemBuilder] = {
 
 def positions_direct_system(m: int, n: int, prime: int = 65521, seed: int = 0) -> list[Poly]:
     """The direct formulation of the m r / n s problem (unknowns: gauge-fixed receiver and transmitter
-    positions and offsets; :func:`analysis.positions.positions_system` ``"full"``) on its seed's
+    positions and offsets; :func:`analysis.formulations.positions.positions_system` ``"full"``) on its seed's
     consistent random instance, unsaturated (6r/3s: 18 unknowns, degree 720 = 4 x 180)."""
-    from .positions import gf_system, positions_system, sample_gf_positions
+    from ..formulations.positions import gf_system, positions_system, sample_gf_positions
 
     system = positions_system(m, n, "full")
     data, _root = sample_gf_positions(m, n, prime, seed, "full")
@@ -224,8 +224,8 @@ BENCHMARK_SYSTEMS["positions-6r3s"] = lambda p: positions_direct_system(6, 3, p)
 
 def tdoa_system(label: str, prime: int = 65521, seed: int = 0) -> list[Poly]:
     """A TDOA formulation ("9r3s:C2-C9") on a consistent random instance (known root checked)."""
-    from . import formulations as tf
-    from .ring import Ring
+    from ..formulations import tdoa as tf
+    from ..engine.ring import Ring
 
     formulation = tf.Formulation.parse(label)
     instance = tf.sample_gf_instance(formulation.config, prime, seed)

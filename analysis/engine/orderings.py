@@ -18,7 +18,7 @@ from typing import Literal
 
 FIELD_BITS = 32
 """Width of one packed row value: every row value (e.g. a total degree) must stay below 2**32 (the parser
-allows total degrees below 2**31, see analysis.io.MAX_DEGREE; 16 bits refused x^65536 - 1).
+allows total degrees below 2**31, see analysis.engine.io.MAX_DEGREE; 16 bits refused x^65536 - 1).
 
 A multiple of 8 dividing 64, so that keys decode in bulk through their bytes (see Ring.decode_many) and
 whole fields fill 64-bit words (see MonomialCodes.to_keys)."""
@@ -26,7 +26,7 @@ whole fields fill 64-bit words (see MonomialCodes.to_keys)."""
 OrderName = Literal["grevlex", "lex", "deglex", "block", "graded"]
 ORDER_NAMES = ("grevlex", "lex", "deglex", "block")
 """The orders a user names; "graded" (total degree, then another order on all variables but the last) is
-built by :mod:`analysis.homogenize` for the homogenizing variable."""
+built by :mod:`analysis.engine.homogenize` for the homogenizing variable."""
 
 
 def _grevlex_rows(nvars: int, offset: int, total: int) -> list[list[int]]:

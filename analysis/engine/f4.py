@@ -2,10 +2,10 @@
 
 The driver :func:`groebner` keeps one :class:`RoundStats` per round and returns the reduced Gröbner
 basis. Pairs are selected by the normal strategy (all pairs of minimal lcm degree), pruned with the
-Gebauer-Möller criteria; the linear algebra is delegated to a backend of :mod:`analysis.linalg`.
+Gebauer-Möller criteria; the linear algebra is delegated to a backend of :mod:`analysis.engine.linalg`.
 
 Every step works on arrays: the basis elements live in a term pool of packed monomial codes
-(:class:`analysis.ring.MonomialCodes`), so symbolic preprocessing, matrix assembly and the pair update
+(:class:`analysis.engine.ring.MonomialCodes`), so symbolic preprocessing, matrix assembly and the pair update
 are numpy operations over all rows, monomials and pairs of a round at once.
 
 Reference: J.-C. Faugère, "A new efficient algorithm for computing Gröbner bases (F4)", JPAA 1999;
@@ -80,7 +80,7 @@ def format_bytes(n: float) -> str:
 
 def matrix_memory(reduce_rows: int, cols: int, nonzeros: int, dense: bool = True) -> int:
     """Estimated peak bytes of reducing one F4 matrix: the rows to reduce as a dense float64 matrix and
-    its two reduced copies (see :func:`analysis.linalg._eliminate`; with dense=False, the sparse
+    its two reduced copies (see :func:`analysis.engine.linalg._eliminate`; with dense=False, the sparse
     kernel's, one accumulator row), plus the sparse matrix (column and value arrays, int64) and its
     pivot / non-pivot copies."""
     return (24 * reduce_rows * cols if dense else 8 * cols) + 48 * nonzeros
@@ -203,7 +203,7 @@ class _State:
     Exponent vectors of the leading monomials and of the pair lcms live in numpy arrays of narrow
     fields that view as packed 64-bit words (see :func:`_divides_words`), so that inserting the new
     elements of a round costs a few array operations instead of Python loops over all pairs. The terms
-    of every element are kept as monomial codes (see :class:`analysis.ring.MonomialCodes`) and
+    of every element are kept as monomial codes (see :class:`analysis.engine.ring.MonomialCodes`) and
     coefficients in one concatenated term pool, so that the rows of an F4 matrix are gathered with
     array operations; ``polys`` gives the elements as polynomials.
     """
@@ -299,7 +299,7 @@ class _State:
         is active at time t (inserted before t, made inactive at t or later), so the new pairs of all t
         follow from these activity spans, and criterion B drops a pair as soon as any later h_t
         qualifies. Degrees decide the equalities: for monomials a | c and b | c, lcm(a, b) = c iff their
-        degrees agree. Where the C kernels are built (:mod:`analysis.native`) the same update runs there,
+        degrees agree. Where the C kernels are built (:mod:`analysis.engine.native`) the same update runs there,
         h_t after h_t, without numpy's per-call overhead (cyclic-7: 93 -> 16 ms); the arrays below are the
         fallback and the reference it is tested against.
         """
@@ -817,7 +817,7 @@ def interreduce(basis: Sequence[Poly], options: F4Options = F4Options()) -> list
     """The reduced Gröbner basis from a minimal one (monic elements of one ring, no leading monomial
     dividing another's), by the tail reduction that ends :func:`groebner` (:func:`_reduce_basis`).
 
-    Raises :class:`analysis.ring.CodeOverflow` when a reducer's degree outgrows the narrow monomial codes
+    Raises :class:`analysis.engine.ring.CodeOverflow` when a reducer's degree outgrows the narrow monomial codes
     (possible in a non-graded order); callers then reduce another way.
     """
     if not basis:

@@ -8,7 +8,7 @@ that maps roots to roots for every q.
 
 This module is exact algebra: it builds the system from a TDOA formulation or from a user's text file,
 specialises it over GF(p) at given parameter values and counts its roots there (two primes and
-several parameter points must agree; analysis.degree). It imports nothing from ``solvers``.
+several parameter points must agree; analysis.engine.degree). It imports nothing from ``solvers``.
 
 Text format (``parse``)::
 
@@ -22,7 +22,7 @@ Text format (``parse``)::
 
 One equation per line (or separated by ';'); ``^`` or ``**`` for powers; rational coefficients
 (``3/4*x``; '/' only by constants); parentheses. The file is data: it is read by the project's own
-polynomial parser (the one behind the msolve format, :mod:`analysis.io`), parameters and definitions
+polynomial parser (the one behind the msolve format, :mod:`analysis.engine.io`), parameters and definitions
 as further variables, and nothing in it is evaluated.
 """
 from __future__ import annotations
@@ -36,9 +36,10 @@ from typing import Callable, Sequence
 import numpy as np
 import sympy
 
-from .degree import DEFAULT_PRIMES, DegreeReport, PrimeDisagreement, analyse
-from .io import InputError, parse_polynomial
-from .ring import Poly, Ring
+from ..engine.degree import DEFAULT_PRIMES, DegreeReport, PrimeDisagreement, analyse
+from ..engine.io import InputError, parse_polynomial
+from ..engine.quotient import saturated_degree
+from ..engine.ring import Poly, Ring
 
 __all__ = ["ParametricSystem", "ParametricError", "GFSample", "parse", "from_formulation"]
 
@@ -57,7 +58,7 @@ _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 class ParametricSystem:
     """Equations f(x; q) = 0 in ``unknowns`` x with coefficients polynomial in ``parameters`` q.
 
-    equations / nonzero: polynomial text in the syntax of :func:`analysis.io.parse_polynomial` (kept
+    equations / nonzero: polynomial text in the syntax of :func:`analysis.engine.io.parse_polynomial` (kept
     as text so a system is plain data; read by the project's parser, never evaluated; the sympy
     forms built from the parse are cached). symmetry: sign vectors (tuples of +-1, one per unknown), the non-identity
     elements of a group acting on the roots of every instance. gf_sampler: optional
@@ -139,7 +140,7 @@ class ParametricSystem:
         return tuple(sympy.Symbol(v) for v in self.parameters)
 
     def _parse_expr(self, text: str, what: str, aux: int | None = None, where: tuple[int, int] | None = None) -> sympy.Expr:
-        """One polynomial of the system, read by the project's parser (:func:`analysis.io.parse_polynomial`).
+        """One polynomial of the system, read by the project's parser (:func:`analysis.engine.io.parse_polynomial`).
 
         Unknowns, parameters and the usable definitions are all variables of the parser; its exact
         expansion becomes a sympy expression built from symbols and rationals (no text is evaluated).
@@ -299,11 +300,9 @@ class ParametricSystem:
         """The report of I : (product of the nonzero conditions)^inf.
 
         Zero-dimensional I: the rank of a high power of the condition's action matrix on the standard
-        monomials (cheap; analysis.complexity.saturated_degree); otherwise the Rabinowitsch trick.
+        monomials (cheap; analysis.engine.quotient.saturated_degree); otherwise the Rabinowitsch trick.
         """
         if report.zero_dimensional:
-            from .complexity import saturated_degree
-
             sats = {r.prime: saturated_degree(r.gb, self.gf_nonzero(sample(r.prime)[0], r.prime)) for r in report.per_prime}
             if len(set(sats.values())) != 1:
                 raise PrimeDisagreement(f"{self.name}: primes disagree on the saturated degree {sats}")
@@ -362,7 +361,7 @@ def parse(text: str, name: str = "<system>") -> ParametricSystem:
     """Read a parametric system from the text format of the module docstring.
 
     The text is data: names are checked, every polynomial is read by the project's parser
-    (:func:`analysis.io.parse_polynomial`, parameters as further variables) and nothing is evaluated.
+    (:func:`analysis.engine.io.parse_polynomial`, parameters as further variables) and nothing is evaluated.
     Errors are :class:`ParametricError` naming ``name``, the line and the column.
     """
     fields: dict[str, list[tuple[str, int, int]]] = {}
@@ -409,9 +408,9 @@ def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSys
     Equations A and B carry the factor det H, whose vanishing gives spurious roots; with
     ``saturate_det_h`` (what a solver wants) det H != 0 is a non-vanishing condition and the count
     drops them; without it the count is the paper's |B| as generated (Tables 2-3). The
-    sampler draws consistent networks over GF(p) (analysis.formulations.sample_gf_instance).
+    sampler draws consistent networks over GF(p) (analysis.formulations.tdoa.sample_gf_instance).
     """
-    from .formulations import as_formulation, data_symbols, definition_order, factored_equations, sample_gf_instance
+    from .tdoa import as_formulation, data_symbols, definition_order, factored_equations, sample_gf_instance
 
     formulation = as_formulation(formulation)
     config = formulation.config
@@ -434,16 +433,16 @@ def from_formulation(formulation, saturate_det_h: bool = False) -> ParametricSys
 
 def _from_formulation_kd(formulation, saturate_det_h: bool) -> ParametricSystem:
     """Any other configuration (TOA, 3D, the direct parametrization) as a parametric system in the f_ij:
-    :func:`analysis.formulations_kd.formulas` written on sympy symbols.
+    :func:`analysis.formulations.kd.formulas` written on sympy symbols.
 
     Definitions (data only): e<i>_<j> = f_ij - f_1j, p<i>_<j> = f_ij + f_1j, c<i>_<j> the constant part
     of D~_ij; for TOA with B_j, j >= K + 2, also dm = det M, M = D~[:K, :K], and u<j>_<a> = (adj(M)
     D~[:K, j-1])_a (B_j multiplied by dm^2: polynomial in the data, the same roots). 3D TDOA's det M
     depends on the offsets and is a further non-vanishing condition. The sampler is
-    analysis.formulations.sample_gf_instance (known root checked by every count).
+    analysis.formulations.tdoa.sample_gf_instance (known root checked by every count).
     """
-    from .formulations import data_symbols, sample_gf_instance, unknown_symbols
-    from .formulations_kd import formulas
+    from .tdoa import data_symbols, sample_gf_instance, unknown_symbols
+    from .kd import formulas
 
     config = formulation.config
     x = dict(zip(config.unknowns, unknown_symbols(config)))
@@ -527,7 +526,7 @@ def parse_squared_name(text: str) -> tuple[str, int] | None:
 
 
 def from_positions(m: int, n: int, variant: str = "receivers-orbits") -> ParametricSystem:
-    """A positions formulation (analysis.positions; unknowns are coordinates) as a parametric system.
+    """A positions formulation (analysis.formulations.positions; unknowns are coordinates) as a parametric system.
 
     The default variant eliminates transmitters and offsets and writes the receivers in invariants of
     the gauge's sign group, so that each geometric solution is one root (4r/5s: 344). Its nonzero

@@ -7,7 +7,7 @@ it through files in a private temporary directory.
 
 What is written (:func:`to_msolve_input`) avoids what msolve 0.10.1 misreads: a monomial written twice in
 one polynomial (``x^2+x^2`` is read as ``x^2``), a variable repeated in a term (``x*x`` is read as
-``x``) and coefficients of 2^32 or more (read modulo 2^32). A :class:`analysis.ring.Poly` has its like
+``x``) and coefficients of 2^32 or more (read modulo 2^32). A :class:`analysis.engine.ring.Poly` has its like
 terms combined and its coefficients in [0, p), and each term is written once as ``c*x1^a*x2^b``. The
 variables are written as ``x1 .. xn`` whatever their names (msolve need not accept the user's), the
 characteristic is the prime, and there is no division. The answer (``-g 2``: the reduced basis in
@@ -158,8 +158,8 @@ def groebner_msolve(polys: Sequence[Poly], exe: str, threads: int = 1, timeout: 
     """Reduced Gröbner basis (grevlex) of the polynomials by the msolve executable ``exe``.
 
     The basis is returned in the polynomials' ring with the order set to grevlex (msolve computes no
-    other order here; convert with :func:`analysis.quotient.fglm`), monic and sorted by leading monomial
-    like :func:`analysis.f4.groebner`'s, with no round statistics. ``seconds`` is the wall time of the
+    other order here; convert with :func:`analysis.engine.quotient.fglm`), monic and sorted by leading monomial
+    like :func:`analysis.engine.f4.groebner`'s, with no round statistics. ``seconds`` is the wall time of the
     msolve process. Raises :class:`MsolveError` when msolve fails, times out or prints no basis.
     """
     if not polys:
