@@ -147,3 +147,32 @@ def test_sigma_too_small_is_never_ok_and_drops_no_good_entry(factor):
     assert "too small" in res.message
     assert res.inliers.all(), f"{int((~res.inliers).sum())} good measurements rejected"
     assert 0.5 < res.sigma / true_sigma < 2.0
+
+
+@pytest.mark.slow  # two 12r/8s calibrations at 1 cm: 5-10 s
+def test_sigma_given_search_that_missed_the_basin_restarts_from_the_sigma_estimated_answer():
+    """With sigma given, hypotheses are scored at 3 sigmas; a search that never lands in the basin
+    (here: forced, with a budget of two blocks) rejects good data. The sigma-estimated calibration,
+    which the given sigma fits, restarts the sigma-given search: every gross error rejected, no good
+    entry, as with the full budget."""
+    import time
+
+    from solvers.calibration.pipeline import _calibrate_once, _restart_from
+    from solvers.calibration.result import CalibrationOptions
+
+    rng = np.random.default_rng(2006)
+    net = room_network(12, 8, rng)
+    sigma = 1e-2
+    F, bad = corrupt_measurements(net.measurements(sigma, rng), rng, 0.0, 0.05, min_per_receiver=4,
+                                  min_per_transmitter=5)
+    starved = CalibrationOptions(max_samples=2, subnetwork_samples=0, stability_check=False)
+    t0 = time.perf_counter()
+    first = _calibrate_once(F, sigma, 1, starved, t0, 3)
+    good = np.isfinite(F) & ~bad
+    assert (good & ~first.inliers).sum() > 5, "the starved search was meant to miss the basin"
+    est = calibrate(F, None, dim=3, seed=1)
+    assert (bad & est.inliers).sum() == 0 and (good & ~est.inliers).sum() == 0
+    again = _restart_from(F, sigma, 1, starved, t0, 3, first, est)
+    assert again is not first
+    assert (bad & again.inliers).sum() == 0 and (good & ~again.inliers).sum() == 0
+    assert any("restarted" in w for w in again.warnings)

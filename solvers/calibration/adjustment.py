@@ -203,7 +203,7 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
         return float(np.sum(loss_rho((e / scale) ** 2, loss)))
 
     cost = cost_of(e)
-    lam = 1e-3
+    lam, nu = 1e-3, 2.0
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
@@ -223,11 +223,18 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
             cost_new = cost_of(e_new) if np.all(np.isfinite(e_new)) else np.inf
             if cost_new <= cost:
                 converged = bool(np.linalg.norm(step) <= xtol * (np.linalg.norm(x) + xtol) or cost - cost_new <= tol * cost)
+                # Nielsen's damping update from the gain ratio (actual over predicted decrease of the
+                # quadratic model): a step the model predicted well lets lambda fall by up to 3x, a poor
+                # one keeps it; a long curved valley no longer costs a rejected step every iteration
+                predicted = -(2.0 * float(g @ step) + float(step @ (A @ step))) / (scale * scale)
+                rho = (cost - cost_new) / predicted if predicted > 0 else 0.0
                 x, e, diff, dist, cost = x_new, e_new, diff_new, dist_new, cost_new
-                lam = max(lam / 5.0, 1e-12)
+                lam = max(lam * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
+                nu = 2.0
                 improved = True
                 break
-            lam *= 4.0
+            lam *= nu
+            nu *= 2.0
         if not improved:
             converged = True  # no descent left at this precision: a (local) minimum
         if converged:

@@ -382,7 +382,7 @@ def _needed(w: float, k: int, confidence: float, success: float = 1.0, tolerated
 
 def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
             accept: Callable[[_Model], bool] | None = None, confirm: float = 0.0, *,
-            dim: int) -> tuple[_Model | None, _Search]:
+            dim: int, hint: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[_Model | None, _Search]:
     """LO-RANSAC over the minimal solvers on fully measured sub-blocks, then over sub-networks solved
     by least squares from random starts (see module docstring).
 
@@ -392,6 +392,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     sample needs when a share `confirm` of the entries were gross errors (with sigma
     unknown, a fit distorted by gross errors can look clean on its own scale; a better hypothesis
     from another sample then beats it).
+    hint: (R, S, O) of a calibration found otherwise, offered (with its local optimisation) first.
     """
     search = _Search()
     best: _Model | None = None
@@ -447,6 +448,10 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     # min_samples also holds with sigma unknown: a hypothesis distorted by gross errors explains all
     # entries on its own inflated scale (inlier ratio 1, needed 0).
     floor_samples = opts.min_samples if thr is None else 0
+    if hint is not None:
+        R0, S0, O0 = (np.array(a, dtype=float) for a in hint)
+        score, ratio, _ = _score(_residual_matrix(F, R0, S0, O0), mask, thr, floor, dim=dim)
+        offer([_Model(R0, S0, O0, score, ratio)])
     while (not confirmed() and search.samples < (max(needed, opts.min_samples) if needed > 0 else floor_samples)
            and search.samples < opts.max_samples):
         drawn = None
