@@ -269,6 +269,10 @@ def main(argv=None) -> int:
                for r in rows}
     if args.dim == 3:  # results only: the seconds are run facts (calibration3d.timing.json)
         rows = [{k: v for k, v in r.items() if k not in ("sec_med", "sec_p95")} for r in rows]
+    old_meta = {}
+    if only or args.conditions:
+        # a partial run replaces its rows in the existing table and keeps the others (in grid order)
+        rows, old_meta = _merge(out_dir, name, rows, args.dim)
     with open(os.path.join(out_dir, f"{name}.csv"), "w", newline="") as handle:
         w = csv.DictWriter(handle, fieldnames=list(rows[0]))
         w.writeheader()
@@ -289,6 +293,8 @@ def main(argv=None) -> int:
         "threads": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")},
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
+    if old_meta.get("seconds_per_call"):
+        seconds = {**old_meta["seconds_per_call"], **seconds}
     if args.dim == 3:
         meta["networks"] = ("solvers.synthetic.room_network: uniform in an 8 x 6 x 3 m room, offsets N(0, 1 m), Gaussian "
                             "noise sigma; network k of a cell uses numpy.random.default_rng(seed + 1000 k + 7)")
@@ -300,6 +306,32 @@ def main(argv=None) -> int:
         handle.write("\n")
     print(f"wrote {out_dir}/{name}.csv, {name}.md, {meta_name} in {meta['seconds']} s", file=sys.stderr)
     return 0
+
+
+def _key(row) -> tuple:
+    return row["cell"], float(row["sigma"]), row["condition"], row["sigma_mode"]
+
+
+def _merge(out_dir: str, name: str, rows: list[dict], dim: int) -> tuple[list[dict], dict]:
+    """The rows of the existing {name}.csv with the rerun ones replaced (new ones appended), in grid
+    order, and the existing run record (its seconds per call are kept for the rows not rerun)."""
+    path = os.path.join(out_dir, f"{name}.csv")
+    if not os.path.exists(path):
+        return rows, {}
+    with open(path, newline="") as handle:
+        old = list(csv.DictReader(handle))
+    fresh = {_key(r): r for r in rows}
+    merged = [fresh.pop(_key(r), None) or r for r in old] + list(fresh.values())  # old rows as read (text)
+    cells = [f"{m}r/{n}s" for m, n in (CELLS if dim == 2 else CELLS_3D) + (SCALE if dim == 2 else SCALE_3D)]
+    conds = list(CONDITIONS) + [SCALE_CONDITION[0]]
+    merged.sort(key=lambda r: (cells.index(r["cell"]), float(r["sigma"]), conds.index(r["condition"]),
+                               ("given", "estimated").index(r["sigma_mode"])))
+    record = os.path.join(out_dir, f"{name}.meta.json" if dim == 2 else f"{name}.timing.json")
+    meta = {}
+    if os.path.exists(record):
+        with open(record) as handle:
+            meta = json.load(handle)
+    return merged, meta
 
 
 class _Serial:
