@@ -595,11 +595,18 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
 
     # Gauge of the report: receiver 1 at 0 and receiver 2 on +x (3D: receiver 3 in the xy half-plane
     # y > 0), or the first receivers with enough inliers (see gauge_order); the statistics use it too.
+    # 2D: of the two mirror images (equally good), the one with the first further receiver off the
+    # x axis at y > 0 (else the search's path would decide which one is printed).
     placed_r, placed_t = np.isfinite(R[:, 0]), np.isfinite(S[:, 0])
     order = gauge_order(R, inl)
     gauged = to_gauge(R[order], S[placed_t]) if len(order) >= dim else None
     if gauged is not None:
         R[order], S[placed_t] = gauged
+        if dim == 2:
+            extent = float(np.nanmax(np.abs(R[order])))
+            off = [i for i in order[2:] if abs(R[i, 1]) > 1e-9 * extent]
+            if off and R[off[0], 1] < 0:
+                R[:, 1], S[:, 1] = 0.0 - R[:, 1], 0.0 - S[:, 1]  # (0.0 - x: no negative zeros)
     st = adjustment_statistics(F, inl, R, S, O, sigma, alpha=opts.alpha, power=opts.power,
                                alpha_global=opts.alpha_global) if inl.any() else None
     nan_mn = np.full((m, n), np.nan)
