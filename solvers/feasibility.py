@@ -57,6 +57,7 @@ __all__ = [
     "relation_count",
     "system_basis",
     "template_numerics",
+    "template_relations",
 ]
 
 Exponent = tuple[int, ...]
@@ -139,17 +140,39 @@ def count_relations(equations: Sequence[Mapping[Exponent, int]], multiplier_set:
     bset = set(map(tuple, basis))
     nv = len(next(iter(bset)))
     reducible = sorted({tuple(b[j] + (j == action) for j in range(nv)) for b in bset} - bset)
-    rows = [{m: c % p for m, c in row.items()} for row in _macaulay_rows(equations, multiplier_set)]
-    columns = set().union(*rows)
-    excess = sorted(columns - set(reducible) - bset)
-    r_excess = _rank(rows, excess, p)
-    r_both = _rank(rows, excess + reducible, p)
-    return len(rows), len(columns), r_both - r_excess, len(reducible)
+    rows = [(i, t) for i in range(len(equations)) for t in multiplier_set]
+    reached, excess = template_relations(equations, rows, reducible, basis, p)
+    columns = {tuple(a + b for a, b in zip(e, t)) for i, t in rows for e in equations[i]}
+    return len(rows), len(columns), reached, len(reducible)
 
 
 def _macaulay_rows(equations: Sequence[Mapping[Exponent, object]], multiplier_set: Sequence[Exponent]) -> list[dict]:
     """t f for every equation f and multiplier t (equation-major), as {exponent: coefficient}."""
     return [{tuple(a + b for a, b in zip(e, t)): c for e, c in f.items()} for f in equations for t in multiplier_set]
+
+
+def template_relations(equations: Sequence[Mapping[Exponent, int]], rows: Sequence[tuple[int, Exponent]],
+                       reducible: Sequence[Exponent], basis: Sequence[Exponent], p: int) -> tuple[int, list[Exponent]]:
+    """Relations of R modulo B that a template reaches over GF(p), and its excess columns E (sorted).
+
+    rows: (equation index, multiplier exponent) pairs; returns (rank [M_E M_R] - rank M_E, E). A
+    monomial of R that no row contains counts as not reached. The template is complete when the
+    count is |R| (:func:`count_relations`; :func:`solvers.methods.action_matrix.build_template`).
+    """
+    polys = _template_rows(equations, rows, p)
+    columns = set().union(*polys) if polys else set()
+    excess = sorted(columns - set(reducible) - set(basis))
+    present = [r for r in reducible if r in columns]
+    return _rank(polys, excess + present, p) - _rank(polys, excess, p), excess
+
+
+def _template_rows(equations, rows, p: int) -> list[dict]:
+    return [{tuple(a + b for a, b in zip(e, t)): c % p for e, c in equations[i].items()} for i, t in rows]
+
+
+def _macaulay_rank(equations, rows: Sequence[tuple[int, Exponent]], columns: Sequence[Exponent], p: int) -> int:
+    """Rank over GF(p) of the template rows (equation index, multiplier) restricted to ``columns``."""
+    return _rank(_template_rows(equations, rows, p), list(columns), p)
 
 
 def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> int:

@@ -65,6 +65,13 @@ def test_template_of_2d_toa_3r3s():
         am.build(system, 7)
 
 
+def test_3d_toa_is_refused_with_its_reason():
+    # the 38 roots are counted in the eliminated coordinates, but the unsaturated ideal has a
+    # positive-dimensional part (rank H <= 1): no template of this kind (docs/action-matrix.md)
+    with pytest.raises(am.ActionMatrixError, match="not zero-dimensional"):
+        am.build(solver_system("6r4s3dtoa"), 38)
+
+
 def _module(method_tag):
     stem = next(f[:-3] for f in sorted(os.listdir(GENERATED_DIR)) if f.startswith(f"tdoa_3r3stoa_{method_tag}")
                 and f.endswith(".py"))
