@@ -40,9 +40,9 @@ class SolverChoice:
 
 #: Where a configuration has committed solvers of two methods, the one solve_network runs: the faster in
 #: scripts/bench_minimal.py (same run, interleaved), and only if it is at least as reliable
-#: (tables/solvers_minimal.md). 3r3stoa: the homotopy (1000/1000 networks, 7x eig(8)) over the action
-#: matrix (99.x %, 10x eig(8); docs/action-matrix.md). Without an entry, the solver that is not an
-#: action matrix is used.
+#: (tables/solvers_minimal.md). 3r3stoa: the homotopy (1000/1000 networks) over the action matrix (992/1000;
+#: both 0.56 ms a solve in the same run, docs/action-matrix.md). Without an entry, the solver that is not
+#: an action matrix is used.
 PREFERRED_METHOD = {"3r3stoa": "homotopy"}
 
 #: Method -> the tag in its module names (solvers.codegen.module_name).

@@ -175,9 +175,20 @@ def _macaulay_rank(equations, rows: Sequence[tuple[int, Exponent]], columns: Seq
     return _rank(_template_rows(equations, rows, p), list(columns), p)
 
 
-def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> int:
+def _pivot_columns(equations, rows: Sequence[tuple[int, Exponent]], columns: Sequence[Exponent], p: int) -> list[Exponent]:
+    """A maximal set of linearly independent columns (the first ones, in the given order) over GF(p)."""
     if not rows or not columns:
-        return 0
+        return []
+    R, rank = _nmod(_template_rows(equations, rows, p), list(columns), p).rref()
+    out, j = [], 0
+    for i in range(rank):
+        while int(R[i, j]) == 0:
+            j += 1
+        out.append(columns[j])
+    return out
+
+
+def _nmod(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> "flint.nmod_mat":
     index = {c: j for j, c in enumerate(columns)}
     M = flint.nmod_mat(len(rows), len(columns), p)
     for r, row in enumerate(rows):
@@ -185,7 +196,13 @@ def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p
             j = index.get(mon)
             if j is not None:
                 M[r, j] = c
-    return M.rank()
+    return M
+
+
+def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> int:
+    if not rows or not columns:
+        return 0
+    return _nmod(rows, columns, p).rank()
 
 
 def _instance_equations(formulation: Formulation, prime: int, seed: int) -> list[dict]:

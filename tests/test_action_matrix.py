@@ -59,8 +59,9 @@ def test_template_of_2d_toa_3r3s():
     # 8 roots plus one on det H = 0 (H = 0, b fixed by the linear equations) in the standard basis
     assert len(tpl["basis"]) == 9 and spec["saturation"] == "dropped"
     rows, cols = tpl["size"]
-    assert rows - tpl["rank_excess"] == len(tpl["reducible"])  # a square solve for R after the excess block
     assert cols == len(tpl["excess"]) + len(tpl["reducible"]) + len(tpl["basis"])
+    # only independent excess columns are kept, and the pruned rows make [E R] square: one LU solve online
+    assert tpl["rank_excess"] == len(tpl["excess"]) and rows == len(tpl["excess"]) + len(tpl["reducible"])
     with pytest.raises(am.ActionMatrixError, match="saturated count 8"):
         am.build(system, 7)
 

@@ -18,10 +18,13 @@ non-vanishing condition (det H):
    by B modulo the other ("excess") monomials E: rank [E R] = rank E + |R|. Then rows are removed
    while this holds (greedy, in halving chunks, largest multiples first). The template is checked on
    a second instance and on a second prime (same supports, same excess columns, same rank condition).
+   Only a maximal independent set of the excess columns is kept (:func:`_square`): the others lie in
+   their span, so the relations are the same, and [E R] becomes square when the rows are minimal.
 3. *Online* (:class:`ActionMatrixSolver`, numpy/scipy only): the coefficients of the data, the kernel of
    the linear equations by SVD (orthonormal N), the g_i(y) by products of linear forms (a vectorised
-   tensor expansion), the template filled (rows scaled to unit norm), the left kernel of its excess
-   block by pivoted QR (its rank is known from GF(p)), R in terms of B by a square solve, the
+   tensor expansion), the template filled (rows scaled to unit norm), R in terms of B by one LU solve
+   of the square [E R] block (else: the left kernel of the excess block by pivoted QR, its rank known
+   from GF(p), then a solve), the
    |B| x |B| action matrix, eig, y_j = v[y_j] / v[1] from the eigenvectors, the |B| - degree
    candidates with the smallest |det H| dropped, Newton steps on g(y) = 0, x = x0 + N y.
 
@@ -42,8 +45,9 @@ __all__ = ["SPEC_FORMAT", "ActionMatrixError", "ActionMatrixSolver", "Composer",
 
 SPEC_FORMAT = "tdoa-action-matrix/1"
 
-#: Newton steps on g(y) = 0 after the eigensolve (written into the spec). 2D TOA 3r/3s, 1000 room
-#: networks, true root within 1e-6: 986 with 1 step, 990 with 2, 993 with 4 and with 8.
+#: Newton steps on g(y) = 0 after the eigensolve, at most (written into the spec). 2D TOA 3r/3s, 1000 room
+#: networks, true root within 1e-6, QR elimination of the 44 x 56 template: 986 with 1 step, 990 with 2,
+#: 993 with 4 and with 8; the square 44 x 53 template (LU) with 4: 991.
 NEWTON_STEPS = 4
 
 
@@ -327,13 +331,21 @@ class ActionMatrixSolver:
         self.read = np.array([bidx[tuple(int(j == v) for j in range(len(basis[0])))] for v in range(self.k)], dtype=np.intp)
         self.one = one
         self.degree = int(spec["degree"])
-        # Newton on g(y) = 0 (the linear equations hold exactly on x0 + N y): monomials of y and their derivatives
-        mons = np.array(self.composer.monomials, dtype=np.int64)
-        self.mons, self.top = mons, int(mons.max())
-        lowered = mons[:, None, :] - np.eye(self.k, dtype=np.int64)[None]
-        where = {tuple(m): i for i, m in enumerate(map(tuple, mons))}
-        self.d_index = np.array([[where.get(tuple(v), 0) for v in row] for row in lowered], dtype=np.intp)  # (Mn, k)
-        self.d_factor = mons.astype(float)
+        # Newton on g(y) = 0 (the linear equations hold exactly on x0 + N y): the monomials of y degree by
+        # degree (each one a lower one times a variable), the derivatives as one matrix on the coefficients
+        mons = [tuple(m) for m in self.composer.monomials]
+        where = {m: i for i, m in enumerate(mons)}
+        self.levels = []
+        for d in range(1, max(sum(m) for m in mons) + 1):
+            idx = [i for i, m in enumerate(mons) if sum(m) == d]
+            var = [next(v for v in range(self.k) if mons[i][v]) for i in idx]
+            parent = [where[tuple(e - (v == j) for j, e in enumerate(mons[i]))] for i, v in zip(idx, var)]
+            self.levels.append(tuple(np.array(a, dtype=np.intp) for a in (idx, parent, var)))
+        self.derivative = np.zeros((len(mons), self.k * len(mons)))  # d/dy_j: column block j
+        for i, m in enumerate(mons):
+            for j in range(self.k):
+                if m[j]:
+                    self.derivative[i, j * len(mons) + where[tuple(e - (v == j) for v, e in enumerate(m))]] = m[j]
         self.newton_steps = int(spec["newton_steps"])
 
     def _kernel(self, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -356,14 +368,13 @@ class ActionMatrixSolver:
         T[rows, cols] = G[src_eq, src_mon]
         T /= np.linalg.norm(T, axis=1, keepdims=True)
         ne, nr = self.n_excess, self.n_reducible
-        # left kernel of the excess block (its rank is known from GF(p)), then R in terms of B
-        Q = self._qr(T[:, :ne], pivoting=True, mode="full")[0] if ne else np.eye(self.shape[0])
-        W = Q[:, self.rank_excess:]
-        P, Bpart = W.T @ T[:, ne: ne + nr], W.T @ T[:, ne + nr:]
-        if P.shape[0] == P.shape[1]:
-            X = np.linalg.solve(P, Bpart)
-        else:
-            X = np.linalg.lstsq(P, Bpart, rcond=None)[0]
+        if self.shape[0] == ne + nr and self.rank_excess == ne:  # square [E R]: one LU solve
+            X = np.linalg.solve(T[:, : ne + nr], T[:, ne + nr:])[ne:]
+        else:  # left kernel of the excess block (its rank is known from GF(p)), then R in terms of B
+            Q = self._qr(T[:, :ne], pivoting=True, mode="full")[0] if ne else np.eye(self.shape[0])
+            W = Q[:, self.rank_excess:]
+            P, Bpart = W.T @ T[:, ne: ne + nr], W.T @ T[:, ne + nr:]
+            X = np.linalg.solve(P, Bpart) if P.shape[0] == nr else np.linalg.lstsq(P, Bpart, rcond=None)[0]
         A = np.zeros((self.n_basis, self.n_basis), dtype=X.dtype)
         for i, j in self.shift_basis:
             A[i, j] = 1.0
@@ -383,28 +394,38 @@ class ActionMatrixSolver:
 
     def _monomial_values(self, y: np.ndarray) -> np.ndarray:
         """Values (c, Mn) of the composer's monomials at the points y (c, k)."""
-        pw = np.cumprod(np.concatenate([np.ones(y.shape + (1,), y.dtype), np.repeat(y[..., None], self.top, axis=-1)],
-                                       axis=-1), axis=-1)  # (c, k, top + 1)
-        return np.prod(pw[:, np.arange(self.k)[None, :], self.mons], axis=-1)
+        V = np.empty((len(y), len(self.composer.monomials)), dtype=y.dtype)
+        V[:, 0] = 1.0
+        for idx, parent, var in self.levels:
+            V[:, idx] = V[:, parent] * y[:, var]
+        return V
 
     def _newton(self, y: np.ndarray, G: np.ndarray) -> np.ndarray:
         """Newton steps on g(y) = 0 (G: (k, Mn) composed coefficients) for every candidate; a step is kept
-        only where it lowers the residual, so an accurate root is never spoilt."""
+        only where it lowers the residual, so an accurate root is never spoilt; at most ``newton_steps``,
+        fewer once no candidate's residual decreases."""
+        k, Mn = G.shape
+        DG = (G @ self.derivative).reshape(k, k, Mn).transpose(2, 0, 1).reshape(Mn, k * k)  # J[c] = V[c] @ DG
         V = self._monomial_values(y)
         f = V @ G.T
+        res = np.linalg.norm(f, axis=1)
         for _ in range(self.newton_steps):
-            dV = V[:, self.d_index] * self.d_factor  # (c, Mn, k)
-            J = np.einsum("im,cmj->cij", G, dV)
-            ok = np.all(np.isfinite(J), axis=(1, 2)) & (np.abs(np.linalg.det(J)) > 0)
-            step = np.zeros_like(y)
-            step[ok] = np.linalg.solve(J[ok], f[ok][..., None])[..., 0]
+            J = (V @ DG).reshape(len(y), k, k)
+            try:
+                step = np.linalg.solve(J, f[..., None])[..., 0]
+            except np.linalg.LinAlgError:  # a singular Jacobian somewhere: least squares for all
+                step = (np.linalg.pinv(J) @ f[..., None])[..., 0]
             yn = y - step
             Vn = self._monomial_values(yn)
             fn = Vn @ G.T
-            better = ok & np.all(np.isfinite(fn), axis=1) & (np.linalg.norm(fn, axis=1) < np.linalg.norm(f, axis=1))
+            rn = np.linalg.norm(fn, axis=1)
+            better = rn < res  # False for NaN
+            if not better.any():  # converged to rounding everywhere
+                break
             y = np.where(better[:, None], yn, y)
             V = np.where(better[:, None], Vn, V)
             f = np.where(better[:, None], fn, f)
+            res = np.where(better, rn, res)
         return y
 
 
@@ -435,6 +456,25 @@ def _instance_polys(ext, structure, exps, term_eq, p: int, seed: int):
     det = {m + (1,): int(c) for m, c in zip(composer.monomials, C[structure.saturation[0]]) if c}
     det[(0,) * (k + 1)] = p - 1
     return polys, [{m + (0,): c for m, c in f.items()} for f in polys] + [det], k
+
+
+def _square(tpl: Template, instance, checks, name: str) -> tuple[Template, int]:
+    """The template with only a maximal independent set of its excess columns (pivot columns over GF(p)).
+
+    Every other excess column lies in their span on a generic instance, so a row combination that
+    vanishes on them vanishes on all: the relations are the same. When the rows are then exactly
+    |E'| + |R|, [E' R] is square and invertible, and the online elimination is one LU solve. Checked on
+    the other instances: the dropped columns add no rank there either. Returns (template, rank of E).
+    """
+    from ..feasibility import _macaulay_rank, _pivot_columns
+
+    polys, p = instance
+    kept = tuple(_pivot_columns(polys, tpl.rows, tpl.excess, p))
+    for other, q in checks:
+        ranks = {_macaulay_rank(other, tpl.rows, cols, q) for cols in (tpl.excess, kept)}
+        if ranks != {len(kept)} or _macaulay_rank(other, tpl.rows, kept + tpl.reducible, q) != len(kept) + len(tpl.reducible):
+            raise ActionMatrixError(f"{name}: the independent excess columns differ on GF({q})")
+    return Template(tpl.rows, kept, tpl.reducible, tpl.basis, tpl.action), len(kept)
 
 
 def build(system, degree: int, primes: tuple[int, int] = (65521, 65519), progress=None,
@@ -480,16 +520,16 @@ def build(system, degree: int, primes: tuple[int, int] = (65521, 65519), progres
             progress(f"action y{a}: template {len(tpl.rows)} x {len(tpl.columns)}")
         if best is None or len(tpl.rows) * len(tpl.columns) < len(best.rows) * len(best.columns):
             best = tpl
+    checks = []
     for q, seed in ((p, 1), (primes[1], 0)):  # the same rows work on another instance and prime
         other, _, _ = _instance_polys(ext, st, exps, term_eq, q, seed)
+        checks.append((other, q))
         if [set(f) for f in other] != [set(f) for f in polys]:
             raise ActionMatrixError(f"{system.name}: supports differ on GF({q}) seed {seed}")
         ok, excess = _works(other, list(best.rows), best.reducible, best.basis, q)
         if not ok or excess != best.excess:
             raise ActionMatrixError(f"{system.name}: the template fails on GF({q}) seed {seed}")
-    from ..feasibility import _macaulay_rank
-
-    rank_excess = _macaulay_rank(polys, best.rows, best.excess, p)
+    best, rank_excess = _square(best, (polys, p), checks, system.name)
     return {
         "format": SPEC_FORMAT,
         "kind": "action-matrix",
