@@ -115,7 +115,7 @@ class Composer:
 
 
 # --------------------------------------------------------------------------------------------------
-# offline: the instance in (y, t) over GF(p), the template
+# offline: the instance in y over GF(p), the template
 # --------------------------------------------------------------------------------------------------
 
 
@@ -169,7 +169,9 @@ def _structure(exps: np.ndarray, term_eq: np.ndarray, n_eq: int, n_saturation: i
 
 
 def _gf_instance(extended, structure: Structure, exps: np.ndarray, term_eq: np.ndarray, p: int, seed: int):
-    """(polys in (y, t) over GF(p) as lists of {exponent: coeff}, the known root's image or None)."""
+    """(term coefficients mod p, M = [[1, 0], [x0, N]], k) of one seeded consistent GF(p) instance: its
+    linear equations solved exactly (x0 + N y on their solution set, N in random coordinates on the
+    kernel, as generic as the online SVD's). Its known root is checked by the certification before."""
     q, root = extended.sample_gf(p, seed)[:2]
     polys = extended.gf_polys(q, p)
     coeffs = np.zeros(len(exps), dtype=np.int64)
