@@ -11,7 +11,13 @@ interleaved in the same run: one ``solve`` call (median of single calls, best of
 thread) against numpy.linalg.eig of an N x N complex matrix, N = the solver's root count; their ratio
 and the microseconds per tracked path.
 
-Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_minimal.py [--trials 1000] [--single-calls 200]
+A configuration with two committed methods (3r3stoa: homotopy and action matrix) gets one row per method;
+the "true network found" of an action-matrix row runs solve_network with that solver
+(solvers.api.PREFERRED_METHOD is set to it for the row).
+
+Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_minimal.py [--trials 1000] [--single-calls 200] [--only LABEL ...]
+  --only: rerun these configurations; their rows replace the old ones in the CSV and the table, the
+  other rows are kept as committed.
 """
 from __future__ import annotations
 
@@ -34,6 +40,7 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
+from solvers import api  # noqa: E402
 from solvers.api import KD_SOLVERS, _module_for, solve_network  # noqa: E402
 from solvers.metrics import position_error  # noqa: E402
 from solvers.synthetic import ROOM, room_network, true_root  # noqa: E402
@@ -42,15 +49,22 @@ TABLES = os.path.join(ROOT, "tables")
 FOUND_TOL = 1e-6
 REAL_TOL = 1e-6
 SINGLE_ROUNDS = 3
-COLUMNS = ["solver", "formulation", "dim", "model", "roots", "paths", "trials", "root_median_log10_err",
+COLUMNS = ["solver", "method", "formulation", "dim", "model", "roots", "paths", "trials", "root_median_log10_err",
            "root_p99_log10_err", "root_max_log10_err", "found", "failures", "failure_share",
            "position_median_log10_err", "mean_real", "mean_calibrations", "spec_sha256"]
 
 
-def minimal_solvers() -> list[tuple[str, int, str]]:
-    """(label, dim, model) of the committed TOA solvers."""
-    return [(label, dim, model) for (dim, model), labels in sorted(KD_SOLVERS.items()) if model == "toa"
-            for label in labels]
+def minimal_solvers() -> list[tuple[str, int, str, str]]:
+    """(label, dim, model, method) of the committed TOA solvers (every committed method of a label)."""
+    out = []
+    for (dim, model), labels in sorted(KD_SOLVERS.items()):
+        if model != "toa":
+            continue
+        for label in labels:
+            for method, tag in (("homotopy", "_homotopy"), ("action-matrix", "_action")):
+                if any(f.startswith(f"tdoa_{label}{tag}") and f.endswith(".py") for f in os.listdir(api._GENERATED)):
+                    out.append((label, dim, model, method))
+    return out
 
 
 def _log(values) -> np.ndarray:
@@ -67,9 +81,9 @@ def networks(m: int, n: int, dim: int, trials: int) -> list:
     return [room_network(m, n, np.random.default_rng(seed), room=ROOM[:dim], offset_sigma=0.0) for seed in range(trials)]
 
 
-def bench(label: str, dim: int, model: str, trials: int) -> tuple[dict, list[int]]:
+def bench(label: str, dim: int, model: str, trials: int, method: str = "homotopy") -> tuple[dict, list[int]]:
     """One row of solvers_minimal.csv and the seeds of the failed networks."""
-    module = _module_for(label)
+    module = _module_for(label, method)
     m, n = module.CONFIG
     nets = networks(m, n, dim, trials)
     F = np.stack([net.measurements() for net in nets])
@@ -79,15 +93,21 @@ def bench(label: str, dim: int, model: str, trials: int) -> tuple[dict, list[int
     err = np.min(np.linalg.norm(roots - truths[:, None, :], axis=2), axis=1) / np.linalg.norm(truths, axis=1)
     err = np.where(np.isfinite(err), err, np.inf)
     found, failed, n_cals = [], [], []
-    for seed, net in enumerate(nets):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # minimal data: several exact solutions, by design
-            cals = solve_network(F[seed], dim=dim, model=model)
-        n_cals.append(len(cals))
-        best = min((position_error(c, net) for c in cals), default=np.inf)
-        found.append(best)
-        if not best <= FOUND_TOL:
-            failed.append(seed)
+    preferred = dict(api.PREFERRED_METHOD)
+    api.PREFERRED_METHOD[label] = method  # solve_network runs the solver of this row
+    try:
+        for seed, net in enumerate(nets):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # minimal data: several exact solutions, by design
+                cals = solve_network(F[seed], dim=dim, model=model)
+            n_cals.append(len(cals))
+            best = min((position_error(c, net) for c in cals), default=np.inf)
+            found.append(best)
+            if not best <= FOUND_TOL:
+                failed.append(seed)
+    finally:
+        api.PREFERRED_METHOD.clear()
+        api.PREFERRED_METHOD.update(preferred)
     finite = np.all(np.isfinite(roots), axis=2)
     scale = np.max(np.abs(np.where(np.isfinite(roots), roots, 0)), axis=2)
     real = finite & (np.max(np.abs(np.where(np.isfinite(roots), roots, 0).imag), axis=2) <= REAL_TOL * np.maximum(scale, 1e-300))
@@ -95,8 +115,8 @@ def bench(label: str, dim: int, model: str, trials: int) -> tuple[dict, list[int
         spec = json.load(fh)
     ok = [v for v in found if np.isfinite(v)]
     row = {
-        "solver": label, "formulation": module.SYSTEM, "dim": dim, "model": model, "roots": module.DEGREE,
-        "paths": spec["paths"], "trials": trials,
+        "solver": label, "method": method, "formulation": module.SYSTEM, "dim": dim, "model": model, "roots": module.DEGREE,
+        "paths": spec.get("paths", module.DEGREE), "trials": trials,
         "root_median_log10_err": _q(err, 50), "root_p99_log10_err": _q(err, 99), "root_max_log10_err": _q(err, 100),
         "found": trials - len(failed), "failures": len(failed), "failure_share": round(len(failed) / trials, 4),
         "position_median_log10_err": _q(ok, 50), "mean_real": round(float(np.mean(real.sum(axis=1))), 3),
@@ -105,9 +125,9 @@ def bench(label: str, dim: int, model: str, trials: int) -> tuple[dict, list[int
     return row, failed
 
 
-def timing(label: str, dim: int, calls: int) -> dict:
+def timing(label: str, dim: int, calls: int, method: str = "homotopy") -> dict:
     """Median single ``solve`` and eig(N x N) times, interleaved (best of SINGLE_ROUNDS rounds)."""
-    module = _module_for(label)
+    module = _module_for(label, method)
     m, n = module.CONFIG
     F = np.stack([net.measurements() for net in networks(m, n, dim, calls)])
     N = module.DEGREE
@@ -137,10 +157,10 @@ def markdown(rows: list[dict]) -> str:
              "**Generated minimal TOA solvers: noise-free validation on room networks** (log10 relative root error "
              "median / p99 / max; a failure: the true network is not among the calibrations of "
              "solve_network(F, dim=K, model=\"toa\") within 1e-6 position error after rigid alignment)", "",
-             "| solver | formulation | roots (paths) | trials | root error | true network found | failures | "
-             "real roots (mean) | calibrations (mean) |", "|---|---|---|---|---|---|---|---|---|"]
+             "| solver | method | formulation | roots (paths) | trials | root error | true network found | failures | "
+             "real roots (mean) | calibrations (mean) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['dim']}D {r['model'].upper()} {r['solver'].split('s')[0]}s | {r['formulation']} | "
+        lines.append(f"| {r['dim']}D {r['model'].upper()} {r['solver'].split('s')[0]}s | {r['method']} | {r['formulation']} | "
                      f"{r['roots']} ({r['paths']}) | {r['trials']} | {r['root_median_log10_err']} / "
                      f"{r['root_p99_log10_err']} / {r['root_max_log10_err']} | {r['found']} | "
                      f"{r['failures']} ({100 * float(r['failure_share']):.1f} %) | {r['mean_real']} | "
@@ -152,30 +172,42 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=1000, help="noise-free networks per solver (default 1000)")
     parser.add_argument("--single-calls", type=int, default=200, help="timed single calls per round (default 200)")
-    parser.add_argument("--only", nargs="*", help="a subset of the solver labels (the table is then not written)")
+    parser.add_argument("--only", nargs="*", help="a subset of the solver labels (their rows replace the old ones)")
     args = parser.parse_args(argv)
     if min(args.trials, args.single_calls) < 1:
         parser.error("--trials and --single-calls must be positive")
-    rows, failed, times = [], {}, {}
-    for label, dim, model in minimal_solvers():
+    rows, failed, times = {}, {}, {}
+    for label, dim, model, method in minimal_solvers():
         if args.only and label not in args.only:
             continue
-        row, bad = bench(label, dim, model, args.trials)
-        rows.append(row)
-        failed[label] = bad
-        times[label] = timing(label, dim, args.single_calls)
-        print(f"{label}: root median {row['root_median_log10_err']}, max {row['root_max_log10_err']}; found "
-              f"{row['found']}/{args.trials}; {times[label]}", flush=True)
-    if args.only:
-        return 0
-    with open(os.path.join(TABLES, "solvers_minimal.csv"), "w", newline="", encoding="utf-8") as fh:
+        key = f"{label}:{method}"
+        row, bad = bench(label, dim, model, args.trials, method)
+        rows[key] = row
+        failed[key] = bad
+        times[key] = timing(label, dim, args.single_calls, method)
+        print(f"{key}: root median {row['root_median_log10_err']}, max {row['root_max_log10_err']}; found "
+              f"{row['found']}/{args.trials}; {times[key]}", flush=True)
+    csv_path = os.path.join(TABLES, "solvers_minimal.csv")
+    if args.only:  # the other rows as committed (a row written before the method column: a homotopy)
+        with open(csv_path, newline="", encoding="utf-8") as fh:
+            old = {f"{r['solver']}:{r.get('method') or 'homotopy'}": {**r, "method": r.get("method") or "homotopy"}
+                   for r in csv.DictReader(fh)}
+        order = [f"{lb}:{mt}" for lb, _, _, mt in minimal_solvers()]
+        rows = {k: rows.get(k, old.get(k)) for k in order if k in rows or k in old}
+    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows(rows.values())
     with open(os.path.join(TABLES, "solvers_minimal.csv"), newline="", encoding="utf-8") as fh:
         table = markdown(list(csv.DictReader(fh)))
     with open(os.path.join(TABLES, "solvers_minimal.md"), "w", encoding="utf-8", newline="\n") as fh:
         fh.write(table)
+    timing_path = os.path.join(TABLES, "solvers_minimal.timing.json")
+    if args.only and os.path.exists(timing_path):  # keep the other solvers' times
+        with open(timing_path, encoding="utf-8") as fh:
+            previous = json.load(fh)
+        times = {**previous.get("times", {}), **times}
+        failed = {**previous.get("failed_networks", {}), **failed}
     record = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
               "trials": args.trials, "single_calls": args.single_calls, "threads": os.environ.get("OPENBLAS_NUM_THREADS"),
               "load_average_at_end": list(os.getloadavg()), "times": times, "failed_networks": failed}

@@ -5,6 +5,8 @@ Usage: python scripts/generate_solvers.py [6r4s 9r3s 8r3s 7r3s 6r3s 5r4s 5r5s 4r
                  pencil, the others parameter homotopies whose start roots monodromy recomputes).
   --emit-only    re-emit the modules of the given (default: all) committed solvers from their committed
                  JSON specs (no construction, numerics unchanged).
+  --method M     build with method M instead (3r3stoa --method action-matrix: the elimination-template
+                 solver, written beside the homotopy one).
 Same as `tdoa-workbench generate CONFIG --out solvers/generated` for each configuration.
 """
 from __future__ import annotations
@@ -23,6 +25,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("configs", nargs="*", default=every, help=f"subset of {', '.join(every)}")
     parser.add_argument("--emit-only", action="store_true", help="re-emit the modules from their committed specs")
+    parser.add_argument("--method", choices=list(gen.METHODS), help="build with this method (default: the "
+                        "configuration's own); action-matrix solvers are written beside the homotopy ones")
     args = parser.parse_args(argv)
     unknown = [c for c in args.configs if c not in gen.SOLVERS]
     if unknown:
@@ -36,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"emitted {py_path}")
         return 0
     for label in args.configs:
-        result = gen.generate(label, out=gen.GENERATED_DIR,
+        result = gen.generate(label, args.method, out=gen.GENERATED_DIR,
                               progress=lambda msg: print("  " + msg, file=sys.stderr, flush=True))
         print(result.summary(), flush=True)
     return 0

@@ -38,11 +38,33 @@ class SolverChoice:
     module: str
 
 
-def _module_for(label: str):
+#: Where a configuration has committed solvers of two methods, the one solve_network runs: the faster in
+#: scripts/bench_minimal.py (same run, interleaved), and only if it is at least as reliable
+#: (tables/solvers_minimal.md). 3r3stoa: the homotopy (1000/1000 networks) over the action matrix (992/1000;
+#: both 0.56 ms a solve in the same run, docs/action-matrix.md). Without an entry, the solver that is not
+#: an action matrix is used.
+PREFERRED_METHOD = {"3r3stoa": "homotopy"}
+
+#: Method -> the tag in its module names (solvers.codegen.module_name).
+_METHOD_TAG = {"homotopy": "homotopy", "curve-pencil": "pencil", "offset-kernel": "kernel", "action-matrix": "action"}
+
+
+def _module_for(label: str, method: str | None = None):
+    """The committed module of a configuration: of ``method`` if given, else the preferred one
+    (:data:`PREFERRED_METHOD`)."""
     names = sorted(f[:-3] for f in os.listdir(_GENERATED) if f.startswith(f"tdoa_{label}_") and f.endswith(".py"))
     if not names:
         raise RuntimeError(f"no generated solver for {label} in {_GENERATED}; run scripts/generate_solvers.py")
-    return importlib.import_module(f"solvers.generated.{names[-1]}")
+    if method is not None and method not in _METHOD_TAG:
+        raise ValueError(f"unknown method {method!r}; valid: {', '.join(_METHOD_TAG)}")
+    want = method or PREFERRED_METHOD.get(label)
+    if want is not None:
+        chosen = [n for n in names if re.fullmatch(rf"tdoa_{re.escape(label)}_{_METHOD_TAG[want]}\d+", n)]
+        if not chosen:
+            raise RuntimeError(f"no committed {want} solver for {label} in {_GENERATED}")
+    else:
+        chosen = [n for n in names if "_action" not in n] or names
+    return importlib.import_module(f"solvers.generated.{chosen[-1]}")
 
 
 #: Solvers by expected cost (paths or pencil size, measured in tables/solvers.csv): the first one

@@ -601,6 +601,9 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
                    "formulation label or system FILE")
     p.add_argument("--out", metavar="DIR", required=True, help="output directory (created if needed)")
     p.add_argument("--seed", type=int, default=0, help="monodromy seed (default 0)")
+    p.add_argument("--method", choices=("curve-pencil", "homotopy", "offset-kernel", "action-matrix"),
+                   help="solving method (default: the target's own; action-matrix: an elimination template over "
+                   "GF(p) and an eigensolve, docs/action-matrix.md)")
     p.add_argument("--evidence", choices=("gf", "monodromy"), default="gf",
                    help="gf (default): certify the root count over GF(p) first; monodromy: numerical evidence "
                    "alone (loops until many find no new root), for systems F4 cannot count; the spec and the "
@@ -643,6 +646,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
     from analysis.formulations.parametric import ParametricError, parse
     from solvers import generate as gen
+    from solvers.methods.action_matrix import ActionMatrixError
     from solvers.methods.homotopy import HomotopyError
     from solvers.subsystem import SUBSYSTEMS
 
@@ -675,18 +679,19 @@ def cmd_generate(args: argparse.Namespace) -> int:
     command += f" --seed {args.seed}" if args.seed else ""
     command += f" --start {shlex.quote(args.start)}" if args.start else ""
     command += f" --evidence {args.evidence}" if args.evidence != "gf" else ""
+    command += f" --method {args.method}" if args.method else ""
     try:
         if is_file:
             system = parse(_read_text(target), os.path.basename(target))
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
-            result = gen.generate(system, out=args.out, name=name, seed=args.seed, start=start, command=command,
-                                  progress=progress, evidence=args.evidence)
+            result = gen.generate(system, args.method, out=args.out, name=name, seed=args.seed, start=start,
+                                  command=command, progress=progress, evidence=args.evidence)
         else:
-            result = gen.generate(target, out=args.out, seed=args.seed, command=command, progress=progress,
-                                  evidence=args.evidence)
+            result = gen.generate(target, args.method, out=args.out, seed=args.seed, command=command,
+                                  progress=progress, evidence=args.evidence)
         print(result.summary())
-    except (ParametricError, HomotopyError, gen.GenerationError) as exc:
+    except (ParametricError, HomotopyError, ActionMatrixError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"{args.out}: {exc.strerror or exc}") from None

@@ -124,6 +124,8 @@ def module_name(name: str, spec: dict) -> str:
         return f"{name}_pencil{spec['size'][0]}"
     if spec["kind"] == "offset-kernel":
         return f"{name}_kernel{spec['degree']}"
+    if spec["kind"] == "action-matrix":
+        return f"{name}_action{spec['degree']}"
     return f"{name}_homotopy{spec['paths']}"
 
 
@@ -224,6 +226,23 @@ def _pencil_parts(spec: dict) -> ModuleParts:
                f"    return runtime.solve_one(solver(), coefficients, F, CONFIG, polish)"))
 
 
+def _load_source(solver_class: str) -> str:
+    """The body of ``solver()`` for a method whose kernel takes the spec text and the coefficient function."""
+    return ("        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), SPEC_FILE), encoding=\"utf-8\") as fh:\n"
+            f"            _SOLVER.append(_method.{solver_class}(_method.load_spec(fh.read()), coefficients))")
+
+
+def _scaled_solve_source(pshape: tuple[int, ...], rows: int, nvars: int) -> str:
+    """``solve_batch`` / ``solve`` through the method's ``solve_scaled`` (data normalised by their RMS)."""
+    shape = ", ".join(map(str, pshape))
+    return (f"def solve_batch(F):\n"
+            f'    """Candidate roots for a batch of data F (..., {shape}) -> (..., {rows}, {nvars}) complex."""\n'
+            f"    return _method.solve_scaled(solver(), F, {pshape!r}, SCALE_POWERS)\n\n\n"
+            f"def solve(F):\n"
+            f'    """Candidate roots ({rows}, {nvars}) for one instance F ({shape})."""\n'
+            f"    return solve_batch(np.asarray(F)[None])[0]")
+
+
 def _homotopy_parts(spec: dict) -> ModuleParts:
     config = spec.get("config")
     pshape = tuple(config) if config else (len(spec["parameters"]),)
@@ -237,7 +256,6 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
     if spec.get("starts"):
         tracked += (f"\nThey are tracked from {len(spec['starts']) + 1} start instances (the spec's further ones seeded, their roots\n"
                     f"found at generation), each instance's distinct endpoints pooled; nothing is retracked.")
-    shape = ", ".join(map(str, pshape))
     return ModuleParts(
         summary=f"parameter homotopy with {paths} paths in {nvars} unknowns.",
         description=((f"The {paths} roots of a generic complex start instance (certified count over GF(p), found by\n"
@@ -251,14 +269,7 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
         method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"
                           f"START_ROOTS = {len(spec['start_roots'])}"),
         scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
-        load=("        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), SPEC_FILE), encoding=\"utf-8\") as fh:\n"
-              "            _SOLVER.append(_method.HomotopySolver(_method.load_spec(fh.read()), coefficients))"),
-        solve=(f"def solve_batch(F):\n"
-               f'    """Candidate roots for a batch of data F (..., {shape}) -> (..., {paths}, {nvars}) complex."""\n'
-               f"    return _method.solve_scaled(solver(), F, {pshape!r}, SCALE_POWERS)\n\n\n"
-               f"def solve(F):\n"
-               f'    """Candidate roots ({paths}, {nvars}) for one instance F ({shape})."""\n'
-               f"    return solve_batch(np.asarray(F)[None])[0]"))
+        load=_load_source("HomotopySolver"), solve=_scaled_solve_source(pshape, paths, nvars))
 
 
 def offset_kernel_coefficients(spec: dict) -> str:
@@ -296,14 +307,34 @@ def _offset_kernel_parts(spec: dict) -> ModuleParts:
                f"    return solve_batch(F)"))
 
 
+def _action_matrix_parts(spec: dict) -> ModuleParts:
+    config = spec.get("config")
+    pshape = tuple(config) if config else (len(spec["parameters"]),)
+    degree, nvars, tpl = int(spec["degree"]), len(spec["unknowns"]), spec["template"]
+    linear, basis = len(spec["structure"]["linear"]), len(tpl["basis"])
+    return ModuleParts(
+        summary=f"action matrix, {degree} roots certified over GF(p), elimination template {tpl['size'][0]} x {tpl['size'][1]}.",
+        description=(f"The {linear} linear equations solved (kernel by SVD), the others composed on their solution set,\n"
+                     f"the template (built over GF(p), solvers.methods.action_matrix) eliminated by QR, the {basis} x {basis}\n"
+                     f"action matrix of y{tpl['action']} solved by eig; {basis - degree} root(s) on det H = 0 dropped, Newton on the rest."),
+        rows=degree, pshape=pshape, config=tuple(config) if config else None,
+        imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import action_matrix as _method",
+        method_constants=f"TEMPLATE = ({tpl['size'][0]}, {tpl['size'][1]})\nBASIS = {basis}",
+        scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
+        load=_load_source("ActionMatrixSolver"), solve=_scaled_solve_source(pshape, degree, nvars))
+
+
 #: Method (spec kind) -> the text it puts into the template's holes.
-METHOD_PARTS = {"curve-pencil": _pencil_parts, "homotopy": _homotopy_parts, "offset-kernel": _offset_kernel_parts}
+METHOD_PARTS = {"curve-pencil": _pencil_parts, "homotopy": _homotopy_parts, "offset-kernel": _offset_kernel_parts,
+                "action-matrix": _action_matrix_parts}
 
 
 def read_spec(spec_text: str) -> dict:
     """A spec of either format (the pencil's ``tdoa-solver/2``, the homotopy's own)."""
+    from .methods import action_matrix
+
     kind = json.loads(spec_text).get("kind")
-    return (homotopy.load_spec if kind == "homotopy" else load_spec)(spec_text)
+    return {"homotopy": homotopy.load_spec, "action-matrix": action_matrix.load_spec}.get(kind, load_spec)(spec_text)
 
 
 def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str) -> str:
@@ -321,7 +352,7 @@ def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str)
     unknowns = tuple(spec["unknowns"])
     return MODULE_TEMPLATE.format(
         method=kind, spec_file=spec_file, command=command, spec_sha=spec_sha256(spec_text),
-        system=spec["system"] if kind == "homotopy" else spec["formulation"],
+        system=spec["system"] if kind in ("homotopy", "action-matrix") else spec["formulation"],
         summary=parts.summary, description=parts.description, rows=parts.rows, nvars=len(unknowns),
         unknown_list=", ".join(unknowns), pshape=", ".join(map(str, parts.pshape)),
         imports=parts.imports, config=repr(parts.config), unknowns=repr(unknowns), degree=int(spec["degree"]),

@@ -57,6 +57,7 @@ __all__ = [
     "relation_count",
     "system_basis",
     "template_numerics",
+    "template_relations",
 ]
 
 Exponent = tuple[int, ...]
@@ -139,12 +140,10 @@ def count_relations(equations: Sequence[Mapping[Exponent, int]], multiplier_set:
     bset = set(map(tuple, basis))
     nv = len(next(iter(bset)))
     reducible = sorted({tuple(b[j] + (j == action) for j in range(nv)) for b in bset} - bset)
-    rows = [{m: c % p for m, c in row.items()} for row in _macaulay_rows(equations, multiplier_set)]
-    columns = set().union(*rows)
-    excess = sorted(columns - set(reducible) - bset)
-    r_excess = _rank(rows, excess, p)
-    r_both = _rank(rows, excess + reducible, p)
-    return len(rows), len(columns), r_both - r_excess, len(reducible)
+    rows = [(i, t) for i in range(len(equations)) for t in multiplier_set]
+    reached, excess = template_relations(equations, rows, reducible, basis, p)
+    columns = {tuple(a + b for a, b in zip(e, t)) for i, t in rows for e in equations[i]}
+    return len(rows), len(columns), reached, len(reducible)
 
 
 def _macaulay_rows(equations: Sequence[Mapping[Exponent, object]], multiplier_set: Sequence[Exponent]) -> list[dict]:
@@ -152,9 +151,44 @@ def _macaulay_rows(equations: Sequence[Mapping[Exponent, object]], multiplier_se
     return [{tuple(a + b for a, b in zip(e, t)): c for e, c in f.items()} for f in equations for t in multiplier_set]
 
 
-def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> int:
+def template_relations(equations: Sequence[Mapping[Exponent, int]], rows: Sequence[tuple[int, Exponent]],
+                       reducible: Sequence[Exponent], basis: Sequence[Exponent], p: int) -> tuple[int, list[Exponent]]:
+    """Relations of R modulo B that a template reaches over GF(p), and its excess columns E (sorted).
+
+    rows: (equation index, multiplier exponent) pairs; returns (rank [M_E M_R] - rank M_E, E). A
+    monomial of R that no row contains counts as not reached. The template is complete when the
+    count is |R| (:func:`count_relations`; :func:`solvers.methods.action_matrix.build_template`).
+    """
+    polys = _template_rows(equations, rows, p)
+    columns = set().union(*polys) if polys else set()
+    excess = sorted(columns - set(reducible) - set(basis))
+    present = [r for r in reducible if r in columns]
+    return _rank(polys, excess + present, p) - _rank(polys, excess, p), excess
+
+
+def _template_rows(equations, rows, p: int) -> list[dict]:
+    return [{tuple(a + b for a, b in zip(e, t)): c % p for e, c in equations[i].items()} for i, t in rows]
+
+
+def _macaulay_rank(equations, rows: Sequence[tuple[int, Exponent]], columns: Sequence[Exponent], p: int) -> int:
+    """Rank over GF(p) of the template rows (equation index, multiplier) restricted to ``columns``."""
+    return _rank(_template_rows(equations, rows, p), list(columns), p)
+
+
+def _pivot_columns(equations, rows: Sequence[tuple[int, Exponent]], columns: Sequence[Exponent], p: int) -> list[Exponent]:
+    """A maximal set of linearly independent columns (the first ones, in the given order) over GF(p)."""
     if not rows or not columns:
-        return 0
+        return []
+    R, rank = _nmod(_template_rows(equations, rows, p), list(columns), p).rref()
+    out, j = [], 0
+    for i in range(rank):
+        while int(R[i, j]) == 0:
+            j += 1
+        out.append(columns[j])
+    return out
+
+
+def _nmod(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> "flint.nmod_mat":
     index = {c: j for j, c in enumerate(columns)}
     M = flint.nmod_mat(len(rows), len(columns), p)
     for r, row in enumerate(rows):
@@ -162,7 +196,13 @@ def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p
             j = index.get(mon)
             if j is not None:
                 M[r, j] = c
-    return M.rank()
+    return M
+
+
+def _rank(rows: Sequence[Mapping[Exponent, int]], columns: Sequence[Exponent], p: int) -> int:
+    if not rows or not columns:
+        return 0
+    return _nmod(rows, columns, p).rank()
 
 
 def _instance_equations(formulation: Formulation, prime: int, seed: int) -> list[dict]:

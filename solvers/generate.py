@@ -11,7 +11,11 @@ directory ``out``, and nowhere else. Methods are strategies behind one interface
 * ``homotopy``: parameter homotopy (:mod:`solvers.methods.homotopy`), the general method: every
   square system with a certified root count gets one;
 * ``offset-kernel`` (3D TDOA mr/5s, m >= 9, one solution): the linear construction of
-  :mod:`solvers.methods.offset_kernel`.
+  :mod:`solvers.methods.offset_kernel`;
+* ``action-matrix`` (asked for by name): an elimination template built over GF(p) and an eigenvalue
+  solve (:mod:`solvers.methods.action_matrix`), for square systems with linear equations to eliminate
+  and one non-vanishing factor (TOA 2D 3r/3s); its module sits beside the homotopy one
+  (``<name>_action<roots>``).
 
 Every homotopy solver's root count is certified over GF(p) first (two primes, two seeds, known root
 checked); monodromy must reach exactly that count. When F4 cannot certify (its matrices do not fit, as for
@@ -43,7 +47,7 @@ from analysis.formulations.tdoa import Formulation
 from analysis.formulations.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
 
 from . import codegen
-from .methods import homotopy, offset_kernel, pencil, tracker
+from .methods import action_matrix, homotopy, offset_kernel, pencil, tracker
 from .methods.spec import METHODS as METHOD_NAMES
 from .methods.spec import TemplateOptions, dump_spec, solver_method
 
@@ -379,6 +383,35 @@ class HomotopyMethod:
         return Built(spec, source, spec["degree"] if certified is None else report.degree, spec["paths"], build)
 
 
+class ActionMatrixMethod:
+    """Action matrix with an elimination template (:mod:`solvers.methods.action_matrix`) of a square
+    parametric system: the root count certified over GF(p) first (as for the homotopy), then the template
+    built and checked on a second instance and prime, then the solver checked on seeded real instances."""
+
+    kind = "action-matrix"
+
+    def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built:
+        system = job.system
+        if system is None or not system.is_square or job.full is not None:
+            raise GenerationError(f"{job.name}: the action-matrix method needs a square parametric system")
+        if progress:
+            progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
+        report = system.degree(seeds=job.seeds)
+        if not report.zero_dimensional or report.degree == 0:
+            raise GenerationError(f"{system.name}: not zero-dimensional with roots (dimension {report.dimension})")
+        spec = action_matrix.build(system, report.degree, progress=progress)
+        spec = {"name": job.name, **spec, "certified": {"primes": list(report.primes), "seeds": list(job.seeds),
+                                                        "degree": report.degree, "saturated_by": list(system.nonzero)},
+                "config": list(job.config) if job.config else None,
+                **({"unused_parameters": list(system.unused)} if system.unused else {}),
+                "scale_powers": list(system.scale_powers) if system.scale_powers else None}
+        source = homotopy.coefficient_source(action_matrix.extended_system(system))
+        build = {"template": "x".join(map(str, spec["template"]["size"])), "action": f"y{spec['template']['action']}"}
+        if job.trials is not None:
+            build["verified"] = action_matrix.verify(system.name, spec, homotopy.load_coefficients(source), job.trials, 20)
+        return Built(spec, source, report.degree, report.degree, build)
+
+
 #: Method name -> strategy (names as in solvers.methods.spec.METHODS).
 METHODS: dict[str, Method] = {
     "curve-pencil": FormulationMethod("curve-pencil", SOLVERS["6r4s"], "certifying the root count over GF(p) and "
@@ -387,6 +420,7 @@ METHODS: dict[str, Method] = {
     "offset-kernel": FormulationMethod("offset-kernel", SOLVERS["9r5s3d"], "certifying the root count over GF(p) "
                                        "(two primes x 2 seeds), checking the kernel on seeded room networks",
                                        offset_kernel.build, codegen.offset_kernel_coefficients),
+    "action-matrix": ActionMatrixMethod(),
 }
 assert tuple(METHODS) == METHOD_NAMES
 
@@ -425,9 +459,10 @@ def _check_linear_in_parameters(system: ParametricSystem) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-def committed_command(label: str) -> str:
-    """The command that regenerates a committed solver (run from the repository root)."""
-    return f"python scripts/generate_solvers.py {label}"
+def committed_command(label: str, method: str | None = None) -> str:
+    """The command that regenerates a committed solver (run from the repository root); ``method``: one
+    asked for by name (the action-matrix solvers committed beside the homotopy ones)."""
+    return f"python scripts/generate_solvers.py {label}" + (f" --method {method}" if method else "")
 
 
 def _config(label: str) -> tuple[int, int]:
@@ -486,8 +521,11 @@ def _identifier(text: str) -> str:
 
 
 def _remove_stale(out: str, name: str, keep: str) -> None:
-    """Remove this solver's older modules and specs in ``out`` (other sizes or methods); nothing else."""
-    stale = re.compile(re.escape(name) + r"_(pencil|homotopy|kernel)\d+")
+    """Remove this solver's older modules and specs in ``out`` (other sizes or methods); nothing else. An
+    action-matrix solver lives beside the others: it replaces only an older action-matrix file, and they
+    replace it never."""
+    kinds = "action" if keep.rsplit("_", 1)[-1].startswith("action") else "pencil|homotopy|kernel"
+    stale = re.compile(re.escape(name) + rf"_({kinds})\d+")
     for f in os.listdir(out):
         stem, ext = os.path.splitext(f)
         if ext in (".py", ".json") and stem != keep and stale.fullmatch(stem):
@@ -546,7 +584,7 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     built = METHODS[kind].build(job, seed, progress)
     if command is None:
         if label is not None and job.name == f"tdoa_{label}" and os.path.abspath(out) == GENERATED_DIR:
-            command = committed_command(label)
+            command = committed_command(label, kind if kind == "action-matrix" else None)
         elif isinstance(target, str) and name is None and method in (None, kind):
             command = f"tdoa-workbench generate {shlex.quote(target)} --out {shlex.quote(out)}"
             command += f" --seed {seed}" if seed else ""
@@ -571,6 +609,10 @@ def emit_committed(json_path: str) -> tuple[str, str]:
         coefficients = codegen.pencil_coefficients(codegen.read_spec(text))
     elif "_kernel" in stem:
         coefficients = codegen.offset_kernel_coefficients(codegen.read_spec(text))
+    elif "_action" in stem:
+        coefficients = homotopy.coefficient_source(action_matrix.extended_system(solver_system(label)))
+        return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients,
+                                                           committed_command(label, "action-matrix"))
     else:
         coefficients = homotopy.coefficient_source(solver_system(label))
     return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients, committed_command(label))

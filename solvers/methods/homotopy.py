@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from . import tape_kernel, tape_native, tracker
+from .common import load_format, verify_found
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -942,23 +943,12 @@ def verify(name: str, spec: dict, coefficients: Callable, trials: Callable[[int]
     """Solve ``count`` seeded real instances (seed -> (q, known root)) with the spec's solver; "found/count",
     or :class:`HomotopyError` when the known root is missed in more than 10 % of them."""
     solver = HomotopySolver(spec, coefficients)
-    found = 0
-    for seed in range(count):
-        q, xt = trials(seed)
-        x = solver.roots(q[None])[0]
-        d = np.linalg.norm(x - xt, axis=1) / (1.0 + np.linalg.norm(xt))
-        found += bool(np.nanmin(d) < 1e-6)
-    if found < 0.9 * count:
-        raise HomotopyError(f"{name}: the solver finds the known root in only {found}/{count} seeded instances")
-    return f"{found}/{count}"
+    return verify_found(name, lambda q: solver.roots(q[None])[0], trials, count, HomotopyError)
 
 
 def load_spec(text: str) -> dict:
     """A spec from its JSON text; raises :class:`HomotopyError` for another format."""
-    spec = json.loads(text)
-    if spec.get("format") != SPEC_FORMAT:
-        raise HomotopyError(f"unknown homotopy spec format {spec.get('format')!r}; expected {SPEC_FORMAT}")
-    return spec
+    return load_format(text, SPEC_FORMAT, HomotopyError, "homotopy")
 
 
 def solve_scaled(solver: HomotopySolver, F, shape: tuple[int, ...], powers: tuple[float, ...] | None,

@@ -9,7 +9,8 @@ tag, :class:`TemplateOptions` and :class:`TemplateResult`, the term structure of
 (:func:`solver_method`) and the byte-stable JSON text (:func:`dump_spec`, :func:`load_spec`,
 :func:`spec_sha256`). Methods: :mod:`solvers.methods.pencil` (``curve-pencil``) and
 :mod:`solvers.methods.homotopy` (``homotopy``; its spec format is its own) and
-:mod:`solvers.methods.offset_kernel` (``offset-kernel``, 3D); :mod:`solvers.generate` runs them. This module imports no method (the methods import it), so there is no import circle.
+:mod:`solvers.methods.offset_kernel` (``offset-kernel``, 3D) and :mod:`solvers.methods.action_matrix`
+(``action-matrix``: elimination template; its spec format is its own); :mod:`solvers.generate` runs them. This module imports no method (the methods import it), so there is no import circle.
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ __all__ = [
 #: Format of the curve-pencil specs.
 SPEC_FORMAT = "tdoa-solver/2"
 #: Solver construction methods (solvers.generate runs them).
-METHODS = ("curve-pencil", "homotopy", "offset-kernel")
+METHODS = ("curve-pencil", "homotopy", "offset-kernel", "action-matrix")
 
 
 class TemplateError(RuntimeError):
