@@ -696,6 +696,10 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         dof = st.dof if st is not None else 0
         found.append(("uncontrolled", f"too little redundancy to estimate sigma ({dof} degrees of freedom, needs "
                       f"{opts.min_dof_for_sigma}): give sigma (--sigma) to test the measurements"))
+    if search.unconfirmed > 0:
+        found.append(("uncontrolled", f"the data hold too few distinct blocks to confirm the calibration: "
+                      f"{math.ceil(search.unconfirmed)} more sample(s) with a hypothesis were needed, with sigma "
+                      "unknown, to rule out a better one (give sigma to test it)"))
     n_unc = int(uncontrolled.sum())
     if n_unc:
         nodes = sorted({f"r{i + 1}" for i in np.flatnonzero(uncontrolled.any(axis=1))} |

@@ -401,6 +401,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         """Keep the best model (LO on each new best, up to the budget); True when the best changed."""
         nonlocal best
         changed = False
+        search.productive += bool(models)
         for model in models:
             if best is not None and not _better(model, best, floor):
                 if not model.refined and np.isfinite(model.score):
@@ -419,7 +420,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
                 if confirm == 0:
                     search.accepted = True
                     return True
-                pending[0] = search.samples
+                pending[0] = search.productive
                 pending[1] = min(_needed(1.0 - confirm, k_now[0], opts.confidence, tolerated=k_now[1]), opts.max_samples,
                                  opts.max_confirm_samples)
         return changed
@@ -435,7 +436,10 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         return model.inlier_ratio if thr is not None else min(model.inlier_ratio, 1.0 - opts.unknown_sigma_outliers)
 
     def confirmed() -> bool:
-        if pending[0] is not None and search.samples - pending[0] >= pending[1]:
+        # counted in samples that gave a hypothesis: a block refused as coplanar or failed says nothing
+        # about whether a better model exists (10r/6s at 1 cm: 23 of 32 samples gave none, and a wrong
+        # basin was confirmed by the 9 that did)
+        if pending[0] is not None and search.productive - pending[0] >= pending[1]:
             search.accepted = True
         return search.accepted
 
@@ -482,6 +486,10 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
             needed_own = _needed(best.inlier_ratio, solver.m * solver.n, opts.confidence, tolerated=solver.tolerates)
 
     if search.accepted or pending[0] is not None:
+        if not confirmed():
+            # the distinct blocks ran out before as many samples as confirm_outliers asks for gave a
+            # hypothesis: the accepted model was never challenged enough to call it unique
+            search.unconfirmed = pending[1] - (search.productive - pending[0])
         search.accepted = True  # the blocks ran out (or the count was met) with the accepted model still best
         return best, search
     confident = best is not None and ((needed == 0 and search.samples >= floor_samples)

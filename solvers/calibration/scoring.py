@@ -128,9 +128,11 @@ class _Search:
 
     samples: int = 0
     hypotheses: int = 0
+    productive: int = 0  # samples that gave at least one hypothesis (the ones that can confirm a model)
     local_optimisations: int = 0
     solvers: set = field(default_factory=set)
     others: list = field(default_factory=list)  # distinct refined models (alternatives)
     runners_up: list = field(default_factory=list)  # unrefined models that did not beat the best
     accepted: bool = False  # the search ended because the best model passed the all-data test
     short_of: int = 0  # samples the confidence still needed when the budget (max_samples) stopped the search
+    unconfirmed: int = 0  # confirming samples still needed when the distinct blocks ran out (sigma unknown)
