@@ -446,7 +446,9 @@ def solve_network(F, refine: bool = True, max_refined: int = 5, *, dim: int = 2,
         receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s), every
         real candidate with H positive definite becomes a calibration (:func:`calibrations`), the other
         transmitters and then receivers are placed by linear least squares, and TDOA candidates are
-        refined (TOA ones are not: solvers.refine frees the offsets). 3D gauge: r_1 = 0, r_2 on +x,
+        refined (TOA ones are not: solvers.refine frees the offsets). TOA: where the solver's root set is
+        incomplete (a lost path, two paths on one root) or gives no calibration, the transposed network F.T
+        (receivers and transmitters swapped) is solved too and the candidates pooled. 3D gauge: r_1 = 0, r_2 on +x,
         r_3 in the xy half-plane y > 0; the mirror image z -> -z fits the data equally and is not
         returned (one representative per network).
 
