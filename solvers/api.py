@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .recovery import Calibration, recover, rms_residual
+from .recovery import Calibration, recover, rms_residual, to_gauge
 from .refine import refine as _refine
 
 __all__ = ["KD_SOLVERS", "SOLVER_ORDER", "SolverChoice", "calibrations", "degrees_of_freedom", "minimal_configuration",
@@ -327,19 +327,73 @@ def _extend_kd(F: np.ndarray, cal: Calibration, toa: bool) -> Calibration | None
     return Calibration(rec, tra, off, res) if np.isfinite(res) else None
 
 
-def _solve_network_kd(F: np.ndarray, dim: int, model: str, refine: bool, max_refined: int) -> list[Calibration]:
-    """:func:`solve_network` for 3D and for TOA: the committed solver's calibrations on its block
-    (:func:`calibrations`), extended to every node, TDOA refined on all measurements."""
-    m, n = F.shape
-    choice = select_solver_kd(m, n, dim, model)
+def _kd_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibration], bool]:
+    """The committed solver's calibrations on its block of F (:func:`calibrations`), extended to every node,
+    and whether its root set was complete (every path ended on a finite root of its own; a root set with
+    lost or coinciding endpoints may miss the true network)."""
+    from .methods.homotopy import unresolved
+
+    choice = select_solver_kd(*F.shape, dim, model)
     module = importlib.import_module(choice.module)
-    toa = model == "toa"
+    block = F[: choice.m, : choice.n]
     cands = []
     with np.errstate(all="ignore"):
-        for cal in calibrations(module, F[: choice.m, : choice.n]):
-            cal = _extend_kd(F, cal, toa)
+        roots = module.solve(block)
+        for cal in calibrations(module, block, roots):
+            cal = _extend_kd(F, cal, model == "toa")
             if cal is not None:
                 cands.append(cal)
+    return cands, len(roots) == module.DEGREE and not unresolved(roots).any()
+
+
+def _transposed(F: np.ndarray, cal: Calibration) -> Calibration | None:
+    """A calibration of the TOA network F.T as one of F (receivers and transmitters swap roles), in F's gauge."""
+    gauged = to_gauge(cal.transmitters, cal.receivers)
+    if gauged is None:
+        return None
+    rec, tra = gauged
+    off = np.zeros(len(tra))
+    res = rms_residual(F, rec, tra, off)
+    return Calibration(rec, tra, off, res) if np.isfinite(res) else None
+
+
+def _same_networks_once(cands: list[Calibration], tol: float = 1e-5) -> list[Calibration]:
+    """The candidates (same gauge, either mirror image) by residual, without those whose positions lie within
+    tol (relative to the network's spread) of a better one: one network reached by both orientations, where
+    the ill-conditioned orientation's copy is less accurate (relative position errors up to 5e-7 measured)
+    than :func:`_dedupe` tolerates."""
+    out: list[Calibration] = []
+    for c in sorted(cands, key=lambda c: c.residual):
+        X = np.vstack([c.receivers, c.transmitters])
+        spread = np.linalg.norm(X - X.mean(axis=0))
+        mirror = np.ones(X.shape[1])
+        mirror[-1] = -1.0
+        if not any(min(np.linalg.norm(X - Y), np.linalg.norm(X * mirror - Y)) <= tol * spread
+                   for Y in (np.vstack([d.receivers, d.transmitters]) for d in out)):
+            out.append(c)
+    return out
+
+
+def _solve_network_kd(F: np.ndarray, dim: int, model: str, refine: bool, max_refined: int) -> list[Calibration]:
+    """:func:`solve_network` for 3D and for TOA: the committed solver's calibrations on its block
+    (:func:`_kd_candidates`), extended to every node, TDOA refined on all measurements.
+
+    TOA is symmetric under swapping receivers and transmitters (F -> F.T). Where the solver's root set is
+    incomplete or yields no calibration, the transposed network is solved too and the candidates of both
+    are pooled. The compaction unknown H = (4 S^T S)^{-1} is built on the first K + 1 transmitters; where
+    they are close to coplanar, H is large (eigenvalues 1e3-9e4 m^-2 on room networks) and paths are lost,
+    while the transposed problem's frame (the first receivers) is usually well conditioned
+    (docs/minimal-3d.md, section 2)."""
+    m, n = F.shape
+    toa = model == "toa"
+    cands, complete = _kd_candidates(F, dim, model)
+    if toa and not (complete and cands):
+        try:
+            more, _ = _kd_candidates(np.ascontiguousarray(F.T), dim, model)
+        except ValueError:  # no committed solver fits the transposed shape
+            more = []
+        with np.errstate(all="ignore"):
+            cands = _same_networks_once(cands + [c for c in (_transposed(F, cal) for cal in more) if c is not None])
     cands.sort(key=lambda c: c.residual)
     # solvers.refine estimates offsets: TDOA candidates only
     return _finish(F, cands, refine and not toa, max_refined, minimal_configuration(m, n, dim, model),
@@ -392,7 +446,9 @@ def solve_network(F, refine: bool = True, max_refined: int = 5, *, dim: int = 2,
         receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s), every
         real candidate with H positive definite becomes a calibration (:func:`calibrations`), the other
         transmitters and then receivers are placed by linear least squares, and TDOA candidates are
-        refined (TOA ones are not: solvers.refine frees the offsets). 3D gauge: r_1 = 0, r_2 on +x,
+        refined (TOA ones are not: solvers.refine frees the offsets). TOA: where the solver's root set is
+        incomplete (a lost path, two paths on one root) or gives no calibration, the transposed network F.T
+        (receivers and transmitters swapped) is solved too and the candidates pooled. 3D gauge: r_1 = 0, r_2 on +x,
         r_3 in the xy half-plane y > 0; the mirror image z -> -z fits the data equally and is not
         returned (one representative per network).
 

@@ -112,6 +112,34 @@ def test_solve_network_finds_the_true_toa_network(dim, m, n):
                 assert c.receivers[2, 1] > 0 and c.receivers[2, 2] == 0
 
 
+@pytest.mark.parametrize("m, n, seed", [(6, 4, 103), (6, 4, 139), (4, 6, 47), (4, 6, 470)])
+def test_toa_network_with_a_near_coplanar_frame_is_solved_transposed(m, n, seed):
+    """Seeded room networks of scripts/bench_minimal.py whose first K + 1 transmitters are close to coplanar:
+    the solver's root set on F is incomplete (lost or coinciding paths) and misses the true network (these
+    seeds failed before the transposed retry); solve_network then also solves F.T and finds it, in F's gauge,
+    without listing one network twice."""
+    net = room_network(m, n, np.random.default_rng(seed), offset_sigma=0.0)
+    F = net.measurements()
+    with np.errstate(all="ignore"):
+        direct, complete = api._kd_candidates(F, 3, "toa")
+    assert not complete and not any(position_error(c, net) < 1e-6 for c in direct), seed
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cals = api.solve_network(F, dim=3, model="toa")
+    assert min(position_error(c, net) for c in cals) < 1e-8, seed
+    for i, c in enumerate(cals):
+        assert c.residual < 1e-6 and np.all(c.receivers[0] == 0) and c.receivers[1, 0] > 0 and c.receivers[2, 1] > 0
+        assert all(position_error(c, d) > 1e-3 for d in cals[:i]), seed  # distinct networks
+
+
+def test_toa_retry_is_skipped_when_the_root_set_is_complete():
+    """The common case costs one solve: network 0 (6r/4s) has a complete root set containing the truth."""
+    net = room_network(6, 4, np.random.default_rng(0), offset_sigma=0.0)
+    with np.errstate(all="ignore"):
+        direct, complete = api._kd_candidates(net.measurements(), 3, "toa")
+    assert complete and min(position_error(c, net) for c in direct) < 1e-8
+
+
 def test_solve_network_extends_a_larger_toa_network():
     """7 receivers x 5 transmitters in 3D TOA: the 6r/4s solver on the first block, the other nodes placed
     by least squares; the best calibration is the true network (not minimal: no warning)."""

@@ -48,7 +48,7 @@ if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
     from analysis.formulations.parametric import ParametricSystem
 
 __all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "build", "coefficient_source",
-           "load_coefficients", "structure", "affine_start"]
+           "load_coefficients", "structure", "affine_start", "unresolved"]
 
 SPEC_FORMAT = "tdoa-homotopy/1"
 
@@ -356,7 +356,7 @@ class HomotopySolver:
         if len(bi):
             xr, _ = self.track(qa[None], q, xa[ki], bi, self.retrack)
             x[bi, ki] = xr
-        complete = np.array([not _unresolved(x[b]).any() for b in range(B)])
+        complete = np.array([not unresolved(x[b]).any() for b in range(B)])
         return x, complete
 
     def _local_detours(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, x: np.ndarray, stalled: np.ndarray,
@@ -416,7 +416,7 @@ class HomotopySolver:
             return self._multistart(q)
         B, K = len(q), self.n_paths
         x, complete = self._route(self.q0, self.x0, q)
-        bad = [b for b in np.flatnonzero(~complete) if not _degenerate(_unresolved(x[b]))]
+        bad = [b for b in np.flatnonzero(~complete) if not _degenerate(unresolved(x[b]))]
         # paths that still stall even with tight steps: the segment passes too close to a singular
         # point. Each such path alone goes around it through a fixed complex midpoint (two segments);
         # K distinct finite endpoints are all K roots whatever route each path took.
@@ -464,7 +464,7 @@ class HomotopySolver:
         # Newton steps on the target (two unconverged endpoints of one ill-conditioned root, |x| ~ 5e4
         # in 4r/5s's scaled unknowns, can differ by more than the duplicate test's tolerance before
         # them and coincide after).
-        left = np.array([b for b in bad if _unresolved(x[b]).any()], dtype=np.int64)
+        left = np.array([b for b in bad if unresolved(x[b]).any()], dtype=np.int64)
         for k in range(POOLED_MIDPOINTS):
             if not len(left):
                 break
@@ -476,7 +476,7 @@ class HomotopySolver:
             xk = xk.reshape(L, M, -1)
             for j, b in enumerate(left):
                 x[b] = self._pooled(x[b], xk[j], q[b])
-            left = left[[bool(_unresolved(x[b]).any()) for b in left]]
+            left = left[[bool(unresolved(x[b]).any()) for b in left]]
         return self._polish(x, q)
 
     def _multistart(self, q: np.ndarray) -> np.ndarray:
@@ -543,8 +543,9 @@ def _degenerate(failed: np.ndarray) -> bool:
     return int(failed.sum()) > max(8, RETRACK_FRACTION * len(failed))
 
 
-def _unresolved(x: np.ndarray) -> np.ndarray:
-    """Mask of the endpoints (K, n) of one instance that were lost (NaN) or coincide with another."""
+def unresolved(x: np.ndarray) -> np.ndarray:
+    """Mask of the endpoints (K, n) of one instance that were lost (NaN) or coincide with another: where it
+    is not all False, the root set is incomplete (solvers.api retries TOA networks transposed then)."""
     return ~np.all(np.isfinite(x), axis=1) | _duplicated(x)
 
 
