@@ -5,7 +5,9 @@ solvers through ``solvers.api`` (`solver_status`) and the seeding, error and fai
 
 Setup (paper Sec. 4): receiver and transmitter coordinates ~ N(0, 10^2), transmitter offsets
 ~ N(0, 1); measurements f_ij = ||r_i - s_j|| + o_j (+ N(0, sigma^2) noise for Fig. 2). Two ways to
-start Levenberg-Marquardt (`solvers.refine.refine`, all m*n measurements):
+start Levenberg-Marquardt (`solvers.refine.refine` with ``TrialOptions.lm_method``, scipy's "trf" by default:
+MINPACK's "lm" ends elsewhere from some diverging starts depending on the process's memory; all m*n
+measurements):
 
 * ``"solver"`` ("ours" in the paper): the algebraic minimal solver. ``solvers.api.solve_network(F,
   refine=False)`` returns the real, valid candidates best residual first; the best
