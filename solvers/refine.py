@@ -23,6 +23,7 @@ from scipy.optimize import least_squares
 from solvers.recovery import Calibration, rms_residual, to_gauge
 
 __all__ = [
+    "LM_METHODS",
     "RefineResult",
     "jacobian",
     "pack",
@@ -33,7 +34,7 @@ __all__ = [
 ]
 
 Method = Literal["lm", "trf", "dogbox"]
-_METHODS = ("lm", "trf", "dogbox")
+LM_METHODS = ("lm", "trf", "dogbox")
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,7 +49,7 @@ class RefineResult:
     success : bool
         scipy's convergence flag (a tolerance was met, not the evaluation budget).
     iterations : int
-        Number of Jacobian evaluations (one per accepted LM iteration in MINPACK's lmder).
+        Number of Jacobian evaluations (one per accepted iteration: MINPACK's lmder, scipy's "trf").
     nfev : int
         Number of residual evaluations.
     status : int
@@ -209,6 +210,10 @@ def refine(
     method : "lm" | "trf" | "dogbox"
         scipy.optimize.least_squares method; "lm" (MINPACK Levenberg-Marquardt, the paper's
         choice) needs m*n >= 2m + 3n - 3 (3D: 3m + 4n - 6), i.e. not an underdetermined configuration.
+        "trf" without bounds is the same Levenberg-Marquardt trust-region iteration (Moré's LM
+        parameter, here from an SVD of J instead of MINPACK's pivoted QR) in numpy and LAPACK. From a
+        start that diverges, MINPACK's end point can depend on what the process's freed memory held;
+        "trf"'s cannot (docs/reproducibility.md, section 4), so the experiments use it.
     tol : float
         ftol = xtol = gtol passed to scipy.
 
@@ -224,8 +229,8 @@ def refine(
 
     Reference: paper Sec. 3.1 step 4 and Sec. 4 (LM from the solver vs from random values).
     """
-    if method not in _METHODS:
-        raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
+    if method not in LM_METHODS:
+        raise ValueError(f"method must be one of {LM_METHODS}, got {method!r}")
     F = np.asarray(F, dtype=float)
     m, n = _shape(F)
     receivers, transmitters, offsets = _initial_arrays(initial)

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["CACHE_ENV", "DATA_DIR", "cache_dir", "default_output_dir", "keep_row_timings", "same_json_apart_from",
+__all__ = ["CACHE_ENV", "DATA_DIR", "cache_dir", "default_output_dir", "same_json_apart_from",
            "source_checkout", "write_if_changed"]
 
 CACHE_ENV = "TDOA_WORKBENCH_CACHE"
@@ -45,24 +45,6 @@ def default_output_dir() -> Path:
     """``<checkout>/tables`` when running from a source checkout, else ``./tables``."""
     root = source_checkout()
     return root / "tables" if root is not None else Path.cwd() / "tables"
-
-
-def keep_row_timings(new: list[list[str]], old: list[list[str]], is_timing: Callable[[str], bool]) -> list[list[str]]:
-    """CSV rows ``new`` (header first) with the timing cells of ``old`` in every row whose other cells are equal.
-
-    A rerun measures other runtimes for the same results; keeping the written ones row by row leaves a
-    table's bytes, and a checkout, unchanged, and a row whose results changed does not rewrite the runtimes
-    of the others. Rows are matched by position: for another header or number of rows ``new`` is returned.
-    ``is_timing(column name)`` says which columns are timings.
-    """
-    if not old or old[0] != new[0] or len(old) != len(new):
-        return new
-    timing = {k for k, name in enumerate(new[0]) if is_timing(name)}
-
-    def same_results(a: list[str], b: list[str]) -> bool:
-        return len(a) == len(b) and all(x == y for k, (x, y) in enumerate(zip(a, b)) if k not in timing)
-
-    return [new[0]] + [a if same_results(a, b) else b for a, b in zip(old[1:], new[1:])]
 
 
 def write_if_changed(path: Path, content: "str | bytes", same: Callable[[str, str], bool] | None = None) -> bool:

@@ -57,7 +57,7 @@ from .complexity import (
     sweep,
 )
 from ..engine.f4 import F4Options
-from .paths import DATA_DIR, HEADER_PREFIXES, default_output_dir, keep_row_timings, same_json_apart_from, write_if_changed
+from .paths import DATA_DIR, HEADER_PREFIXES, default_output_dir, write_if_changed
 from .paths import cache_dir as user_cache_dir
 from .provenance import run_facts
 from ..formulations.tdoa import Formulation, TDOAConfig, canonical_form, enumerate_formulations
@@ -680,7 +680,7 @@ def _provenance(primes, seeds, options: F4Options, timeout, budget: Budget, mode
 
 
 def _last_uncached_run(previous: Path, provenance: dict, cached: int) -> dict | None:
-    """Timings of the last run that computed everything, carried over from the previous provenance.json
+    """Timings of the last run that computed everything, carried over from the previous timing record
     while the engine version and mode are unchanged (a cached rerun otherwise hides the real cost)."""
     if cached == 0:
         return {"date": provenance["date"], "commit": provenance["commit"],
@@ -697,15 +697,18 @@ def _last_uncached_run(previous: Path, provenance: dict, cached: int) -> dict | 
 
 
 VOLATILE_PROVENANCE = ("date", "commit", "worktree_dirty", "versions", "machine", "timings", "jobs",
-                       "sweep_seconds_sum", "last_uncached_run")
-"""Keys of provenance.json that change from run to run without the results changing; a rerun that
-changes only these leaves provenance.json alone and writes them to provenance.timing.json (untracked)."""
+                       "sweep_seconds_sum", "last_uncached_run", "seconds")
+"""Keys of the provenance record that are facts of the run (dates, commit, machine, timings), not results: they go
+to the untracked provenance.timing.json only; provenance.json holds the rest."""
 
 TIMING_COLUMNS = ("seconds",)
+"""Columns of the sweep's frames that measure this run's speed: written to provenance.timing.json, never to a
+committed table."""
 
 
 def _strip_volatile(text: str, csv_file: bool) -> str:
-    """A table file without its provenance header (commit, date) and timing columns."""
+    """A table file without its provenance header (commit, date) and timing columns (the search tables,
+    `analysis.sweeps.search`, still carry both)."""
     if csv_file:
         rows = list(csv.reader(io.StringIO(text)))
         if not rows:
@@ -727,64 +730,57 @@ def _strip_volatile(text: str, csv_file: bool) -> str:
     return "\n".join(out)
 
 
-def _keep_seconds(frame: pd.DataFrame, path: Path) -> pd.DataFrame:
-    """``frame`` with the ``seconds`` of the CSV at ``path`` (as written) in every row whose results are
-    unchanged (:func:`analysis.sweeps.paths.keep_row_timings`): one changed row rewrites its own timing only."""
-    new = list(csv.reader(io.StringIO(_csv_text(frame))))
-    try:
-        old = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"))))
-    except (OSError, UnicodeDecodeError):
-        return frame
-    kept = keep_row_timings(new, old, lambda name: name in TIMING_COLUMNS)
-    out = frame.copy()
-    for k, name in enumerate(new[0]):
-        if name in TIMING_COLUMNS:
-            out[name] = [row[k] for row in kept[1:]]
-    return out
-
-
 def _same_results(name: str):
     csv_file = name.endswith(".csv")
     return lambda old, new: _strip_volatile(old, csv_file) == _strip_volatile(new, csv_file)
 
 
-_same_provenance = same_json_apart_from(VOLATILE_PROVENANCE)
+def _row_seconds(frame: pd.DataFrame, key: Sequence[str]) -> list[dict]:
+    """The ``seconds`` of each row of a table, with the columns that name the row (for the timing record)."""
+    def seconds(value: object) -> float | None:
+        return None if value is None or value == "" or pd.isna(value) else float(value)
+
+    return [{**{k: _fmt(row[k]) for k in key}, "seconds": seconds(row["seconds"])} for _, row in frame.iterrows()]
+
+
+def _results_only(frame: pd.DataFrame) -> pd.DataFrame:
+    return frame[[c for c in frame.columns if c not in TIMING_COLUMNS]]
 
 
 def write_outputs(out_dir: Path, table2: pd.DataFrame, table3: pd.DataFrame, section32: pd.DataFrame,
                   formulations: pd.DataFrame, provenance: dict) -> list[Path]:
-    """Write the tables (CSV, Markdown and LaTeX with a provenance header) and provenance.json.
-
-    A file whose results are unchanged is left as it is (only its header or timings would differ), so a
-    rerun keeps a checkout clean; in a file whose results changed, the rows that did not keep their
-    written ``seconds``. The run's own timings always go to provenance.timing.json.
+    """Write the tables (CSV, Markdown and LaTeX) and provenance.json: results only, so that the same results
+    give the same bytes on every run and machine; the run facts (commit, date, versions, machine, wall time and
+    every row's ``seconds``) go to the untracked provenance.timing.json. A file whose bytes are unchanged is not
+    touched (its mtime stays).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    header = (f"generated by analysis.sweeps.tables.make_tables ({provenance['mode']} run); commit "
-              f"{provenance['commit'][:12] or 'unknown'}{' (dirty worktree)' if provenance['worktree_dirty'] else ''}, "
-              f"{provenance['date']}, primes {' '.join(map(str, provenance['primes']))}, seeds "
-              f"{' '.join(map(str, provenance['seeds']))}, engine {provenance['engine_version']}; "
-              "see provenance.json")
+    header = (f"generated by analysis.sweeps.tables.make_tables ({provenance['mode']} run); primes "
+              f"{' '.join(map(str, provenance['primes']))}, seeds {' '.join(map(str, provenance['seeds']))}, "
+              f"engine {provenance['engine_version']}; see provenance.json (commit, date and timings: "
+              "provenance.timing.json, not tracked)")
     written = []
 
     def put(name: str, text: str) -> None:
         path = out_dir / name
-        write_if_changed(path, text, _same_results(name))
+        write_if_changed(path, text)
         written.append(path)
 
-    t2_cols = [c for c in table2.columns if c != "seconds"] + ["seconds"]
-    table2 = _keep_seconds(table2[t2_cols], out_dir / "table2.csv")
-    table3 = _keep_seconds(table3, out_dir / "table3.csv")
-    formulations = _keep_seconds(formulations, out_dir / "formulations.csv")
+    timing = {**provenance, "seconds": {
+        "table2": _row_seconds(table2, ("A", "B", "C", "formulation")),
+        "table3": _row_seconds(table3, ("m", "n", "formulation")),
+        "formulations": _row_seconds(formulations, ("label",)),
+    }}
+    table2, table3, formulations = (_results_only(t) for t in (table2, table3, formulations))
     put("table2.csv", _csv_text(table2))
     put("table3.csv", _csv_text(table3))
     put("formulations.csv", _csv_text(formulations))
     if len(section32):
-        put("section32.csv", _csv_text(section32))
+        put("section32.csv", _csv_text(_results_only(section32)))
     t2_caption = ("Table 2 (reproduction): size of the standard monomial basis |B| for the 3-transmitter "
                   "formulations with a A, b B and c C equations. 'ours' is |B| as generated (A and B multiplied "
                   "by det H); 'ours_saturated' after saturating by det H.")
-    put("table2.md", f"<!-- {header} -->\n\n**{t2_caption}**\n\n" + _md_table(table2[t2_cols]))
+    put("table2.md", f"<!-- {header} -->\n\n**{t2_caption}**\n\n" + _md_table(table2))
     put("table2.tex", f"% {header}\n" + _tex_table(table2[["A", "B", "C", "paper", "ours", "match", "ours_saturated",
                                                           "formulation"]], t2_caption, "tab:3rec-repro"))
     t3_caption = ("Table 3 (reproduction): complexity |B| of TDOA configurations m/n, ours (paper). Ours is the "
@@ -800,11 +796,9 @@ def write_outputs(out_dir: Path, table2: pd.DataFrame, table3: pd.DataFrame, sec
         + _grid(table3, tex=True) + r"\end{table}" + "\n\n"
         + _tex_table(table3[["m", "n", "paper", "ours", "match", "ours_saturated", "formulation"]],
                      "Table 3 (reproduction), per cell: the formulation behind each number.", "tab:degree-cells"))
-    text = json.dumps(provenance, indent=2) + "\n"
-    path = out_dir / "provenance.json"
-    write_if_changed(path, text, _same_provenance)
-    write_if_changed(out_dir / "provenance.timing.json", text)
-    written.append(path)
+    put("provenance.json", json.dumps({k: v for k, v in provenance.items() if k not in VOLATILE_PROVENANCE},
+                                      indent=2) + "\n")
+    write_if_changed(out_dir / "provenance.timing.json", json.dumps(timing, indent=2, default=str) + "\n")
     return written
 
 
@@ -931,11 +925,9 @@ def make_tables(quick: bool = False, jobs: int = 2, *, use_cache: bool = True,
     provenance = _provenance(primes, seeds, options, timeout, budget, mode, seconds, len(results) - cached, cached,
                              jobs)
     provenance["timeout_seconds_x_star_cells"] = other_timeout
-    provenance["table3_cells"] = [f"{m}/{n}" for m, n in cell_list]
+    provenance["table3_cells"] = [f"{m}/{n}" for m, n in sorted(cell_list)]  # Table 3 order, as --cells gave it or not
     provenance["sweep_seconds_sum"] = round(sum(r.seconds for r in results.values()), 1)
-    timing = out_dir / "provenance.timing.json"
-    provenance["last_uncached_run"] = _last_uncached_run(timing if timing.exists() else out_dir / "provenance.json",
-                                                         provenance, cached)
+    provenance["last_uncached_run"] = _last_uncached_run(out_dir / "provenance.timing.json", provenance, cached)
     paths = write_outputs(out_dir, table2, table3, section32, formulations, provenance)
     return TablesSummary(table2, table3, section32, formulations, paths, seconds, len(results) - cached, cached,
                          mode, statuses)

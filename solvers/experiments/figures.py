@@ -22,9 +22,7 @@ _COLORS = {"solver": "#1f77b4", "random": "#d62728"}
 _LINESTYLES = {"9r3s": "-", "6r4s": "--"}
 _MARKERS = {"9r3s": "o", "6r4s": "s"}
 #: Histogram x-range (log10 error), fixed: errors outside it are drawn in the end bins. Above 1e4 a run
-#: has diverged, and where a diverged LM trajectory ends is chaotic: scipy's MINPACK LM can end elsewhere
-#: from the same start in another process (tables/NOTES.md, clean reruns), so bins beyond 1e4 would make
-#: the figure's counts differ from run to run without saying anything.
+#: has diverged; where a diverging LM trajectory stops (after its budget) says nothing about the method.
 HIST_RANGE = (-17.0, 4.0)
 
 

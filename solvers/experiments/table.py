@@ -174,6 +174,9 @@ def write_table4(table: pd.DataFrame, directory: Path = TABLES_DIR, meta: dict |
         "Median log10 relative errors over noiseless trials (paper Sec. 4.1, Table 4); paper values beside ours.",
         "Position error: after the best rigid alignment, ||X_est - X_true||_F / ||X_true - centroid||_F over all "
         "receivers and transmitters. Offset error: ||o_est - o_true|| / ||o_true||.",
+        "Levenberg-Marquardt (LM): scipy's least_squares method 'trf' without bounds, i.e. MINPACK's LM iteration "
+        "with the LM step from an SVD; its end point from a start that diverges does not depend on the process "
+        "(MINPACK's can).",
         "A trial fails when there is no candidate or an error exceeds 1e-6. Runtimes are facts of a run, not "
         "results: `tdoa-workbench reproduce` prints them and keeps them in experiments_provenance.timing.json.",
     ]

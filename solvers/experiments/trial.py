@@ -5,7 +5,9 @@ solvers through ``solvers.api`` (`solver_status`) and the seeding, error and fai
 
 Setup (paper Sec. 4): receiver and transmitter coordinates ~ N(0, 10^2), transmitter offsets
 ~ N(0, 1); measurements f_ij = ||r_i - s_j|| + o_j (+ N(0, sigma^2) noise for Fig. 2). Two ways to
-start Levenberg-Marquardt (`solvers.refine.refine`, all m*n measurements):
+start Levenberg-Marquardt (`solvers.refine.refine` with ``TrialOptions.lm_method``, scipy's "trf" by default:
+MINPACK's "lm" ends elsewhere from some diverging starts depending on the process's memory; all m*n
+measurements):
 
 * ``"solver"`` ("ours" in the paper): the algebraic minimal solver. ``solvers.api.solve_network(F,
   refine=False)`` returns the real, valid candidates best residual first; the best
@@ -47,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solvers.metrics import log10_error, offset_error, position_error
-from solvers.refine import random_initial, refine
+from solvers.refine import LM_METHODS, Method, random_initial, refine
 from solvers.synthetic import random_network
 
 from .config import CONFIGS, Init, check_init, config_key, config_label, config_shape
@@ -108,6 +110,11 @@ class TrialOptions:
         Solver initialisation: number of best-residual candidates refined by LM.
     max_iter : int
         LM budget of residual evaluations (`solvers.refine.refine` ``max_iter``).
+    lm_method : "trf" | "lm" | "dogbox"
+        `solvers.refine.refine` ``method``. "trf" (scipy's trust-region method; without bounds the
+        Levenberg-Marquardt iteration of MINPACK with the LM step from an SVD) gives the same bits from
+        the same start in any process; MINPACK's "lm" does not on starts that diverge
+        (docs/reproducibility.md, section 4), so the committed experiments use "trf".
     count_roots : bool
         Solver initialisation: also call ``solvers.api.solve_roots`` (outside the timed part) to
         count all finite and all real roots of the polynomial system.
@@ -121,6 +128,7 @@ class TrialOptions:
 
     refine_candidates: int = 3
     max_iter: int = 200
+    lm_method: Method = "trf"
     count_roots: bool = True
     failure_threshold: float = 1e-6
     oracle_factor: float = 10.0
@@ -130,6 +138,8 @@ class TrialOptions:
     def __post_init__(self) -> None:
         if self.refine_candidates < 1:
             raise ValueError(f"refine_candidates must be >= 1, got {self.refine_candidates}")
+        if self.lm_method not in LM_METHODS:
+            raise ValueError(f"lm_method must be one of {LM_METHODS}, got {self.lm_method!r}")
         if self.max_iter < 1:
             raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
         if not (self.failure_threshold > 0 and self.oracle_factor > 0):
@@ -320,10 +330,11 @@ def _run_trial(
                 pass
 
     t0 = time.perf_counter()
-    results = [refine(start, F, max_iter=options.max_iter) for start in starts]
+    results = [refine(start, F, max_iter=options.max_iter, method=options.lm_method) for start in starts]
     lm_s = time.perf_counter() - t0
 
-    oracle = refine((network.receivers, network.transmitters, network.offsets), F, max_iter=options.max_iter)
+    oracle = refine((network.receivers, network.transmitters, network.offsets), F, max_iter=options.max_iter,
+                    method=options.lm_method)
     oracle_pe, oracle_oe = _errors(oracle.calibration, network)
 
     record: dict[str, object] = dict(
