@@ -10,9 +10,14 @@ $TDOA_WORKBENCH_CACHE/monodromy/<cell>-seed<k>.json. The compaction unknowns are
 Euclidean group, so each root is one network up to rotation, reflection and translation (group order 1).
 
 A count is reported as "settled" (stopped growing for --stall loops; two seeds should agree) or as a
-lower bound ("at least N after L loops, still growing"). No trace test is run (not implemented here).
+lower bound ("at least N after L loops, still growing"). A settled count then gets the trace test
+(solvers.methods.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
+for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witnesses.json, the outcome kept
+in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
+relative residual of the affine fit, the number of witnesses and the paths it tracked.
 
 Usage: python scripts/monodromy_counts.py [10r4s] [--seeds 0 1] [--loops 60] [--stall 10] [--seconds 1800]
+       [--trace-seconds 3600] [--trace-stall 3]
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import csv  # noqa: E402
+import json  # noqa: E402
 import sys  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -34,16 +40,24 @@ from analysis.formulations.parametric import from_formulation  # noqa: E402
 from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers.generate import complex_instance  # noqa: E402
 from solvers.methods import homotopy as hm  # noqa: E402
+from solvers.methods import trace  # noqa: E402
 
 TABLES = os.path.join(ROOT, "tables")
 
 #: The minimal 3D TDOA cells with a square formulation counted here.
 CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10"}
+#: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
+#: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
+#: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
+#: unknowns need more witnesses (9r/3s: 2045 with all, 1290 with b or with H, for 75 roots). The compaction
+#: unknowns have no symmetry (group order 1), so no two roots share their b.
+TRACE_COORDINATES = {"10r4s": (6, 7, 8)}
 COLUMNS = ["cell", "formulation", "unknowns", "seed", "roots", "status", "loops", "paths", "loops_without_new",
-           "group_order"]
+           "group_order", "trace_test", "trace_residual", "witnesses", "trace_paths"]
 
 
-def count(cell: str, seed: int, loops: int, stall: int, seconds: float) -> tuple[dict, float]:
+def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_stall: int = 3,
+          trace_seconds: float = 3600.0) -> tuple[dict, float]:
     """One row of monodromy3d.csv and the seconds it took (checkpointed, resumable)."""
     label = CELLS[cell]
     form = Formulation.parse(label)
@@ -61,21 +75,56 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float) -> tuple
     status = "settled" if result.stall >= stall else "still growing"
     row = {"cell": cell, "formulation": label, "unknowns": len(system.unknowns), "seed": seed,
            "roots": len(result.roots), "status": status, "loops": result.loops, "paths": result.paths,
-           "loops_without_new": result.stall, "group_order": 1}
+           "loops_without_new": result.stall, "group_order": 1, "trace_test": "not run", "trace_residual": "",
+           "witnesses": "", "trace_paths": ""}
+    if status == "settled":
+        test = trace_test(system, q0, result.roots, path / f"{cell}-seed{seed}", TRACE_COORDINATES.get(cell), seed,
+                          trace_stall, trace_seconds)
+        if test is not None:
+            row.update({"trace_test": test["status"], "trace_residual": f"{test['residual']:.0e}",
+                        "witnesses": test["witnesses"], "trace_paths": test["paths"]})
     return row, result.seconds
 
 
+def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, seed: int, stall: int,
+               seconds: float) -> dict | None:
+    """The trace test's record for a settled count, read from <stem>-trace.json when it was run on the same
+    roots and options, else run (witnesses checkpointed in <stem>-witnesses.json; ``seconds`` <= 0: not run,
+    None) and stored."""
+    config = Formulation.parse(system.name).config
+    F2, x2 = complex_instance(config.m, config.n, np.random.default_rng(1000 + seed), config.dim, config.model)
+    options = trace.TraceOptions(seed=seed, stall=stall, seconds=seconds,
+                                 coordinates=tuple(coordinates) if coordinates else None)
+    key = {"roots": len(roots), "seed": seed, "stall": stall, "coordinates": list(coordinates or [])}
+    stored = trace.load_record(f"{stem}-trace.json")
+    if stored and stored.get("key") == key and (stored["status"] != "inconclusive" or seconds <= 0):
+        return stored
+    if seconds <= 0:
+        return None
+    test = trace.trace_test_system(system, q0, roots, (F2.ravel(), x2), options, checkpoint=f"{stem}-witnesses.json",
+                                   progress=lambda msg: print(f"  {stem.name} trace: {msg}", file=sys.stderr, flush=True))
+    record = {**test.record(), "key": key}
+    with open(f"{stem}-trace.json", "w", encoding="utf-8") as fh:
+        json.dump(record, fh)
+    print(f"{stem.name}: trace test {test.status}, residual {test.residual:.1e}, {test.witnesses} witnesses, "
+          f"{test.paths} paths, {test.seconds:.0f} s", flush=True)
+    return record
+
+
 def markdown(rows: list[dict]) -> str:
-    lines = ["<!-- Regenerate: python scripts/monodromy_counts.py; numerical evidence only (no GF(p) certificate, "
-             "no trace test) -->", "",
+    lines = ["<!-- Regenerate: python scripts/monodromy_counts.py; numerical evidence only (no GF(p) certificate) -->", "",
              "**3D TDOA minimal cells: root counts by monodromy** (up to rotation, reflection and translation; "
-             "'settled': no new root in the last loops, else a lower bound)", "",
-             "| cell | formulation | unknowns | seed | roots | status | loops | paths tracked | loops without a new root |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "'settled': no new root in the last loops, else a lower bound; trace test: solvers.methods.trace, "
+             f"'passed' when the affine fit's relative residual is <= {trace.PASS_TOL:.0e}, 'inconclusive' when its "
+             "witness set was not settled or a path was lost)", "",
+             "| cell | formulation | unknowns | seed | roots | status | loops | paths tracked | loops without a new root "
+             "| trace test | residual | witnesses | trace paths |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         bound = "" if r["status"] == "settled" else "at least "
         lines.append(f"| {r['cell']} | {r['formulation']} | {r['unknowns']} | {r['seed']} | {bound}{r['roots']} | "
-                     f"{r['status']} | {r['loops']} | {r['paths']} | {r['loops_without_new']} |")
+                     f"{r['status']} | {r['loops']} | {r['paths']} | {r['loops_without_new']} | {r['trace_test']} | "
+                     f"{r['trace_residual']} | {r['witnesses']} | {r['trace_paths']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -86,11 +135,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--loops", type=int, default=60, help="loop budget per seed (default 60)")
     parser.add_argument("--stall", type=int, default=10, help="loops without a new root that settle a count")
     parser.add_argument("--seconds", type=float, default=1800.0, help="time cap per seed (then a lower bound)")
+    parser.add_argument("--trace-seconds", type=float, default=3600.0,
+                        help="time cap of the trace test's witness monodromy per seed (0: no trace test)")
+    parser.add_argument("--trace-stall", type=int, default=3, help="witness loops without a new one before the trace")
     args = parser.parse_args(argv)
     rows = []
     for cell in args.cells:
         for seed in args.seeds:
-            row, seconds = count(cell, seed, args.loops, args.stall, args.seconds)
+            row, seconds = count(cell, seed, args.loops, args.stall, args.seconds, args.trace_stall, args.trace_seconds)
             rows.append(row)
             print(f"{cell} seed {seed}: {row['roots']} roots, {row['status']}, {row['loops']} loops, "
                   f"{row['paths']} paths, {seconds:.0f} s", flush=True)

@@ -127,9 +127,12 @@ class TraceSystem:
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         return tape_kernel.newton(self.tapes, q, x, inst, steps, native=self.native)
 
-    def residual(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+    def step(self, y: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Size of a Newton step from each point y (K, N + 1) at parameters q, relative to 1 + |y| (inf where
+        it is not finite): a root's is at rounding level."""
         with np.errstate(all="ignore"):
-            return np.abs(tape_kernel.evaluate(self.tapes.residual, x, 0.0, q, q)).max(axis=1)
+            out = np.linalg.norm(self.newton(y, q[None]) - y, axis=1) / (1.0 + np.linalg.norm(y, axis=1))
+        return np.where(np.isfinite(out), out, np.inf)
 
 
 def _affine_residual(traces: np.ndarray, ts: np.ndarray, size: float) -> float:
@@ -168,11 +171,12 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
 
     start = system.newton(np.concatenate([x_star, [1.0]])[None], Q0[None], steps=3)
-    if system.residual(start, Q0[None]).max() > 1e-8:
-        raise hm.HomotopyError(f"the second instance's root is not a root (residual {system.residual(start, Q0[None]).max():.1e})")
+    if system.step(start, Q0).max() > hm.START_TOL:
+        raise hm.HomotopyError(f"the second instance's root is not a root (Newton step {system.step(start, Q0).max():.1e})")
     base = np.column_stack([roots, np.zeros(K)])
-    if system.residual(base, Q0[None]).max() > 1e-6 * (1.0 + np.abs(roots).max()):
-        raise hm.HomotopyError("the roots are not roots of the system at p")
+    if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
+        raise hm.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
+    base = system.newton(base, Q0[None], steps=2)
     loop_options = hm.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall)
     witnesses = hm.monodromy_count(system, Q0, start, loop_options, options.seconds, checkpoint,
                                    progress=progress, excluded=off_locus, free=free)
