@@ -38,14 +38,20 @@ import numpy as np  # noqa: E402
 from analysis.formulations.tdoa import Formulation  # noqa: E402
 from analysis.formulations.parametric import from_formulation  # noqa: E402
 from analysis.sweeps.paths import cache_dir  # noqa: E402
-from solvers.generate import complex_instance  # noqa: E402
+from solvers.generate import complex_instance, gauge_reflections  # noqa: E402
 from solvers.methods import homotopy as hm  # noqa: E402
 from solvers.methods import trace  # noqa: E402
 
 TABLES = os.path.join(ROOT, "tables")
 
-#: The minimal 3D TDOA cells with a square formulation counted here.
-CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10"}
+#: The minimal 3D TDOA cells with a square formulation counted here. 10r/4s: the compaction formulation (every
+#: measurement, det H saturated). The other three have none without minors; they run on the direct
+#: parametrization (receivers in the gauge frame r_1 = 0, r_2 on x, r_3 in the xy-plane, transmitters,
+#: offsets: 3m + 4n - 6 = mn unknowns, one equation d_ij^2 = |r_i - s_j|^2 per measurement), whose roots come
+#: in orbits of the 8 reflections of that frame (x, y, z -> -x, -y, -z): one root per orbit is tracked and
+#: counted, so its counts are networks up to the Euclidean group, like the compaction counts.
+CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "7r5s": "7r5s-tdoa3d-direct:all",
+         "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
 #: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
 #: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
 #: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
@@ -62,22 +68,26 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
     label = CELLS[cell]
     form = Formulation.parse(label)
     config = form.config
-    system = from_formulation(label, saturate_det_h=True)
-    F, x0 = complex_instance(config.m, config.n, np.random.default_rng(seed), config.dim, config.model)
+    direct = config.parametrization == "direct"
+    system = from_formulation(label, saturate_det_h=not direct)
+    F, x0 = complex_instance(config.m, config.n, np.random.default_rng(seed), config.dim, config.model,
+                             config.parametrization)
     q0 = F.ravel()
     solver, x0 = hm.start_solver(system, q0, x0, seed)
+    group = gauge_reflections(system.unknowns) if direct else None
     options = hm.HomotopyOptions(seed=seed, max_loops=loops, stall_loops=stall)
     path = cache_dir("monodromy")
     path.mkdir(parents=True, exist_ok=True)
     result = hm.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
                                 progress=lambda msg: print(f"  {cell} seed {seed}: {msg}", file=sys.stderr, flush=True),
-                                excluded=hm._excluded(system, q0))
+                                excluded=hm._excluded(system, q0), group=group)
     status = "settled" if result.stall >= stall else "still growing"
     row = {"cell": cell, "formulation": label, "unknowns": len(system.unknowns), "seed": seed,
            "roots": len(result.roots), "status": status, "loops": result.loops, "paths": result.paths,
-           "loops_without_new": result.stall, "group_order": 1, "trace_test": "not run", "trace_residual": "",
+           "loops_without_new": result.stall, "group_order": 1 if group is None else len(group),
+           "trace_test": "not run", "trace_residual": "",
            "witnesses": "", "trace_paths": ""}
-    if status == "settled":
+    if status == "settled" and group is None:  # (with one root per orbit the trace needs the orbits: not done)
         test = trace_test(system, q0, result.roots, path / f"{cell}-seed{seed}", TRACE_COORDINATES.get(cell), seed,
                           trace_stall, trace_seconds)
         if test is not None:
