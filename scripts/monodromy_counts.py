@@ -2,12 +2,14 @@
 writes tables/monodromy3d.{csv,md} (results) and prints the seconds.
 
 Per cell and seed: the cell's square formulation (10r/4s: compaction A, B2-B4, C2-C10, 13 unknowns, every
-measurement used, det H saturated), a generic complex start network (solvers.generate.complex_instance,
-seeded) and its root, then monodromy loops (solvers.methods.homotopy.monodromy_count: triangles through
+measurement used, det H saturated; 7r/5s, 6r/6s, 5r/9s: the direct parametrization, see CELLS), a generic
+complex start network (solvers.generate.complex_instance, seeded) and its root, then monodromy loops (solvers.methods.homotopy.monodromy_count: triangles through
 random complex parameters, all known roots tracked in one batch on the compiled tape tracker) until
 --stall loops bring no new root or --loops loops are done. Checkpoints (resumable) go to
 $TDOA_WORKBENCH_CACHE/monodromy/<cell>-seed<k>.json. The compaction unknowns are invariant under the
-Euclidean group, so each root is one network up to rotation, reflection and translation (group order 1).
+Euclidean group, so each root is one network up to rotation, reflection and translation (group order 1);
+the direct roots are counted one per orbit of the gauge frame's 8 reflections (group order 8), which
+counts the same networks.
 
 A count is reported as "settled" (stopped growing for --stall loops; two seeds should agree) or as a
 lower bound ("at least N after L loops, still growing"). A settled count then gets the trace test
@@ -16,8 +18,9 @@ for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witness
 in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
 relative residual of the affine fit, the number of witnesses and the paths it tracked.
 
-Usage: python scripts/monodromy_counts.py [10r4s] [--seeds 0 1] [--loops 60] [--stall 10] [--seconds 1800]
-       [--trace-seconds 3600] [--trace-stall 3]
+Usage: python scripts/monodromy_counts.py [10r4s 7r5s 6r6s 5r9s] [--seeds 0 1] [--loops 60] [--stall 10]
+       [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3]
+(--seconds 0 --trace-seconds 0: read the checkpoints only, no loop and no trace test run.)
 """
 from __future__ import annotations
 
@@ -52,6 +55,9 @@ TABLES = os.path.join(ROOT, "tables")
 #: counted, so its counts are networks up to the Euclidean group, like the compaction counts.
 CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "7r5s": "7r5s-tdoa3d-direct:all",
          "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
+#: Seeds (start networks) per cell by default: two for 10r/4s; one for the direct cells (their counts are
+#: lower bounds that a second seed could only repeat with the same machine time).
+SEEDS = {"10r4s": (0, 1), "7r5s": (0,), "6r6s": (0,), "5r9s": (0,)}
 #: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
 #: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
 #: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
@@ -90,17 +96,17 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
     if status == "settled" and group is None:  # (with one root per orbit the trace needs the orbits: not done)
         test = trace_test(system, q0, result.roots, path / f"{cell}-seed{seed}", TRACE_COORDINATES.get(cell), seed,
                           trace_stall, trace_seconds)
-        if test is not None:
-            row.update({"trace_test": test["status"], "trace_residual": f"{test['residual']:.0e}",
-                        "witnesses": test["witnesses"], "trace_paths": test["paths"]})
+        residual = "" if np.isnan(test["residual"]) else f"{test['residual']:.0e}"
+        row.update({"trace_test": test["status"], "trace_residual": residual,
+                    "witnesses": test["witnesses"], "trace_paths": test["paths"]})
     return row, result.seconds
 
 
 def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, seed: int, stall: int,
-               seconds: float) -> dict | None:
+               seconds: float) -> dict:
     """The trace test's record for a settled count, read from <stem>-trace.json when it was run on the same
-    roots and options, else run (witnesses checkpointed in <stem>-witnesses.json; ``seconds`` <= 0: not run,
-    None) and stored."""
+    roots and options (an inconclusive one only when ``seconds`` is 0), else run and stored (the witnesses
+    resume from <stem>-witnesses.json; ``seconds`` 0: no new witness loop, only what that checkpoint holds)."""
     config = Formulation.parse(system.name).config
     F2, x2 = complex_instance(config.m, config.n, np.random.default_rng(1000 + seed), config.dim, config.model)
     options = trace.TraceOptions(seed=seed, stall=stall, seconds=seconds,
@@ -109,8 +115,6 @@ def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, see
     stored = trace.load_record(f"{stem}-trace.json")
     if stored and stored.get("key") == key and (stored["status"] != "inconclusive" or seconds <= 0):
         return stored
-    if seconds <= 0:
-        return None
     test = trace.trace_test_system(system, q0, roots, (F2.ravel(), x2), options, checkpoint=f"{stem}-witnesses.json",
                                    progress=lambda msg: print(f"  {stem.name} trace: {msg}", file=sys.stderr, flush=True))
     record = {**test.record(), "key": key}
@@ -126,13 +130,15 @@ def markdown(rows: list[dict]) -> str:
              "**3D TDOA minimal cells: root counts by monodromy** (up to rotation, reflection and translation; "
              "'settled': no new root in the last loops, else a lower bound; trace test: solvers.methods.trace, "
              f"'passed' when the affine fit's relative residual is <= {trace.PASS_TOL:.0e}, 'inconclusive' when its "
-             "witness set was not settled or a path was lost)", "",
-             "| cell | formulation | unknowns | seed | roots | status | loops | paths tracked | loops without a new root "
-             "| trace test | residual | witnesses | trace paths |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "witness set was not settled (its size then a lower bound, no residual) or a path was lost; group order "
+             "8: direct parametrization, roots counted one per orbit of the gauge frame's reflections)", "",
+             "| cell | formulation | unknowns | group order | seed | roots | status | loops | paths tracked "
+             "| loops without a new root | trace test | residual | witnesses | trace paths |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         bound = "" if r["status"] == "settled" else "at least "
-        lines.append(f"| {r['cell']} | {r['formulation']} | {r['unknowns']} | {r['seed']} | {bound}{r['roots']} | "
+        lines.append(f"| {r['cell']} | {r['formulation']} | {r['unknowns']} | {r['group_order']} | {r['seed']} | "
+                     f"{bound}{r['roots']} | "
                      f"{r['status']} | {r['loops']} | {r['paths']} | {r['loops_without_new']} | {r['trace_test']} | "
                      f"{r['trace_residual']} | {r['witnesses']} | {r['trace_paths']} |")
     return "\n".join(lines) + "\n"
@@ -141,17 +147,18 @@ def markdown(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cells", nargs="*", default=list(CELLS), help=f"subset of {', '.join(CELLS)}")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="seeds of every cell (default: SEEDS, per cell)")
     parser.add_argument("--loops", type=int, default=60, help="loop budget per seed (default 60)")
     parser.add_argument("--stall", type=int, default=10, help="loops without a new root that settle a count")
     parser.add_argument("--seconds", type=float, default=1800.0, help="time cap per seed (then a lower bound)")
     parser.add_argument("--trace-seconds", type=float, default=3600.0,
-                        help="time cap of the trace test's witness monodromy per seed (0: no trace test)")
+                        help="time cap of the trace test's witness monodromy per seed (0: the checkpoints only)")
     parser.add_argument("--trace-stall", type=int, default=3, help="witness loops without a new one before the trace")
     args = parser.parse_args(argv)
     rows = []
     for cell in args.cells:
-        for seed in args.seeds:
+        for seed in args.seeds if args.seeds is not None else SEEDS[cell]:
             row, seconds = count(cell, seed, args.loops, args.stall, args.seconds, args.trace_stall, args.trace_seconds)
             rows.append(row)
             print(f"{cell} seed {seed}: {row['roots']} roots, {row['status']}, {row['loops']} loops, "
