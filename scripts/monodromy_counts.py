@@ -12,7 +12,7 @@ the direct roots are counted one per orbit of the gauge frame's 8 reflections (g
 counts the same networks.
 
 A count is reported as "settled" (stopped growing for --stall loops; two seeds should agree) or as a
-lower bound ("at least N after L loops, still growing"). A settled count then gets the trace test
+lower bound ("not settled": at least N after L loops). A settled count then gets the trace test
 (solvers.methods.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
 for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witnesses.json, the outcome kept
 in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
@@ -87,7 +87,7 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
     result = hm.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
                                 progress=lambda msg: print(f"  {cell} seed {seed}: {msg}", file=sys.stderr, flush=True),
                                 excluded=hm._excluded(system, q0), group=group)
-    status = "settled" if result.stall >= stall else "still growing"
+    status = "settled" if result.stall >= stall else "not settled"
     row = {"cell": cell, "formulation": label, "unknowns": len(system.unknowns), "seed": seed,
            "roots": len(result.roots), "status": status, "loops": result.loops, "paths": result.paths,
            "loops_without_new": result.stall, "group_order": 1 if group is None else len(group),
@@ -115,6 +115,8 @@ def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, see
     stored = trace.load_record(f"{stem}-trace.json")
     if stored and stored.get("key") == key and (stored["status"] != "inconclusive" or seconds <= 0):
         return stored
+    if seconds <= 0 and not os.path.exists(f"{stem}-witnesses.json"):
+        return {"status": "not run", "residual": float("nan"), "witnesses": "", "paths": ""}
     test = trace.trace_test_system(system, q0, roots, (F2.ravel(), x2), options, checkpoint=f"{stem}-witnesses.json",
                                    progress=lambda msg: print(f"  {stem.name} trace: {msg}", file=sys.stderr, flush=True))
     record = {**test.record(), "key": key}

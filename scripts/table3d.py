@@ -54,7 +54,7 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
 
     "N (monodromy + trace test, not certified)": every seed settled at N and a trace test passed;
     "N (monodromy, k seeds, not certified)": settled, same N on every seed, no trace test passed;
-    ">=N (monodromy, lower bound)": a seed still growing, or seeds that disagree (N: the largest).
+    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree (N: the largest).
     """
     path = os.path.join(ROOT, "tables", "monodromy3d.csv")
     if not os.path.exists(path):
@@ -74,7 +74,7 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
         elif any(r.get("trace_test") == "passed" for r in seeds):
             text = f"{counts.pop()} (monodromy + trace test, not certified)"
         else:
-            text = f"{counts.pop()} (monodromy, {len(seeds)} seeds, not certified)"
+            text = f"{counts.pop()} (monodromy, {len(seeds)} seed{'s' if len(seeds) > 1 else ''}, not certified)"
         out[(config.model, config.dim, config.m, config.n)] = text
     note = ("Cells marked (monodromy ...): no GF(p) count (F4 cap); the count is numerical evidence from "
             "tables/monodromy3d.* (scripts/monodromy_counts.py: seeds, loops, paths, trace-test residual).\n"
