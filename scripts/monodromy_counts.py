@@ -2,17 +2,25 @@
 writes tables/monodromy3d.{csv,md} (results) and prints the seconds.
 
 Per cell and seed: the cell's square formulation (10r/4s: compaction A, B2-B4, C2-C10, 13 unknowns, every
-measurement used, det H saturated), a generic complex start network (solvers.generate.complex_instance,
-seeded) and its root, then monodromy loops (solvers.methods.homotopy.monodromy_count: triangles through
+measurement used, det H saturated; 7r/5s, 6r/6s, 5r/9s: the direct parametrization, see CELLS), a generic
+complex start network (solvers.generate.complex_instance, seeded) and its root, then monodromy loops (solvers.methods.homotopy.monodromy_count: triangles through
 random complex parameters, all known roots tracked in one batch on the compiled tape tracker) until
 --stall loops bring no new root or --loops loops are done. Checkpoints (resumable) go to
 $TDOA_WORKBENCH_CACHE/monodromy/<cell>-seed<k>.json. The compaction unknowns are invariant under the
-Euclidean group, so each root is one network up to rotation, reflection and translation (group order 1).
+Euclidean group, so each root is one network up to rotation, reflection and translation (group order 1);
+the direct roots are counted one per orbit of the gauge frame's 8 reflections (group order 8), which
+counts the same networks.
 
 A count is reported as "settled" (stopped growing for --stall loops; two seeds should agree) or as a
-lower bound ("at least N after L loops, still growing"). No trace test is run (not implemented here).
+lower bound ("not settled": at least N after L loops). A settled count then gets the trace test
+(solvers.methods.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
+for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witnesses.json, the outcome kept
+in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
+relative residual of the affine fit, the number of witnesses and the paths it tracked.
 
-Usage: python scripts/monodromy_counts.py [10r4s] [--seeds 0 1] [--loops 60] [--stall 10] [--seconds 1800]
+Usage: python scripts/monodromy_counts.py [10r4s 7r5s 6r6s 5r9s] [--seeds 0 1] [--loops 60] [--stall 10]
+       [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3]
+(--seconds 0 --trace-seconds 0: read the checkpoints only, no loop and no trace test run.)
 """
 from __future__ import annotations
 
@@ -22,6 +30,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import csv  # noqa: E402
+import json  # noqa: E402
 import sys  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -32,65 +41,127 @@ import numpy as np  # noqa: E402
 from analysis.formulations.tdoa import Formulation  # noqa: E402
 from analysis.formulations.parametric import from_formulation  # noqa: E402
 from analysis.sweeps.paths import cache_dir  # noqa: E402
-from solvers.generate import complex_instance  # noqa: E402
+from solvers.generate import complex_instance, gauge_reflections  # noqa: E402
 from solvers.methods import homotopy as hm  # noqa: E402
+from solvers.methods import trace  # noqa: E402
 
 TABLES = os.path.join(ROOT, "tables")
 
-#: The minimal 3D TDOA cells with a square formulation counted here.
-CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10"}
+#: The minimal 3D TDOA cells with a square formulation counted here. 10r/4s: the compaction formulation (every
+#: measurement, det H saturated). The other three have none without minors; they run on the direct
+#: parametrization (receivers in the gauge frame r_1 = 0, r_2 on x, r_3 in the xy-plane, transmitters,
+#: offsets: 3m + 4n - 6 = mn unknowns, one equation d_ij^2 = |r_i - s_j|^2 per measurement), whose roots come
+#: in orbits of the 8 reflections of that frame (x, y, z -> -x, -y, -z): one root per orbit is tracked and
+#: counted, so its counts are networks up to the Euclidean group, like the compaction counts.
+CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "7r5s": "7r5s-tdoa3d-direct:all",
+         "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
+#: Seeds (start networks) per cell by default: two for 10r/4s; one for the direct cells (their counts are
+#: lower bounds that a second seed could only repeat with the same machine time).
+SEEDS = {"10r4s": (0, 1), "7r5s": (0,), "6r6s": (0,), "5r9s": (0,)}
+#: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
+#: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
+#: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
+#: unknowns need more witnesses (9r/3s: 2045 with all, 1290 with b or with H, for 75 roots). The compaction
+#: unknowns have no symmetry (group order 1), so no two roots share their b.
+TRACE_COORDINATES = {"10r4s": (6, 7, 8)}
 COLUMNS = ["cell", "formulation", "unknowns", "seed", "roots", "status", "loops", "paths", "loops_without_new",
-           "group_order"]
+           "group_order", "trace_test", "trace_residual", "witnesses", "trace_paths"]
 
 
-def count(cell: str, seed: int, loops: int, stall: int, seconds: float) -> tuple[dict, float]:
+def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_stall: int = 3,
+          trace_seconds: float = 3600.0) -> tuple[dict, float]:
     """One row of monodromy3d.csv and the seconds it took (checkpointed, resumable)."""
     label = CELLS[cell]
     form = Formulation.parse(label)
     config = form.config
-    system = from_formulation(label, saturate_det_h=True)
-    F, x0 = complex_instance(config.m, config.n, np.random.default_rng(seed), config.dim, config.model)
+    direct = config.parametrization == "direct"
+    system = from_formulation(label, saturate_det_h=not direct)
+    F, x0 = complex_instance(config.m, config.n, np.random.default_rng(seed), config.dim, config.model,
+                             config.parametrization)
     q0 = F.ravel()
     solver, x0 = hm.start_solver(system, q0, x0, seed)
+    group = gauge_reflections(system.unknowns) if direct else None
     options = hm.HomotopyOptions(seed=seed, max_loops=loops, stall_loops=stall)
     path = cache_dir("monodromy")
     path.mkdir(parents=True, exist_ok=True)
     result = hm.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
                                 progress=lambda msg: print(f"  {cell} seed {seed}: {msg}", file=sys.stderr, flush=True),
-                                excluded=hm._excluded(system, q0))
-    status = "settled" if result.stall >= stall else "still growing"
+                                excluded=hm._excluded(system, q0), group=group)
+    status = "settled" if result.stall >= stall else "not settled"
     row = {"cell": cell, "formulation": label, "unknowns": len(system.unknowns), "seed": seed,
            "roots": len(result.roots), "status": status, "loops": result.loops, "paths": result.paths,
-           "loops_without_new": result.stall, "group_order": 1}
+           "loops_without_new": result.stall, "group_order": 1 if group is None else len(group),
+           "trace_test": "not run", "trace_residual": "",
+           "witnesses": "", "trace_paths": ""}
+    if status == "settled" and group is None:  # (with one root per orbit the trace needs the orbits: not done)
+        test = trace_test(system, q0, result.roots, path / f"{cell}-seed{seed}", TRACE_COORDINATES.get(cell), seed,
+                          trace_stall, trace_seconds)
+        residual = "" if np.isnan(test["residual"]) else f"{test['residual']:.0e}"
+        row.update({"trace_test": test["status"], "trace_residual": residual,
+                    "witnesses": test["witnesses"], "trace_paths": test["paths"]})
     return row, result.seconds
 
 
+def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, seed: int, stall: int,
+               seconds: float) -> dict:
+    """The trace test's record for a settled count, read from <stem>-trace.json when it was run on the same
+    roots and options (an inconclusive one only when ``seconds`` is 0), else run and stored (the witnesses
+    resume from <stem>-witnesses.json; ``seconds`` 0: no new witness loop, only what that checkpoint holds)."""
+    config = Formulation.parse(system.name).config
+    F2, x2 = complex_instance(config.m, config.n, np.random.default_rng(1000 + seed), config.dim, config.model)
+    options = trace.TraceOptions(seed=seed, stall=stall, seconds=seconds,
+                                 coordinates=tuple(coordinates) if coordinates else None)
+    key = {"roots": len(roots), "seed": seed, "stall": stall, "coordinates": list(coordinates or [])}
+    stored = trace.load_record(f"{stem}-trace.json")
+    if stored and stored.get("key") == key and (stored["status"] != "inconclusive" or seconds <= 0):
+        return stored
+    if seconds <= 0 and not os.path.exists(f"{stem}-witnesses.json"):
+        return {"status": "not run", "residual": float("nan"), "witnesses": "", "paths": ""}
+    test = trace.trace_test_system(system, q0, roots, (F2.ravel(), x2), options, checkpoint=f"{stem}-witnesses.json",
+                                   progress=lambda msg: print(f"  {stem.name} trace: {msg}", file=sys.stderr, flush=True))
+    record = {**test.record(), "key": key}
+    with open(f"{stem}-trace.json", "w", encoding="utf-8") as fh:
+        json.dump(record, fh)
+    print(f"{stem.name}: trace test {test.status}, residual {test.residual:.1e}, {test.witnesses} witnesses, "
+          f"{test.paths} paths, {test.seconds:.0f} s", flush=True)
+    return record
+
+
 def markdown(rows: list[dict]) -> str:
-    lines = ["<!-- Regenerate: python scripts/monodromy_counts.py; numerical evidence only (no GF(p) certificate, "
-             "no trace test) -->", "",
+    lines = ["<!-- Regenerate: python scripts/monodromy_counts.py; numerical evidence only (no GF(p) certificate) -->", "",
              "**3D TDOA minimal cells: root counts by monodromy** (up to rotation, reflection and translation; "
-             "'settled': no new root in the last loops, else a lower bound)", "",
-             "| cell | formulation | unknowns | seed | roots | status | loops | paths tracked | loops without a new root |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "'settled': no new root in the last loops, else a lower bound; trace test: solvers.methods.trace, "
+             f"'passed' when the affine fit's relative residual is <= {trace.PASS_TOL:.0e}, 'inconclusive' when its "
+             "witness set was not settled (its size then a lower bound, no residual) or a path was lost; group order "
+             "8: direct parametrization, roots counted one per orbit of the gauge frame's reflections)", "",
+             "| cell | formulation | unknowns | group order | seed | roots | status | loops | paths tracked "
+             "| loops without a new root | trace test | residual | witnesses | trace paths |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         bound = "" if r["status"] == "settled" else "at least "
-        lines.append(f"| {r['cell']} | {r['formulation']} | {r['unknowns']} | {r['seed']} | {bound}{r['roots']} | "
-                     f"{r['status']} | {r['loops']} | {r['paths']} | {r['loops_without_new']} |")
+        lines.append(f"| {r['cell']} | {r['formulation']} | {r['unknowns']} | {r['group_order']} | {r['seed']} | "
+                     f"{bound}{r['roots']} | "
+                     f"{r['status']} | {r['loops']} | {r['paths']} | {r['loops_without_new']} | {r['trace_test']} | "
+                     f"{r['trace_residual']} | {r['witnesses']} | {r['trace_paths']} |")
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cells", nargs="*", default=list(CELLS), help=f"subset of {', '.join(CELLS)}")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="seeds of every cell (default: SEEDS, per cell)")
     parser.add_argument("--loops", type=int, default=60, help="loop budget per seed (default 60)")
     parser.add_argument("--stall", type=int, default=10, help="loops without a new root that settle a count")
     parser.add_argument("--seconds", type=float, default=1800.0, help="time cap per seed (then a lower bound)")
+    parser.add_argument("--trace-seconds", type=float, default=3600.0,
+                        help="time cap of the trace test's witness monodromy per seed (0: the checkpoints only)")
+    parser.add_argument("--trace-stall", type=int, default=3, help="witness loops without a new one before the trace")
     args = parser.parse_args(argv)
     rows = []
     for cell in args.cells:
-        for seed in args.seeds:
-            row, seconds = count(cell, seed, args.loops, args.stall, args.seconds)
+        for seed in args.seeds if args.seeds is not None else SEEDS[cell]:
+            row, seconds = count(cell, seed, args.loops, args.stall, args.seconds, args.trace_stall, args.trace_seconds)
             rows.append(row)
             print(f"{cell} seed {seed}: {row['roots']} roots, {row['status']}, {row['loops']} loops, "
                   f"{row['paths']} paths, {seconds:.0f} s", flush=True)

@@ -15,8 +15,11 @@ Budget: each formulation runs in a child process with a wall-time cap (--seconds
 matrix cap (--max-cells, default 150 000 000 rows x cols; F4's own 8 GiB memory cap also applies); a
 formulation that hits one is listed with it.
 msolve (when installed) recomputes each degree found on the first prime. Usage:
-OPENBLAS_NUM_THREADS=1 python scripts/table3d.py [--seconds S] [--max-cells N] [--out-dir DIR]
-(about 15 minutes with the defaults on one core).
+OPENBLAS_NUM_THREADS=1 python scripts/table3d.py [--seconds S] [--max-cells N] [--out-dir DIR] [--reuse]
+(about 15 minutes with the defaults on one core; --reuse: the committed table3d.csv's records, no F4).
+
+The minimal cells that F4 leaves open show their counts by monodromy from tables/monodromy3d.csv
+(scripts/monodromy_counts.py; numerical evidence, never certified, and named as such in the cell).
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import csv  # noqa: E402
 import sys  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -43,6 +47,39 @@ cell's equations bounds the count from above and is the size of that formulation
 cap/timeout: the budget in the meta file was not enough. Comparison with the published 3D solvers and the
 open cells: tables/NOTES.md, section "3D TDOA".
 """
+
+
+def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
+    """The counts of tables/monodromy3d.csv as grid cells (per cell: its seeds' rows) and the note naming them.
+
+    "N (monodromy + trace test, not certified)": every seed settled at N and a trace test passed;
+    "N (monodromy, k seeds, not certified)": settled, same N on every seed, no trace test passed;
+    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree (N: the largest).
+    """
+    path = os.path.join(ROOT, "tables", "monodromy3d.csv")
+    if not os.path.exists(path):
+        return {}, ""
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    by_cell: dict[str, list[dict]] = {}
+    for row in rows:
+        by_cell.setdefault(row["cell"], []).append(row)
+    out = {}
+    for cell, seeds in by_cell.items():
+        config = Formulation.parse(seeds[0]["formulation"]).config
+        counts = {int(r["roots"]) for r in seeds}
+        settled = all(r["status"] == "settled" for r in seeds) and len(counts) == 1
+        if not settled:
+            text = f">={max(counts)} (monodromy, lower bound)"
+        elif any(r.get("trace_test") == "passed" for r in seeds):
+            text = f"{counts.pop()} (monodromy + trace test, not certified)"
+        else:
+            text = f"{counts.pop()} (monodromy, {len(seeds)} seed{'s' if len(seeds) > 1 else ''}, not certified)"
+        out[(config.model, config.dim, config.m, config.n)] = text
+    note = ("Cells marked (monodromy ...): no GF(p) count (F4 cap); the count is numerical evidence from "
+            "tables/monodromy3d.* (scripts/monodromy_counts.py: seeds, loops, paths, trace-test residual).\n"
+            if out else "")
+    return out, note
 
 
 def cells() -> list[TDOAConfig]:
@@ -74,7 +111,7 @@ def main(argv=None) -> int:
                              "formulations": "A,B2-B4,C*,minors; all; C*,minors (each once per cell)",
                              "degree": "degree of I + (t g - 1) in grevlex, g = det H (times det D~[:3, :3] with "
                                        "B5..Bn): solutions with g != 0"},
-                            seconds=180.0, max_cells=150_000_000)
+                            seconds=180.0, max_cells=150_000_000, evidence=monodromy_evidence)
 
 
 if __name__ == "__main__":

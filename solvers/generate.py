@@ -39,7 +39,7 @@ import re
 import shlex
 import time
 from dataclasses import dataclass
-from typing import Callable, Protocol, Union
+from typing import Callable, Protocol, Sequence, Union
 
 import numpy as np
 
@@ -156,9 +156,12 @@ class Generated:
 # --------------------------------------------------------------------------------------------------
 
 
-def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2,
-                     model: str = "tdoa") -> tuple[np.ndarray, np.ndarray]:
-    """A complex network's data F (m, n), normalised by its RMS modulus, and its compaction root in that frame.
+def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2, model: str = "tdoa",
+                     parametrization: str = "compaction") -> tuple[np.ndarray, np.ndarray]:
+    """A complex network's data F (m, n), normalised by its RMS modulus, and its compaction root in that frame
+    (``parametrization="direct"``: the network is first put in the gauge frame, r_1 = 0, r_2 on the x-axis,
+    r_3 in the xy-plane, by zeroing those coordinates, and the root is the direct unknowns: the receivers'
+    free coordinates, the transmitters, the offsets).
 
     Receivers, transmitters and (TDOA) offsets are complex normal, in ``dim`` dimensions (drawn in this
     order; TOA draws no offsets); d_ij is a square root of the (complex) squared distance (the equations
@@ -169,16 +172,34 @@ def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2,
     r = rng.normal(size=(m, dim)) + 1j * rng.normal(size=(m, dim))
     t = rng.normal(size=(n, dim)) + 1j * rng.normal(size=(n, dim))
     o = rng.normal(size=n) + 1j * rng.normal(size=n) if model == "tdoa" else np.zeros(0)
+    if parametrization == "direct":
+        for i in range(min(dim, m)):
+            r[i, i:] = 0.0
     F = np.sqrt(((r[:, None, :] - t[None, :, :]) ** 2).sum(axis=-1)) + (o[None, :] if len(o) else 0.0)
+    scale = np.sqrt(np.mean(np.abs(F) ** 2))
+    if parametrization == "direct":
+        x = [r[i, a] for i in range(1, m) for a in range(min(i, dim))] + list(t.ravel()) + list(o)
+        return F / scale, np.array(x) / scale
     s1 = t[0] - r[0]
     S = np.column_stack([t[c + 1] - t[0] for c in range(dim)])
     H = np.linalg.inv(4.0 * S.T @ S)
     b = -0.5 * np.linalg.solve(S, s1)
     upper = [H[a, c] for a in range(dim) for c in range(a, dim)]
     x = np.concatenate([upper, b, o])
-    scale = np.sqrt(np.mean(np.abs(F) ** 2))
     powers = np.array([-2.0] * len(upper) + [0.0] * dim + [1.0] * len(o))
     return F / scale, x / scale**powers
+
+
+def gauge_reflections(unknowns: Sequence[str]) -> np.ndarray:
+    """The sign vectors (2^dim, N) of the gauge frame's reflections (each axis x, y (, z) -> minus itself) on
+    the direct parametrization's unknowns (receivers' and transmitters' coordinates; offsets fixed): the
+    group whose orbits the direct roots come in (TDOAConfig.gauge_group_order elements)."""
+    axes = sorted({u[-1] for u in unknowns if u[0] in "rs"})
+    out = []
+    for flips in np.ndindex(*(2,) * len(axes)):
+        sign = {axis: -1.0 if f else 1.0 for axis, f in zip(axes, flips)}
+        out.append([sign[u[-1]] if u[0] in "rs" else 1.0 for u in unknowns])
+    return np.array(out)
 
 
 def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:

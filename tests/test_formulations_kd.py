@@ -290,6 +290,22 @@ def test_write_table_is_plain_text_with_regenerate_line(tmp_path):
     assert '"commit": "abc"' in open(paths[2]).read()
 
 
+def test_committed_table3d_records_round_trip_and_take_evidence(tmp_path):
+    """scripts/table3d.py --reuse: the committed CSV read back and written again is byte-identical; a cell
+    without a certified count shows the evidence given for it, a certified one keeps its count."""
+    import os
+
+    source = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tables", "table3d.csv")
+    records = cell_degrees.read_records(source)
+    evidence = {("tdoa", 3, 10, 4): "6148 (monodromy, 2 seeds, not certified)", ("tdoa", 3, 7, 6): "99 (wrong)"}
+    paths = write_table(records, str(tmp_path), "table3d", "title", "python scripts/table3d.py", {"commit": "abc"},
+                        evidence=evidence)
+    assert open(paths[0]).read() == open(source).read()
+    md = open(paths[1]).read()
+    assert "| 10 | 6148 (monodromy, 2 seeds, not certified) | 1 |" in md
+    assert "| 7 |  | cap | 1 | 1 |" in md and "99 (wrong)" not in md  # 7r/6s has its GF(p) count 1
+
+
 def test_gf_evaluation_of_saturated_system_at_root():
     system, root = cell_degrees.formulation_system(Formulation.from_spec("6r6s-tdoa3d", "all"))
     polys = system(P)

@@ -199,3 +199,20 @@ def test_generate_on_numerical_evidence_alone(tmp_path):
     assert "NOT certified over GF(p)" in (tmp_path / (result.name + ".py")).read_text()
     with pytest.raises(GenerationError, match="evidence"):
         generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="guess")
+
+
+def test_monodromy_by_orbits_of_the_direct_parametrization():
+    """2D TOA 3r/3s, direct parametrization (r_2x, r_3, transmitters: 9 unknowns): its roots come in orbits of the
+    4 reflections of the gauge frame; monodromy with one root per orbit settles at the compaction count 8
+    (the certified count up to the gauge, Kuang et al. 2013), so 32 direct roots."""
+    from solvers.generate import gauge_reflections
+
+    label = "3r3s-toa2d-direct:all"
+    system = from_formulation(label)
+    F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa", "direct")
+    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    group = gauge_reflections(system.unknowns)
+    assert group.shape == (4, len(system.unknowns))
+    assert solver.residual(group * x0, F.ravel()[None]).max() < 1e-10  # every image is a root
+    settled = hm.monodromy_count(solver, F.ravel(), x0, hm.HomotopyOptions(seed=3, stall_loops=8), 1e9, group=group)
+    assert settled.stall == 8 and len(settled.roots) == 8

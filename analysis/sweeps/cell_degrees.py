@@ -244,12 +244,38 @@ def _whole_cell(record: CellDegree) -> bool:
     return formulation.equations == equation_names(formulation.config)
 
 
-def cell_summary(records: Sequence[CellDegree]) -> str:
+def read_records(path: str) -> list[CellDegree]:
+    """The records of a cell-degree table's CSV (:func:`write_table`), as written (round trip: the same CSV)."""
+    import csv
+    import typing
+
+    types = typing.get_type_hints(CellDegree)
+    out = []
+    with open(path, newline="") as handle:
+        for row in csv.DictReader(handle):
+            values = {}
+            for name in FIELDS:
+                text, kind = row[name], types[name]
+                if kind is str:
+                    values[name] = text
+                elif kind is float:
+                    values[name] = float(text)
+                else:  # int or int | None
+                    values[name] = int(text) if text != "" else None
+            out.append(CellDegree(**values))
+    return out
+
+
+def cell_summary(records: Sequence[CellDegree], evidence: str = "") -> str:
     """What a grid cell shows: the smallest count up to the gauge over its zero-dimensional formulations (the
     cell's complexity, as in Table 3), written ``<=N`` when the whole cell's formulation has no count and
     N > 1 (N then bounds the number of networks from above); else ``cap``/``timeout`` when a formulation ran out of budget
-    (the cell is open); else ``dim>0`` with the smallest tangent dimension at the known root."""
+    (the cell is open); else ``dim>0`` with the smallest tangent dimension at the known root. ``evidence``: what
+    a cell without a certified count shows instead of cap/timeout/dim>0 (a count by other means, which says
+    so: tables/monodromy3d.* for the 3D minimal cells)."""
     counts = [r.up_to_gauge for r in records if r.status == "ok"]
+    if evidence and not counts:
+        return evidence
     if counts:
         whole = any(r.status == "ok" and _whole_cell(r) for r in records)
         # a subset with one solution leaves exactly one for the whole cell: the known root satisfies both
@@ -261,8 +287,11 @@ def cell_summary(records: Sequence[CellDegree]) -> str:
     return f"dim>0 (tangent {tangent})"
 
 
-def markdown_grid(records: Sequence[CellDegree], parametrization: str = "compaction") -> str:
-    """One m x n grid per (model, dimension) of the records of one parametrization (module docstring)."""
+def markdown_grid(records: Sequence[CellDegree], parametrization: str = "compaction",
+                  evidence: dict[tuple[str, int, int, int], str] | None = None) -> str:
+    """One m x n grid per (model, dimension) of the records of one parametrization (module docstring);
+    ``evidence``: :func:`cell_summary`'s, per (model, dim, m, n)."""
+    evidence = evidence or {}
     out = []
     groups: dict[tuple[str, int], dict[tuple[int, int], list[CellDegree]]] = {}
     for r in records:
@@ -278,7 +307,8 @@ def markdown_grid(records: Sequence[CellDegree], parametrization: str = "compact
         out.append("| m/n | " + " | ".join(map(str, ns)) + " |")
         out.append("|---|" + "---|" * len(ns))
         for m in ms:
-            row = [cell_summary(cells[(m, n)]) if (m, n) in cells else "" for n in ns]
+            row = [cell_summary(cells[(m, n)], evidence.get((model, dim, m, n), "")) if (m, n) in cells else ""
+                   for n in ns]
             out.append(f"| {m} | " + " | ".join(row) + " |")
         out.append("")
     return "\n".join(out)
@@ -309,7 +339,7 @@ def provenance(root: str) -> dict:
 
 
 def write_table(records: Sequence[CellDegree], out_dir: str, stem: str, title: str, regenerate: str,
-                meta: dict, notes: str = "") -> list[str]:
+                meta: dict, notes: str = "", evidence: dict[tuple[str, int, int, int], str] | None = None) -> list[str]:
     """Write ``<stem>.csv``, ``<stem>.md`` and ``<stem>.meta.json`` into out_dir; returns the paths.
 
     Rows keep the given order (the scripts give a fixed one); the Markdown starts with the
@@ -331,7 +361,7 @@ def write_table(records: Sequence[CellDegree], out_dir: str, stem: str, title: s
             row = r.row()
             row["seconds"] = f"{r.seconds:.2f}"
             writer.writerow(row)
-    grids = "\n".join(markdown_grid(records, p) for p in ("compaction", "direct"))
+    grids = "\n".join(markdown_grid(records, p, evidence) for p in ("compaction", "direct"))
     with open(paths[1], "w") as handle:
         handle.write(f"<!-- # Regenerate: {regenerate}; provenance in {stem}.meta.json -->\n\n**{title}**\n\n"
                      f"{grids}\n{notes}\nEvery row:\n\n{markdown_rows(records)}")
@@ -347,14 +377,19 @@ def write_table(records: Sequence[CellDegree], out_dir: str, stem: str, title: s
 def run_table_script(argv: Sequence[str] | None, doc: str, root: str, script: str, stem: str, title: str, notes: str,
                      jobs: Callable[[], Sequence[tuple[Formulation, bool]]], meta_extra: dict,
                      seconds: float = 120.0, max_cells: int = 30_000_000,
-                     check: Callable[[Sequence[CellDegree]], None] | None = None) -> int:
+                     check: Callable[[Sequence[CellDegree]], None] | None = None,
+                     evidence: Callable[[], tuple[dict[tuple[str, int, int, int], str], str]] | None = None) -> int:
     """The command line of a cell-degree table script (``scripts/toa_table.py``, ``scripts/table3d.py``).
 
     Options --seconds (wall-time cap per formulation), --max-cells (F4 matrix cap), --out-dir (default
-    root/tables). ``jobs()`` gives the formulations in table order, each with whether msolve (when
+    root/tables), --reuse (take the records of the committed ``<stem>.csv`` instead of running the sweep:
+    they must be the formulations of ``jobs()``, in order; the meta file keeps the sweep's provenance).
+    ``jobs()`` gives the formulations in table order, each with whether msolve (when
     installed) must confirm its degree; ``check`` may raise on the finished records (e.g. two
-    parametrizations disagreeing). Writes ``<stem>.{csv,md,meta.json}`` with provenance (commit and dirty
-    flag read before anything is written, primes, seed, caps, versions, machine, seconds).
+    parametrizations disagreeing); ``evidence()`` gives counts by other means for cells without a certified
+    one (:func:`cell_summary`) and a note naming where they come from. Writes ``<stem>.{csv,md,meta.json}``
+    with provenance (commit and dirty flag read before anything is written, primes, seed, caps, versions,
+    machine, seconds).
     """
     import argparse
     import datetime
@@ -368,7 +403,12 @@ def run_table_script(argv: Sequence[str] | None, doc: str, root: str, script: st
     parser.add_argument("--max-cells", type=int, default=max_cells,
                         help=f"F4 matrix cap, rows x cols (default {max_cells})")
     parser.add_argument("--out-dir", default=os.path.join(root, "tables"))
+    parser.add_argument("--reuse", action="store_true",
+                        help=f"take the records of tables/{stem}.csv (no F4 sweep); merge the evidence only")
     args = parser.parse_args(argv)
+    extra, evidence_note = evidence() if evidence is not None else ({}, "")
+    if args.reuse:
+        return _rewrite_table(root, args.out_dir, stem, title, notes + evidence_note, jobs, extra)
     exe = find_msolve()
     info = provenance(root)
     t_start = time.perf_counter()
@@ -395,6 +435,26 @@ def run_table_script(argv: Sequence[str] | None, doc: str, root: str, script: st
         "msolve": msolve_version(exe) or "not installed",
         "seconds_total": round(time.perf_counter() - t_start, 1),
     }
-    paths = write_table(records, args.out_dir, stem, title, command, meta, notes)
+    paths = write_table(records, args.out_dir, stem, title, command, meta, notes + evidence_note, extra)
     print("wrote " + ", ".join(paths), file=sys.stderr)
+    return 0
+
+
+def _rewrite_table(root: str, out_dir: str, stem: str, title: str, notes: str,
+                   jobs: Callable[[], Sequence[tuple[Formulation, bool]]],
+                   evidence: dict[tuple[str, int, int, int], str]) -> int:
+    """:func:`run_table_script` with --reuse: the committed records and meta, the evidence merged."""
+    import json
+    import os
+    import sys
+
+    source = os.path.join(root, "tables", stem)
+    records = read_records(source + ".csv")
+    wanted = [as_formulation(f).label for f, _ in jobs()]
+    if [r.formulation for r in records] != wanted:
+        raise ValueError(f"{source}.csv holds other formulations than the script's (rerun without --reuse)")
+    with open(source + ".meta.json") as handle:
+        meta = json.load(handle)
+    paths = write_table(records, out_dir, stem, title, meta["command"], meta, notes, evidence)
+    print("wrote " + ", ".join(paths) + " (records reused)", file=sys.stderr)
     return 0

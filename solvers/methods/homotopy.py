@@ -659,9 +659,15 @@ def affine_start(system: ParametricSystem, coefficients: Callable, rng: np.rando
 
 
 def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Generator,
-                    options: HomotopyOptions, excluded: Callable[[np.ndarray], np.ndarray] | None) -> tuple[np.ndarray, int]:
+                    options: HomotopyOptions, excluded: Callable[[np.ndarray], np.ndarray] | None,
+                    free: np.ndarray | None = None, group: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """One monodromy loop (a triangle q0 -> qa -> qb -> q0 through random complex parameters) from all known
-    roots: (the known roots with the new ones appended, the number of paths tracked).
+    roots: (the known roots with the new ones appended, the number of paths tracked). ``free``: mask of the
+    parameters the loop moves (default all; the trace test's witness loops keep its pencil parameter at 0).
+    ``group``: sign vectors (G, N) of a group acting on the unknowns that fixes the parameters (the direct
+    parametrization's reflections of the gauge frame); the roots are then one per orbit, and an endpoint is
+    new only when no image of it is known (the loop commutes with the group, so the orbits' other members
+    need not be tracked).
 
     New endpoints count only when Newton's method has converged on them and, with ``excluded`` (a mask of
     points on the locus of the non-vanishing conditions), when they lie off that locus; a new root is one
@@ -670,6 +676,8 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
     scale = np.sqrt(np.mean(np.abs(q0) ** 2))
     qa = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
     qb = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
+    if free is not None:
+        qa, qb = np.where(free, qa, q0), np.where(free, qb, q0)
     xs, paths = roots, 0
     for a, b in ((q0, qa), (qa, qb), (qb, q0)):
         paths += len(xs)
@@ -682,9 +690,10 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
         if excluded is not None:
             keep &= ~excluded(xs)
         xs = xs[keep & np.all(np.isfinite(xs), axis=1)]
+    images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group)
     for x in xs:
-        d = np.linalg.norm(roots - x, axis=1)
-        if np.min(d) > 1e-6 * (1.0 + np.linalg.norm(x)):
+        d = min(np.min(np.linalg.norm(roots - g * x, axis=1)) for g in images)
+        if d > 1e-6 * (1.0 + np.linalg.norm(x)):
             roots = np.vstack([roots, x])
     return roots, paths
 
@@ -750,13 +759,16 @@ def start_solver(system: ParametricSystem, q0: np.ndarray, x0: np.ndarray,
 def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, options: HomotopyOptions,
                     seconds: float, checkpoint: str | None = None,
                     progress: Callable[[str], None] | None = None,
-                    excluded: Callable[[np.ndarray], np.ndarray] | None = None) -> MonodromyCount:
+                    excluded: Callable[[np.ndarray], np.ndarray] | None = None,
+                    free: np.ndarray | None = None, group: np.ndarray | None = None) -> MonodromyCount:
     """Grow the roots at q0 by monodromy loops until ``options.stall_loops`` loops bring nothing new, or
     ``options.max_loops`` loops, or ``seconds`` have passed (then the count is a lower bound).
 
     checkpoint: a JSON file (plain text: q0, roots, loops, paths, stall, seconds, the rng state) written
     after every loop and resumed from when it exists for the same q0, so that a long count survives an
     interruption. Numerical evidence only: a root count without the GF(p) certificate of :func:`build`.
+    ``free``: the parameters the loops move, ``group``: roots kept one per orbit (:func:`_monodromy_loop`).
+    Completeness: :mod:`.trace`.
     """
     roots = np.array(x0, dtype=complex).reshape(-1, solver.nvars)
     loops = paths = stall = 0
@@ -773,7 +785,7 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
     t0 = time.perf_counter()
     while loops < options.max_loops and stall < options.stall_loops and time.perf_counter() - t0 < seconds:
         before = len(roots)
-        roots, tracked = _monodromy_loop(solver, q0, roots, rng, options, excluded)
+        roots, tracked = _monodromy_loop(solver, q0, roots, rng, options, excluded, free, group)
         loops, paths = loops + 1, paths + tracked
         stall = 0 if len(roots) > before else stall + 1
         if checkpoint:
@@ -789,8 +801,10 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
     return MonodromyCount(roots, loops, paths, stall, spent + time.perf_counter() - t0)
 
 
-def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[..., np.ndarray] | None:
     """Mask of points where a non-vanishing condition is (numerically) zero at parameters q0, or None.
+    The mask is ``mask(x)``, or ``mask(x, q)`` with parameters q (K, P) per point (the trace test's witnesses
+    lie over different parameters).
 
     A condition of degree d counts as zero when it cancels to rounding level (its value below 1e-8
     times the sum of its terms' moduli) or when all its terms are at noise level for the point's size
@@ -809,11 +823,12 @@ def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[[np.ndarray]
         terms = [c * sympy.Mul(*(v**e for v, e in zip(system.x_symbols, mon))) for mon, c in poly.terms()]
         conditions.append((sympy.lambdify(args, terms, "numpy"), poly.total_degree()))
 
-    def mask(x: np.ndarray) -> np.ndarray:
+    def mask(x: np.ndarray, q: np.ndarray | None = None) -> np.ndarray:
         noise = 1e-8 * (1.0 + np.linalg.norm(x, axis=1))
         out = np.zeros(len(x), dtype=bool)
+        qs = q0 if q is None else np.asarray(q).T
         for terms, degree in conditions:
-            values = np.array([np.broadcast_to(v, (len(x),)) for v in terms(*x.T, *q0)])
+            values = np.array([np.broadcast_to(v, (len(x),)) for v in terms(*x.T, *qs)])
             size = np.abs(values).sum(axis=0)
             out |= (np.abs(values.sum(axis=0)) <= 1e-8 * size) | (size <= noise ** degree)
         return out

@@ -1,0 +1,251 @@
+"""Trace test: whether a root set of a parametric system, found by monodromy, is complete.
+
+For F(x; q) = 0 (N equations, N unknowns x, parameters q entering in any way) and roots R of F(.; p) at a
+generic p, the test (Leykin, Rodriguez, Sottile, "Trace test", Arnold Math. J. 4 (2018) 113-125; the set-up
+of HomotopyContinuation.jl's ``verify_solution_completeness``, written here on our own tapes) works on
+the curve C = {(x, lam) : F(x; p + lam v) = 0} over the line through p in a random direction v, cut by
+the pencil of hypersurfaces
+
+    Q_t = {(x, lam) : (a . x - 1) lam + t = 0},   t in C,   a random.
+
+Q_0 cuts C in two sets: lam = 0, that is R (with lam = 0 appended), and the *witnesses* W, the points of
+C with a . x = 1 (found by monodromy on the same system with t kept at 0, from one known point: a second
+complex instance p* with root x*, v = p* - p, a scaled so that a . x* = 1, lam = 1). The trace test
+tracks R u W from t = 0 to two values t1, t2 and sums each set's points (x, lam).
+
+Why the trace is affine in t exactly when R u W is all of C n Q_0: Q_t = phi^-1(t) for the rational
+function phi = -(a . x - 1) lam on C's closure in P^N x P^1. phi is finite wherever x and lam are
+(its poles are the points at infinity of x or of lam: the pencil's base locus misses C's closure for
+generic a, v and p), so the trace of the coordinate functions x_k and lam along phi, whose poles lie only
+among phi's, is a polynomial in t; at a pole, x_k and lam grow at most like phi (at a point where x is
+infinite and lam finite, phi ~ (a . x) lam; where lam is infinite and x finite, phi ~ lam; where both are,
+phi grows like their product), so the polynomial has degree <= 1. The trace of a proper subset of the
+fibre is a sum over some branches only, which for generic a, v is not affine (loc. cit.; the monodromy of
+an irreducible curve moves the subset to others with other sums), so the test fails when a root (or a
+witness) is missing: measured, removing one root of 8 (2D TOA 3r/3s), 38 (3D TOA 6r/4s) or 75 (2D TDOA
+9r/3s) takes the residual from 2e-12, 2e-13, 1e-15 to 1e-2, 3e-4 .. 7e-3, 2e-4 .. 6e-4. The affine fit's residual, ||tr(t2) - tr(0) - (t2 / t1) (tr(t1) - tr(0))||,
+is reported relative to the sum of the moduli of the points summed (the size of the rounding errors in the
+traces). Points at infinity of the fibre x(p + lam v), where roots of the parametric family escape (the
+reason a pencil in lam alone, i.e. a trace over the parameter line, is not affine), are the poles that
+a . x puts at t = infinity.
+
+The TDOA systems' det H saturation: F = 0 also holds on a positive-dimensional spurious locus (det H = 0)
+that the roots exclude (``excluded`` masks, as in :func:`homotopy._excluded`); C here means the closure of
+the part off that locus, a union of curves whose points over generic lam are the isolated roots. Paths
+from points of C stay on C; a witness landing on the excluded locus is not kept.
+
+A failed path (lost, or two landing on one point) makes the test "inconclusive", never "passed".
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from . import homotopy as hm
+from . import slp, tape_kernel, tape_native, tracker
+from .tracker import TrackerOptions
+
+__all__ = ["TraceOptions", "TraceSystem", "TraceTest", "trace_equations", "trace_test", "PASS_TOL"]
+
+#: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
+#: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
+PASS_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class TraceOptions:
+    """seed: rng of a, t1, t2 and the witness loops; stall/max_loops: the witnesses' monodromy stops after
+    ``stall`` loops without a new one (or ``max_loops``); step: |t1| = |t2| (the pencil's parameter;
+    lam ~ t on the roots); seconds: time cap of the witness monodromy (then inconclusive); coordinates: the
+    unknowns the pencil's linear form a . x and the traces use (default all). Fewer coordinates, fewer
+    witnesses (the witnesses are the poles of a . x on C), but a coordinate that is the same on two roots of
+    the family (a symmetry of the system) cannot tell them apart: use it only for systems without one; and
+    the coordinates must go to infinity wherever a root escapes, else the pencil has base points on C and
+    paths are lost (2D 9r/3s: the offsets; H or b are fine)."""
+
+    seed: int = 0
+    stall: int = 5
+    max_loops: int = 200
+    step: float = 0.5
+    seconds: float = 1e9
+    coordinates: tuple[int, ...] | None = None
+
+
+@dataclass(frozen=True)
+class TraceTest:
+    """The test's outcome: status "passed" (residual <= PASS_TOL), "failed" or "inconclusive" (a path lost,
+    or the witness monodromy cut by its time cap), with the numbers that back it."""
+
+    status: str
+    residual: float
+    roots: int
+    witnesses: int
+    witness_loops: int
+    paths: int
+    seconds: float
+    failed_paths: int
+
+    def record(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def trace_equations(equations: Callable, N: int, P: int) -> Callable:
+    """``equations(y, Q)`` of the trace system in y = (x, lam), Q = (p, v, a, t): F(x; p + lam v) and
+    (a . x - 1) lam + t, written on :mod:`.slp` program values (N + 1 equations, 2 P + N + 1 parameters)."""
+
+    def traced(y: list, Q: list) -> list:
+        x, lam = y[:N], y[N]
+        p, v, a, t = Q[:P], Q[P:2 * P], Q[2 * P:2 * P + N], Q[2 * P + N]
+        out = list(equations(x, [pk + lam * vk for pk, vk in zip(p, v)]))
+        ax = a[0] * x[0]
+        for ak, xk in zip(a[1:], x[1:]):
+            ax = ax + ak * xk
+        return out + [(ax - 1.0) * lam + t]
+
+    return traced
+
+
+class TraceSystem:
+    """The trace system's compiled tapes with the two calls monodromy needs (``track``, ``newton``:
+    :func:`homotopy._monodromy_loop` takes it in place of a :class:`homotopy.HomotopySolver`)."""
+
+    def __init__(self, equations: Callable, unknowns: list[str], parameters: list[str]):
+        self.N, self.P = len(unknowns), len(parameters)
+        names = [f"{u}" for u in unknowns] + ["lam"]
+        params = [f"p:{p}" for p in parameters] + [f"v:{p}" for p in parameters] + [f"a:{u}" for u in unknowns] + ["t"]
+        self.tapes = slp.homotopy_tapes(trace_equations(equations, self.N, self.P), names, params)
+        self.native = tape_native.addresses(self.tapes)
+        self.nvars = self.N + 1
+        self.options = TrackerOptions()
+
+    def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
+              options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
+        return tape_kernel.track(self.tapes, q0, q1, x0, inst, options or self.options, native=self.native)
+
+    def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
+        return tape_kernel.newton(self.tapes, q, x, inst, steps, native=self.native)
+
+    def step(self, y: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Size of a Newton step from each point y (K, N + 1) at parameters q, relative to 1 + |y| (inf where
+        it is not finite): a root's is at rounding level."""
+        with np.errstate(all="ignore"):
+            out = np.linalg.norm(self.newton(y, q[None]) - y, axis=1) / (1.0 + np.linalg.norm(y, axis=1))
+        return np.where(np.isfinite(out), out, np.inf)
+
+
+def _affine_residual(traces: np.ndarray, ts: np.ndarray, size: float) -> float:
+    """Relative residual of the affine fit of traces (3, n) at ts = (0, t1, t2)."""
+    fit = traces[0] + (ts[2] / ts[1]) * (traces[1] - traces[0])
+    return float(np.linalg.norm(traces[2] - fit) / size)
+
+
+def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], p: np.ndarray, roots: np.ndarray,
+               other: tuple[np.ndarray, np.ndarray], options: TraceOptions = TraceOptions(),
+               excluded: Callable | None = None, checkpoint: str | None = None,
+               progress: Callable[[str], None] | None = None) -> TraceTest:
+    """Trace test of the roots (K, N) of ``equations(x, q)`` at parameters p (P,).
+
+    other: a second instance (p*, x*) with a known root (generic, complex); excluded: mask(x, q) of points on
+    the locus the roots exclude (:func:`homotopy._excluded`); checkpoint: the witness monodromy's resumable
+    file (:func:`homotopy.monodromy_count`). Returns a :class:`TraceTest`.
+    """
+    t_start = time.perf_counter()
+    p = np.asarray(p, dtype=complex)
+    roots = np.asarray(roots, dtype=complex).reshape(-1, len(unknowns))
+    N, P, K = len(unknowns), len(parameters), len(roots)
+    system = TraceSystem(equations, list(unknowns), list(parameters))
+    rng = np.random.default_rng(options.seed)
+    p_star, x_star = (np.asarray(z, dtype=complex) for z in other)
+    v = p_star - p
+    used = np.zeros(N, dtype=bool)
+    used[list(options.coordinates) if options.coordinates is not None else slice(None)] = True
+    a = (rng.normal(size=N) + 1j * rng.normal(size=N)) * used
+    a = a / (a @ x_star)
+    Q0 = np.concatenate([p, v, a, [0.0]])
+    free = np.ones(len(Q0), dtype=bool)
+    free[-1] = False  # the witness loops keep t = 0: they move p, v and a, never onto the lam = 0 component
+
+    def off_locus(y: np.ndarray) -> np.ndarray:
+        return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
+
+    start = system.newton(np.concatenate([x_star, [1.0]])[None], Q0[None], steps=3)
+    if system.step(start, Q0).max() > hm.START_TOL:
+        raise hm.HomotopyError(f"the second instance's root is not a root (Newton step {system.step(start, Q0).max():.1e})")
+    base = np.column_stack([roots, np.zeros(K)])
+    if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
+        raise hm.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
+    base = system.newton(base, Q0[None], steps=2)
+    loop_options = hm.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall)
+    witnesses = hm.monodromy_count(system, Q0, start, loop_options, options.seconds, checkpoint,
+                                   progress=progress, excluded=off_locus, free=free)
+    W = witnesses.roots
+    paths = witnesses.paths
+    if witnesses.stall < options.stall:  # cut by the time cap: the witnesses are a lower bound, no verdict
+        if progress:
+            progress(f"trace test: inconclusive, witnesses not settled ({len(W)} after {witnesses.loops} loops)")
+        return TraceTest("inconclusive", float("nan"), K, len(W), witnesses.loops, paths,
+                         round(time.perf_counter() - t_start, 1), 0)
+    # the pencil: t = 0 (the sets as they are), t1 and t2 on a circle of radius step (random angles)
+    angles = rng.uniform(0.0, 2.0 * np.pi, size=2)
+    ts = np.array([0.0, *(options.step * np.exp(1j * angles))])
+    S = np.vstack([base, W])
+    M = len(S)
+    targets = np.array([np.concatenate([p, v, a, [t]]) for t in ts[1:]])
+    inst = np.repeat(np.arange(2), M)
+    ends, _ = system.track(Q0[None], targets, np.tile(S, (2, 1)), inst)
+    paths += 2 * M
+    ends = ends.reshape(2, M, -1)
+    failed = np.zeros((2, M), dtype=bool)
+    for b in range(2):
+        failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
+    bi, ki = np.nonzero(failed)
+    if len(bi):  # retrack with tight step control
+        ends[bi, ki], _ = system.track(Q0[None], targets, S[ki], bi, tracker.TIGHT)
+        paths += len(bi)
+        for b in range(2):
+            failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
+    flat = ends.reshape(2 * M, -1)
+    ok = np.all(np.isfinite(flat), axis=1)
+    flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
+    ends = flat.reshape(2, M, -1)
+    n_failed = int(failed.sum())
+    sets = [S, ends[0], ends[1]]
+    sets = [s[:, np.append(used, True)] for s in sets]  # the pencil's coordinates and lam
+    traces = np.array([s.sum(axis=0) for s in sets])
+    size = max(float(np.linalg.norm(s, axis=1).sum()) for s in sets) if not n_failed else 1.0
+    residual = _affine_residual(traces, ts, size) if not n_failed else float("nan")
+    if n_failed:
+        status = "inconclusive"
+    else:
+        status = "passed" if residual <= PASS_TOL else "failed"
+    if progress:
+        progress(f"trace test: {status}, residual {residual:.1e}, {K} roots + {len(W)} witnesses, {paths} paths")
+    return TraceTest(status, residual, K, len(W), witnesses.loops, paths,
+                     round(time.perf_counter() - t_start, 1), n_failed)
+
+
+def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.ndarray, np.ndarray],
+                      options: TraceOptions = TraceOptions(), checkpoint: str | None = None,
+                      progress: Callable[[str], None] | None = None) -> TraceTest:
+    """:func:`trace_test` of a formulation's :class:`analysis.formulations.parametric.ParametricSystem` (its
+    equations written from the formulas, :func:`slp.system_equations`; its non-vanishing conditions
+    excluded)."""
+    equations, unknowns, parameters = slp.system_equations(system.name)
+    if list(unknowns) != list(system.unknowns) or list(parameters) != list(system.parameters):
+        raise ValueError(f"{system.name}: the program's unknowns or parameters differ from the system's")
+    return trace_test(equations, unknowns, parameters, p, roots, other, options, hm._excluded(system, p),
+                      checkpoint, progress)
+
+
+def load_record(path: str) -> dict | None:
+    """A stored trace-test record (:meth:`TraceTest.record` plus its inputs' key), or None."""
+    if not os.path.exists(path):
+        return None
+    with open(path, encoding="utf-8") as fh:
+        return json.load(fh)

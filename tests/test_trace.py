@@ -1,0 +1,53 @@
+"""The trace test (solvers.methods.trace) on certified cells: it passes on the complete root set and fails
+when one root (or one witness) is missing."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis.formulations.parametric import from_formulation
+from analysis.formulations.tdoa import Formulation
+from solvers.generate import SOLVERS, complex_instance
+from solvers.methods import homotopy as hm
+from solvers.methods import trace
+
+
+def _roots(key: str, count: int):
+    """The system of a committed cell, a seeded complex start network and all its roots by monodromy (the
+    count certified over GF(p): tables/toa.*), and a second seeded network with its known root."""
+    label = SOLVERS[key]
+    config = Formulation.parse(label).config
+    system = from_formulation(label, saturate_det_h=True)
+    F, x0 = complex_instance(config.m, config.n, np.random.default_rng(5), config.dim, config.model)
+    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    found = hm.monodromy_count(solver, F.ravel(), x0, hm.HomotopyOptions(seed=3, stall_loops=8), 1e9,
+                               excluded=hm._excluded(system, F.ravel()))
+    assert len(found.roots) == count
+    F2, x2 = complex_instance(config.m, config.n, np.random.default_rng(6), config.dim, config.model)
+    return system, F.ravel(), found.roots, (F2.ravel(), x2)
+
+
+@pytest.mark.parametrize("key, count, coordinates", [("3r3stoa", 8, None),
+                                                     pytest.param("6r4s3dtoa", 38, (6, 7, 8), marks=pytest.mark.slow)])
+def test_trace_test_passes_on_all_roots_and_fails_without_one(key, count, coordinates):
+    """2D TOA 3r/3s (8 roots) with the pencil on every unknown, 3D TOA 6r/4s (38, 35 s: slow) on b: the
+    complete set's trace is affine to rounding, the set without a root (any of three) is off by orders of
+    magnitude."""
+    system, q0, roots, other = _roots(key, count)
+    options = trace.TraceOptions(seed=1, coordinates=coordinates)
+    full = trace.trace_test_system(system, q0, roots, other, options)
+    assert full.status == "passed" and full.residual < trace.PASS_TOL and full.failed_paths == 0, full
+    assert full.roots == count and full.witnesses > 0
+    for k in (0, count // 2, count - 1):
+        short = trace.trace_test_system(system, q0, np.delete(roots, k, axis=0), other, options)
+        assert short.status == "failed" and short.residual > 1e4 * trace.PASS_TOL, (k, short)
+
+
+def test_trace_test_is_inconclusive_on_a_cut_witness_set_and_checks_its_inputs():
+    """A witness monodromy cut short (one loop, not settled) gives no verdict, and points that are not roots
+    are refused."""
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    cut = trace.trace_test_system(system, q0, roots, other, trace.TraceOptions(seed=1, max_loops=1))
+    assert cut.status == "inconclusive" and cut.witness_loops == 1
+    with pytest.raises(hm.HomotopyError, match="not roots"):
+        trace.trace_test_system(system, q0, roots + 0.1, other)
