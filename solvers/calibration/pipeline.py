@@ -47,6 +47,11 @@ def _data_scale(F, mask) -> float:
     return float(values.max()) if values.size and values.max() > 0 else 1.0
 
 
+def _floor(F) -> float:
+    """The floor of the noise scales when comparing whole results: 1e-9 of the largest measured |F|."""
+    return 1e-9 * _data_scale(F, np.isfinite(F))
+
+
 def _check_input(F) -> np.ndarray:
     try:
         arr = np.array(F, dtype=float)
@@ -102,7 +107,7 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
         other = _calibrate_once(F, sigma, seed2, opts, t0, dim)
         if other.status != "failed" and _differs(result, other):
-            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, 1e-9 * _data_scale(F, np.isfinite(F)))
+            cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, _floor(F))
             unusable = ("failed", "unconverged", "inconsistent")
             key_r = (result.status in unusable, cost_r, -result.inliers.sum())
             key_o = (other.status in unusable, cost_o, -other.inliers.sum())
@@ -168,7 +173,7 @@ def _restart_from(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result
     the right basin (16r/10s at sigma 1 cm with 5 % gross errors: 6 of 193 hypotheses in the basin,
     every one scored as explaining < 1 % of the entries). The sigma-given search then runs again with
     `est` offered first; its answer is kept if it explains the data better than the first one."""
-    floor = 1e-9 * _data_scale(F, np.isfinite(F))
+    floor = _floor(F)
     cost_r, cost_e, scale = _truncated_costs(result, est, sigma, opts, floor)
     if not cost_e < cost_r - opts.ambiguity_chi2 * scale**2:
         return result

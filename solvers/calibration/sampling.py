@@ -397,11 +397,12 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     search = _Search()
     best: _Model | None = None
 
-    def offer(models) -> bool:
-        """Keep the best model (LO on each new best, up to the budget); True when the best changed."""
+    def offer(models, sample: bool = True) -> bool:
+        """Keep the best model (LO on each new best, up to the budget); True when the best changed.
+        sample: the models come from a sample (one that gave any counts towards confirming the best)."""
         nonlocal best
         changed = False
-        search.productive += bool(models)
+        search.productive += bool(models) and sample
         for model in models:
             if best is not None and not _better(model, best, floor):
                 if not model.refined and np.isfinite(model.score):
@@ -455,7 +456,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     if hint is not None:
         R0, S0, O0 = (np.array(a, dtype=float) for a in hint)
         score, ratio, _ = _score(_residual_matrix(F, R0, S0, O0), mask, thr, floor, dim=dim)
-        offer([_Model(R0, S0, O0, score, ratio)])
+        offer([_Model(R0, S0, O0, score, ratio)], sample=False)
     while (not confirmed() and search.samples < (max(needed, opts.min_samples) if needed > 0 else floor_samples)
            and search.samples < opts.max_samples):
         drawn = None
