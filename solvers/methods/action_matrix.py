@@ -120,33 +120,27 @@ class Composer:
 
 
 def _kernel_mod(A: list[list[int]], p: int) -> tuple[list[int], list[list[int]]]:
-    """(particular solution, kernel basis) of A [1; x] = 0 over GF(p): A (l x (n + 1)), column 0 the constants."""
-    rows = [[v % p for v in r] for r in A]
-    n = len(rows[0]) - 1
-    pivots, r = [], 0
-    for c in range(1, n + 1):
-        piv = next((i for i in range(r, len(rows)) if rows[i][c]), None)
-        if piv is None:
-            continue
-        rows[r], rows[piv] = rows[piv], rows[r]
-        inv = pow(rows[r][c], -1, p)
-        rows[r] = [v * inv % p for v in rows[r]]
-        for i in range(len(rows)):
-            if i != r and rows[i][c]:
-                f = rows[i][c]
-                rows[i] = [(a - f * b) % p for a, b in zip(rows[i], rows[r])]
-        pivots.append(c)
-        r += 1
-    free = [c for c in range(1, n + 1) if c not in pivots]
+    """(particular solution, kernel basis) of A [1; x] = 0 over GF(p): A (l x (n + 1)), column 0 the constants.
+
+    The reduced row echelon form is FLINT's (``nmod_mat.rref``), of [A_x | A_1] with the constants last so
+    that they never take a pivot of a consistent system."""
+    import flint
+
+    n = len(A[0]) - 1
+    M = flint.nmod_mat(len(A), n + 1, [int(v) % p for r in A for v in (*r[1:], r[0])], p)
+    R, rank = M.rref()
+    pivots = [next(c for c in range(n + 1) if int(R[i, c])) for i in range(rank)]
+    if n in pivots:
+        raise ValueError("the linear equations of the instance are inconsistent over GF(p)")
     x0 = [0] * n
     for i, c in enumerate(pivots):
-        x0[c - 1] = -rows[i][0] % p
+        x0[c] = -int(R[i, n]) % p
     basis = []
-    for f in free:
+    for f in (c for c in range(n) if c not in pivots):
         v = [0] * n
-        v[f - 1] = 1
+        v[f] = 1
         for i, c in enumerate(pivots):
-            v[c - 1] = -rows[i][f] % p
+            v[c] = -int(R[i, f]) % p
         basis.append(v)
     return x0, basis
 
