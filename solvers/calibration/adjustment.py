@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -91,9 +92,31 @@ class Problem:
     slots: np.ndarray  # (k, 2 dim + 1)
     dim: int = 2
 
-    @property
+    @cached_property
     def n_params(self) -> int:
         return n_unknowns(len(self.rows), len(self.cols), self.dim)
+
+    @cached_property
+    def gather(self) -> np.ndarray:
+        """Indices into [x, 0] giving [receivers (ma dim), transmitters (na dim), offsets (na)]: unpack
+        by one take (the fixed gauge coordinates read the appended 0)."""
+        ma, na, dim = len(self.rows), len(self.cols), self.dim
+        u = self.n_params
+        rec = np.full(ma * dim, u)
+        free = _free_receiver_coordinates(ma, dim)
+        rec[free] = np.arange(len(free))
+        return np.concatenate([rec, np.arange(len(free), u)])
+
+    @cached_property
+    def normal_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """(flat (n_params + 1)^2 index of each v_a v_b product, flat slots): normal_equations' bincounts."""
+        size = self.n_params + 1
+        return (self.slots[:, :, None] * size + self.slots[:, None, :]).ravel(), self.slots.ravel()
+
+    @cached_property
+    def measured(self) -> np.ndarray:
+        """F at the problem's entries."""
+        return self.F[self.ii, self.jj]
 
     def slots_of(self, receivers: bool) -> np.ndarray:
         """Parameter columns of each local receiver's coordinates (ma, dim), or each transmitter's
@@ -123,7 +146,12 @@ def make_problem(F: np.ndarray, use: np.ndarray, rows: np.ndarray, cols: np.ndar
 
 
 def unpack(x: np.ndarray, p: Problem):
-    return _unpack(x, len(p.rows), len(p.cols), p.dim)  # the parameter layout of solvers.refine
+    """(R, S, O) of the problem's placed nodes (local order) from x: the parameter layout of solvers.refine."""
+    if np.shape(x) != (p.n_params,):
+        return _unpack(x, len(p.rows), len(p.cols), p.dim)  # (raises with the layout's message)
+    ma, na, dim = len(p.rows), len(p.cols), p.dim
+    full = np.append(np.asarray(x, dtype=float), 0.0)[p.gather]
+    return full[: ma * dim].reshape(ma, dim), full[ma * dim: (ma + na) * dim].reshape(na, dim), full[(ma + na) * dim:]
 
 
 def entry_residuals(x: np.ndarray, p: Problem):
@@ -131,13 +159,18 @@ def entry_residuals(x: np.ndarray, p: Problem):
     R, S, O = unpack(x, p)
     diff = R[p.ii] - S[p.jj]
     dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-    return p.F[p.ii, p.jj] - O[p.jj] - dist, diff, dist
+    return p.measured - O[p.jj] - dist, diff, dist
 
 
 def jacobian_values(diff: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """(k, 2 dim + 1) derivatives of e_k by (r, s, o) of its receiver and transmitter."""
     u = diff / np.maximum(dist, 1e-300)[:, None]
-    return np.column_stack([-u, u, -np.ones(len(dist))])
+    dim = diff.shape[1]
+    v = np.empty((len(dist), 2 * dim + 1))
+    np.negative(u, out=v[:, :dim])
+    v[:, dim: 2 * dim] = u
+    v[:, 2 * dim] = -1.0
+    return v
 
 
 def dense_jacobian(p: Problem, diff: np.ndarray, dist: np.ndarray) -> np.ndarray:
@@ -151,9 +184,9 @@ def normal_equations(p: Problem, diff, dist, w, e) -> tuple[np.ndarray, np.ndarr
     """J^T W J and J^T W e, accumulated from the 2 dim + 1 non-zeros per row (no sparse matrices)."""
     v = jacobian_values(diff, dist)
     size = p.n_params + 1
-    idx = (p.slots[:, :, None] * size + p.slots[:, None, :]).ravel()
+    idx, flat = p.normal_index
     A = np.bincount(idx, (w[:, None, None] * v[:, :, None] * v[:, None, :]).ravel(), minlength=size * size)
-    g = np.bincount(p.slots.ravel(), ((w * e)[:, None] * v).ravel(), minlength=size)
+    g = np.bincount(flat, ((w * e)[:, None] * v).ravel(), minlength=size)
     return A.reshape(size, size)[:-1, :-1], g[:-1]
 
 
@@ -184,6 +217,19 @@ def loss_rho(z: np.ndarray, loss: Loss) -> np.ndarray:
     return z
 
 
+def _cholesky_solve(M: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """M^-1 b for a symmetric positive definite M (overwritten) by LAPACK's potrf/potrs (what
+    scipy.linalg.cho_factor/cho_solve call, without their checks: this runs thousands of times on
+    matrices of 20-100 unknowns), or None when M is not positive definite."""
+    from scipy.linalg import lapack
+
+    c, info = lapack.dpotrf(M, lower=0, clean=0, overwrite_a=1)
+    if info != 0:
+        return None
+    x, info = lapack.dpotrs(c, b, lower=0)
+    return x if info == 0 else None
+
+
 def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max_iter: int):
     """Iteratively reweighted Levenberg-Marquardt for sum rho((e/scale)^2); returns (x, converged, its).
 
@@ -193,7 +239,6 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
     200 x 150 network) and factors it by LSMR each iteration; the normal matrix here is accumulated
     from 5 non-zeros per row and factored densely (847^2), which is what these problems need.
     """
-    import scipy.linalg
 
     tol = 1e-12 if loss == "linear" else 1e-8
     xtol = 1e-15 if loss == "linear" else 1e-8  # least squares: iterate to rounding (noiseless data)
@@ -210,12 +255,13 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
         A, g = normal_equations(p, diff, dist, loss_weights((e / scale) ** 2, loss), e)
         diag = np.diag(A).copy()
         floor = 1e-12 * max(diag.max(initial=0.0), 1e-300)
+        damping = np.maximum(diag, floor)
         improved = False
         while lam < 1e12:
-            M = A + lam * np.diag(np.maximum(diag, floor))
-            try:
-                step = scipy.linalg.cho_solve(scipy.linalg.cho_factor(M, check_finite=False), -g, check_finite=False)
-            except (np.linalg.LinAlgError, ValueError):
+            M = A.copy()
+            M.flat[:: len(diag) + 1] += lam * damping
+            step = _cholesky_solve(M, -g)
+            if step is None:
                 lam *= 10.0
                 continue
             x_new = x + step
