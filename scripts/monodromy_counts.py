@@ -12,7 +12,9 @@ the direct roots are counted one per orbit of the gauge frame's 8 reflections (g
 counts the same networks.
 
 A count is reported as "settled" (stopped growing for --stall loops; two seeds should agree) or as a
-lower bound ("not settled": at least N after L loops). A settled count then gets the trace test
+lower bound ("not settled": at least N after L loops). With two settled seeds, the second seed's roots are
+carried to the first seed's instance and pooled with its roots (column union, cached in <cell>-union.json):
+equal counts are then equal sets, and a pool larger than either count shows a "settled" count was short. A settled count then gets the trace test
 (solvers.methods.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
 for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witnesses.json, the outcome kept
 in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
@@ -55,9 +57,9 @@ TABLES = os.path.join(ROOT, "tables")
 #: counted, so its counts are networks up to the Euclidean group, like the compaction counts.
 CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "7r5s": "7r5s-tdoa3d-direct:all",
          "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
-#: Seeds (start networks) per cell by default: two for 10r/4s; one for the direct cells (their counts are
-#: lower bounds that a second seed could only repeat with the same machine time).
-SEEDS = {"10r4s": (0, 1), "7r5s": (0,), "6r6s": (0,), "5r9s": (0,)}
+#: Seeds (start networks) per cell by default: two for every settled cell (the second seed's count from
+#: another start network must agree); one for 5r/9s, whose first seed has not settled yet.
+SEEDS = {"10r4s": (0, 1), "7r5s": (0, 1), "6r6s": (0, 1), "5r9s": (0,)}
 #: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
 #: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
 #: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
@@ -65,7 +67,7 @@ SEEDS = {"10r4s": (0, 1), "7r5s": (0,), "6r6s": (0,), "5r9s": (0,)}
 #: unknowns have no symmetry (group order 1), so no two roots share their b.
 TRACE_COORDINATES = {"10r4s": (6, 7, 8)}
 COLUMNS = ["cell", "formulation", "unknowns", "seed", "roots", "status", "loops", "paths", "loops_without_new",
-           "group_order", "trace_test", "trace_residual", "witnesses", "trace_paths"]
+           "group_order", "trace_test", "trace_residual", "witnesses", "trace_paths", "union"]
 
 
 def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_stall: int = 3,
@@ -102,6 +104,54 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
     return row, result.seconds
 
 
+def union(cell: str, seeds: list[int]) -> dict | None:
+    """The roots of every other seed's checkpoint carried to the first seed's parameters by one parameter
+    homotopy each, and pooled with the first seed's roots (one per orbit of the gauge reflections for the
+    direct cells): {"union": size of the pool, "new": roots no checkpoint but one had, "lost": paths that
+    failed}. Equal counts from two seeds can still be two different sets; a pool larger than every seed's
+    count shows that a "settled" count was incomplete (6r/6s: 3919 and 3920, pool 3920). Kept in
+    <cell>-union.json for the checkpoints' root counts; None when a checkpoint is missing."""
+    path = cache_dir("monodromy")
+    files = [path / f"{cell}-seed{seed}.json" for seed in seeds]
+    if len(seeds) < 2 or not all(f.exists() for f in files):
+        return None
+    saved = [json.loads(f.read_text(encoding="utf-8")) for f in files]
+    key = {"seeds": list(seeds), "roots": [len(d["roots"]) for d in saved]}
+    record = path / f"{cell}-union.json"
+    if record.exists():
+        stored = json.loads(record.read_text(encoding="utf-8"))
+        if stored.get("key") == key:
+            return stored
+    label = CELLS[cell]
+    config = Formulation.parse(label).config
+    direct = config.parametrization == "direct"
+    system = from_formulation(label, saturate_det_h=not direct)
+    images = np.asarray(gauge_reflections(system.unknowns)) if direct else np.ones((1, len(system.unknowns)))
+    q0, pool = hm._complex_array(saved[0]["q0"]), hm._complex_array(saved[0]["roots"])
+    _, x0 = complex_instance(config.m, config.n, np.random.default_rng(seeds[0]), config.dim, config.model,
+                             config.parametrization)
+    solver, _ = hm.start_solver(system, q0, x0, seeds[0])
+    excluded = hm._excluded(system, q0)
+    new = lost = 0
+    for d in saved[1:]:
+        xs, _ = solver.track(hm._complex_array(d["q0"])[None], q0[None], hm._complex_array(d["roots"]))
+        finite = np.all(np.isfinite(xs), axis=1)
+        lost += int((~finite).sum())
+        xs = solver.newton(xs[finite], q0[None], steps=3)
+        step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
+        keep = step < hm.START_TOL
+        if excluded is not None:
+            keep &= ~excluded(xs)
+        lost += int((~keep).sum())
+        for x in xs[keep]:
+            if min(np.min(np.linalg.norm(pool - g * x, axis=1)) for g in images) > 1e-6 * (1.0 + np.linalg.norm(x)):
+                pool = np.vstack([pool, x])
+                new += 1
+    out = {"union": len(pool), "new": new, "lost": lost, "key": key}
+    record.write_text(json.dumps(out), encoding="utf-8")
+    return out
+
+
 def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, seed: int, stall: int,
                seconds: float) -> dict:
     """The trace test's record for a settled count, read from <stem>-trace.json when it was run on the same
@@ -135,14 +185,14 @@ def markdown(rows: list[dict]) -> str:
              "witness set was not settled (its size then a lower bound, no residual) or a path was lost; group order "
              "8: direct parametrization, roots counted one per orbit of the gauge frame's reflections)", "",
              "| cell | formulation | unknowns | group order | seed | roots | status | loops | paths tracked "
-             "| loops without a new root | trace test | residual | witnesses | trace paths |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| loops without a new root | trace test | residual | witnesses | trace paths | union of the seeds |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         bound = "" if r["status"] == "settled" else "at least "
         lines.append(f"| {r['cell']} | {r['formulation']} | {r['unknowns']} | {r['group_order']} | {r['seed']} | "
                      f"{bound}{r['roots']} | "
                      f"{r['status']} | {r['loops']} | {r['paths']} | {r['loops_without_new']} | {r['trace_test']} | "
-                     f"{r['trace_residual']} | {r['witnesses']} | {r['trace_paths']} |")
+                     f"{r['trace_residual']} | {r['witnesses']} | {r['trace_paths']} | {r.get('union', '')} |")
     return "\n".join(lines) + "\n"
 
 
@@ -160,11 +210,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rows = []
     for cell in args.cells:
-        for seed in args.seeds if args.seeds is not None else SEEDS[cell]:
+        seeds = args.seeds if args.seeds is not None else SEEDS[cell]
+        cell_rows = []
+        for seed in seeds:
             row, seconds = count(cell, seed, args.loops, args.stall, args.seconds, args.trace_stall, args.trace_seconds)
-            rows.append(row)
+            cell_rows.append(row)
             print(f"{cell} seed {seed}: {row['roots']} roots, {row['status']}, {row['loops']} loops, "
                   f"{row['paths']} paths, {seconds:.0f} s", flush=True)
+        pooled = union(cell, list(seeds)) if all(r["status"] == "settled" for r in cell_rows) else None
+        for row in cell_rows:
+            row["union"] = "" if pooled is None else (f"{pooled['union']}" +
+                                                      (f" ({pooled['lost']} paths lost)" if pooled["lost"] else ""))
+        if pooled is not None:
+            print(f"{cell}: union of seeds {list(seeds)}: {pooled['union']} ({pooled['new']} new, {pooled['lost']} "
+                  "paths lost)", flush=True)
+        rows += cell_rows
     with open(os.path.join(TABLES, "monodromy3d.csv"), "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()

@@ -53,8 +53,10 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
     """The counts of tables/monodromy3d.csv as grid cells (per cell: its seeds' rows) and the note naming them.
 
     "N (monodromy + trace test, not certified)": every seed settled at N and a trace test passed;
-    "N (monodromy, k seeds, not certified)": settled, same N on every seed, no trace test passed;
-    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree (N: the largest).
+    "N (monodromy, k seeds, not certified)": settled, same N on every seed (and their root sets, carried to one
+    instance, pool to N: column union), no trace test passed;
+    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree (N: the largest count or the
+    pool of the seeds' roots, whichever is larger).
     """
     path = os.path.join(ROOT, "tables", "monodromy3d.csv")
     if not os.path.exists(path):
@@ -68,9 +70,10 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
     for cell, seeds in by_cell.items():
         config = Formulation.parse(seeds[0]["formulation"]).config
         counts = {int(r["roots"]) for r in seeds}
-        settled = all(r["status"] == "settled" for r in seeds) and len(counts) == 1
+        pooled = max((int(r["union"].split()[0]) for r in seeds if r.get("union")), default=0)
+        settled = all(r["status"] == "settled" for r in seeds) and len(counts) == 1 and pooled <= max(counts)
         if not settled:
-            text = f">={max(counts)} (monodromy, lower bound)"
+            text = f">={max(max(counts), pooled)} (monodromy, lower bound)"
         elif any(r.get("trace_test") == "passed" for r in seeds):
             text = f"{counts.pop()} (monodromy + trace test, not certified)"
         else:

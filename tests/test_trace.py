@@ -51,3 +51,30 @@ def test_trace_test_is_inconclusive_on_a_cut_witness_set_and_checks_its_inputs()
     assert cut.status == "inconclusive" and cut.witness_loops == 1
     with pytest.raises(hm.HomotopyError, match="not roots"):
         trace.trace_test_system(system, q0, roots + 0.1, other)
+
+
+def test_union_of_two_seeds_finds_a_root_one_checkpoint_lacks(tmp_path, monkeypatch):
+    """scripts/monodromy_counts.union: the second seed's roots carried to the first seed's instance pool to
+    the full count (2D TOA 3r/3s, 8 roots); with a root deleted from the first checkpoint, the pool still has
+    8 and counts the one only the second seed had (6r/6s 3D: 3919 and 3920 settled, pool 3920)."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("monodromy_counts",
+                                                  Path(__file__).resolve().parents[1] / "scripts" / "monodromy_counts.py")
+    counts = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(counts)
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path))
+    monkeypatch.setattr(counts, "CELLS", {"t": SOLVERS["3r3stoa"]})
+    for seed in (0, 1):
+        row, _ = counts.count("t", seed, loops=30, stall=6, seconds=1e9, trace_seconds=0)
+        assert row["roots"] == 8 and row["status"] == "settled"
+    pooled = counts.union("t", [0, 1])
+    assert (pooled["union"], pooled["new"], pooled["lost"]) == (8, 0, 0)
+    first = tmp_path / "monodromy" / "t-seed0.json"
+    saved = json.loads(first.read_text())
+    saved["roots"] = saved["roots"][1:]
+    first.write_text(json.dumps(saved))
+    pooled = counts.union("t", [0, 1])
+    assert (pooled["union"], pooled["new"]) == (8, 1)
