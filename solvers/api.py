@@ -79,8 +79,11 @@ MINIMAL = ((6, 3), (4, 5))
 
 #: The committed solvers of the other dimensions and models, (dim, model) -> labels by cost (root count):
 #: the first whose configuration fits inside the network is used. TOA: the minimal cells (2D 3r/3s,
-#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root).
-KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"), (3, "tdoa"): ("9r5s3d",)}
+#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root), then the
+#: minimal cells 7r/5s and 6r/6s (2321 and 3919 paths, one per orbit of the gauge reflections; direct
+#: parametrization, counts by monodromy, not certified).
+KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"),
+              (3, "tdoa"): ("9r5s3d",)}
 
 MODELS = ("tdoa", "toa")
 
@@ -222,6 +225,8 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
         from analysis.formulations.positions import positions_system
 
         system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
+    elif "-direct" in module.SYSTEM:
+        return _direct_calibrations(F, module.UNKNOWNS, roots)
     elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets, HBO_UNKNOWNS,
                                         HBO_UNKNOWNS_3D):
         raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b[, o]) nor a positions formulation's")
@@ -234,6 +239,42 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
                    else recover(F, x[:h], x[h:h + k], np.zeros(n) if toa else x[h + k:]))
             if cal is not None:
                 out.append(cal)
+    return sorted(out, key=lambda c: c.residual)
+
+
+_DIRECT_NAME = re.compile(r"([rs])(\d+)([xyz])|o(\d+)")
+
+
+def _direct_calibrations(F: np.ndarray, unknowns, roots: np.ndarray, tol: float = 1e-6) -> list[Calibration]:
+    """:func:`calibrations` of a direct-parametrization solver (unknowns r<i><axis> of the receivers in the gauge
+    frame, s<j><axis>, o<j>; analysis.formulations.kd): the real roots whose distances f_ij - o_j are all
+    non-negative (the equations square them), moved into the gauge by a rotation (one root per orbit of the
+    frame's reflections is enough: the others give the same network or its mirror image)."""
+    m, n = F.shape
+    fields = [_DIRECT_NAME.fullmatch(u) for u in unknowns]
+    if not all(fields):
+        raise ValueError(f"unknowns {tuple(unknowns)} are not a direct parametrization's")
+    dim = 1 + max("xyz".index(f.group(3)) for f in fields if f.group(3))
+    out = []
+    scale = float(np.sqrt(np.mean(F * F))) or 1.0
+    for x in roots[np.all(np.isfinite(roots), axis=1)]:
+        if np.max(np.abs(x.imag)) > tol * (1.0 + np.max(np.abs(x))):
+            continue
+        rec, tra, off = np.zeros((m, dim)), np.zeros((n, dim)), np.zeros(n)
+        for f, v in zip(fields, x.real):
+            if f.group(4):
+                off[int(f.group(4)) - 1] = v
+            else:
+                (rec if f.group(1) == "r" else tra)[int(f.group(2)) - 1, "xyz".index(f.group(3))] = v
+        if np.min(F - off[None, :]) < -tol * scale:  # a negative distance fits the squared equations only
+            continue
+        gauged = to_gauge(rec, tra)
+        if gauged is None:
+            continue
+        rec, tra = gauged
+        res = rms_residual(F, rec, tra, off)
+        if np.isfinite(res):
+            out.append(Calibration(rec, tra, off, res))
     return sorted(out, key=lambda c: c.residual)
 
 
@@ -343,7 +384,7 @@ def _kd_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibratio
             cal = _extend_kd(F, cal, model == "toa")
             if cal is not None:
                 cands.append(cal)
-    return cands, len(roots) == module.DEGREE and not unresolved(roots).any()
+    return cands, len(roots) == getattr(module, "PATHS", module.DEGREE) and not unresolved(roots).any()
 
 
 def _transposed(F: np.ndarray, cal: Calibration) -> Calibration | None:
