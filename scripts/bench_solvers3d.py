@@ -14,7 +14,7 @@ rounds of single calls, one thread) and of ``solve_batch`` per network. The nois
 percentile of the position and offset errors of the calibration, before and after Levenberg-Marquardt on
 all measurements (solvers.refine, as the 2D Table 4 rows), and the number of networks without one.
 
-The minimal cells' solvers built on numerical evidence (spec "evidence": 7r/5s, 6r/6s; thousands of paths, 20 s
+The minimal cells' solvers built on numerical evidence (spec "evidence": 7r/5s; thousands of paths, 15-35 s
 and more a solve) run on fewer room networks (MINIMAL_TRIALS, or --minimal-trials), one ``solve`` each, and each
 network's figures are cached ($TDOA_WORKBENCH_CACHE/bench_solvers3d/<solver>-<spec sha>/seed<k>.json) so that a
 rerun or an interrupted run does not solve it again. Their root error is the distance to the nearest image of the
@@ -26,7 +26,7 @@ microseconds per path, the ratio to the eig) go to the untracked tables/solvers3
 not into the committed table.
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers3d.py [--trials 1000] [--noise-trials 200]
-       [--solvers 9r5s3d 7r5s3d 6r6s3d] [--minimal-trials N]
+       [--solvers 9r5s3d 7r5s3d] [--minimal-trials N] [--fill-only [--reverse | --first-seed K]]
 (--solvers: rerun these only; the other solvers' rows are kept from the committed CSVs.)
 
 The table (solvers3d.md) is written from the two CSVs alone (tests/test_solver3d.py checks it is current,
@@ -43,6 +43,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import csv  # noqa: E402
 import datetime  # noqa: E402
+import hashlib  # noqa: E402
 import importlib  # noqa: E402
 import json  # noqa: E402
 import subprocess  # noqa: E402
@@ -59,6 +60,7 @@ from solvers import generate as gen  # noqa: E402
 from solvers.api import calibrations  # noqa: E402
 from solvers.metrics import offset_error, position_error  # noqa: E402
 from solvers.refine import refine  # noqa: E402
+from solvers.methods.homotopy import unresolved  # noqa: E402
 from solvers.recovery import to_gauge  # noqa: E402
 from solvers.synthetic import random_network, room_network, true_root  # noqa: E402
 
@@ -78,7 +80,7 @@ COLUMNS = ["solver", "formulation", "method", "roots", "certified_primes", "size
            "offset_median_log10_err", "offset_max_log10_err", "residual_median_log10", "mean_real",
            "single_ms", "batch_us_per_network", "spec_sha256", "found"]
 #: Room networks per solver built on numerical evidence (each solve tracks thousands of paths; CPU budget).
-MINIMAL_TRIALS = {"7r5s3d": 100, "6r6s3d": 20}
+MINIMAL_TRIALS = {"7r5s3d": 100}
 #: Every EIG_EVERY-th network of those also times a complex eig of the paths' size (seeded random matrix).
 EIG_EVERY = 10
 NOISE_COLUMNS = ["solver", "network", "sigma_m", "trials", "position_median_log10_err", "position_p90_log10_err",
@@ -195,7 +197,9 @@ def _network_record(module, spec: dict, seed: int, eig: bool) -> dict:
     x = np.where(finite[:, None], roots, 0)
     real = finite & (np.max(np.abs(x.imag), axis=1) <= REAL_TOL * np.maximum(np.max(np.abs(x), axis=1), 1e-300))
     record = {"seed": seed, "root_err": err if np.isfinite(err) else None, "finite": int(finite.sum()),
-              "real": int(real.sum()), "calibrations": len(cals), "solve_s": solve_s}
+              "real": int(real.sum()), "calibrations": len(cals), "solve_s": solve_s,
+              "duplicates": int(unresolved(roots).sum() - (~finite).sum()),
+              "orbit_jumps": int(unresolved(roots, signs).sum() - (~finite).sum())}
     if cals:
         errors = [position_error(c, net) for c in cals]
         best = cals[int(np.argmin(errors))]
@@ -209,23 +213,39 @@ def _network_record(module, spec: dict, seed: int, eig: bool) -> dict:
     return record
 
 
-def bench_minimal(label: str, trials: int, fill_only: bool = False,
-                  reverse: bool = False) -> tuple[dict, list[int], dict] | None:
+#: The homotopy runtime's sources: a cached network record is valid for one spec and one version of these.
+KERNELS = ("solvers/methods/homotopy.py", "solvers/methods/tracker.py", "solvers/methods/tape_kernel.py",
+           "solvers/methods/tape_native.py", "solvers/methods/slp.py", "solvers/api.py")
+
+
+def _kernel_sha() -> str:
+    digest = hashlib.sha256()
+    for name in KERNELS:
+        with open(os.path.join(ROOT, name), "rb") as fh:
+            digest.update(fh.read())
+    return digest.hexdigest()[:12]
+
+
+def bench_minimal(label: str, trials: int, fill_only: bool = False, reverse: bool = False,
+                  first: int = 0, cached_only: bool = False) -> tuple[dict, list[int], dict] | None:
     """The row of a minimal-cell solver built on numerical evidence (room networks, seeds 0..trials-1, cached per
     network), the seeds of the failed networks and its timing record. ``fill_only``: solve the networks not
     cached yet (``reverse``: from the last seed down, so that a second process fills the cache from the other
-    end) and return None."""
+    end; ``first``: from this seed up, a third process) and return None. ``cached_only``: the row of the cached
+    networks among seeds 0..trials-1 alone (its "trials" is their number; the seeds go to the meta file)."""
     module = module_for(label)
     with open(os.path.join(gen.GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = json.load(fh)
-    folder = cache_dir("bench_solvers3d") / f"{label}-{module.SPEC_SHA256[:12]}"
+    folder = cache_dir("bench_solvers3d") / f"{label}-{module.SPEC_SHA256[:12]}-{_kernel_sha()}"
     folder.mkdir(parents=True, exist_ok=True)
     records = []
-    for seed in sorted(range(trials), reverse=reverse):
+    for seed in sorted(range(first if fill_only else 0, trials), reverse=reverse):
         path = folder / f"seed{seed}.json"
         if path.exists():
             with open(path, encoding="utf-8") as fh:
                 records.append(json.load(fh))
+            continue
+        if cached_only:
             continue
         record = _network_record(module, spec, seed, seed % EIG_EVERY == 0)
         with open(str(path) + ".tmp", "w", encoding="utf-8") as fh:
@@ -242,6 +262,7 @@ def bench_minimal(label: str, trials: int, fill_only: bool = False,
     found = [r.get("position_err", np.inf) <= FAIL_TOL for r in records]
     failed = [r["seed"] for r, f, e in zip(records, found, err) if not f or e > FAIL_TOL]
     have = [r for r in records if "position_err" in r]
+    trials = len(records)
     row = {
         "solver": label, "formulation": module.SYSTEM, "method": module.METHOD, "roots": module.DEGREE,
         "certified_primes": "monodromy", "size": str(module.PATHS), "network": "room", "trials": trials,
@@ -264,6 +285,10 @@ def bench_minimal(label: str, trials: int, fill_only: bool = False,
               "eig_ms_median": round(1e3 * float(np.median([e for _, e in paired])), 1) if paired else None,
               "solve_over_eig_median": round(float(np.median([s / e for s, e in paired])), 2) if paired else None,
               "solve_over_eig_max": round(float(np.max([s / e for s, e in paired])), 2) if paired else None,
+              "seeds": [r["seed"] for r in records],
+              "orbit_jump_endpoints_mean": round(float(np.mean([r["orbit_jumps"] for r in records])), 2),
+              "orbit_jump_endpoints_max": int(max(r["orbit_jumps"] for r in records)),
+              "calibrations_mean": round(float(np.mean([r["calibrations"] for r in records])), 2),
               "note": "solve and eig of the same networks, one thread, interleaved; a network solved in an earlier "
                       "run keeps that run's times (cache)"}
     return row, failed, timing
@@ -355,10 +380,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fill-only", action="store_true", help="minimal-cell solvers: solve the networks not cached "
                         "yet and stop (no table); --reverse from the last seed down (a second process)")
     parser.add_argument("--reverse", action="store_true", help="with --fill-only: from the last seed down")
+    parser.add_argument("--first-seed", type=int, default=0, help="with --fill-only: from this seed up")
+    parser.add_argument("--cached-only", action="store_true", help="minimal-cell solvers: the row of the networks "
+                        "already cached (no solve; their seeds go to the meta file)")
     args = parser.parse_args(argv)
     if args.fill_only:
         for label in [label for label in args.solvers or solvers3d() if label in MINIMAL_TRIALS]:
-            bench_minimal(label, args.minimal_trials or MINIMAL_TRIALS.get(label, 20), True, args.reverse)
+            bench_minimal(label, args.minimal_trials or MINIMAL_TRIALS.get(label, 20), True, args.reverse, args.first_seed)
         return 0
     if min(args.trials, args.noise_trials, args.single_calls, args.minimal_trials or 1) < 1:
         parser.error("--trials, --noise-trials, --single-calls and --minimal-trials must be positive")
@@ -381,7 +409,8 @@ def main(argv: list[str] | None = None) -> int:
     for label in chosen:
         rows[label] = []
         if "evidence" in json.load(open(os.path.join(gen.GENERATED_DIR, module_for(label).SPEC_FILE), encoding="utf-8")):
-            row, bad, timing[label] = bench_minimal(label, args.minimal_trials or MINIMAL_TRIALS.get(label, 20))
+            row, bad, timing[label] = bench_minimal(label, args.minimal_trials or MINIMAL_TRIALS.get(label, 20),
+                                                    cached_only=args.cached_only)
             rows[label].append(row)
             failed[f"{label} room"] = bad
             t = timing[label]
@@ -411,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
             "trials": args.trials, "noise_trials": args.noise_trials, "single_calls": args.single_calls,
             "seeds": f"0..{args.trials - 1}", "threads": os.environ.get("OPENBLAS_NUM_THREADS"),
             "load_average_at_end": list(os.getloadavg()), "failed_networks": failed,
-            "rerun": chosen, "minimal_trials": {r["solver"]: r["trials"] for r in rows if r["certified_primes"] == "monodromy"}}
+            "rerun": chosen, "minimal_seeds": {label: t["seeds"] for label, t in timing.items() if label in chosen}}
     with open(os.path.join(TABLES, "solvers3d.meta.json"), "w", encoding="utf-8", newline="\n") as fh:
         json.dump(meta, fh, indent=2)
         fh.write("\n")

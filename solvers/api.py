@@ -80,10 +80,10 @@ MINIMAL = ((6, 3), (4, 5))
 #: The committed solvers of the other dimensions and models, (dim, model) -> labels by cost (root count):
 #: the first whose configuration fits inside the network is used. TOA: the minimal cells (2D 3r/3s,
 #: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root), then the
-#: minimal cells 7r/5s and 6r/6s (2321 and 3919 paths, one per orbit of the gauge reflections; direct
-#: parametrization, counts by monodromy, not certified).
+#: minimal cell 7r/5s (2321 paths, one per orbit of the gauge reflections; direct parametrization, count by
+#: monodromy, not certified).
 KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"),
-              (3, "tdoa"): ("9r5s3d",)}
+              (3, "tdoa"): ("9r5s3d", "7r5s3d")}
 
 MODELS = ("tdoa", "toa")
 

@@ -73,12 +73,15 @@ SOLVERS = {
     "4r6s3dtoa": "4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4",
     "5r5s3dtoa": "5r5s-toa3d:A,B2,B3,B4,B5,C2-C5",
     "6r4s3dtoa": "6r4s-toa3d:A,B2,B3,B4,C2-C6",
+    # 3D TDOA minimal cells, direct parametrization (receivers in the gauge frame, transmitters, offsets), built
+    # on numerical evidence from a monodromy checkpoint (MONODROMY_CHECKPOINTS): F4 cannot count them
+    "7r5s3d": "7r5s-tdoa3d-direct:all",
 }
 
 #: Configurations whose committed solver is built from a settled monodromy count (numerical evidence, no GF(p)
 #: certificate): the checkpoint scripts/monodromy_counts.py wrote, in $TDOA_WORKBENCH_CACHE/monodromy/, read by
 #: ``generate(..., from_monodromy=PATH)`` (scripts/generate_solvers.py passes this file by default).
-MONODROMY_CHECKPOINTS = {"7r5s3d": "7r5s-seed0.json", "6r6s3d": "6r6s-seed0.json"}
+MONODROMY_CHECKPOINTS = {"7r5s3d": "7r5s-seed0.json"}
 
 #: Loops without a new root that settle a checkpoint's count (scripts/monodromy_counts.py --stall, default 10).
 SETTLED_LOOPS = 10

@@ -285,8 +285,11 @@ class HomotopySolver:
         self.options = TrackerOptions(**spec.get("tracker", {}))
         self.retrack = dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
         self.nvars = self.structure.nvars
-        # one root per orbit of a group (sign vectors; the direct parametrization's gauge reflections): an endpoint
-        # on an image of another path's endpoint is path jumping too, and is retracked like a duplicate
+        # one root per orbit of a group (sign vectors; the direct parametrization's gauge reflections). An endpoint
+        # on an image of another path's endpoint is path jumping too (unresolved(x, solver.group) tells), but it is
+        # not retracked: 7r/5s room networks have about 3 such pairs of 2321 endpoints, complex ones; retracking
+        # them with tight steps took 2.5x the solve (seed 0: 34.5 s against 13.9 s), and where that left a pair the
+        # midpoint routes took up to 525 s (docs/minimal-3d.md, section 5)
         self.group = np.asarray(spec["group"]["signs"], dtype=float) if spec.get("group") else None
         tracked = (spec.get("full_system") or {}).get("tracked")
         if tracked is not None:  # a squared system: only the roots of the full system are tracked
@@ -353,14 +356,14 @@ class HomotopySolver:
         self._local_detours(qa, xa, q, x, stalled, stats[:, 3].reshape(B, K)[stalled])
         redo = stalled & ~np.all(np.isfinite(x), axis=2)
         for b in range(B):
-            redo[b] |= _duplicated(x[b], group=self.group)
+            redo[b] |= _duplicated(x[b])
             if _degenerate(redo[b]):
                 redo[b] = False
         bi, ki = np.nonzero(redo)
         if len(bi):
             xr, _ = self.track(qa[None], q, xa[ki], bi, self.retrack)
             x[bi, ki] = xr
-        complete = np.array([not unresolved(x[b], self.group).any() for b in range(B)])
+        complete = np.array([not unresolved(x[b]).any() for b in range(B)])
         return x, complete
 
     def _local_detours(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, x: np.ndarray, stalled: np.ndarray,
@@ -394,7 +397,7 @@ class HomotopySolver:
                 if np.all(np.isfinite(y[j])):
                     trial = x[b].copy()
                     trial[k] = y[j]
-                    if not _duplicated(trial, group=self.group)[k]:
+                    if not _duplicated(trial)[k]:
                         x[b, k] = y[j]
                         done[j] = True
             bi, ki, at, d = bi[~done], ki[~done], at[~done], d[~done]
@@ -420,11 +423,11 @@ class HomotopySolver:
             return self._multistart(q)
         B, K = len(q), self.n_paths
         x, complete = self._route(self.q0, self.x0, q)
-        bad = [b for b in np.flatnonzero(~complete) if not _degenerate(unresolved(x[b], self.group))]
+        bad = [b for b in np.flatnonzero(~complete) if not _degenerate(unresolved(x[b]))]
         # paths that still stall even with tight steps: the segment passes too close to a singular
         # point. Each such path alone goes around it through a fixed complex midpoint (two segments);
         # K distinct finite endpoints are all K roots whatever route each path took.
-        jumped = {b for b in bad if _duplicated(x[b], group=self.group).any()}
+        jumped = {b for b in bad if _duplicated(x[b]).any()}
         for k in range(DETOURS):
             rows = np.zeros((B, K), dtype=bool)
             for b in bad:
@@ -441,7 +444,7 @@ class HomotopySolver:
             xe, _ = self.track(qm[None], q, xm[good], bj[good], self.retrack)
             for b, i, xi in zip(bj[good], kj[good], xe):
                 if np.all(np.isfinite(xi)):
-                    if _duplicated(np.vstack([x[b], xi[None]]), group=self.group)[-1]:
+                    if _duplicated(np.vstack([x[b], xi[None]]))[-1]:
                         jumped.add(b)
                     else:
                         x[b, i] = xi
@@ -468,7 +471,7 @@ class HomotopySolver:
         # Newton steps on the target (two unconverged endpoints of one ill-conditioned root, |x| ~ 5e4
         # in 4r/5s's scaled unknowns, can differ by more than the duplicate test's tolerance before
         # them and coincide after).
-        left = np.array([b for b in bad if unresolved(x[b], self.group).any()], dtype=np.int64)
+        left = np.array([b for b in bad if unresolved(x[b]).any()], dtype=np.int64)
         for k in range(POOLED_MIDPOINTS):
             if not len(left):
                 break
@@ -480,7 +483,7 @@ class HomotopySolver:
             xk = xk.reshape(L, M, -1)
             for j, b in enumerate(left):
                 x[b] = self._pooled(x[b], xk[j], q[b])
-            left = left[[bool(unresolved(x[b], self.group).any()) for b in left]]
+            left = left[[bool(unresolved(x[b]).any()) for b in left]]
         return self._polish(x, q)
 
     def _multistart(self, q: np.ndarray) -> np.ndarray:
