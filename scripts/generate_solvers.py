@@ -7,6 +7,10 @@ Usage: python scripts/generate_solvers.py [6r4s 9r3s 8r3s 7r3s 6r3s 5r4s 5r5s 4r
                  JSON specs (no construction, numerics unchanged).
   --method M     build with method M instead (3r3stoa --method action-matrix: the elimination-template
                  solver, written beside the homotopy one).
+  --from-monodromy PATH
+                 start from this monodromy checkpoint (scripts/monodromy_counts.py; one configuration). The
+                 configurations of solvers.generate.MONODROMY_CHECKPOINTS (7r5s3d: a 3D TDOA minimal cell,
+                 numerical evidence) take $TDOA_WORKBENCH_CACHE/monodromy/<cell>-seed0.json by default.
 Same as `tdoa-workbench generate CONFIG --out solvers/generated` for each configuration.
 """
 from __future__ import annotations
@@ -17,6 +21,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers import generate as gen  # noqa: E402
 
 
@@ -27,7 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--emit-only", action="store_true", help="re-emit the modules from their committed specs")
     parser.add_argument("--method", choices=list(gen.METHODS), help="build with this method (default: the "
                         "configuration's own); action-matrix solvers are written beside the homotopy ones")
+    parser.add_argument("--from-monodromy", metavar="PATH", help="a monodromy checkpoint to start from (one "
+                        "configuration; default for 7r5s3d: the cache's 7r5s-seed0.json)")
     args = parser.parse_args(argv)
+    if args.from_monodromy and len(args.configs) != 1:
+        parser.error("--from-monodromy is for one configuration")
     unknown = [c for c in args.configs if c not in gen.SOLVERS]
     if unknown:
         parser.error(f"unknown configuration(s) {', '.join(unknown)}; valid: {', '.join(every)}")
@@ -40,7 +49,10 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"emitted {py_path}")
         return 0
     for label in args.configs:
-        result = gen.generate(label, args.method, out=gen.GENERATED_DIR,
+        checkpoint = args.from_monodromy
+        if checkpoint is None and label in gen.MONODROMY_CHECKPOINTS:
+            checkpoint = str(cache_dir("monodromy") / gen.MONODROMY_CHECKPOINTS[label])
+        result = gen.generate(label, args.method, out=gen.GENERATED_DIR, from_monodromy=checkpoint,
                               progress=lambda msg: print("  " + msg, file=sys.stderr, flush=True))
         print(result.summary(), flush=True)
     return 0

@@ -79,8 +79,11 @@ MINIMAL = ((6, 3), (4, 5))
 
 #: The committed solvers of the other dimensions and models, (dim, model) -> labels by cost (root count):
 #: the first whose configuration fits inside the network is used. TOA: the minimal cells (2D 3r/3s,
-#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root).
-KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"), (3, "tdoa"): ("9r5s3d",)}
+#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root), then the
+#: minimal cell 7r/5s (2321 paths, one per orbit of the gauge reflections; direct parametrization, count by
+#: monodromy, not certified).
+KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"),
+              (3, "tdoa"): ("9r5s3d", "7r5s3d")}
 
 MODELS = ("tdoa", "toa")
 
@@ -222,6 +225,8 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
         from analysis.formulations.positions import positions_system
 
         system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
+    elif "-direct" in module.SYSTEM:
+        return _direct_calibrations(F, module.UNKNOWNS, roots)
     elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets, HBO_UNKNOWNS,
                                         HBO_UNKNOWNS_3D):
         raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b[, o]) nor a positions formulation's")
@@ -234,6 +239,42 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
                    else recover(F, x[:h], x[h:h + k], np.zeros(n) if toa else x[h + k:]))
             if cal is not None:
                 out.append(cal)
+    return sorted(out, key=lambda c: c.residual)
+
+
+_DIRECT_NAME = re.compile(r"([rs])(\d+)([xyz])|o(\d+)")
+
+
+def _direct_calibrations(F: np.ndarray, unknowns, roots: np.ndarray, tol: float = 1e-6) -> list[Calibration]:
+    """:func:`calibrations` of a direct-parametrization solver (unknowns r<i><axis> of the receivers in the gauge
+    frame, s<j><axis>, o<j>; analysis.formulations.kd): the real roots whose distances f_ij - o_j are all
+    non-negative (the equations square them), moved into the gauge by a rotation (one root per orbit of the
+    frame's reflections is enough: the others give the same network or its mirror image)."""
+    m, n = F.shape
+    fields = [_DIRECT_NAME.fullmatch(u) for u in unknowns]
+    if not all(fields):
+        raise ValueError(f"unknowns {tuple(unknowns)} are not a direct parametrization's")
+    dim = 1 + max("xyz".index(f.group(3)) for f in fields if f.group(3))
+    out = []
+    scale = float(np.sqrt(np.mean(F * F))) or 1.0
+    for x in roots[np.all(np.isfinite(roots), axis=1)]:
+        if np.max(np.abs(x.imag)) > tol * (1.0 + np.max(np.abs(x))):
+            continue
+        rec, tra, off = np.zeros((m, dim)), np.zeros((n, dim)), np.zeros(n)
+        for f, v in zip(fields, x.real):
+            if f.group(4):
+                off[int(f.group(4)) - 1] = v
+            else:
+                (rec if f.group(1) == "r" else tra)[int(f.group(2)) - 1, "xyz".index(f.group(3))] = v
+        if np.min(F - off[None, :]) < -tol * scale:  # a negative distance fits the squared equations only
+            continue
+        gauged = to_gauge(rec, tra)
+        if gauged is None:
+            continue
+        rec, tra = gauged
+        res = rms_residual(F, rec, tra, off)
+        if np.isfinite(res):
+            out.append(Calibration(rec, tra, off, res))
     return sorted(out, key=lambda c: c.residual)
 
 
@@ -327,10 +368,18 @@ def _extend_kd(F: np.ndarray, cal: Calibration, toa: bool) -> Calibration | None
     return Calibration(rec, tra, off, res) if np.isfinite(res) else None
 
 
-def _kd_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibration], bool]:
+#: A solve with one root per orbit of the gauge reflections (direct parametrization, 7r/5s) is suspect when more
+#: than this fraction of its endpoints lie on another endpoint or its image: on 100 room networks at most 12 of
+#: 2321 did, except seed 12 (2142, the true network missed; with the receivers reordered 0, 3, 4, 1, 2, 5, 6:
+#: 2, the true network found). solve_network then solves the reordered network too (:func:`_reordered`).
+SUSPECT_FRACTION = 0.01
+
+
+def _kd_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibration], bool, bool]:
     """The committed solver's calibrations on its block of F (:func:`calibrations`), extended to every node,
-    and whether its root set was complete (every path ended on a finite root of its own; a root set with
-    lost or coinciding endpoints may miss the true network)."""
+    whether its root set was complete (every path ended on a finite root of its own; a root set with
+    lost or coinciding endpoints may miss the true network) and whether it is suspect (one root per orbit
+    tracked, and more than :data:`SUSPECT_FRACTION` of the endpoints on an image of another)."""
     from .methods.homotopy import unresolved
 
     choice = select_solver_kd(*F.shape, dim, model)
@@ -343,7 +392,26 @@ def _kd_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibratio
             cal = _extend_kd(F, cal, model == "toa")
             if cal is not None:
                 cands.append(cal)
-    return cands, len(roots) == module.DEGREE and not unresolved(roots).any()
+    group = getattr(module.solver(), "group", None) if hasattr(module, "GROUP_ORDER") else None
+    suspect = group is not None and unresolved(roots, group).mean() > SUSPECT_FRACTION
+    return cands, len(roots) == getattr(module, "PATHS", module.DEGREE) and not unresolved(roots).any(), suspect
+
+
+def _reordered(F: np.ndarray, dim: int, model: str) -> list[Calibration]:
+    """The calibrations of F solved with its receivers 2, 3 and 4, 5 swapped (the gauge frame then rests on
+    receivers 1, 4, 5), moved back into F's receiver order and gauge."""
+    m = F.shape[0]
+    order = np.array([0, 3, 4, 1, 2] + list(range(5, m)))
+    back = np.argsort(order)
+    out = []
+    cands, _, _ = _kd_candidates(np.ascontiguousarray(F[order]), dim, model)
+    for cal in cands:
+        gauged = to_gauge(cal.receivers[back], cal.transmitters)
+        if gauged is not None:
+            res = rms_residual(F, gauged[0], gauged[1], cal.offsets)
+            if np.isfinite(res):
+                out.append(Calibration(gauged[0], gauged[1], cal.offsets, res))
+    return out
 
 
 def _transposed(F: np.ndarray, cal: Calibration) -> Calibration | None:
@@ -386,10 +454,13 @@ def _solve_network_kd(F: np.ndarray, dim: int, model: str, refine: bool, max_ref
     (docs/minimal-3d.md, section 2)."""
     m, n = F.shape
     toa = model == "toa"
-    cands, complete = _kd_candidates(F, dim, model)
+    cands, complete, suspect = _kd_candidates(F, dim, model)
+    if suspect and m >= 5:  # one root per orbit, and many paths met on one orbit (docs/minimal-3d.md, section 5)
+        with np.errstate(all="ignore"):
+            cands = _same_networks_once(cands + _reordered(F, dim, model))
     if toa and not (complete and cands):
         try:
-            more, _ = _kd_candidates(np.ascontiguousarray(F.T), dim, model)
+            more, _, _ = _kd_candidates(np.ascontiguousarray(F.T), dim, model)
         except ValueError:  # no committed solver fits the transposed shape
             more = []
         with np.errstate(all="ignore"):
@@ -443,12 +514,14 @@ def solve_network(F, refine: bool = True, max_refined: int = 5, *, dim: int = 2,
     them apart.
     dim, model: 2 or 3; ``"tdoa"`` (unknown transmitter offsets) or ``"toa"`` (synchronised, F[i, j] =
         |r_i - s_j|). Other than 2D TDOA, the committed solvers of :data:`KD_SOLVERS` run on the first
-        receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s), every
+        receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s, 7r/5s), every
         real candidate with H positive definite becomes a calibration (:func:`calibrations`), the other
         transmitters and then receivers are placed by linear least squares, and TDOA candidates are
         refined (TOA ones are not: solvers.refine frees the offsets). TOA: where the solver's root set is
         incomplete (a lost path, two paths on one root) or gives no calibration, the transposed network F.T
-        (receivers and transmitters swapped) is solved too and the candidates pooled. 3D gauge: r_1 = 0, r_2 on +x,
+        (receivers and transmitters swapped) is solved too and the candidates pooled. 3D TDOA 7r/5s (one root
+        per orbit of the gauge reflections): a suspect root set (:data:`SUSPECT_FRACTION`) is solved again with
+        receivers 2, 3 and 4, 5 swapped and the candidates pooled. 3D gauge: r_1 = 0, r_2 on +x,
         r_3 in the xy half-plane y > 0; the mirror image z -> -z fits the data equally and is not
         returned (one representative per network).
 

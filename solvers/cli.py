@@ -608,6 +608,10 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
                    help="gf (default): certify the root count over GF(p) first; monodromy: numerical evidence "
                    "alone (loops until many find no new root), for systems F4 cannot count; the spec and the "
                    "module's header say the count is not certified")
+    p.add_argument("--from-monodromy", metavar="CHECKPOINT",
+                   help="start from the roots of a settled monodromy count (a checkpoint of scripts/monodromy_counts.py "
+                   "for the same system) instead of growing them again; each root is checked to satisfy the system at "
+                   "the checkpoint's parameters. Implies --evidence monodromy")
     p.add_argument("--start", metavar="JSON",
                    help="system FILE only: a start pair, {\"parameters\": [...], \"root\": [...]} with one value per "
                    "parameter and per unknown (numbers or [re, im]); generic complex values, the root satisfying the "
@@ -680,16 +684,18 @@ def cmd_generate(args: argparse.Namespace) -> int:
     command += f" --start {shlex.quote(args.start)}" if args.start else ""
     command += f" --evidence {args.evidence}" if args.evidence != "gf" else ""
     command += f" --method {args.method}" if args.method else ""
+    command += f" --from-monodromy {shlex.quote(args.from_monodromy)}" if args.from_monodromy else ""
     try:
         if is_file:
             system = parse(_read_text(target), os.path.basename(target))
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
             result = gen.generate(system, args.method, out=args.out, name=name, seed=args.seed, start=start,
-                                  command=command, progress=progress, evidence=args.evidence)
+                                  command=command, progress=progress, evidence=args.evidence,
+                                  from_monodromy=args.from_monodromy)
         else:
             result = gen.generate(target, args.method, out=args.out, seed=args.seed, command=command,
-                                  progress=progress, evidence=args.evidence)
+                                  progress=progress, evidence=args.evidence, from_monodromy=args.from_monodromy)
         print(result.summary())
     except (ParametricError, HomotopyError, ActionMatrixError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None

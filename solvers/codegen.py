@@ -253,6 +253,10 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
         tracked = (f"\nThe spec stores all {len(spec['start_roots'])} roots of the squared system; only the {paths} that also\n"
                    f"satisfy the full system ({full['equations']} equations, {full['degree']} roots certified over GF(p)) "
                    f"are tracked.")
+    group = spec.get("group")
+    if group:
+        tracked += (f"\nThe system's {spec['degree']} roots come in orbits of the {group['order']} {group['name']} (sign vectors\n"
+                    f"in the spec's \"group\"); one root per orbit is stored and tracked, and solve returns one per orbit.")
     if spec.get("starts"):
         tracked += (f"\nThey are tracked from {len(spec['starts']) + 1} start instances (the spec's further ones seeded, their roots\n"
                     f"found at generation), each instance's distinct endpoints pooled; nothing is retracked.")
@@ -267,7 +271,7 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
         rows=paths, pshape=pshape, config=tuple(config) if config else None,
         imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import homotopy as _method",
         method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"
-                          f"START_ROOTS = {len(spec['start_roots'])}"),
+                          f"START_ROOTS = {len(spec['start_roots'])}" + (f"\nGROUP_ORDER = {group['order']}" if group else "")),
         scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
         load=_load_source("HomotopySolver"), solve=_scaled_solve_source(pshape, paths, nvars))
 

@@ -73,7 +73,22 @@ SOLVERS = {
     "4r6s3dtoa": "4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4",
     "5r5s3dtoa": "5r5s-toa3d:A,B2,B3,B4,B5,C2-C5",
     "6r4s3dtoa": "6r4s-toa3d:A,B2,B3,B4,C2-C6",
+    # 3D TDOA minimal cells, direct parametrization (receivers in the gauge frame, transmitters, offsets), built
+    # on numerical evidence from a monodromy checkpoint (MONODROMY_CHECKPOINTS): F4 cannot count them
+    "7r5s3d": "7r5s-tdoa3d-direct:all",
 }
+
+#: Configurations whose committed solver is built from a settled monodromy count (numerical evidence, no GF(p)
+#: certificate): the checkpoint scripts/monodromy_counts.py wrote, in $TDOA_WORKBENCH_CACHE/monodromy/, read by
+#: ``generate(..., from_monodromy=PATH)`` (scripts/generate_solvers.py passes this file by default).
+MONODROMY_CHECKPOINTS = {"7r5s3d": "7r5s-seed0.json"}
+
+#: Loops without a new root that settle a checkpoint's count (scripts/monodromy_counts.py --stall, default 10).
+SETTLED_LOOPS = 10
+
+#: Seeded real instances a solver built from a checkpoint is verified on (each solve tracks thousands of paths:
+#: about 20 s for 7r/5s; the bench, scripts/bench_solvers3d.py, validates it on 100).
+CHECKPOINT_VERIFY_TRIALS = 3
 
 #: Configurations solved in a positions formulation (analysis.formulations.positions) instead of (H, b, o).
 POSITIONS = {"4r5s": "receivers-orbits"}
@@ -121,7 +136,8 @@ def solver_system(label: str) -> ParametricSystem:
     if label in SQUARE_MINORS:
         kept = SOLVERS[label].rsplit(",", 1)[0]  # the formulation without its family of minors
         return from_formulation(kept + "," + ",".join(SQUARE_MINORS[label]), saturate_det_h=True)
-    system = from_formulation(SOLVERS[label], saturate_det_h=True)
+    direct = Formulation.parse(SOLVERS[label]).config.parametrization == "direct"  # no H to saturate
+    system = from_formulation(SOLVERS[label], saturate_det_h=not direct)
     if label in SQUARED:
         system = square(system, SQUARED[label], seed=0, name=squared_name(system.name, 0))
     return system
@@ -202,9 +218,10 @@ def gauge_reflections(unknowns: Sequence[str]) -> np.ndarray:
     return np.array(out)
 
 
-def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
+def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa",
+                parametrization: str = "compaction") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
     def start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        F, x = complex_instance(m, n, rng, dim, model)
+        F, x = complex_instance(m, n, rng, dim, model, parametrization)
         return F.ravel(), x
 
     return start
@@ -264,7 +281,10 @@ class Job:
     formulation: a TDOA formulation label (pencil; the homotopy's system came from it) or None;
     system: the square parametric system (homotopy); full: the over-determined system it squares;
     start / trials: start pair and seeded real instances (TDOA targets; a user's start pair);
-    seeds: the GF(p) certification's seeds; step_control: the spec's tracking options (:data:`STEP_CONTROL`).
+    seeds: the GF(p) certification's seeds; step_control: the spec's tracking options (:data:`STEP_CONTROL`);
+    checkpoint: a monodromy checkpoint whose q0 and roots the solver starts from (evidence "monodromy");
+    group: sign vectors (G, N) whose orbits the roots come in (the direct parametrization's gauge reflections),
+    one root per orbit tracked.
     """
 
     name: str
@@ -277,6 +297,8 @@ class Job:
     seeds: tuple[int, ...] = (0, 1)
     step_control: dict | None = None
     evidence: str = "gf"
+    checkpoint: str | None = None
+    group: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -355,12 +377,31 @@ class HomotopyMethod:
         # verified once, below: a squared system on the paths it will track (not on all its roots), a system
         # with its own step control as it will run
         build_options = dataclasses.replace(options, verify_trials=0) if full is not None or job.step_control else options
-        if job.evidence == "monodromy":
+        if job.evidence == "monodromy" and job.checkpoint is not None:
+            if full is not None:
+                raise GenerationError(f"{system.name}: a squared system needs the full system's GF(p) count")
+            if progress:
+                progress(f"{system.name}: no GF(p) certificate; the roots of the monodromy checkpoint {job.checkpoint}, "
+                         "checked against the system")
+            checkpoint = homotopy.read_checkpoint(job.checkpoint)
+            ck_options = dataclasses.replace(build_options, stall_loops=SETTLED_LOOPS,
+                                             verify_trials=min(build_options.verify_trials, CHECKPOINT_VERIFY_TRIALS))
+            spec, source, build = homotopy.build(system, None, None, job.trials, ck_options, progress,
+                                                 checkpoint=checkpoint, group=job.group)
+            certified = None
+            evidence = {"method": "monodromy", "degree": spec["degree"], "orbits": len(spec["start_roots"]),
+                        "group_order": 1 if job.group is None else len(job.group), "checkpoint": os.path.basename(job.checkpoint),
+                        "loops": checkpoint.loops, "paths_tracked": checkpoint.paths, "stall_loops": SETTLED_LOOPS,
+                        "loops_without_new": checkpoint.stall, "saturated_by": list(system.nonzero),
+                        "note": "numerical evidence only: no GF(p) certificate and no trace test; the roots of a settled "
+                                "monodromy count (scripts/monodromy_counts.py), checked to satisfy the system at q0"}
+        elif job.evidence == "monodromy":
             if full is not None:
                 raise GenerationError(f"{system.name}: a squared system needs the full system's GF(p) count")
             if progress:
                 progress(f"{system.name}: no GF(p) certificate asked; counting by monodromy alone (numerical evidence)")
-            spec, source, build = homotopy.build(system, None, job.start, job.trials, build_options, progress)
+            spec, source, build = homotopy.build(system, None, job.start, job.trials, build_options, progress,
+                                                 group=job.group)
             certified = None
             evidence = {"method": "monodromy", "degree": spec["degree"], "seed": seed, "loops": spec["monodromy"]["loops"],
                         "stall_loops": options.stall_loops, "saturated_by": list(system.nonzero),
@@ -482,7 +523,8 @@ def _check_linear_in_parameters(system: ParametricSystem) -> None:
 
 def committed_command(label: str, method: str | None = None) -> str:
     """The command that regenerates a committed solver (run from the repository root); ``method``: one
-    asked for by name (the action-matrix solvers committed beside the homotopy ones)."""
+    asked for by name (the action-matrix solvers committed beside the homotopy ones). A solver built from a
+    monodromy checkpoint (:data:`MONODROMY_CHECKPOINTS`) needs that file in $TDOA_WORKBENCH_CACHE/monodromy/."""
     return f"python scripts/generate_solvers.py {label}" + (f" --method {method}" if method else "")
 
 
@@ -528,13 +570,16 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
     chosen = method or solver_method(Formulation.parse(formulation))
     if chosen in ("curve-pencil", "offset-kernel"):
         return Job(name, formulation, config=config), chosen, label
-    system = solver_system(label) if label else from_formulation(formulation, saturate_det_h=True)
+    kind = Formulation.parse(formulation).config
+    direct = kind.parametrization == "direct"
+    system = solver_system(label) if label else from_formulation(formulation, saturate_det_h=not direct)
     squared = label in SQUARED or label in SQUARE_MINORS
     full = from_formulation(formulation, saturate_det_h=True) if squared else None
     trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
-    kind = Formulation.parse(formulation).config
-    return (Job(name, formulation, system, config, _tdoa_start(*config, kind.dim, kind.model), trials, full,
-                seeds=(0,) if squared else (0, 1), step_control=STEP_CONTROL.get(label)), chosen, label)
+    group = gauge_reflections(system.unknowns) if direct else None
+    return (Job(name, formulation, system, config, _tdoa_start(*config, kind.dim, kind.model, kind.parametrization),
+                trials, full, seeds=(0,) if squared else (0, 1), step_control=STEP_CONTROL.get(label), group=group),
+            chosen, label)
 
 
 def _identifier(text: str) -> str:
@@ -577,7 +622,7 @@ EVIDENCE = ("gf", "monodromy")
 def generate(target: "str | ParametricSystem", method: str | None = None, *, out: str, name: str | None = None,
              seed: int = 0, start: Start | None = None, full: ParametricSystem | None = None,
              command: str | None = None, progress: Callable[[str], None] | None = None,
-             evidence: str = "gf") -> Generated:
+             evidence: str = "gf", from_monodromy: str | None = None) -> Generated:
     """Build a solver and write its spec and module into ``out`` (and nowhere else).
 
     target: a committed configuration (:data:`SOLVERS`, e.g. ``"9r3s"``), a TDOA formulation label
@@ -591,17 +636,25 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     parameters). command: the regenerating command printed in the module's header (default:
     :func:`committed_command` for a committed configuration written to :data:`GENERATED_DIR`, the
     ``tdoa-workbench generate`` command for another label, else a description of this call).
+    from_monodromy: a checkpoint of :func:`solvers.methods.homotopy.monodromy_count` (scripts/monodromy_counts.py,
+    the same system and settled: :data:`SETTLED_LOOPS` loops without a new root) whose start parameters and roots
+    the solver takes instead of growing them again; every root is checked to satisfy the system there (implies
+    evidence "monodromy"; the spec's evidence records the checkpoint's loops, paths and loops without a new root).
     """
     if method is not None and method not in METHODS:
         raise GenerationError(f"unknown method {method!r}; valid: {', '.join(METHODS)}")
     if evidence not in EVIDENCE:
         raise GenerationError(f"unknown evidence {evidence!r}; valid: {', '.join(EVIDENCE)}")
+    if from_monodromy is not None:
+        if not os.path.isfile(from_monodromy):
+            raise GenerationError(f"{from_monodromy}: no such monodromy checkpoint (scripts/monodromy_counts.py writes them)")
+        evidence = "monodromy"
     t0 = time.perf_counter()
     job, kind, label = _job(target, name, start, method, full)
     if evidence != "gf":
         if kind != "homotopy":
             raise GenerationError(f"{job.name}: evidence {evidence!r} is for the homotopy method, not {kind}")
-        job = dataclasses.replace(job, evidence=evidence)
+        job = dataclasses.replace(job, evidence=evidence, checkpoint=from_monodromy)
     built = METHODS[kind].build(job, seed, progress)
     if command is None:
         if label is not None and job.name == f"tdoa_{label}" and os.path.abspath(out) == GENERATED_DIR:

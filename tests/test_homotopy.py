@@ -296,8 +296,9 @@ def test_every_registered_solver_is_committed_with_its_own_spec(label):
         assert name.endswith(f"pencil{module.SIZE[0]}") and module.SYSTEM == SOLVERS[label]
     elif label in POSITIONS:  # building the positions system takes 10 s: its name is the label's
         assert name.endswith(f"homotopy{module.DEGREE}") and module.SYSTEM == f"{label}:positions-{POSITIONS[label]}"
-    elif "_homotopy" in name:
-        assert name.endswith(f"homotopy{module.DEGREE}") and module.SYSTEM == solver_system(label).name
+    elif "_homotopy" in name:  # its paths: the roots, or one per orbit of a group (7r5s3d: 2321 of 18568)
+        assert name.endswith(f"homotopy{module.PATHS}") and module.SYSTEM == solver_system(label).name
+        assert module.DEGREE == module.PATHS * getattr(module, "GROUP_ORDER", 1)
     else:
         assert name.endswith(f"kernel{module.DEGREE}") and module.SYSTEM == SOLVERS[label]
 

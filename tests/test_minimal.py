@@ -121,7 +121,7 @@ def test_toa_network_with_a_near_coplanar_frame_is_solved_transposed(m, n, seed)
     net = room_network(m, n, np.random.default_rng(seed), offset_sigma=0.0)
     F = net.measurements()
     with np.errstate(all="ignore"):
-        direct, complete = api._kd_candidates(F, 3, "toa")
+        direct, complete, _ = api._kd_candidates(F, 3, "toa")
     assert not complete and not any(position_error(c, net) < 1e-6 for c in direct), seed
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -136,7 +136,7 @@ def test_toa_retry_is_skipped_when_the_root_set_is_complete():
     """The common case costs one solve: network 0 (6r/4s) has a complete root set containing the truth."""
     net = room_network(6, 4, np.random.default_rng(0), offset_sigma=0.0)
     with np.errstate(all="ignore"):
-        direct, complete = api._kd_candidates(net.measurements(), 3, "toa")
+        direct, complete, _ = api._kd_candidates(net.measurements(), 3, "toa")
     assert complete and min(position_error(c, net) for c in direct) < 1e-8
 
 

@@ -176,13 +176,16 @@ def test_benchmark_table_is_current():
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     rows, noise = bench.read_csv("solvers3d.csv"), bench.read_csv("solvers3d_noise.csv")
-    assert bench.solvers3d() == [LABEL]
-    assert [(r["solver"], r["network"]) for r in rows] == [(LABEL, f) for f in bench.FAMILIES], \
-        "stale: run scripts/bench_solvers3d.py"
-    module = _module()
+    labels = bench.solvers3d()
+    assert labels[0] == LABEL
+    # the minimal cells built on numerical evidence (7r/5s, 6r/6s) run on room networks only, fewer of them
+    expected = [(label, f) for label in labels for f in (bench.FAMILIES if label == LABEL else ("room",))]
+    assert [(r["solver"], r["network"]) for r in rows] == expected, "stale: run scripts/bench_solvers3d.py"
     for row in rows:
+        module = bench.module_for(row["solver"])
         assert row["spec_sha256"] == module.SPEC_SHA256, "the solver changed: run scripts/bench_solvers3d.py"
-        assert row["method"] == module.METHOD and int(row["roots"]) == module.DEGREE and int(row["trials"]) >= 1000
+        assert row["method"] == module.METHOD and int(row["roots"]) == module.DEGREE
+        assert int(row["trials"]) >= (1000 if row["solver"] == LABEL else 20)
     assert [r["sigma_m"] for r in noise] == [f"{s:g}" for s in bench.NOISE_SIGMAS]
     with open(os.path.join(root, "tables", "solvers3d.md"), encoding="utf-8") as fh:
         assert fh.read() == bench.markdown(rows, noise), "stale: run scripts/bench_solvers3d.py"

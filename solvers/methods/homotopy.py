@@ -47,7 +47,8 @@ from .tracker import SystemStructure, TrackerOptions
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
     from analysis.formulations.parametric import ParametricSystem
 
-__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "build", "coefficient_source",
+__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "MonodromyCheckpoint", "build", "checked_roots",
+           "coefficient_source", "expand_orbits", "read_checkpoint",
            "load_coefficients", "structure", "affine_start", "unresolved"]
 
 SPEC_FORMAT = "tdoa-homotopy/1"
@@ -284,6 +285,12 @@ class HomotopySolver:
         self.options = TrackerOptions(**spec.get("tracker", {}))
         self.retrack = dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
         self.nvars = self.structure.nvars
+        # one root per orbit of a group (sign vectors; the direct parametrization's gauge reflections). An endpoint
+        # on an image of another path's endpoint is path jumping too (unresolved(x, solver.group) tells), but it is
+        # not retracked: 7r/5s room networks have about 3 such pairs of 2321 endpoints, complex ones; retracking
+        # them with tight steps took 2.5x the solve (seed 0: 34.5 s against 13.9 s), and where that left a pair the
+        # midpoint routes took up to 525 s (docs/minimal-3d.md, section 5)
+        self.group = np.asarray(spec["group"]["signs"], dtype=float) if spec.get("group") else None
         tracked = (spec.get("full_system") or {}).get("tracked")
         if tracked is not None:  # a squared system: only the roots of the full system are tracked
             self.x0 = self.x0[np.asarray(tracked, dtype=np.int64)]
@@ -543,30 +550,38 @@ def _degenerate(failed: np.ndarray) -> bool:
     return int(failed.sum()) > max(8, RETRACK_FRACTION * len(failed))
 
 
-def unresolved(x: np.ndarray) -> np.ndarray:
-    """Mask of the endpoints (K, n) of one instance that were lost (NaN) or coincide with another: where it
-    is not all False, the root set is incomplete (solvers.api retries TOA networks transposed then)."""
-    return ~np.all(np.isfinite(x), axis=1) | _duplicated(x)
+def unresolved(x: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
+    """Mask of the endpoints (K, n) of one instance that were lost (NaN) or coincide with another (``group``: or
+    with an image of another, one root per orbit tracked): where it is not all False, the root set is
+    incomplete (solvers.api retries TOA networks transposed then)."""
+    return ~np.all(np.isfinite(x), axis=1) | _duplicated(x, group=group)
 
 
-def _near(f: np.ndarray, tol: float) -> np.ndarray:
-    """near[i, j]: row j of f (finite rows) lies within tol (1 + |f_i|) of row i. Squared distances from the
-    Gram matrix (rounding ~1e-16 |x|^2, far below tol^2 (1 + |x|)^2; the K x K x n differences took a
-    tenth of a 9r/3s solve)."""
+def _near(f: np.ndarray, tol: float, sign: np.ndarray | None = None) -> np.ndarray:
+    """near[i, j]: row j of f (finite rows; with ``sign``, its image sign * f_j) lies within tol (1 + |f_i|) of
+    row i. Squared distances from the Gram matrix (rounding ~1e-16 |x|^2, far below tol^2 (1 + |x|)^2; the
+    K x K x n differences took a tenth of a 9r/3s solve)."""
     size = np.linalg.norm(f, axis=1)
-    d2 = size[:, None] ** 2 + size[None, :] ** 2 - 2.0 * (f @ f.conj().T).real
+    g = f if sign is None else f * sign
+    d2 = size[:, None] ** 2 + size[None, :] ** 2 - 2.0 * (f @ g.conj().T).real
     return d2 < (tol * (1.0 + size))[:, None] ** 2
 
 
-def _duplicated(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """Mask of the rows of x (K, n) that coincide with another finite row (path jumping)."""
+def _duplicated(x: np.ndarray, tol: float = 1e-6, group: np.ndarray | None = None) -> np.ndarray:
+    """Mask of the rows of x (K, n) that coincide with another finite row (path jumping); with ``group`` (sign
+    vectors (G, n), one root per orbit tracked), also with an image of another row: one G-th of the distances
+    at a time, never the G K x G K Gram matrix (7r/5s direct: 3 such pairs of 2321 endpoints on a room
+    network, complex roots, two paths on one orbit)."""
     out = np.zeros(len(x), dtype=bool)
     ok = np.flatnonzero(np.all(np.isfinite(x), axis=1))
     if len(ok) < 2:
         return out
-    near = _near(x[ok], tol)
-    np.fill_diagonal(near, False)
-    out[ok] = near.any(axis=1)
+    hit = np.zeros(len(ok), dtype=bool)
+    for sign in (None,) if group is None else [None if np.all(g == 1.0) else g for g in np.asarray(group)]:
+        near = _near(x[ok], tol, sign)
+        np.fill_diagonal(near, False)
+        hit |= near.any(axis=1)
+    out[ok] = hit
     return out
 
 
@@ -888,15 +903,82 @@ def full_system_roots(full: ParametricSystem, spec: dict, coefficients: Callable
     return tracked.tolist()
 
 
+@dataclass(frozen=True)
+class MonodromyCheckpoint:
+    """What :func:`monodromy_count` wrote to its checkpoint: the start parameters q0, the roots there (one per
+    orbit when it ran with a group), the loops run, the paths tracked, the loops since the last new root and
+    the seconds spent."""
+
+    q0: np.ndarray
+    roots: np.ndarray
+    loops: int
+    paths: int
+    stall: int
+    seconds: float
+
+
+def read_checkpoint(path: str) -> MonodromyCheckpoint:
+    """A checkpoint of :func:`monodromy_count` (plain JSON); raises :class:`HomotopyError` for a file without
+    its fields. Nothing is checked against a system here (:func:`checked_roots` does)."""
+    with open(path, encoding="utf-8") as fh:
+        saved = json.load(fh)
+    missing = [k for k in ("q0", "roots", "loops", "paths", "stall") if k not in saved]
+    if missing:
+        raise HomotopyError(f"{path}: not a monodromy checkpoint (no {', '.join(missing)})")
+    return MonodromyCheckpoint(_complex_array(saved["q0"]), _complex_array(saved["roots"]), int(saved["loops"]),
+                               int(saved["paths"]), int(saved["stall"]), float(saved.get("seconds", 0.0)))
+
+
+#: Largest relative residual (:func:`system_residuals`: |f_e| over the sum of f_e's terms' moduli) a stored
+#: root may have at its parameters before Newton's method: the checkpoints keep START_DIGITS digits, which
+#: leaves about 1e-11 (7r/5s direct: 2e-11 at most); a root of another instance or system has 1e-3 or more.
+CHECKPOINT_TOL = 1e-8
+
+
+def checked_roots(system: ParametricSystem, q0: np.ndarray, roots: np.ndarray,
+                  group: np.ndarray | None = None) -> np.ndarray:
+    """The roots (K, N) of ``system`` at q0 read from a checkpoint, refined by Newton's method, after checking
+    that each satisfies the system (relative residual <= :data:`CHECKPOINT_TOL` as stored, next Newton step
+    <= :data:`START_TOL` after refinement) and that no two coincide, nor (with ``group``, sign vectors (G, N))
+    lie in one orbit. Raises :class:`HomotopyError` naming how many roots fail and the worst value."""
+    roots = np.atleast_2d(np.asarray(roots, dtype=complex))
+    q0 = np.asarray(q0, dtype=complex)
+    if roots.shape[1] != len(system.unknowns) or len(q0) != len(system.parameters):
+        raise HomotopyError(f"{system.name}: the checkpoint has {roots.shape[1]} unknowns and {len(q0)} parameters, "
+                            f"the system {len(system.unknowns)} and {len(system.parameters)}")
+    res = system_residuals(system, roots, q0)
+    bad = ~(res <= CHECKPOINT_TOL)
+    if bad.any():
+        raise HomotopyError(f"{system.name}: {int(bad.sum())} of {len(roots)} checkpoint roots do not satisfy the system "
+                            f"at its q0 (relative residual up to {np.nanmax(np.where(np.isfinite(res), res, np.inf)):.1e}, "
+                            f"tolerance {CHECKPOINT_TOL:.0e})")
+    solver, _ = start_solver(system, q0, roots[:1])
+    roots = solver.newton(roots, q0[None], steps=3)
+    step = np.linalg.norm(solver.newton(roots, q0[None]) - roots, axis=1) / (1.0 + np.linalg.norm(roots, axis=1))
+    if not np.all(step <= START_TOL):
+        raise HomotopyError(f"{system.name}: {int(np.sum(~(step <= START_TOL)))} checkpoint roots do not converge under "
+                            f"Newton's method (next step up to {np.nanmax(step):.1e})")
+    same = int(_duplicated(roots, group=group).sum())
+    if same:
+        raise HomotopyError(f"{system.name}: {same} checkpoint roots coincide with another"
+                            + (" or with an image of another under the group" if group is not None else ""))
+    return roots
+
+
 def build(system: ParametricSystem, count: int | None, start: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]] | None = None,
           trials: Callable[[int], tuple[np.ndarray, np.ndarray]] | None = None,
-          options: HomotopyOptions = HomotopyOptions(), progress: Callable[[str], None] | None = None) -> tuple[dict, str, dict]:
+          options: HomotopyOptions = HomotopyOptions(), progress: Callable[[str], None] | None = None,
+          checkpoint: MonodromyCheckpoint | None = None, group: np.ndarray | None = None) -> tuple[dict, str, dict]:
     """Spec, coefficient source and build report of the homotopy solver of a square system.
 
     count: the certified number of roots (GF(p), two primes), or None: numerical evidence alone, monodromy
     until ``options.stall_loops`` loops find no new root (the count is then what it found). start: rng -> (q0, x0) generic complex
     parameters with one known root (default :func:`affine_start`). trials: seed -> (q real, known
-    root) for the verification on seeded real instances (skipped when None).
+    root) for the verification on seeded real instances (skipped when None). checkpoint (with count None): the
+    q0 and roots of a settled :func:`monodromy_count` instead of growing them again (checked by
+    :func:`checked_roots`); group: sign vectors (G, N) whose orbits the roots come in, one root per orbit
+    stored and tracked (the spec's "group"; its "degree" counts every root, G per orbit, and its "paths"
+    the orbits).
     """
     t0 = time.perf_counter()
     if not system.is_square:
@@ -906,7 +988,10 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
     source = coefficient_source(system)
     coefficients = load_coefficients(source)
     rng = np.random.default_rng(options.seed)
-    q0, x0 = start(rng) if start is not None else affine_start(system, coefficients, rng)
+    if checkpoint is not None:
+        q0, x0 = checkpoint.q0, None
+    else:
+        q0, x0 = start(rng) if start is not None else affine_start(system, coefficients, rng)
     exps, eq = structure(system)
     spec = {
         "format": SPEC_FORMAT,
@@ -925,10 +1010,21 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
     }
     solver = HomotopySolver(spec, coefficients)
     solver.q0 = np.asarray(q0, dtype=complex)
-    x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
-    if solver.residual(x0, q0[None]).max() > 1e-8:
-        raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
-    if count is None:  # numerical evidence alone: loops until options.stall_loops of them bring nothing new
+    if checkpoint is None:
+        x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
+        if solver.residual(x0, q0[None]).max() > 1e-8:
+            raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")
+    if checkpoint is not None:  # a settled count grown earlier (scripts/monodromy_counts.py): checked, not regrown
+        if count is not None:
+            raise HomotopyError(f"{system.name}: a checkpoint's roots are numerical evidence; no certified count with it")
+        if checkpoint.stall < options.stall_loops:
+            raise HomotopyError(f"{system.name}: the checkpoint's count is not settled ({checkpoint.stall} loops without a "
+                                f"new root, {options.stall_loops} asked); no solver from an unsettled count")
+        roots, loops = checked_roots(system, solver.q0, checkpoint.roots, group), checkpoint.loops
+        count = len(roots) * (1 if group is None else len(group))
+        spec["degree"] = count
+        spec["monodromy"] = {"checkpoint": True, "paths": checkpoint.paths, "loops_without_new": checkpoint.stall}
+    elif count is None:  # numerical evidence alone: loops until options.stall_loops of them bring nothing new
         grown = monodromy_count(solver, solver.q0, x0, options, float("inf"), progress=progress,
                                 excluded=_excluded(system, solver.q0))
         if grown.stall < options.stall_loops:
@@ -947,6 +1043,8 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
     spec["start_parameters"] = _pairs(solver.q0)
     spec["start_roots"] = _pairs(roots[order])
     spec["monodromy"]["loops"] = loops
+    if group is not None:
+        spec["group"] = {"name": "gauge reflections", "order": len(group), "signs": np.asarray(group).astype(int).tolist()}
     report = {"method": "homotopy", "degree": int(count), "loops": loops, "paths": len(roots)}
     if trials is not None and options.verify_trials:
         report["verified"] = verify(system.name, spec, coefficients, trials, options.verify_trials)
@@ -959,7 +1057,17 @@ def verify(name: str, spec: dict, coefficients: Callable, trials: Callable[[int]
     """Solve ``count`` seeded real instances (seed -> (q, known root)) with the spec's solver; "found/count",
     or :class:`HomotopyError` when the known root is missed in more than 10 % of them."""
     solver = HomotopySolver(spec, coefficients)
-    return verify_found(name, lambda q: solver.roots(q[None])[0], trials, count, HomotopyError)
+    return verify_found(name, lambda q: expand_orbits(solver.roots(q[None])[0], spec), trials, count, HomotopyError)
+
+
+def expand_orbits(x: np.ndarray, spec: dict) -> np.ndarray:
+    """Every root from one root per orbit: x (..., K, N) -> (..., G K, N), the images under the spec's group
+    (sign vectors (G, N), its "group"; the identity first) one after the other; x itself without a group."""
+    group = spec.get("group")
+    if not group:
+        return x
+    signs = np.asarray(group["signs"], dtype=float)
+    return np.concatenate([x * g for g in signs], axis=-2)
 
 
 def load_spec(text: str) -> dict:
