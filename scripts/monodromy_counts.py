@@ -126,7 +126,7 @@ def union(cell: str, seeds: list[int]) -> dict | None:
     config = Formulation.parse(label).config
     direct = config.parametrization == "direct"
     system = from_formulation(label, saturate_det_h=not direct)
-    images = np.asarray(gauge_reflections(system.unknowns)) if direct else np.ones((1, len(system.unknowns)))
+    group = gauge_reflections(system.unknowns) if direct else None
     q0, pool = hm._complex_array(saved[0]["q0"]), hm._complex_array(saved[0]["roots"])
     _, x0 = complex_instance(config.m, config.n, np.random.default_rng(seeds[0]), config.dim, config.model,
                              config.parametrization)
@@ -135,18 +135,11 @@ def union(cell: str, seeds: list[int]) -> dict | None:
     new = lost = 0
     for d in saved[1:]:
         xs, _ = solver.track(hm._complex_array(d["q0"])[None], q0[None], hm._complex_array(d["roots"]))
-        finite = np.all(np.isfinite(xs), axis=1)
-        lost += int((~finite).sum())
-        xs = solver.newton(xs[finite], q0[None], steps=3)
-        step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
-        keep = step < hm.START_TOL
-        if excluded is not None:
-            keep &= ~excluded(xs)
-        lost += int((~keep).sum())
-        for x in xs[keep]:
-            if min(np.min(np.linalg.norm(pool - g * x, axis=1)) for g in images) > 1e-6 * (1.0 + np.linalg.norm(x)):
-                pool = np.vstack([pool, x])
-                new += 1
+        roots = hm.accepted(solver, xs, q0, excluded)  # (the monodromy loops' own test of a root)
+        lost += len(xs) - len(roots)
+        before = len(pool)
+        pool = hm.add_new(pool, roots, group)
+        new += len(pool) - before
     out = {"union": len(pool), "new": new, "lost": lost, "key": key}
     record.write_text(json.dumps(out), encoding="utf-8")
     return out

@@ -47,8 +47,8 @@ from .tracker import SystemStructure, TrackerOptions
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
     from analysis.formulations.parametric import ParametricSystem
 
-__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "MonodromyCheckpoint", "build", "checked_roots",
-           "coefficient_source", "expand_orbits", "read_checkpoint",
+__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "MonodromyCheckpoint", "accepted", "add_new", "build",
+           "checked_roots", "coefficient_source", "expand_orbits", "read_checkpoint",
            "load_coefficients", "structure", "affine_start", "unresolved"]
 
 SPEC_FORMAT = "tdoa-homotopy/1"
@@ -698,19 +698,33 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
         paths += len(xs)
         xs, _ = solver.track(a[None], b[None], xs)
         xs = xs[np.all(np.isfinite(xs), axis=1)]
-    if len(xs):
-        xs = solver.newton(xs, q0[None], steps=3)
-        step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
-        keep = step < START_TOL
-        if excluded is not None:
-            keep &= ~excluded(xs)
-        xs = xs[keep & np.all(np.isfinite(xs), axis=1)]
+    return add_new(roots, accepted(solver, xs, q0, excluded), group), paths
+
+
+def accepted(solver, xs: np.ndarray, q0: np.ndarray, excluded: Callable[..., np.ndarray] | None = None) -> np.ndarray:
+    """The endpoints xs (K, N) that are roots at q0: finite, polished by three Newton steps after which the next
+    step is below START_TOL (relative), and (``excluded``: a mask of points on the locus of the non-vanishing
+    conditions) off that locus."""
+    xs = xs[np.all(np.isfinite(xs), axis=1)]
+    if not len(xs):
+        return xs
+    xs = solver.newton(xs, q0[None], steps=3)
+    step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
+    keep = step < START_TOL
+    if excluded is not None:
+        keep &= ~excluded(xs)
+    return xs[keep & np.all(np.isfinite(xs), axis=1)]
+
+
+def add_new(roots: np.ndarray, xs: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
+    """roots (R, N) with every x of xs appended, in order, that lies farther than 1e-6 (1 + |x|) from each root
+    known by then (``group``: sign vectors (G, N), and from each root's images: one root per orbit)."""
     images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group)
     for x in xs:
         d = min(np.min(np.linalg.norm(roots - g * x, axis=1)) for g in images)
         if d > 1e-6 * (1.0 + np.linalg.norm(x)):
             roots = np.vstack([roots, x])
-    return roots, paths
+    return roots
 
 
 def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int, rng: np.random.Generator,
