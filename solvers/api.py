@@ -79,10 +79,11 @@ MINIMAL = ((6, 3), (4, 5))
 
 #: The committed solvers of the other dimensions and models, (dim, model) -> labels by cost (root count):
 #: the first whose configuration fits inside the network is used. TOA: the minimal cells (2D 3r/3s,
-#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b); 3D TDOA: 9r/5s (1 root), then the
+#: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b), but 4r/6s in the receivers' Gram
+#: matrix (6 unknowns, the fastest of the three measured); 3D TDOA: 9r/5s (1 root), then the
 #: minimal cell 7r/5s (2321 paths, one per orbit of the gauge reflections; direct parametrization, count by
 #: monodromy, not certified).
-KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dtoa", "6r4s3dtoa", "5r5s3dtoa"),
+KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dgram", "6r4s3dtoa", "5r5s3dtoa"),
               (3, "tdoa"): ("9r5s3d", "7r5s3d")}
 
 MODELS = ("tdoa", "toa")
@@ -227,6 +228,8 @@ def calibrations(module, F, roots: np.ndarray | None = None) -> list[Calibration
         system = positions_system(m, n, module.SYSTEM.split("positions-", 1)[1])
     elif "-direct" in module.SYSTEM:
         return _direct_calibrations(F, module.UNKNOWNS, roots)
+    elif "-gram" in module.SYSTEM:
+        return _gram_calibrations(F, module.UNKNOWNS, roots)
     elif tuple(module.UNKNOWNS) not in (HBO_UNKNOWNS + offsets, HBO_UNKNOWNS_3D + offsets, HBO_UNKNOWNS,
                                         HBO_UNKNOWNS_3D):
         raise ValueError(f"{module.__name__}: unknowns {module.UNKNOWNS} are neither (H, b[, o]) nor a positions formulation's")
@@ -275,6 +278,74 @@ def _direct_calibrations(F: np.ndarray, unknowns, roots: np.ndarray, tol: float 
         res = rms_residual(F, rec, tra, off)
         if np.isfinite(res):
             out.append(Calibration(rec, tra, off, res))
+    return sorted(out, key=lambda c: c.residual)
+
+
+#: Gauss-Newton steps on the range equations after a Gram root's positions (:func:`_range_newton`).
+GRAM_NEWTON = 3
+
+
+def _range_newton(F: np.ndarray, rec: np.ndarray, tra: np.ndarray, steps: int = GRAM_NEWTON) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Newton steps (minimum-norm, the gauge left free) on |r_i - s_j|^2 - f_ij^2 in the positions, each
+    kept only when it lowers the residual. A Gram root maps to positions through G's Cholesky factor, which
+    is ill-conditioned when r_1..r_{K+1} are close to coplanar (bench seed 103 of 6r/4s, solved transposed:
+    1.8e-7 relative position error); the range equations are not, and the steps restore full accuracy."""
+    m, n, k = len(rec), len(tra), rec.shape[1]
+    ii, jj = np.divmod(np.arange(m * n), n)
+
+    def res(r, t):
+        return (((r[:, None, :] - t[None, :, :]) ** 2).sum(-1) - F ** 2).ravel()
+
+    current = res(rec, tra)
+    for _ in range(steps):
+        diff = rec[ii] - tra[jj]  # (mn, k)
+        J = np.zeros((m * n, (m + n) * k))
+        rows = np.arange(m * n)
+        for a in range(k):
+            J[rows, ii * k + a] = 2.0 * diff[:, a]
+            J[rows, (m + jj) * k + a] = -2.0 * diff[:, a]
+        step = np.linalg.lstsq(J, -current, rcond=None)[0]
+        r2, t2 = rec + step[:m * k].reshape(m, k), tra + step[m * k:].reshape(n, k)
+        trial = res(r2, t2)
+        if not np.linalg.norm(trial) < np.linalg.norm(current):
+            break
+        rec, tra, current = r2, t2, trial
+    return rec, tra
+
+
+def _gram_calibrations(F: np.ndarray, unknowns, roots: np.ndarray, tol: float = 1e-6) -> list[Calibration]:
+    """:func:`calibrations` of a gram-parametrization solver (TOA; unknowns the upper triangle of the Gram
+    matrix G = R R^T of the receivers r_2..r_{K+1} relative to r_1, then a<i>_1..a<i>_K of each further
+    receiver: analysis.formulations.kd): the real roots with G positive definite. The receivers are the rows
+    of G's Cholesky factor L (r_2 on the x axis, r_3 in the xy plane: the gauge) and r_i = L^T a_i; the
+    transmitters solve R s_j = w_j / 2, w_j,a = G_aa + f_1j^2 - f_{a+1,j}^2 (the ranges to r_1..r_{K+1})."""
+    m, n = F.shape
+    k = next((k for k in (2, 3) if k * (k + 1) // 2 + k * max(m - k - 1, 0) == len(unknowns)), None)
+    if k is None or any(not u.startswith("g") for u in unknowns[:k * (k + 1) // 2]):
+        raise ValueError(f"unknowns {tuple(unknowns)} are not a gram parametrization's")
+    iu = np.triu_indices(k)
+    out = []
+    for x in roots[np.all(np.isfinite(roots), axis=1)]:
+        if np.max(np.abs(x.imag)) > tol * (1.0 + np.max(np.abs(x))):
+            continue
+        G = np.zeros((k, k))
+        G[iu] = x.real[:len(iu[0])]
+        G = G + np.triu(G, 1).T
+        try:
+            L = np.linalg.cholesky(G)
+        except np.linalg.LinAlgError:  # not positive definite: no real receivers
+            continue
+        alpha = x.real[len(iu[0]):].reshape(-1, k)
+        rec = np.vstack([np.zeros((1, k)), L, alpha @ L])
+        w = np.diag(G)[:, None] + F[0][None, :] ** 2 - F[1:k + 1] ** 2
+        rec, tra = _range_newton(F, rec, np.linalg.solve(L, 0.5 * w).T)
+        gauged = to_gauge(rec, tra)
+        if gauged is None:
+            continue
+        rec, tra = gauged
+        res = rms_residual(F, rec, tra, np.zeros(n))
+        if np.isfinite(res):
+            out.append(Calibration(rec, tra, np.zeros(n), res))
     return sorted(out, key=lambda c: c.residual)
 
 

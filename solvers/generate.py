@@ -73,6 +73,9 @@ SOLVERS = {
     "4r6s3dtoa": "4r6s-toa3d:A,B2,B3,B4,B5,B6,C2-C4",
     "5r5s3dtoa": "5r5s-toa3d:A,B2,B3,B4,B5,C2-C5",
     "6r4s3dtoa": "6r4s-toa3d:A,B2,B3,B4,C2-C6",
+    # 4r/6s in the receivers' Gram matrix (6 unknowns instead of 9; 2-3.5x faster than its compaction solver,
+    # docs/minimal-3d.md); 6r/4s and 5r/5s in it (12 and 9 unknowns) are slower than their compaction solvers
+    "4r6s3dgram": "4r6s-toa3d-gram:all",
     # 3D TDOA minimal cells, direct parametrization (receivers in the gauge frame, transmitters, offsets), built
     # on numerical evidence from a monodromy checkpoint (MONODROMY_CHECKPOINTS): F4 cannot count them
     "7r5s3d": "7r5s-tdoa3d-direct:all",
@@ -196,6 +199,11 @@ def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2, mod
     if parametrization == "direct":
         x = [r[i, a] for i in range(1, m) for a in range(min(i, dim))] + list(t.ravel()) + list(o)
         return F / scale, np.array(x) / scale
+    if parametrization == "gram":
+        from analysis.formulations.kd import gram_root
+
+        x = gram_root(r, dim)
+        return F / scale, x / scale ** np.where(np.arange(len(x)) < dim * (dim + 1) // 2, 2.0, 0.0)
     s1 = t[0] - r[0]
     S = np.column_stack([t[c + 1] - t[0] for c in range(dim)])
     H = np.linalg.inv(4.0 * S.T @ S)

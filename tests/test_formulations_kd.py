@@ -20,7 +20,8 @@ from analysis.formulations.kd import build_equations, det_h_terms, solve_mod
 P = 65521
 
 NEW_CONFIGS = ["3r3s-toa2d", "4r4s-toa2d", "4r6s-toa3d", "6r4s-toa3d", "5r5s-toa3d", "6r6s-tdoa3d", "10r4s-tdoa3d",
-               "7r6s-tdoa3d", "5r3s-tdoa2d-direct", "3r3s-toa2d-direct", "4r6s-toa3d-direct", "6r6s-tdoa3d-direct"]
+               "7r6s-tdoa3d", "5r3s-tdoa2d-direct", "3r3s-toa2d-direct", "4r6s-toa3d-direct", "6r6s-tdoa3d-direct",
+               "3r3s-toa2d-gram", "4r6s-toa3d-gram", "5r5s-toa3d-gram", "6r4s-toa3d-gram"]
 
 
 # ---------------------------------------------------------------------------------------------- configurations
@@ -246,6 +247,33 @@ def test_direct_degree_is_the_gauge_group_times_the_compaction_count():
     compaction = cell_degree("3r3s-toa2d:all")
     direct = cell_degree("3r3s-toa2d-direct:all")
     assert direct.degree == 4 * compaction.degree and direct.up_to_gauge == compaction.up_to_gauge
+
+
+@pytest.mark.parametrize("compaction, gram", [
+    ("3r3s-toa2d:all", "3r3s-toa2d-gram:all"),
+    ("4r6s-toa3d:all", "4r6s-toa3d-gram:all"),
+    ("5r5s-toa3d:A,B2,B3,B4,B5,C2-C5", "5r5s-toa3d-gram:S1-S5,E5_1,E5_2,E5_3,E5_4"),
+    ("6r4s-toa3d:all", "6r4s-toa3d-gram:all")])
+def test_gram_degree_is_the_compaction_count(compaction, gram):
+    """The Gram parametrization (TOA: G = R R^T of r_2..r_{K+1}, coordinates of the further receivers in that
+    basis; invariant under the Euclidean group) counts the same networks as the compaction one, 8 / 38 / 42 /
+    38, each with its known root checked; 5r/5s leaves out f5_5 in both."""
+    a, b = cell_degree(compaction), cell_degree(gram)
+    assert a.status == b.status == "ok" and a.tangent_dim == b.tangent_dim == 0  # the known root is isolated
+    assert b.degree == a.degree and b.up_to_gauge == a.up_to_gauge
+
+
+def test_gram_parametrization_is_for_toa_with_k_plus_1_receivers():
+    config = TDOAConfig.parse("5r5s-toa3d-gram")
+    assert config.unknowns == ("g11", "g12", "g13", "g22", "g23", "g33", "a5_1", "a5_2", "a5_3")
+    assert config.gauge_group_order == 1
+    assert equation_names(config)[:5] == ("S1", "S2", "S3", "S4", "S5") and equation_names(config)[5] == "E5_1"
+    with pytest.raises(ValueError, match="gram parametrization is for TOA"):
+        TDOAConfig(6, 6, dim=3, parametrization="gram")
+    with pytest.raises(ValueError, match="m \\(receivers\\) must be >= 4"):
+        TDOAConfig(3, 6, model="toa", dim=3, parametrization="gram")
+    with pytest.raises(ValueError, match="valid names for 4r6s-toa3d-gram: S1..S6"):
+        Formulation.parse("4r6s-toa3d-gram:E5_1")
 
 
 def test_underdetermined_cell_is_positive_dimensional_without_a_groebner_basis():

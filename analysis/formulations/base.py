@@ -35,7 +35,7 @@ class SamplingFailed(RuntimeError):
 # --------------------------------------------------------------------------------------------------
 
 _CONFIG_RE = re.compile(
-    r"^\s*(\d+)\s*r\s*/?\s*(\d+)\s*s(?:\s*-\s*(tdoa|toa)\s*(\d+)\s*d)?(?:\s*-\s*(direct))?\s*$", re.IGNORECASE)
+    r"^\s*(\d+)\s*r\s*/?\s*(\d+)\s*s(?:\s*-\s*(tdoa|toa)\s*(\d+)\s*d)?(?:\s*-\s*(direct|gram))?\s*$", re.IGNORECASE)
 
 
 MODELS: tuple[str, ...] = ("tdoa", "toa")
@@ -45,10 +45,15 @@ and ``toa`` (everything synchronised, no offsets, paper Section 2.1)."""
 DIMENSIONS: tuple[int, ...] = (2, 3)
 """Spatial dimensions K the builder supports."""
 
-PARAMETRIZATIONS: tuple[str, ...] = ("compaction", "direct")
+PARAMETRIZATIONS: tuple[str, ...] = ("compaction", "direct", "gram")
 """Unknowns of a formulation: ``compaction`` (the paper's factorisation of the compaction matrix: H, b and,
-for TDOA, the offsets) or ``direct`` (the positions themselves in the gauge r_1 = 0, r_2 on the x axis,
-r_3 in the xy plane, and the offsets; equations |r_i - s_j|^2 = d_ij^2)."""
+for TDOA, the offsets), ``direct`` (the positions themselves in the gauge r_1 = 0, r_2 on the x axis,
+r_3 in the xy plane, and the offsets; equations |r_i - s_j|^2 = d_ij^2) or ``gram`` (TOA only: the Gram
+matrix G = R R^T of the receivers r_2..r_{K+1} relative to r_1, upper triangle g11, g12, ..., and for each
+further receiver i its coordinates a<i>_1..a<i>_K in the basis r_2..r_{K+1}; invariant under the
+Euclidean group. Equations ``S<j>``: w_j^T adj(G) w_j - 4 d_1j^2 det G with w_j,a = G_aa + d_1j^2 -
+d_{a+1,j}^2 (|s_j - r_1|^2 = d_1j^2 once R s_j = w_j / 2 is solved); ``E<i>_<j>``: a_i^T G a_i + d_1j^2 -
+d_ij^2 - a_i^T w_j (receiver i's range to s_j). Saturate by det G.)"""
 
 _AXES = "xyz"
 
@@ -88,8 +93,12 @@ class TDOAConfig:
         if self.parametrization not in PARAMETRIZATIONS:
             raise ValueError(f"unknown parametrization {self.parametrization!r}; valid: {', '.join(PARAMETRIZATIONS)}")
         k = self.dim
+        if self.parametrization == "gram" and self.model != "toa":
+            raise ValueError("the gram parametrization is for TOA (the offsets of TDOA do not enter it)")
         if self.parametrization == "direct":
             lows = (k, 1)
+        elif self.parametrization == "gram":
+            lows = (k + 1, 1)
         else:
             lows = (k + 2, k + 1) if self.model == "tdoa" else (k + 1, k + 1)
         for name, value, low in (("m (receivers)", self.m, lows[0]), ("n (transmitters)", self.n, lows[1])):
@@ -108,7 +117,7 @@ class TDOAConfig:
             raise ValueError(f"cannot parse configuration {text!r}; expected e.g. '6r4s', '6r/4s' or '4r6s-toa3d'")
         said_model = match.group(3).lower() if match.group(3) else None
         said_dim = int(match.group(4)) if match.group(4) else None
-        said_param = "direct" if match.group(5) else None
+        said_param = match.group(5).lower() if match.group(5) else None
         values = {}
         for what, said, given, default in (("model", said_model, model, "tdoa"), ("dim", said_dim, dim, 2),
                                            ("parametrization", said_param, parametrization, "compaction")):
@@ -127,7 +136,7 @@ class TDOAConfig:
         """Short label, e.g. ``"6r4s"`` (paper's 2D TDOA), ``"4r6s-toa3d"``, ``"3r3s-toa2d-direct"``."""
         if self.is_planar_tdoa:
             return f"{self.m}r{self.n}s"
-        suffix = "-direct" if self.parametrization == "direct" else ""
+        suffix = "" if self.parametrization == "compaction" else f"-{self.parametrization}"
         return f"{self.m}r{self.n}s-{self.model}{self.dim}d{suffix}"
 
     @property
@@ -137,7 +146,8 @@ class TDOAConfig:
         compaction: the upper triangle of H row by row (h11, h12, h22 in 2D; h11, h12, h13, h22, h23, h33
         in 3D), b1..bK, then (TDOA) o1..on. direct: the free receiver coordinates r2x, r3x, r3y, ...
         (gauge r_1 = 0, r_k has its first k - 1 coordinates free for k <= K), the transmitters s1x, s1y, ...,
-        then (TDOA) o1..on.
+        then (TDOA) o1..on. gram (TOA): the upper triangle of G (g11, g12, g22 in 2D), then a<i>_1..a<i>_K
+        for every receiver i >= K + 2.
         """
         k = self.dim
         offsets = tuple(f"o{j}" for j in range(1, self.n + 1)) if self.model == "tdoa" else ()
@@ -145,6 +155,9 @@ class TDOAConfig:
             rec = tuple(f"r{i}{_AXES[a]}" for i in range(2, self.m + 1) for a in range(min(i - 1, k)))
             tra = tuple(f"s{j}{_AXES[a]}" for j in range(1, self.n + 1) for a in range(k))
             return rec + tra + offsets
+        if self.parametrization == "gram":
+            g = tuple(f"g{a}{c}" for a in range(1, k + 1) for c in range(a, k + 1))
+            return g + tuple(f"a{i}_{a}" for i in range(k + 2, self.m + 1) for a in range(1, k + 1))
         h = tuple(f"h{a}{c}" for a in range(1, k + 1) for c in range(a, k + 1))
         return h + tuple(f"b{a}" for a in range(1, k + 1)) + offsets
 
@@ -242,6 +255,9 @@ def equation_names(config: TDOAConfig | str) -> tuple[str, ...]:
     config = _as_config(config)
     if config.parametrization == "direct":
         return tuple(f"D{i}_{j}" for i in range(1, config.m + 1) for j in range(1, config.n + 1))
+    if config.parametrization == "gram":
+        return tuple(f"S{j}" for j in range(1, config.n + 1)) + tuple(
+            f"E{i}_{j}" for i in range(config.dim + 2, config.m + 1) for j in range(1, config.n + 1))
     last_b = 3 if config.is_planar_tdoa else config.n
     names = ["A"] + [f"B{j}" for j in range(2, last_b + 1)] + [f"C{i}" for i in range(2, config.m + 1)]
     names += [_minor_name(config, rows, cols) for rows, cols in _minor_index_sets(config)]
@@ -258,6 +274,10 @@ def _describe_names(config: TDOAConfig) -> str:
     if config.parametrization == "direct":
         return (f"valid names for {config.label}: D<i>_<j> (receiver i, transmitter j), D1_1..{names[-1]}; "
                 "groups: all, D*, D2_*")
+    if config.parametrization == "gram":
+        extra = f", E<i>_<j> (receiver i >= {config.dim + 2}, transmitter j)" if config.m > config.dim + 1 else ""
+        return (f"valid names for {config.label}: S1..S{config.n} (transmitter j's range to receiver 1){extra}; "
+                "groups: all, S*, E*; ranges like S1-S4")
     minors = [x for x in names if x.startswith("M")]
     bs = [x for x in names if x.startswith("B")]
     text = f"A, {bs[0]}..{bs[-1]}, C2..C{config.m}" if len(bs) > 1 else f"A, {bs[0]}, C2..C{config.m}"
@@ -275,7 +295,7 @@ def _no_minors(config: TDOAConfig) -> str:
     return f"no minors: they need n >= {config.dim + 2}"
 
 
-_RANGE_RE = re.compile(r"^([BC])(\d+)\s*-\s*([BC])?(\d+)$", re.IGNORECASE)
+_RANGE_RE = re.compile(r"^([BCS])(\d+)\s*-\s*([BCS])?(\d+)$", re.IGNORECASE)
 _MINORS_COUNT_RE = re.compile(r"^minors\((\d+)\)$", re.IGNORECASE)
 
 
@@ -419,8 +439,8 @@ class Formulation:
         written ``minors(N)``, a proper subset by explicit names; every range equation of a direct
         formulation is ``all``.
         """
-        if self.config.parametrization == "direct":
-            whole = len(self.equations) == self.config.m * self.config.n
+        if self.config.parametrization in ("direct", "gram"):
+            whole = len(self.equations) == len(equation_names(self.config))
             return f"{self.config.label}:{'all' if whole else ','.join(self.equations)}"
         parts = [x for x in self.equations if _family(x) in ("A", "B")]
         cs = [int(x[1:]) for x in self.equations if _family(x) == "C"]

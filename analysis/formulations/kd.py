@@ -292,9 +292,40 @@ class _BuilderKD:
             out.append(fl.add(self.d2(i, j), fl.scale(dist, -1)))
         return out
 
+    # -- Gram parametrization (TOA)
+    def g_matrix(self) -> list[list[dict]]:
+        k = self.k
+        return [[self.var(f"g{min(a, c) + 1}{max(a, c) + 1}") for c in range(k)] for a in range(k)]
+
+    def build_gram(self, names: Sequence[str]) -> list[dict]:
+        fl, k = self.field, self.k
+        G = self.g_matrix()
+        det, adj = fl.det(G), fl.adjugate(G)
+
+        def w(j: int) -> list[dict]:  # w_j,a = G_aa + d_1j^2 - d_{a+1,j}^2
+            return [fl.add(G[a][a], self.d2(1, j), fl.scale(self.d2(a + 2, j), -1)) for a in range(k)]
+
+        out = []
+        for name in names:
+            if name[0] == "S":
+                j = int(name[1:])
+                wj = w(j)
+                quad = fl.add(*(fl.mul(wj[a], fl.mul(adj[a][c], wj[c])) for a in range(k) for c in range(k)))
+                out.append(fl.add(quad, fl.scale(fl.mul(self.d2(1, j), det), -4)))
+            else:
+                i, j = (int(v) for v in name[1:].split("_"))
+                alpha = [self.var(f"a{i}_{a + 1}") for a in range(k)]
+                wj = w(j)
+                gaa = fl.add(*(fl.mul(alpha[a], fl.mul(G[a][c], alpha[c])) for a in range(k) for c in range(k)))
+                aw = fl.add(*(fl.mul(alpha[a], wj[a]) for a in range(k)))
+                out.append(fl.add(gaa, self.d2(1, j), fl.scale(self.d2(i, j), -1), fl.scale(aw, -1)))
+        return out
+
     def build(self, names: Sequence[str]) -> list[dict]:
         if self.config.parametrization == "direct":
             return self.build_direct(names)
+        if self.config.parametrization == "gram":
+            return self.build_gram(names)
         return self.build_compaction(names)
 
 
@@ -309,6 +340,8 @@ def nonzero_conditions(formulation: Formulation, rows: Sequence[Sequence], p: in
     """Polynomials that vanish only on spurious solutions of a compaction formulation over GF(p): det H
     (A and B were multiplied by it) and, when 3D TDOA's B_j with j >= K + 2 are used, det D~[:K, :K]."""
     builder = _BuilderKD(formulation.config, rows, p)
+    if formulation.config.parametrization == "gram":
+        return [builder.field.det(builder.g_matrix())]
     out = [builder.field.det(builder.h_matrix())]
     if any(_family(x) == "B" and int(x[1:]) > formulation.config.dim + 1 for x in formulation.equations) \
             and formulation.config.model == "tdoa":
@@ -343,6 +376,16 @@ def _root_gf(config: TDOAConfig, receivers, transmitters, offsets, p: int) -> tu
     if config.parametrization == "direct":
         return tuple(int(x) % p for x in _gauge_coordinates(config, receivers, transmitters)) + offs
     k = config.dim
+    if config.parametrization == "gram":
+        R = [[int(x) % p for x in receivers[i]] for i in range(1, k + 1)]  # rows r_2..r_{K+1} (r_1 = 0)
+        g = tuple(sum(R[a][q] * R[c][q] for q in range(k)) % p for a in range(k) for c in range(a, k))
+        if config.m <= k + 1:
+            return g
+        RT = [[R[c][a] for c in range(k)] for a in range(k)]
+        alpha = solve_mod(RT, [[int(receivers[i][a]) % p for i in range(k + 1, config.m)] for a in range(k)], p)
+        if alpha is None:
+            return None
+        return g + tuple(alpha[a][i] for i in range(config.m - k - 1) for a in range(k))
     s1 = [int(x) for x in transmitters[0]]
     S = [[(int(transmitters[c + 1][a]) - s1[a]) % p for c in range(k)] for a in range(k)]  # column c = s_{c+2} - s_1
     m4 = [[4 * sum(S[q][a] * S[q][c] for q in range(k)) % p for c in range(k)] for a in range(k)]  # 4 S^T S
@@ -362,10 +405,24 @@ def _root_real(config: TDOAConfig, receivers: np.ndarray, transmitters: np.ndarr
     if config.parametrization == "direct":
         return tuple(float(x) for x in _gauge_coordinates(config, receivers, transmitters)) + offs
     k = config.dim
+    if config.parametrization == "gram":
+        return tuple(float(v) for v in gram_root(receivers, k))
     S = (transmitters[1:k + 1] - transmitters[0]).T
     H = np.linalg.inv(4.0 * S.T @ S)
     b = -0.5 * np.linalg.solve(S, transmitters[0])
     return tuple(float(H[a, c]) for a in range(k) for c in range(a, k)) + tuple(map(float, b)) + offs
+
+
+def gram_root(receivers: np.ndarray, k: int) -> np.ndarray:
+    """The gram parametrization's root of a network (receivers (m, K), real or complex, r_1 first; any frame):
+    the upper triangle of G = R R^T, R = [r_2 - r_1; ...; r_{K+1} - r_1], then for each further receiver i
+    its coordinates a_i in that basis (r_i - r_1 = R^T a_i; transposes, not conjugates)."""
+    rel = np.asarray(receivers) - np.asarray(receivers)[0]
+    R = rel[1:k + 1]
+    G = R @ R.T
+    upper = [G[a, c] for a in range(k) for c in range(a, k)]
+    alpha = np.linalg.solve(R.T, rel[k + 1:].T).T.ravel() if len(rel) > k + 1 else np.zeros(0)
+    return np.concatenate([upper, alpha])
 
 
 def _gauge_ok(config: TDOAConfig, receivers: np.ndarray, p: int) -> bool:
@@ -374,7 +431,7 @@ def _gauge_ok(config: TDOAConfig, receivers: np.ndarray, p: int) -> bool:
     k = config.dim
     if any(receivers[i, i - 1] % p == 0 for i in range(1, min(k, config.m))):
         return False
-    if config.parametrization == "compaction":
+    if config.parametrization in ("compaction", "gram"):
         return _det_mod(receivers[1:k + 1].tolist(), p) != 0
     return True
 
@@ -552,6 +609,38 @@ def formulas(formulation: Formulation, x, f: Sequence[Sequence], zero, quarter, 
             for ra, sa in zip(position("r", i), position("s", j)):
                 dist = dist + (ra - sa) * (ra - sa)
             out.append(d2(i, j) - dist)
+        return out, conditions
+    if config.parametrization == "gram":
+        G = [[x[f"g{min(a, c) + 1}{max(a, c) + 1}"] for c in range(k)] for a in range(k)]
+        det, adj = _det_generic(G, zero), _adjugate_generic(G, zero)
+        ws: dict = {}
+
+        def w(j: int) -> list:  # w_j,a = G_aa + d_1j^2 - d_{a+1,j}^2 = G_aa - e p
+            if j not in ws:
+                ws[j] = [G[a][a] - e(a + 2, j) * p(a + 2, j) for a in range(k)]
+            return ws[j]
+
+        for name in formulation.equations:
+            if name[0] == "S":
+                j = int(name[1:])
+                wj, quad = w(j), zero
+                for a in range(k):
+                    row = zero
+                    for c in range(k):
+                        row = row + adj[a][c] * wj[c]
+                    quad = quad + wj[a] * row
+                out.append(quad - 4 * (d2(1, j) * det))
+            else:
+                i, j = (int(v) for v in name[1:].split("_"))
+                alpha = [x[f"a{i}_{a + 1}"] for a in range(k)]
+                wj, gaa, aw = w(j), zero, zero
+                for a in range(k):
+                    row = zero
+                    for c in range(k):
+                        row = row + G[a][c] * alpha[c]
+                    gaa = gaa + alpha[a] * row
+                    aw = aw + alpha[a] * wj[a]
+                out.append(gaa - e(i, j) * p(i, j) - aw)
         return out, conditions
     H = [[x[f"h{min(a, c) + 1}{max(a, c) + 1}"] for c in range(k)] for a in range(k)]
     b = [x[f"b{a + 1}"] for a in range(k)]

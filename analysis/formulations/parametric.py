@@ -457,6 +457,12 @@ def _from_formulation_kd(formulation, saturate_det_h: bool) -> ParametricSystem:
     nonzero = [sympy.expand(g) for g in nonzero]
     if config.parametrization == "direct":
         powers = tuple(1.0 for _ in config.unknowns)
+    elif config.parametrization == "gram":  # G scales as the squared distances, the coordinates a_i not at all
+        if saturate_det_h:
+            k = config.dim
+            G = sympy.Matrix(k, k, lambda a, c: x[f"g{min(a, c) + 1}{max(a, c) + 1}"])
+            nonzero.insert(0, sympy.expand(G.det()))
+        powers = tuple(2.0 if u.startswith("g") else 0.0 for u in config.unknowns)
     else:
         if saturate_det_h:
             k = config.dim

@@ -89,12 +89,12 @@ def formulation_system(formulation: Formulation, seed: int = 0, saturate: bool |
     """(prime -> polynomials, prime -> known root) of a formulation on the instance of ``seed``.
 
     The instance is sampled once per prime and its known root checked against every equation. With
-    ``saturate`` (default: compaction formulations) the unknowns get t and the system t det H - 1; the
+    ``saturate`` (default: compaction and gram formulations) the unknowns get t and the system t det H - 1 (det G); the
     root then gets t = 1 / det H.
     """
     config = formulation.config
     if saturate is None:
-        saturate = config.parametrization == "compaction"
+        saturate = config.parametrization in ("compaction", "gram")
     names = config.unknowns + ((SATURATION_VARIABLE,) if saturate else ())
     cache: dict[int, tuple[list[Poly], tuple[int, ...]]] = {}
 
