@@ -40,6 +40,7 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
+from analysis.formulations.kd import gram_root  # noqa: E402
 from solvers import api  # noqa: E402
 from solvers.api import KD_SOLVERS, _module_for, solve_network  # noqa: E402
 from solvers.metrics import position_error  # noqa: E402
@@ -88,7 +89,10 @@ def bench(label: str, dim: int, model: str, trials: int, method: str = "homotopy
     nets = networks(m, n, dim, trials)
     F = np.stack([net.measurements() for net in nets])
     iu = np.triu_indices(dim)
-    truths = np.stack([np.concatenate([true_root(net)[0][iu], true_root(net)[1]]) for net in nets])
+    if "-gram" in module.SYSTEM:  # the receivers' Gram matrix (and further receivers' coordinates in its basis)
+        truths = np.stack([gram_root(net.receivers, dim) for net in nets])
+    else:
+        truths = np.stack([np.concatenate([true_root(net)[0][iu], true_root(net)[1]]) for net in nets])
     roots = module.solve_batch(F)
     dist = np.linalg.norm(roots - truths[:, None, :], axis=2)  # NaN for a lost path: not the nearest root
     err = np.min(np.where(np.isfinite(dist), dist, np.inf), axis=1) / np.linalg.norm(truths, axis=1)

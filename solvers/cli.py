@@ -147,8 +147,9 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
                    help="with --tdoa: measurement model tdoa (default; unknown transmitter offsets) or toa (synchronised)")
     p.add_argument("--dim", type=int, metavar="K", default=None, help="with --tdoa: spatial dimension 2 (default) or 3")
     p.add_argument("--parametrization", metavar="P", default=None,
-                   help="with --tdoa: compaction (default; unknowns H, b and offsets, the paper's) or direct "
-                   "(unknowns the gauge-fixed positions and offsets; degree = 2^K x the compaction count)")
+                   help="with --tdoa: compaction (default; unknowns H, b and offsets, the paper's), direct "
+                   "(unknowns the gauge-fixed positions and offsets; degree = 2^K x the compaction count) or gram "
+                   "(TOA: the receivers' Gram matrix G; saturate by det G with --saturate-det-h)")
     p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
                    help="with --tdoa: seed of the consistent random instance")
     p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H (times det D~[:3,:3] when 3D TDOA's B5..Bn are used)")
@@ -383,8 +384,8 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
         raise UserError("--equations is empty; give e.g. 'C2-C6', 'B2,C2-C6,minors' or 'all'")
     try:
         config = tf.TDOAConfig.parse(args.tdoa, model=args.model, dim=args.dim, parametrization=args.parametrization)
-        if args.saturate_det_h and config.parametrization != "compaction":
-            raise ValueError("--saturate-det-h needs the compaction parametrization (the direct one has no H)")
+        if args.saturate_det_h and config.parametrization == "direct":
+            raise ValueError("--saturate-det-h needs the compaction or gram parametrization (the direct one has no H)")
         formulation = tf.Formulation(config, tf.parse_equations(config, args.equations or "all"))
         primes = tuple(check_prime(p) for p in args.prime) if args.prime else DEFAULT_PRIMES
     except (ValueError, BadPrime) as e:
@@ -435,7 +436,8 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
     if args.saturate_det_h:
         extended = not config.is_planar_tdoa and len(nonzero_conditions(formulation, [list(r) for r in instance.F],
                                                                         primes[0])) > 1
-        out["saturated_by"] = "det H * det D~[:3,:3]" if extended else "det H"
+        out["saturated_by"] = ("det G" if config.parametrization == "gram" else
+                               "det H * det D~[:3,:3]" if extended else "det H")
     return _finish_report(out, report, args, header)
 
 
