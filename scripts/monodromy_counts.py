@@ -21,7 +21,7 @@ in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / fai
 relative residual of the affine fit, the number of witnesses and the paths it tracked.
 
 Usage: python scripts/monodromy_counts.py [10r4s 7r5s 6r6s 5r9s] [--seeds 0 1] [--loops 60] [--stall 10]
-       [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3]
+       [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3] [--dask ADDRESS|local [--dask-chunk 2000]]
 (--seconds 0 --trace-seconds 0: read the checkpoints only, no loop and no trace test run.)
 """
 from __future__ import annotations
@@ -46,6 +46,7 @@ from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers.generate import complex_instance, gauge_reflections  # noqa: E402
 from solvers.methods import homotopy as hm  # noqa: E402
 from solvers.methods import trace  # noqa: E402
+from solvers.methods.dask_tracks import DaskTracks  # noqa: E402
 
 TABLES = os.path.join(ROOT, "tables")
 
@@ -71,8 +72,10 @@ COLUMNS = ["cell", "formulation", "unknowns", "seed", "roots", "status", "loops"
 
 
 def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_stall: int = 3,
-          trace_seconds: float = 3600.0) -> tuple[dict, float]:
-    """One row of monodromy3d.csv and the seconds it took (checkpointed, resumable)."""
+          trace_seconds: float = 3600.0, dask: str | None = None, dask_chunk: int = 2000) -> tuple[dict, float]:
+    """One row of monodromy3d.csv and the seconds it took (checkpointed, resumable). ``dask``: a scheduler
+    address or "local": the loops' paths are tracked on that cluster (solvers.methods.dask_tracks), in chunks
+    of ``dask_chunk``, with the same results."""
     label = CELLS[cell]
     form = Formulation.parse(label)
     config = form.config
@@ -86,9 +89,15 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
     options = hm.HomotopyOptions(seed=seed, max_loops=loops, stall_loops=stall)
     path = cache_dir("monodromy")
     path.mkdir(parents=True, exist_ok=True)
-    result = hm.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
-                                progress=lambda msg: print(f"  {cell} seed {seed}: {msg}", file=sys.stderr, flush=True),
-                                excluded=hm._excluded(system, q0), group=group)
+    tracks = DaskTracks(dask, label, not direct, q0, x0, chunk=dask_chunk) if dask and seconds > 0 else None
+    try:
+        result = hm.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
+                                    progress=lambda msg: print(f"  {cell} seed {seed}: {msg}", file=sys.stderr,
+                                                               flush=True),
+                                    excluded=hm._excluded(system, q0), group=group, track=tracks)
+    finally:
+        if tracks is not None:
+            tracks.close()
     status = "settled" if result.stall >= stall else "not settled"
     row = {"cell": cell, "formulation": label, "unknowns": len(system.unknowns), "seed": seed,
            "roots": len(result.roots), "status": status, "loops": result.loops, "paths": result.paths,
@@ -200,13 +209,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trace-seconds", type=float, default=3600.0,
                         help="time cap of the trace test's witness monodromy per seed (0: the checkpoints only)")
     parser.add_argument("--trace-stall", type=int, default=3, help="witness loops without a new one before the trace")
+    parser.add_argument("--dask", metavar="ADDRESS", help="track the loops' paths on a Dask cluster: a scheduler "
+                        "address, or 'local' for a LocalCluster of one process per core (same results)")
+    parser.add_argument("--dask-chunk", type=int, default=2000, metavar="N", help="paths per Dask task (default 2000)")
     args = parser.parse_args(argv)
     rows = []
     for cell in args.cells:
         seeds = args.seeds if args.seeds is not None else SEEDS[cell]
         cell_rows = []
         for seed in seeds:
-            row, seconds = count(cell, seed, args.loops, args.stall, args.seconds, args.trace_stall, args.trace_seconds)
+            try:
+                row, seconds = count(cell, seed, args.loops, args.stall, args.seconds, args.trace_stall,
+                                     args.trace_seconds, args.dask, args.dask_chunk)
+            except ValueError as e:  # a bad --dask address, one line
+                if not args.dask:
+                    raise
+                print(f"monodromy_counts: {e}", file=sys.stderr)
+                return 2
             cell_rows.append(row)
             print(f"{cell} seed {seed}: {row['roots']} roots, {row['status']}, {row['loops']} loops, "
                   f"{row['paths']} paths, {seconds:.0f} s", flush=True)

@@ -675,14 +675,16 @@ def affine_start(system: ParametricSystem, coefficients: Callable, rng: np.rando
 
 def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Generator,
                     options: HomotopyOptions, excluded: Callable[[np.ndarray], np.ndarray] | None,
-                    free: np.ndarray | None = None, group: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                    free: np.ndarray | None = None, group: np.ndarray | None = None,
+                    track: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """One monodromy loop (a triangle q0 -> qa -> qb -> q0 through random complex parameters) from all known
     roots: (the known roots with the new ones appended, the number of paths tracked). ``free``: mask of the
     parameters the loop moves (default all; the trace test's witness loops keep its pencil parameter at 0).
     ``group``: sign vectors (G, N) of a group acting on the unknowns that fixes the parameters (the direct
     parametrization's reflections of the gauge frame); the roots are then one per orbit, and an endpoint is
     new only when no image of it is known (the loop commutes with the group, so the orbits' other members
-    need not be tracked).
+    need not be tracked). ``track(a, b, xs)``: the endpoints of xs along a -> b (default: the solver's tracker
+    in this process; :class:`solvers.methods.dask_tracks.DaskTracks`: on a Dask cluster).
 
     New endpoints count only when Newton's method has converged on them and, with ``excluded`` (a mask of
     points on the locus of the non-vanishing conditions), when they lie off that locus; a new root is one
@@ -693,10 +695,11 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
     qb = q0 + options.radius * scale * (rng.normal(size=q0.shape) + 1j * rng.normal(size=q0.shape))
     if free is not None:
         qa, qb = np.where(free, qa, q0), np.where(free, qb, q0)
+    track = track or (lambda a, b, xs: solver.track(a[None], b[None], xs)[0])
     xs, paths = roots, 0
     for a, b in ((q0, qa), (qa, qb), (qb, q0)):
         paths += len(xs)
-        xs, _ = solver.track(a[None], b[None], xs)
+        xs = track(a, b, xs)
         xs = xs[np.all(np.isfinite(xs), axis=1)]
     return add_new(roots, accepted(solver, xs, q0, excluded), group), paths
 
@@ -789,14 +792,16 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
                     seconds: float, checkpoint: str | None = None,
                     progress: Callable[[str], None] | None = None,
                     excluded: Callable[[np.ndarray], np.ndarray] | None = None,
-                    free: np.ndarray | None = None, group: np.ndarray | None = None) -> MonodromyCount:
+                    free: np.ndarray | None = None, group: np.ndarray | None = None,
+                    track: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> MonodromyCount:
     """Grow the roots at q0 by monodromy loops until ``options.stall_loops`` loops bring nothing new, or
     ``options.max_loops`` loops, or ``seconds`` have passed (then the count is a lower bound).
 
     checkpoint: a JSON file (plain text: q0, roots, loops, paths, stall, seconds, the rng state) written
     after every loop and resumed from when it exists for the same q0, so that a long count survives an
     interruption. Numerical evidence only: a root count without the GF(p) certificate of :func:`build`.
-    ``free``: the parameters the loops move, ``group``: roots kept one per orbit (:func:`_monodromy_loop`).
+    ``free``: the parameters the loops move, ``group``: roots kept one per orbit, ``track``: where the paths are
+    tracked (:func:`_monodromy_loop`).
     Completeness: :mod:`.trace`.
     """
     roots = np.array(x0, dtype=complex).reshape(-1, solver.nvars)
@@ -814,7 +819,7 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
     t0 = time.perf_counter()
     while loops < options.max_loops and stall < options.stall_loops and time.perf_counter() - t0 < seconds:
         before = len(roots)
-        roots, tracked = _monodromy_loop(solver, q0, roots, rng, options, excluded, free, group)
+        roots, tracked = _monodromy_loop(solver, q0, roots, rng, options, excluded, free, group, track)
         loops, paths = loops + 1, paths + tracked
         stall = 0 if len(roots) > before else stall + 1
         if checkpoint:
