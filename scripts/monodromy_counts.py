@@ -119,14 +119,15 @@ def union(cell: str, seeds: list[int]) -> dict | None:
     direct cells): {"union": size of the pool, "new": roots no checkpoint but one had, "lost": paths that
     failed}. Equal counts from two seeds can still be two different sets; a pool larger than every seed's
     count shows that a "settled" count was incomplete (6r/6s: 3919 and 3920, pool 3920). Kept in
-    <cell>-union.json for the checkpoints' root counts; None when a checkpoint is missing."""
+    <cell>-union.json (first seed 0; else <cell>-union-seed<k>.json) for the checkpoints' root counts; None when
+    a checkpoint is missing."""
     path = cache_dir("monodromy")
     files = [path / f"{cell}-seed{seed}.json" for seed in seeds]
     if len(seeds) < 2 or not all(f.exists() for f in files):
         return None
     saved = [json.loads(f.read_text(encoding="utf-8")) for f in files]
     key = {"seeds": list(seeds), "roots": [len(d["roots"]) for d in saved]}
-    record = path / f"{cell}-union.json"
+    record = path / (f"{cell}-union.json" if seeds[0] == 0 else f"{cell}-union-seed{seeds[0]}.json")
     if record.exists():
         stored = json.loads(record.read_text(encoding="utf-8"))
         if stored.get("key") == key:
@@ -185,7 +186,8 @@ def markdown(rows: list[dict]) -> str:
              "'settled': no new root in the last loops, else a lower bound; trace test: solvers.methods.trace, "
              f"'passed' when the affine fit's relative residual is <= {trace.PASS_TOL:.0e}, 'inconclusive' when its "
              "witness set was not settled (its size then a lower bound, no residual) or a path was lost; group order "
-             "8: direct parametrization, roots counted one per orbit of the gauge frame's reflections)", "",
+             "8: direct parametrization, roots counted one per orbit of the gauge frame's reflections; union of the "
+             "seeds: the other seeds' roots carried to this seed's network and pooled with its own)", "",
              "| cell | formulation | unknowns | group order | seed | roots | status | loops | paths tracked "
              "| loops without a new root | trace test | residual | witnesses | trace paths | union of the seeds |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -229,13 +231,15 @@ def main(argv: list[str] | None = None) -> int:
             cell_rows.append(row)
             print(f"{cell} seed {seed}: {row['roots']} roots, {row['status']}, {row['loops']} loops, "
                   f"{row['paths']} paths, {seconds:.0f} s", flush=True)
-        pooled = union(cell, list(seeds)) if all(r["status"] == "settled" for r in cell_rows) else None
-        for row in cell_rows:
+        settled = all(r["status"] == "settled" for r in cell_rows)
+        for row in cell_rows:  # the pool at each seed's own instance: the other seeds' roots carried there
+            first = [row["seed"]] + [s_ for s_ in seeds if s_ != row["seed"]]
+            pooled = union(cell, first) if settled else None
             row["union"] = "" if pooled is None else (f"{pooled['union']}" +
                                                       (f" ({pooled['lost']} paths lost)" if pooled["lost"] else ""))
-        if pooled is not None:
-            print(f"{cell}: union of seeds {list(seeds)}: {pooled['union']} ({pooled['new']} new, {pooled['lost']} "
-                  "paths lost)", flush=True)
+            if pooled is not None:
+                print(f"{cell}: union of seeds {first} at seed {row['seed']}: {pooled['union']} ({pooled['new']} new, "
+                      f"{pooled['lost']} paths lost)", flush=True)
         rows += cell_rows
     with open(os.path.join(TABLES, "monodromy3d.csv"), "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
