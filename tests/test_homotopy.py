@@ -395,3 +395,29 @@ def test_committed_spec_carries_its_configurations_step_control(name):
     assert solver.retrack == dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
     assert solver.options == tracker.TrackerOptions(**spec.get("tracker", {}))
     assert set(spec.get("retrack", {})) <= {f.name for f in dataclasses.fields(tracker.TrackerOptions)}
+
+
+def test_add_new_by_sorted_projections_decides_as_the_full_comparison():
+    """homotopy.add_new compares each endpoint only with the roots whose projection on a fixed direction is
+    within reach; its result is the same as comparing with every root and image, in order (random roots,
+    endpoints near roots or their images at 1e-9..1e-5, new points, repeats among the new ones)."""
+    from solvers.generate import gauge_reflections
+
+    def reference(roots, xs, group=None):
+        images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group)
+        for x in xs:
+            d = min(np.min(np.linalg.norm(roots - g * x, axis=1)) for g in images)
+            if d > 1e-6 * (1.0 + np.linalg.norm(x)):
+                roots = np.vstack([roots, x])
+        return roots
+
+    rng = np.random.default_rng(1)
+    group = gauge_reflections(["r2x", "r3x", "r3y", "s1x", "s1y", "s2x", "s2y", "o1", "o2"])
+    for trial in range(40):
+        R, K = int(rng.integers(1, 40)), int(rng.integers(0, 60))
+        roots = rng.normal(size=(R, 9)) + 1j * rng.normal(size=(R, 9))
+        base = np.vstack([roots, rng.normal(size=(6, 9)) + 1j * rng.normal(size=(6, 9))])
+        signs = group[rng.integers(0, len(group), size=K)] if trial % 2 else np.ones((K, 9))
+        xs = base[rng.integers(0, len(base), size=K)] * signs + 10.0 ** rng.uniform(-9, -5, size=(K, 1)) * rng.normal(size=(K, 9))
+        g = group if trial % 2 else None
+        assert np.array_equal(hm.add_new(roots, xs, g), reference(roots, xs, g)), trial

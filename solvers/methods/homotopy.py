@@ -704,6 +704,11 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
     return add_new(roots, accepted(solver, xs, q0, excluded), group), paths
 
 
+#: The fixed direction of :func:`add_new`'s projections (any direction gives the same decisions).
+_PROJECTION = np.random.default_rng(20261127)
+_PROJECTION_STATE = _PROJECTION.bit_generator.state
+
+
 def accepted(solver, xs: np.ndarray, q0: np.ndarray, excluded: Callable[..., np.ndarray] | None = None) -> np.ndarray:
     """The endpoints xs (K, N) that are roots at q0: finite, polished by three Newton steps after which the next
     step is below START_TOL (relative), and (``excluded``: a mask of points on the locus of the non-vanishing
@@ -721,13 +726,50 @@ def accepted(solver, xs: np.ndarray, q0: np.ndarray, excluded: Callable[..., np.
 
 def add_new(roots: np.ndarray, xs: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
     """roots (R, N) with every x of xs appended, in order, that lies farther than 1e-6 (1 + |x|) from each root
-    known by then (``group``: sign vectors (G, N), and from each root's images: one root per orbit)."""
-    images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group)
-    for x in xs:
-        d = min(np.min(np.linalg.norm(roots - g * x, axis=1)) for g in images)
-        if d > 1e-6 * (1.0 + np.linalg.norm(x)):
-            roots = np.vstack([roots, x])
-    return roots
+    known by then (``group``: sign vectors (G, N), and from each root's images: one root per orbit).
+
+    Each x is compared only with the roots whose projection on a fixed direction u lies within |u| times its
+    tolerance of its own (|Re u^H (x - r)| <= |u| |x - r|: no root within reach is skipped), found by
+    binary search in the sorted projections: the same decisions as comparing with every root, in
+    O((R + K) log R) instead of O(R K) (a 10^5-root monodromy loop spent minutes in the full comparison)."""
+    roots = np.asarray(roots, dtype=complex).reshape(-1, np.shape(xs)[-1] if np.size(xs) else np.shape(roots)[-1])
+    xs = np.asarray(xs, dtype=complex).reshape(-1, roots.shape[1])
+    if not len(xs):
+        return roots
+    images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group, dtype=float)
+    u = _PROJECTION.normal(size=roots.shape[1]) + 1j * _PROJECTION.normal(size=roots.shape[1])
+    _PROJECTION.bit_generator.state = _PROJECTION_STATE  # the same u every call
+    reach = np.linalg.norm(u) * (1.0 + 1e-9)
+    tol = 1e-6 * (1.0 + np.linalg.norm(xs, axis=1))
+    # the images' projections of every x: Re u^H (g x) = Re (g u)^H x (g real)
+    proj_x = np.stack([(xs @ (g * u).conj()).real for g in images])  # (G, K)
+
+    def near(pool: np.ndarray, proj: np.ndarray, i: int, allowed: Callable[[np.ndarray], np.ndarray]) -> bool:
+        """Whether an image of xs[i] lies within its tolerance of a row of pool (whose sorted projections
+        and their order are ``proj``), among the rows ``allowed`` keeps."""
+        order, sorted_proj = proj
+        for gi, g in enumerate(images):
+            lo, hi = np.searchsorted(sorted_proj, [proj_x[gi, i] - reach * tol[i], proj_x[gi, i] + reach * tol[i]])
+            cand = allowed(order[lo:hi])
+            if len(cand) and np.min(np.linalg.norm(pool[cand] - g * xs[i], axis=1)) <= tol[i]:
+                return True
+        return False
+
+    def sorted_projections(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = (rows @ u.conj()).real
+        order = np.argsort(p, kind="stable")
+        return order, p[order]
+
+    everything = lambda c: c  # noqa: E731
+    known = sorted_projections(roots)
+    fresh = np.array([i for i in range(len(xs)) if not near(roots, known, i, everything)], dtype=np.int64)
+    # among the new ones, in order: kept when far from every one kept before it
+    new = sorted_projections(xs[fresh])
+    keep = np.zeros(len(fresh), dtype=bool)
+    for a, i in enumerate(fresh):
+        keep[a] = not near(xs[fresh], new, i, lambda c, a=a: c[(c < a) & keep[c]])
+    kept = fresh[keep]
+    return np.vstack([roots, xs[kept]]) if len(kept) else roots
 
 
 def monodromy(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, count: int, rng: np.random.Generator,
