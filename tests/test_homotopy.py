@@ -421,3 +421,26 @@ def test_add_new_by_sorted_projections_decides_as_the_full_comparison():
         xs = base[rng.integers(0, len(base), size=K)] * signs + 10.0 ** rng.uniform(-9, -5, size=(K, 1)) * rng.normal(size=(K, 9))
         g = group if trial % 2 else None
         assert np.array_equal(hm.add_new(roots, xs, g), reference(roots, xs, g)), trial
+
+
+def test_duplicated_by_projection_decides_as_the_gram_matrix():
+    """Above GRAM_ROWS finite rows homotopy._duplicated compares by sorted projections (a 10^5-point trace test
+    would need a 10^10-entry Gram matrix); on random sets with near copies and images of rows, and NaN rows,
+    it marks the same rows as the Gram-matrix test."""
+    from solvers.generate import gauge_reflections
+
+    rng = np.random.default_rng(3)
+    group = gauge_reflections(["r2x", "r3x", "r3y", "s1x", "s1y", "s2x", "s2y", "o1", "o2"])
+    for trial in range(30):
+        K = int(rng.integers(2, 200))
+        x = rng.normal(size=(K, 9)) + 1j * rng.normal(size=(K, 9))
+        m = int(rng.integers(0, K // 2 + 1))
+        src, dst = rng.integers(0, K, m), rng.integers(0, K, m)
+        g = group if trial % 2 else None
+        signs = group[rng.integers(0, len(group), m)] if g is not None else np.ones((m, 9))
+        x[dst] = x[src] * signs + 10.0 ** rng.uniform(-9, -5, (m, 1)) * rng.normal(size=(m, 9))
+        x[rng.integers(0, K, 2)] = np.nan
+        ok = np.all(np.isfinite(x), axis=1)
+        by_projection = np.zeros(K, dtype=bool)
+        by_projection[ok] = hm._duplicated_by_projection(x[ok], 1e-6, g)
+        assert np.array_equal(by_projection, hm._duplicated(x, 1e-6, g)), trial

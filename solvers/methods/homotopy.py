@@ -576,6 +576,9 @@ def _duplicated(x: np.ndarray, tol: float = 1e-6, group: np.ndarray | None = Non
     ok = np.flatnonzero(np.all(np.isfinite(x), axis=1))
     if len(ok) < 2:
         return out
+    if len(ok) > GRAM_ROWS:  # the K x K Gram matrix would not fit (a 10^5-point trace test): sorted projections
+        out[ok] = _duplicated_by_projection(x[ok], tol, group)
+        return out
     hit = np.zeros(len(ok), dtype=bool)
     for sign in (None,) if group is None else [None if np.all(g == 1.0) else g for g in np.asarray(group)]:
         near = _near(x[ok], tol, sign)
@@ -583,6 +586,37 @@ def _duplicated(x: np.ndarray, tol: float = 1e-6, group: np.ndarray | None = Non
         hit |= near.any(axis=1)
     out[ok] = hit
     return out
+
+
+#: Above this many finite rows :func:`_duplicated` compares by sorted projections instead of a Gram matrix.
+GRAM_ROWS = 10_000
+
+
+def _duplicated_by_projection(f: np.ndarray, tol: float, group: np.ndarray | None) -> np.ndarray:
+    """:func:`_duplicated` of finite rows f (K, n) without the K x K matrix: row i is compared only with the
+    rows whose projection on a fixed direction u lies within |u| tol (1 + |f_i|) of its images' (the bound
+    |Re u^H (a - b)| <= |u| |a - b| skips no row within reach)."""
+    u = _PROJECTION.normal(size=f.shape[1]) + 1j * _PROJECTION.normal(size=f.shape[1])
+    _PROJECTION.bit_generator.state = _PROJECTION_STATE
+    reach = np.linalg.norm(u) * (1.0 + 1e-9)
+    size = np.linalg.norm(f, axis=1)
+    limit = tol * (1.0 + size)
+    proj = (f @ u.conj()).real
+    order = np.argsort(proj, kind="stable")
+    sorted_proj = proj[order]
+    signs = np.ones((1, f.shape[1])) if group is None else np.asarray(group, dtype=float)
+    hit = np.zeros(len(f), dtype=bool)
+    for g in signs:  # |f_i - g f_j| = |g f_i - f_j|: the image of row i against the rows themselves
+        image = (f @ (g * u).conj()).real
+        lo = np.searchsorted(sorted_proj, image - reach * limit)
+        hi = np.searchsorted(sorted_proj, image + reach * limit, side="right")
+        alone = (hi - lo == 1) & (order[np.minimum(lo, len(f) - 1)] == np.arange(len(f)))  # only itself in reach
+        for i in np.flatnonzero((hi > lo) & ~alone & ~hit):
+            cand = order[lo[i]:hi[i]]
+            cand = cand[cand != i]
+            if len(cand) and np.min(np.linalg.norm(f[cand] - g * f[i], axis=1)) < limit[i]:
+                hit[i] = True
+    return hit
 
 
 def _distinct(x: np.ndarray, tol: float = 1e-6) -> np.ndarray:
