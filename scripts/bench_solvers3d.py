@@ -80,7 +80,7 @@ COLUMNS = ["solver", "formulation", "method", "roots", "certified_primes", "size
            "offset_median_log10_err", "offset_max_log10_err", "residual_median_log10", "mean_real",
            "single_ms", "batch_us_per_network", "spec_sha256", "found"]
 #: Room networks per solver built on numerical evidence (each solve tracks thousands of paths; CPU budget).
-MINIMAL_TRIALS = {"7r5s3d": 100}
+MINIMAL_TRIALS = {"7r5s3d": 100, "6r6s3d": 100}
 #: Every EIG_EVERY-th network of those also times a complex eig of the paths' size (seeded random matrix).
 EIG_EVERY = 10
 NOISE_COLUMNS = ["solver", "network", "sigma_m", "trials", "position_median_log10_err", "position_p90_log10_err",
