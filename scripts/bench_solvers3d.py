@@ -440,7 +440,8 @@ def main(argv: list[str] | None = None) -> int:
             "trials": args.trials, "noise_trials": args.noise_trials, "single_calls": args.single_calls,
             "seeds": f"0..{args.trials - 1}", "threads": os.environ.get("OPENBLAS_NUM_THREADS"),
             "load_average_at_end": list(os.getloadavg()), "failed_networks": failed,
-            "rerun": chosen, "minimal_seeds": {label: t["seeds"] for label, t in timing.items() if label in chosen}}
+            "rerun": chosen, "minimal_seeds": {**{k: v for k, v in old_meta.get("minimal_seeds", {}).items() if k not in chosen},
+                                               **{label: t["seeds"] for label, t in timing.items() if label in chosen}}}
     with open(os.path.join(TABLES, "solvers3d.meta.json"), "w", encoding="utf-8", newline="\n") as fh:
         json.dump(meta, fh, indent=2)
         fh.write("\n")
