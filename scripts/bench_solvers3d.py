@@ -80,7 +80,7 @@ COLUMNS = ["solver", "formulation", "method", "roots", "certified_primes", "size
            "offset_median_log10_err", "offset_max_log10_err", "residual_median_log10", "mean_real",
            "single_ms", "batch_us_per_network", "spec_sha256", "found"]
 #: Room networks per solver built on numerical evidence (each solve tracks thousands of paths; CPU budget).
-MINIMAL_TRIALS = {"7r5s3d": 100}
+MINIMAL_TRIALS = {"7r5s3d": 100, "6r6s3d": 100}
 #: Every EIG_EVERY-th network of those also times a complex eig of the paths' size (seeded random matrix).
 EIG_EVERY = 10
 NOISE_COLUMNS = ["solver", "network", "sigma_m", "trials", "position_median_log10_err", "position_p90_log10_err",
@@ -440,7 +440,8 @@ def main(argv: list[str] | None = None) -> int:
             "trials": args.trials, "noise_trials": args.noise_trials, "single_calls": args.single_calls,
             "seeds": f"0..{args.trials - 1}", "threads": os.environ.get("OPENBLAS_NUM_THREADS"),
             "load_average_at_end": list(os.getloadavg()), "failed_networks": failed,
-            "rerun": chosen, "minimal_seeds": {label: t["seeds"] for label, t in timing.items() if label in chosen}}
+            "rerun": chosen, "minimal_seeds": {**{k: v for k, v in old_meta.get("minimal_seeds", {}).items() if k not in chosen},
+                                               **{label: t["seeds"] for label, t in timing.items() if label in chosen}}}
     with open(os.path.join(TABLES, "solvers3d.meta.json"), "w", encoding="utf-8", newline="\n") as fh:
         json.dump(meta, fh, indent=2)
         fh.write("\n")

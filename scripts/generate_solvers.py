@@ -9,8 +9,9 @@ Usage: python scripts/generate_solvers.py [6r4s 9r3s 8r3s 7r3s 6r3s 5r4s 5r5s 4r
                  solver, written beside the homotopy one).
   --from-monodromy PATH
                  start from this monodromy checkpoint (scripts/monodromy_counts.py; one configuration). The
-                 configurations of solvers.generate.MONODROMY_CHECKPOINTS (7r5s3d: a 3D TDOA minimal cell,
-                 numerical evidence) take $TDOA_WORKBENCH_CACHE/monodromy/<cell>-seed0.json by default.
+                 configurations of solvers.generate.MONODROMY_CHECKPOINTS (7r5s3d, 6r6s3d: 3D TDOA minimal
+                 cells, numerical evidence) take their file there by default, in $TDOA_WORKBENCH_CACHE/monodromy/
+                 (7r5s-seed0.json; 6r6s-seed1.json, the seed with the 3920th root).
 Same as `tdoa-workbench generate CONFIG --out solvers/generated` for each configuration.
 """
 from __future__ import annotations
@@ -33,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--method", choices=list(gen.METHODS), help="build with this method (default: the "
                         "configuration's own); action-matrix solvers are written beside the homotopy ones")
     parser.add_argument("--from-monodromy", metavar="PATH", help="a monodromy checkpoint to start from (one "
-                        "configuration; default for 7r5s3d: the cache's 7r5s-seed0.json)")
+                        "configuration; default for 7r5s3d, 6r6s3d: the cache's file of solvers.generate.MONODROMY_CHECKPOINTS)")
     args = parser.parse_args(argv)
     if args.from_monodromy and len(args.configs) != 1:
         parser.error("--from-monodromy is for one configuration")

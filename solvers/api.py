@@ -80,11 +80,11 @@ MINIMAL = ((6, 3), (4, 5))
 #: The committed solvers of the other dimensions and models, (dim, model) -> labels by cost (root count):
 #: the first whose configuration fits inside the network is used. TOA: the minimal cells (2D 3r/3s,
 #: 8 roots; 3D 4r/6s and 6r/4s, 38; 5r/5s, 42), compaction unknowns (H, b), but 4r/6s in the receivers' Gram
-#: matrix (6 unknowns, the fastest of the three measured); 3D TDOA: 9r/5s (1 root), then the
-#: minimal cell 7r/5s (2321 paths, one per orbit of the gauge reflections; direct parametrization, count by
-#: monodromy, not certified).
+#: matrix (6 unknowns, the fastest of the three measured); 3D TDOA: 9r/5s (1 root), then the minimal cells 7r/5s
+#: (2321 paths) and 6r/6s (3920 paths), one path per orbit of the gauge reflections (direct parametrization,
+#: count by monodromy, not certified).
 KD_SOLVERS = {(2, "toa"): ("3r3stoa",), (3, "toa"): ("4r6s3dgram", "6r4s3dtoa", "5r5s3dtoa"),
-              (3, "tdoa"): ("9r5s3d", "7r5s3d")}
+              (3, "tdoa"): ("9r5s3d", "7r5s3d", "6r6s3d")}
 
 MODELS = ("tdoa", "toa")
 
@@ -439,7 +439,7 @@ def _extend_kd(F: np.ndarray, cal: Calibration, toa: bool) -> Calibration | None
     return Calibration(rec, tra, off, res) if np.isfinite(res) else None
 
 
-#: A solve with one root per orbit of the gauge reflections (direct parametrization, 7r/5s) is suspect when more
+#: A solve with one root per orbit of the gauge reflections (direct parametrization, 7r/5s, 6r/6s) is suspect when more
 #: than this fraction of its endpoints lie on another endpoint or its image: on 100 room networks at most 12 of
 #: 2321 did, except seed 12 (2142, the true network missed; with the receivers reordered 0, 3, 4, 1, 2, 5, 6:
 #: 2, the true network found). solve_network then solves the reordered network too (:func:`_reordered`).
@@ -585,13 +585,13 @@ def solve_network(F, refine: bool = True, max_refined: int = 5, *, dim: int = 2,
     them apart.
     dim, model: 2 or 3; ``"tdoa"`` (unknown transmitter offsets) or ``"toa"`` (synchronised, F[i, j] =
         |r_i - s_j|). Other than 2D TDOA, the committed solvers of :data:`KD_SOLVERS` run on the first
-        receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s, 7r/5s), every
+        receivers and transmitters (3D TOA: 4r/6s, 6r/4s, 5r/5s; 2D TOA: 3r/3s; 3D TDOA: 9r/5s, 7r/5s, 6r/6s), every
         real candidate with H positive definite becomes a calibration (:func:`calibrations`), the other
         transmitters and then receivers are placed by linear least squares, and TDOA candidates are
         refined (TOA ones are not: solvers.refine frees the offsets). TOA: where the solver's root set is
         incomplete (a lost path, two paths on one root) or gives no calibration, the transposed network F.T
-        (receivers and transmitters swapped) is solved too and the candidates pooled. 3D TDOA 7r/5s (one root
-        per orbit of the gauge reflections): a suspect root set (:data:`SUSPECT_FRACTION`) is solved again with
+        (receivers and transmitters swapped) is solved too and the candidates pooled. 3D TDOA 7r/5s and 6r/6s
+        (one root per orbit of the gauge reflections): a suspect root set (:data:`SUSPECT_FRACTION`) is solved again with
         receivers 2, 3 and 4, 5 swapped and the candidates pooled. 3D gauge: r_1 = 0, r_2 on +x,
         r_3 in the xy half-plane y > 0; the mirror image z -> -z fits the data equally and is not
         returned (one representative per network).

@@ -11,7 +11,7 @@ import pytest
 import sympy
 
 from analysis.formulations.parametric import ParametricError, from_formulation, parse
-from solvers.generate import GENERATED_DIR, SOLVERS
+from solvers.generate import GENERATED_DIR, MONODROMY_CHECKPOINTS, SOLVERS
 from solvers.methods import homotopy as hm
 from solvers.methods import tracker
 
@@ -329,8 +329,11 @@ def test_start_system_is_complete(name):
     # a Newton step no longer moves them (to the build's tolerance)
     step = solver.newton(solver.x0, solver.q0[None]) - solver.x0
     # Newton noise ~ eps x condition: degree-10 positions equations are ill-conditioned, and so are the 3D
-    # TOA B_j, j >= 5, whose coefficients carry det(M)^2 (degree 14 in the data; 4r/6s: 4e-9 measured)
-    tol = 1e-7 if "positions" in spec["system"] else 1e-8 if spec["coefficient_degree"] > 10 else 1e-9
+    # TOA B_j, j >= 5, whose coefficients carry det(M)^2 (degree 14 in the data; 4r/6s: 4e-9 measured); a
+    # monodromy checkpoint's roots are checked to its 1e-8 (solvers.generate): 6r/6s 3D start root 1473 (norm 726)
+    # has cond(J) = 1.1e10 at q0 and its Newton steps hover at 2e-9 to 8e-9 (the others' below 1e-10)
+    tol = (1e-7 if "positions" in spec["system"] else 1e-8 if spec["coefficient_degree"] > 10 or "evidence" in spec
+           else 1e-9)
     assert np.max(np.linalg.norm(step, axis=1) / (1 + np.linalg.norm(solver.x0, axis=1))) < tol
     assert not hm._has_duplicates(solver.x0)
 
@@ -361,8 +364,8 @@ def _known_root_errors(module, seeds: int) -> np.ndarray:
 FAST_PATHS = 200
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if "homotopy2321" in n else n
-                                  for n in HOMOTOPY_SPECS])  # (7r/5s 3D: 20 s a solve)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n.split("_")[1] in MONODROMY_CHECKPOINTS else n
+                                  for n in HOMOTOPY_SPECS])  # (the 3D minimal cells: 7r/5s 20-60 s a solve, 6r/6s 60 s)
 def test_known_root_among_candidates(name):
     module = _module(name[:-5])
     positions = "positions" in module.SYSTEM

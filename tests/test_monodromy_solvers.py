@@ -119,10 +119,11 @@ def _committed(label: str):
     return importlib.import_module(f"solvers.generated.{names[0]}")
 
 
-@pytest.mark.parametrize("label, paths", [("7r5s3d", 2321)])
+@pytest.mark.parametrize("label, paths", [("7r5s3d", 2321), ("6r6s3d", 3920)])
 def test_committed_minimal_3d_solver_carries_its_evidence(label, paths):
-    """The committed 3D TDOA minimal-cell solver (7r/5s): evidence "monodromy" (not certified, said in the header),
-    one path per orbit of the 8 gauge reflections, picked by solve_network(F, dim=3) for its shape."""
+    """The committed 3D TDOA minimal-cell solvers (7r/5s, 6r/6s): evidence "monodromy" from their checkpoint (not
+    certified, said in the header), one path per orbit of the 8 gauge reflections, picked by solve_network(F, dim=3)
+    for their shape."""
     module = _committed(label)
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = json.load(fh)
@@ -136,17 +137,19 @@ def test_committed_minimal_3d_solver_carries_its_evidence(label, paths):
     assert api.select_solver_kd(m, n, 3, "tdoa").label == label
 
 
-def test_committed_7r5s_start_roots_satisfy_its_system():
-    """Every 20th stored 7r/5s start root is a root of the direct system at the stored q0, in an orbit of its own
-    (checked as a checkpoint is; generation checked all 2321)."""
-    module = _committed("7r5s3d")
+@pytest.mark.parametrize("label, shape", [("7r5s3d", (2321, 35)), ("6r6s3d", (3920, 36))])
+def test_committed_minimal_3d_start_roots_satisfy_their_system(label, shape):
+    """Every 20th stored start root of a 3D minimal-cell solver is a root of the direct system at the stored q0, in
+    an orbit of its own (checked as a checkpoint is; generation checked all of them)."""
+    module = _committed(label)
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = json.load(fh)
     system = from_formulation(module.SYSTEM)
     q0 = hm._complex_array(spec["start_parameters"])
     roots = hm._complex_array(spec["start_roots"])
-    assert roots.shape == (2321, 35)
-    assert hm.checked_roots(system, q0, roots[::20], np.array(spec["group"]["signs"])).shape == (117, 35)
+    assert roots.shape == shape
+    sample = roots[::20]
+    assert hm.checked_roots(system, q0, sample, np.array(spec["group"]["signs"])).shape == sample.shape
 
 
 @pytest.mark.slow
@@ -155,6 +158,19 @@ def test_solve_network_finds_a_7r5s_room_network():
     network among its exact fits."""
     _committed("7r5s3d")
     net = room_network(7, 5, np.random.default_rng(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cals = api.solve_network(net.measurements(), dim=3)
+    assert cals and min(position_error(c, net) for c in cals) < 1e-8
+
+
+@pytest.mark.slow
+def test_solve_network_finds_a_6r6s_room_network():
+    """solve_network(F, dim=3) on a noiseless 6 x 6 room network runs the 6r/6s solver and returns the true network
+    among its exact fits (3920 paths: the solve took 67 s at load 3, the whole test 278 s at load 7.6)."""
+    _committed("6r6s3d")
+    assert api.select_solver_kd(6, 6, 3, "tdoa").label == "6r6s3d"
+    net = room_network(6, 6, np.random.default_rng(0))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cals = api.solve_network(net.measurements(), dim=3)
