@@ -13,7 +13,7 @@ counts the same networks.
 
 A count is reported as "settled" (stopped growing for --stall loops; two seeds should agree) or as a
 lower bound ("not settled": at least N after L loops). With two settled seeds, the second seed's roots are
-carried to the first seed's instance and pooled with its roots (column union, cached in <cell>-union.json):
+carried to each seed's instance and pooled with its roots (column union, cached in <cell>-union-seed<k>.json):
 equal counts are then equal sets, and a pool larger than either count shows a "settled" count was short. A settled count then gets the trace test
 (solvers.methods.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
 for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witnesses.json, the outcome kept
@@ -119,15 +119,15 @@ def union(cell: str, seeds: list[int]) -> dict | None:
     direct cells): {"union": size of the pool, "new": roots no checkpoint but one had, "lost": paths that
     failed}. Equal counts from two seeds can still be two different sets; a pool larger than every seed's
     count shows that a "settled" count was incomplete (6r/6s: 3919 and 3920, pool 3920). Kept in
-    <cell>-union.json (first seed 0; else <cell>-union-seed<k>.json) for the checkpoints' root counts; None when
-    a checkpoint is missing."""
+    <cell>-union-seed<k>.json (k: the first seed) for the checkpoints' root counts; None when a checkpoint is
+    missing."""
     path = cache_dir("monodromy")
     files = [path / f"{cell}-seed{seed}.json" for seed in seeds]
     if len(seeds) < 2 or not all(f.exists() for f in files):
         return None
     saved = [json.loads(f.read_text(encoding="utf-8")) for f in files]
     key = {"seeds": list(seeds), "roots": [len(d["roots"]) for d in saved]}
-    record = path / (f"{cell}-union.json" if seeds[0] == 0 else f"{cell}-union-seed{seeds[0]}.json")
+    record = path / f"{cell}-union-seed{seeds[0]}.json"
     if record.exists():
         stored = json.loads(record.read_text(encoding="utf-8"))
         if stored.get("key") == key:

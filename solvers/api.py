@@ -320,8 +320,8 @@ def _gram_calibrations(F: np.ndarray, unknowns, roots: np.ndarray, tol: float = 
     of G's Cholesky factor L (r_2 on the x axis, r_3 in the xy plane: the gauge) and r_i = L^T a_i; the
     transmitters solve R s_j = w_j / 2, w_j,a = G_aa + f_1j^2 - f_{a+1,j}^2 (the ranges to r_1..r_{K+1})."""
     m, n = F.shape
-    k = next((k for k in (2, 3) if k * (k + 1) // 2 + k * max(m - k - 1, 0) == len(unknowns)), None)
-    if k is None or any(not u.startswith("g") for u in unknowns[:k * (k + 1) // 2]):
+    k = {3: 2, 6: 3}.get(sum(u.startswith("g") for u in unknowns))  # G's upper triangle: K (K + 1) / 2 entries
+    if k is None or len(unknowns) != k * (k + 1) // 2 + k * max(m - k - 1, 0):
         raise ValueError(f"unknowns {tuple(unknowns)} are not a gram parametrization's")
     iu = np.triu_indices(k)
     out = []

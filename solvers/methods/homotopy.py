@@ -591,28 +591,47 @@ def _duplicated(x: np.ndarray, tol: float = 1e-6, group: np.ndarray | None = Non
 #: Above this many finite rows :func:`_duplicated` compares by sorted projections instead of a Gram matrix.
 GRAM_ROWS = 10_000
 
+#: Seed of the fixed direction u of the sorted-projection searches (any direction gives the same decisions).
+PROJECTION_SEED = 20261127
+
+
+class _Projected:
+    """Rows (K, n) sorted by their projection Re u^H x on a fixed direction u: the rows within distance d of a
+    point y are among those whose projection lies within |u| d of y's (|Re u^H (x - y)| <= |u| |x - y|), found
+    by binary search. The shared search of :func:`add_new` and :func:`_duplicated_by_projection`."""
+
+    def __init__(self, rows: np.ndarray):
+        rng = np.random.default_rng(PROJECTION_SEED)
+        self.u = rng.normal(size=rows.shape[1]) + 1j * rng.normal(size=rows.shape[1])
+        self.reach = np.linalg.norm(self.u) * (1.0 + 1e-9)
+        proj = self.project(rows)
+        self.order = np.argsort(proj, kind="stable")
+        self.sorted = proj[self.order]
+
+    def project(self, points: np.ndarray, sign: np.ndarray | None = None) -> np.ndarray:
+        """Re u^H (sign * p) of every point p (sign real: Re (sign u)^H p)."""
+        u = self.u if sign is None else sign * self.u
+        return (points @ u.conj()).real
+
+    def windows(self, proj: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """[lo, hi) into :attr:`order` of the rows that may lie within radius of points projecting to proj."""
+        return (np.searchsorted(self.sorted, proj - self.reach * radius),
+                np.searchsorted(self.sorted, proj + self.reach * radius, side="right"))
+
 
 def _duplicated_by_projection(f: np.ndarray, tol: float, group: np.ndarray | None) -> np.ndarray:
     """:func:`_duplicated` of finite rows f (K, n) without the K x K matrix: row i is compared only with the
-    rows whose projection on a fixed direction u lies within |u| tol (1 + |f_i|) of its images' (the bound
-    |Re u^H (a - b)| <= |u| |a - b| skips no row within reach)."""
-    u = _PROJECTION.normal(size=f.shape[1]) + 1j * _PROJECTION.normal(size=f.shape[1])
-    _PROJECTION.bit_generator.state = _PROJECTION_STATE
-    reach = np.linalg.norm(u) * (1.0 + 1e-9)
-    size = np.linalg.norm(f, axis=1)
-    limit = tol * (1.0 + size)
-    proj = (f @ u.conj()).real
-    order = np.argsort(proj, kind="stable")
-    sorted_proj = proj[order]
+    rows in reach of its images' projections (:class:`_Projected`)."""
+    index = _Projected(f)
+    limit = tol * (1.0 + np.linalg.norm(f, axis=1))
     signs = np.ones((1, f.shape[1])) if group is None else np.asarray(group, dtype=float)
+    rows = np.arange(len(f))
     hit = np.zeros(len(f), dtype=bool)
     for g in signs:  # |f_i - g f_j| = |g f_i - f_j|: the image of row i against the rows themselves
-        image = (f @ (g * u).conj()).real
-        lo = np.searchsorted(sorted_proj, image - reach * limit)
-        hi = np.searchsorted(sorted_proj, image + reach * limit, side="right")
-        alone = (hi - lo == 1) & (order[np.minimum(lo, len(f) - 1)] == np.arange(len(f)))  # only itself in reach
+        lo, hi = index.windows(index.project(f, g), limit)
+        alone = (hi - lo == 1) & (index.order[np.minimum(lo, len(f) - 1)] == rows)  # only itself in reach
         for i in np.flatnonzero((hi > lo) & ~alone & ~hit):
-            cand = order[lo[i]:hi[i]]
+            cand = index.order[lo[i]:hi[i]]
             cand = cand[cand != i]
             if len(cand) and np.min(np.linalg.norm(f[cand] - g * f[i], axis=1)) < limit[i]:
                 hit[i] = True
@@ -738,11 +757,6 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
     return add_new(roots, accepted(solver, xs, q0, excluded), group), paths
 
 
-#: The fixed direction of :func:`add_new`'s projections (any direction gives the same decisions).
-_PROJECTION = np.random.default_rng(20261127)
-_PROJECTION_STATE = _PROJECTION.bit_generator.state
-
-
 def accepted(solver, xs: np.ndarray, q0: np.ndarray, excluded: Callable[..., np.ndarray] | None = None) -> np.ndarray:
     """The endpoints xs (K, N) that are roots at q0: finite, polished by three Newton steps after which the next
     step is below START_TOL (relative), and (``excluded``: a mask of points on the locus of the non-vanishing
@@ -762,46 +776,38 @@ def add_new(roots: np.ndarray, xs: np.ndarray, group: np.ndarray | None = None) 
     """roots (R, N) with every x of xs appended, in order, that lies farther than 1e-6 (1 + |x|) from each root
     known by then (``group``: sign vectors (G, N), and from each root's images: one root per orbit).
 
-    Each x is compared only with the roots whose projection on a fixed direction u lies within |u| times its
-    tolerance of its own (|Re u^H (x - r)| <= |u| |x - r|: no root within reach is skipped), found by
-    binary search in the sorted projections: the same decisions as comparing with every root, in
-    O((R + K) log R) instead of O(R K) (a 10^5-root monodromy loop spent minutes in the full comparison)."""
-    roots = np.asarray(roots, dtype=complex).reshape(-1, np.shape(xs)[-1] if np.size(xs) else np.shape(roots)[-1])
+    Each x is compared only with the roots in reach of its images' projections (:class:`_Projected`, binary
+    search; the endpoints with exactly one root in reach, most of a loop's, in one vectorised step): the same
+    decisions as comparing with every root, in O((R + K) log R) instead of O(R K) (25,000 endpoints against
+    20,000 roots x 8 images in 35 unknowns: 0.6 s instead of about 2,400 s)."""
+    roots = np.asarray(roots, dtype=complex)
     xs = np.asarray(xs, dtype=complex).reshape(-1, roots.shape[1])
     if not len(xs):
         return roots
     images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group, dtype=float)
-    u = _PROJECTION.normal(size=roots.shape[1]) + 1j * _PROJECTION.normal(size=roots.shape[1])
-    _PROJECTION.bit_generator.state = _PROJECTION_STATE  # the same u every call
-    reach = np.linalg.norm(u) * (1.0 + 1e-9)
     tol = 1e-6 * (1.0 + np.linalg.norm(xs, axis=1))
-    # the images' projections of every x: Re u^H (g x) = Re (g u)^H x (g real)
-    proj_x = np.stack([(xs @ (g * u).conj()).real for g in images])  # (G, K)
-
-    def near(pool: np.ndarray, proj: np.ndarray, i: int, allowed: Callable[[np.ndarray], np.ndarray]) -> bool:
-        """Whether an image of xs[i] lies within its tolerance of a row of pool (whose sorted projections
-        and their order are ``proj``), among the rows ``allowed`` keeps."""
-        order, sorted_proj = proj
-        for gi, g in enumerate(images):
-            lo, hi = np.searchsorted(sorted_proj, [proj_x[gi, i] - reach * tol[i], proj_x[gi, i] + reach * tol[i]])
-            cand = allowed(order[lo:hi])
-            if len(cand) and np.min(np.linalg.norm(pool[cand] - g * xs[i], axis=1)) <= tol[i]:
-                return True
-        return False
-
-    def sorted_projections(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p = (rows @ u.conj()).real
-        order = np.argsort(p, kind="stable")
-        return order, p[order]
-
-    everything = lambda c: c  # noqa: E731
-    known = sorted_projections(roots)
-    fresh = np.array([i for i in range(len(xs)) if not near(roots, known, i, everything)], dtype=np.int64)
+    known = _Projected(roots)
+    near = np.zeros(len(xs), dtype=bool)
+    for g in images:
+        lo, hi = known.windows(known.project(xs, g), tol)
+        one = np.flatnonzero((hi - lo == 1) & ~near)
+        if len(one):
+            near[one] |= np.linalg.norm(roots[known.order[lo[one]]] - g * xs[one], axis=1) <= tol[one]
+        for i in np.flatnonzero((hi - lo > 1) & ~near):
+            near[i] = np.min(np.linalg.norm(roots[known.order[lo[i]:hi[i]]] - g * xs[i], axis=1)) <= tol[i]
+    fresh = np.flatnonzero(~near)
     # among the new ones, in order: kept when far from every one kept before it
-    new = sorted_projections(xs[fresh])
+    new = _Projected(xs[fresh])
     keep = np.zeros(len(fresh), dtype=bool)
     for a, i in enumerate(fresh):
-        keep[a] = not near(xs[fresh], new, i, lambda c, a=a: c[(c < a) & keep[c]])
+        keep[a] = True
+        for g in images:
+            lo, hi = new.windows(new.project(xs[i:i + 1], g), tol[i:i + 1])
+            cand = new.order[lo[0]:hi[0]]
+            cand = cand[(cand < a) & keep[cand]]
+            if len(cand) and np.min(np.linalg.norm(xs[fresh[cand]] - g * xs[i], axis=1)) <= tol[i]:
+                keep[a] = False
+                break
     kept = fresh[keep]
     return np.vstack([roots, xs[kept]]) if len(kept) else roots
 
