@@ -43,6 +43,7 @@ from typing import Callable, Protocol, Sequence, Union
 
 import numpy as np
 
+from analysis.formulations.kd import gram_root
 from analysis.formulations.tdoa import Formulation
 from analysis.formulations.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
 
@@ -204,8 +205,6 @@ def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2, mod
         x = [r[i, a] for i in range(1, m) for a in range(min(i, dim))] + list(t.ravel()) + list(o)
         return F / scale, np.array(x) / scale
     if parametrization == "gram":
-        from analysis.formulations.kd import gram_root
-
         x = gram_root(r, dim)
         return F / scale, x / scale ** np.where(np.arange(len(x)) < dim * (dim + 1) // 2, 2.0, 0.0)
     s1 = t[0] - r[0]

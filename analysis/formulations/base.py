@@ -277,7 +277,7 @@ def _describe_names(config: TDOAConfig) -> str:
     if config.parametrization == "gram":
         extra = f", E<i>_<j> (receiver i >= {config.dim + 2}, transmitter j)" if config.m > config.dim + 1 else ""
         return (f"valid names for {config.label}: S1..S{config.n} (transmitter j's range to receiver 1){extra}; "
-                "groups: all, S*, E*; ranges like S1-S4")
+                f"groups: all, S*{', E*' if extra else ''}; ranges like S1-S{config.n}")
     minors = [x for x in names if x.startswith("M")]
     bs = [x for x in names if x.startswith("B")]
     text = f"A, {bs[0]}..{bs[-1]}, C2..C{config.m}" if len(bs) > 1 else f"A, {bs[0]}, C2..C{config.m}"

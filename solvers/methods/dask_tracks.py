@@ -19,6 +19,10 @@ import os
 
 import numpy as np
 
+from analysis.formulations.parametric import from_formulation
+
+from . import homotopy as hm
+
 __all__ = ["DaskTracks", "track_chunk"]
 
 #: Start solvers built on this worker, by (label, saturate, q0, x0) bytes.
@@ -26,10 +30,6 @@ _SOLVERS: dict = {}
 
 
 def _solver(label: str, saturate: bool, q0: np.ndarray, x0: np.ndarray):
-    from analysis.formulations.parametric import from_formulation
-
-    from . import homotopy as hm
-
     key = (label, saturate, q0.tobytes(), x0.tobytes())
     if key not in _SOLVERS:
         _SOLVERS.clear()  # one system per loop: keep the memory of one solver
