@@ -272,7 +272,7 @@ def test_gram_parametrization_is_for_toa_with_k_plus_1_receivers():
         TDOAConfig(6, 6, dim=3, parametrization="gram")
     with pytest.raises(ValueError, match="m \\(receivers\\) must be >= 4"):
         TDOAConfig(3, 6, model="toa", dim=3, parametrization="gram")
-    with pytest.raises(ValueError, match="valid names for 4r6s-toa3d-gram: S1..S6 .*groups: all, S\*; "):
+    with pytest.raises(ValueError, match=r"valid names for 4r6s-toa3d-gram: S1..S6 .*groups: all, S\*; "):
         Formulation.parse("4r6s-toa3d-gram:E5_1")
 
 
