@@ -21,8 +21,9 @@ in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / fai
 relative residual of the affine fit, the number of witnesses and the paths it tracked.
 
 Usage: python scripts/monodromy_counts.py [10r4s 7r5s 6r6s 5r9s] [--seeds 0 1] [--loops 60] [--stall 10]
-       [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3] [--dask ADDRESS|local [--dask-chunk 2000]]
-(--seconds 0 --trace-seconds 0: read the checkpoints only, no loop and no trace test run.)
+       [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3] [--threads N]
+       [--dask ADDRESS|local [--dask-chunk 2000]]
+(--threads: the batches of each tracking call side by side on N threads, the same results; --seconds 0 --trace-seconds 0: read the checkpoints only, no loop and no trace test run.)
 """
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ from analysis.formulations.parametric import from_formulation  # noqa: E402
 from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers.generate import complex_instance, gauge_reflections  # noqa: E402
 from solvers.methods import homotopy as hm  # noqa: E402
-from solvers.methods import trace  # noqa: E402
+from solvers.methods import tape_kernel, trace  # noqa: E402
 from solvers.methods.dask_tracks import DaskTracks  # noqa: E402
 
 TABLES = os.path.join(ROOT, "tables")
@@ -211,10 +212,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trace-seconds", type=float, default=3600.0,
                         help="time cap of the trace test's witness monodromy per seed (0: the checkpoints only)")
     parser.add_argument("--trace-stall", type=int, default=3, help="witness loops without a new one before the trace")
+    parser.add_argument("--threads", type=int, default=None, metavar="N",
+                        help="track each call's batches on N threads, same results (default $TDOA_WORKBENCH_THREADS or 1)")
     parser.add_argument("--dask", metavar="ADDRESS", help="track the loops' paths on a Dask cluster: a scheduler "
                         "address, or 'local' for a LocalCluster of one process per core (same results)")
     parser.add_argument("--dask-chunk", type=int, default=2000, metavar="N", help="paths per Dask task (default 2000)")
     args = parser.parse_args(argv)
+    if args.threads is not None:
+        if args.threads < 1:
+            parser.error(f"--threads must be a positive integer, not {args.threads}")
+        tape_kernel.set_threads(args.threads)
     rows = []
     for cell in args.cells:
         seeds = args.seeds if args.seeds is not None else SEEDS[cell]

@@ -154,3 +154,44 @@ def test_compiled_tracker_equals_numba_tracker(predictor, corrector):
         assert np.sum(ends[0][1][:, 0] == 0) >= 200 and np.sum(ends[0][1][:, 1]) > 3 * K * 5  # real tracks
     steps = [tape_kernel.newton(solver.tapes, q, x0, inst, 3, native=n) for n in (numba_tracker, native)]
     np.testing.assert_array_equal(steps[0], steps[1])
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_threads_give_the_same_bits(compiled, monkeypatch):
+    """Batches tracked side by side on threads (tape_kernel.set_threads, $TDOA_WORKBENCH_THREADS) give the
+    statuses, step counts, endpoints and Newton steps of one thread, with the compiled tracker and with
+    numba's: 9r/3s, 8 seeded networks at once (8 x 75 paths, 2 batches); bad thread counts are refused."""
+    from solvers.synthetic import random_network
+
+    if compiled and not COMPILED:
+        pytest.skip("no C compiler, or TDOA_WORKBENCH_NATIVE=off")
+    _, solver = _solver()
+    native = tape_native.addresses(solver.tapes, wait=True) if compiled else None
+    q = np.vstack([random_network(9, 3, np.random.default_rng(seed)).measurements().reshape(1, -1) for seed in range(8)])
+    q /= np.sqrt(np.mean(q ** 2, axis=1, keepdims=True))
+    K = len(solver.x0)
+    x0, inst = np.tile(solver.x0, (8, 1)), np.repeat(np.arange(8), K)
+    assert len(tape_kernel._chunks(len(x0))) >= 2
+    runs = []
+    try:
+        for n in (1, 2, 3):
+            tape_kernel.set_threads(n)
+            assert tape_kernel.threads() == n
+            x, stats = tape_kernel.track(solver.tapes, solver.q0, q, x0, inst, solver.options, native=native)
+            runs.append((x, stats, tape_kernel.newton(solver.tapes, q, x0, inst, 2, native=native)))
+    finally:
+        tape_kernel.set_threads(None)
+    for run in runs[1:]:
+        for a, b in zip(runs[0], run):
+            np.testing.assert_array_equal(a, b)
+    assert np.sum(runs[0][1][:, 0] == 0) >= 0.8 * len(x0)  # real tracks
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="positive integer"):
+            tape_kernel.set_threads(bad)
+    monkeypatch.setenv(tape_kernel.THREADS_ENV, "auto")
+    assert tape_kernel.threads() >= 1
+    monkeypatch.setenv(tape_kernel.THREADS_ENV, "two")
+    with pytest.raises(ValueError, match="TDOA_WORKBENCH_THREADS"):
+        tape_kernel.threads()
+    monkeypatch.delenv(tape_kernel.THREADS_ENV)
+    assert tape_kernel.threads() == 1

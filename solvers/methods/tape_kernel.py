@@ -33,6 +33,9 @@ homotopy continuation" (2021), for tracking many paths of one compiled program.
 from __future__ import annotations
 
 import ctypes
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from llvmlite import ir
@@ -44,8 +47,8 @@ from .tracker import TrackerOptions
 # The tapes' types (solvers.methods.slp.Tape, HomotopyTapes) are named in annotations only as strings:
 # slp imports this module's opcodes, and this module never imports slp (one direction of dependency).
 
-__all__ = ["OPCODES", "PREDICTORS", "capacity", "evaluate", "newton", "run", "run_tape", "run_tape_numpy", "taylor", "track",
-           "workspace"]
+__all__ = ["OPCODES", "PREDICTORS", "THREADS_ENV", "capacity", "evaluate", "newton", "run", "run_tape", "run_tape_numpy",
+           "set_threads", "taylor", "threads", "track", "workspace"]
 
 #: Instruction set of the tape: d = a + b, a - b, a b, -a, imm a, a + imm, a a, imm; fused: c + imm a b
 #: (imm = +-1), a + imm b; OUT copies register a to output row d. a, b, c are registers, imm the
@@ -958,6 +961,63 @@ def _chunks(M: int) -> list[tuple[int, int]]:
     return [(a, min(a + size, M)) for a in range(0, M, size)]
 
 
+#: Threads that track a call's batches side by side (:func:`threads`): a positive integer, or "auto" for
+#: every core. The batches are independent (each writes its own rows; the compiled tracker and numba's
+#: release the GIL and keep no state between calls), so the results are the same bits with any number.
+THREADS_ENV = "TDOA_WORKBENCH_THREADS"
+
+_THREADS: int | None = None
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def threads() -> int:
+    """Threads per :func:`track` / :func:`newton` call: :func:`set_threads`'s, else ``$TDOA_WORKBENCH_THREADS``
+    (a positive integer or "auto": every core), else 1. ValueError for any other value."""
+    if _THREADS is not None:
+        return _THREADS
+    value = os.environ.get(THREADS_ENV, "").strip()
+    if not value:
+        return 1
+    if value.lower() == "auto":
+        return os.cpu_count() or 1
+    if not value.isdigit() or int(value) < 1:
+        raise ValueError(f"${THREADS_ENV} must be a positive integer or 'auto', not {value!r}")
+    return int(value)
+
+
+def set_threads(n: int | None) -> None:
+    """Track every later call's batches on ``n`` threads (None: back to ``$TDOA_WORKBENCH_THREADS``)."""
+    global _THREADS
+    if n is not None and (not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1):
+        raise ValueError(f"threads: a positive integer or None, not {n!r}")
+    _THREADS = None if n is None else int(n)
+
+
+def _pool(n: int) -> ThreadPoolExecutor:
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL[0] != n:
+            if _POOL is not None:
+                _POOL[1].shutdown(wait=False)
+            _POOL = (n, ThreadPoolExecutor(max_workers=n, thread_name_prefix="tdoa-track"))
+        return _POOL[1]
+
+
+def _each_chunk(M: int, native: np.ndarray, run) -> None:
+    """run(a, b) for the row ranges of :func:`_chunks`, on :func:`threads` threads when there are several."""
+    chunks = _chunks(M)
+    n = min(threads(), len(chunks))
+    if n <= 1:
+        for a, b in chunks:
+            run(a, b)
+        return
+    if native[5] != 0 and int(native[5]) not in _TRACKERS:  # made once, before the threads share it
+        _TRACKERS[int(native[5])] = _TRACK_PROTOTYPE(int(native[5]))
+    for future in [_pool(n).submit(run, a, b) for a, b in chunks]:
+        future.result()
+
+
 #: Predictors of :func:`track` (:data:`tracker.PREDICTORS` it implements).
 PREDICTORS = ("rk4", "pade")
 
@@ -989,8 +1049,9 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
     x = np.empty_like(x0)
     stats = np.zeros((M, 4))
     native = _native(native)
-    for a, b in _chunks(M):
-        _batch(tapes, native, corrector == "chord", x0[a:b], q0, dq, inst[a:b], options.as_array(), x[a:b], stats[a:b])
+    opts = options.as_array()
+    _each_chunk(M, native, lambda a, b: _batch(tapes, native, corrector == "chord", x0[a:b], q0, dq, inst[a:b], opts,
+                                               x[a:b], stats[a:b]))
     x[(stats[:, 0] != 0) & ~((stats[:, 0] == 1) & (stats[:, 3] >= 1.0 - near_end))] = np.nan
     return x, stats
 
@@ -1009,6 +1070,6 @@ def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarra
     opts = np.zeros(NEWTON_ONLY + 1)
     opts[7], opts[NEWTON_ONLY] = int(steps), 1.0  # final_newton = steps; Newton steps only
     native = _native(native)
-    for a, b in _chunks(M):
-        _batch(tapes, native, False, x[a:b], q, np.zeros_like(q), inst[a:b], opts, out[a:b], stats[a:b])
+    dq = np.zeros_like(q)
+    _each_chunk(M, native, lambda a, b: _batch(tapes, native, False, x[a:b], q, dq, inst[a:b], opts, out[a:b], stats[a:b]))
     return out
