@@ -496,6 +496,26 @@ def _transposed(F: np.ndarray, cal: Calibration) -> Calibration | None:
     return Calibration(rec, tra, off, res) if np.isfinite(res) else None
 
 
+def _solver_rank(m: int, n: int, dim: int, model: str) -> int:
+    """Position in :data:`KD_SOLVERS` (fastest first) of the solver an m x n network gets; len() when none fits."""
+    try:
+        label = select_solver_kd(m, n, dim, model).label
+    except ValueError:
+        return len(KD_SOLVERS.get((dim, model), ()))
+    return KD_SOLVERS[(dim, model)].index(label)
+
+
+def _transposed_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibration], bool]:
+    """The TOA network F.T's calibrations (:func:`_kd_candidates`) as F's (:func:`_transposed`), and whether
+    that root set was complete; none when no committed solver fits the transposed shape."""
+    try:
+        more, complete, _ = _kd_candidates(np.ascontiguousarray(F.T), dim, model)
+    except ValueError:
+        return [], False
+    with np.errstate(all="ignore"):
+        return [c for c in (_transposed(F, cal) for cal in more) if c is not None], complete
+
+
 def _same_networks_once(cands: list[Calibration], tol: float = 1e-5) -> list[Calibration]:
     """The candidates (same gauge, either mirror image) by residual, without those whose positions lie within
     tol (relative to the network's spread) of a better one: one network reached by both orientations, where
@@ -517,25 +537,30 @@ def _solve_network_kd(F: np.ndarray, dim: int, model: str, refine: bool, max_ref
     """:func:`solve_network` for 3D and for TOA: the committed solver's calibrations on its block
     (:func:`_kd_candidates`), extended to every node, TDOA refined on all measurements.
 
-    TOA is symmetric under swapping receivers and transmitters (F -> F.T). Where the solver's root set is
-    incomplete or yields no calibration, the transposed network is solved too and the candidates of both
-    are pooled. The compaction unknown H = (4 S^T S)^{-1} is built on the first K + 1 transmitters; where
+    TOA is symmetric under swapping receivers and transmitters (F -> F.T). The orientation whose solver comes
+    first in :data:`KD_SOLVERS` (the faster: 6 x 4 data goes to the 4r/6s Gram solver as F.T) is solved first;
+    where its root set is incomplete or yields no calibration, the other orientation is solved too and the
+    candidates of both are pooled. The compaction unknown H = (4 S^T S)^{-1} is built on the first K + 1 transmitters; where
     they are close to coplanar, H is large (eigenvalues 1e3-9e4 m^-2 on room networks) and paths are lost,
     while the transposed problem's frame (the first receivers) is usually well conditioned
     (docs/minimal-3d.md, section 2)."""
     m, n = F.shape
     toa = model == "toa"
-    cands, complete, suspect = _kd_candidates(F, dim, model)
-    if suspect and m >= 5:  # one root per orbit, and many paths met on one orbit (docs/minimal-3d.md, section 5)
-        with np.errstate(all="ignore"):
-            cands = _same_networks_once(cands + _reordered(F, dim, model))
-    if toa and not (complete and cands):
-        try:
-            more, _, _ = _kd_candidates(np.ascontiguousarray(F.T), dim, model)
-        except ValueError:  # no committed solver fits the transposed shape
-            more = []
-        with np.errstate(all="ignore"):
-            cands = _same_networks_once(cands + [c for c in (_transposed(F, cal) for cal in more) if c is not None])
+    if toa and _solver_rank(n, m, dim, model) < _solver_rank(m, n, dim, model):
+        # the transposed shape has a faster solver (6 x 4 data: the 4r/6s Gram solver): solved first
+        cands, complete = _transposed_candidates(F, dim, model)
+        if not (complete and cands):
+            more, _, _ = _kd_candidates(F, dim, model)
+            with np.errstate(all="ignore"):
+                cands = _same_networks_once(cands + more)
+    else:
+        cands, complete, suspect = _kd_candidates(F, dim, model)
+        if suspect and m >= 5:  # one root per orbit, and many paths met on one orbit (docs/minimal-3d.md, section 5)
+            with np.errstate(all="ignore"):
+                cands = _same_networks_once(cands + _reordered(F, dim, model))
+        if toa and not (complete and cands):
+            with np.errstate(all="ignore"):
+                cands = _same_networks_once(cands + _transposed_candidates(F, dim, model)[0])
     cands.sort(key=lambda c: c.residual)
     # solvers.refine estimates offsets: TDOA candidates only
     return _finish(F, cands, refine and not toa, max_refined, minimal_configuration(m, n, dim, model),

@@ -157,6 +157,26 @@ def test_toa_retry_is_skipped_when_the_root_set_is_complete():
     assert complete and min(position_error(c, net) for c in direct) < 1e-8
 
 
+def test_toa_network_goes_to_the_faster_orientation(monkeypatch):
+    """6 receivers x 4 transmitters in 3D TOA: F.T (4 x 6) has the faster solver (the 4r/6s Gram one, first in
+    KD_SOLVERS), so that shape is solved first and, its root set complete, alone; 4 x 6 data stays as it is."""
+    shapes = []
+    kd = api._kd_candidates
+    monkeypatch.setattr(api, "_kd_candidates", lambda F, dim, model: (shapes.append(F.shape), kd(F, dim, model))[1])
+    assert api._solver_rank(4, 6, 3, "toa") < api._solver_rank(6, 4, 3, "toa") < api._solver_rank(3, 3, 3, "toa")
+    net = room_network(6, 4, np.random.default_rng(2), offset_sigma=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cals = api.solve_network(net.measurements(), dim=3, model="toa")
+    assert shapes == [(4, 6)] and min(position_error(c, net) for c in cals) < 1e-8
+    shapes.clear()
+    net = room_network(4, 6, np.random.default_rng(2), offset_sigma=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cals = api.solve_network(net.measurements(), dim=3, model="toa")
+    assert shapes == [(4, 6)] and min(position_error(c, net) for c in cals) < 1e-8
+
+
 def test_solve_network_extends_a_larger_toa_network():
     """7 receivers x 5 transmitters in 3D TOA: the 6r/4s solver on the first block, the other nodes placed
     by least squares; the best calibration is the true network (not minimal: no warning)."""
