@@ -78,3 +78,25 @@ def test_union_of_two_seeds_finds_a_root_one_checkpoint_lacks(tmp_path, monkeypa
     first.write_text(json.dumps(saved))
     pooled = counts.union("t", [0, 1])
     assert (pooled["union"], pooled["new"]) == (8, 1)
+
+
+def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
+    """The pencil's tracks from t = 0 to t1, t2: two paths made to fail on the straight route (plain and tight)
+    are retracked through an intermediate t' (trace._detours), and the test still passes on the whole fibre
+    (2D TOA 3r/3s); without the detours the same run is inconclusive."""
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    straight = trace.TraceSystem.track
+
+    def lossy(self, q0_, q1_, x0, inst=None, options=None):
+        x, stats = straight(self, q0_, q1_, x0, inst, options)
+        q0_, q1_ = np.atleast_2d(q0_), np.atleast_2d(q1_)
+        if len(q1_) == 2 and np.all(q0_[:, -1] == 0):  # t = 0 -> t1, t2 straight: lose the first two paths
+            x[:2] = np.nan
+        return x, stats
+
+    monkeypatch.setattr(trace.TraceSystem, "track", lossy)
+    options = trace.TraceOptions(seed=1)
+    test = trace.trace_test_system(system, q0, roots, other, options)
+    assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
+    monkeypatch.setattr(trace, "_detours", lambda *args, **kw: 0)
+    assert trace.trace_test_system(system, q0, roots, other, options).status == "inconclusive"

@@ -210,6 +210,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         paths += len(bi)
         for b in range(2):
             failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
+        paths += _detours(system, Q0, targets, S, ends, failed, rng, options.step)
     flat = ends.reshape(2 * M, -1)
     ok = np.all(np.isfinite(flat), axis=1)
     flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
@@ -228,6 +229,35 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         progress(f"trace test: {status}, residual {residual:.1e}, {K} roots + {len(W)} witnesses, {paths} paths")
     return TraceTest(status, residual, K, len(W), witnesses.loops, paths,
                      round(time.perf_counter() - t_start, 1), n_failed)
+
+
+def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
+             failed: np.ndarray, rng: np.random.Generator, step: float, tries: int = 3) -> int:
+    """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) through an intermediate pencil point t' (tight
+    step control; a new random t' each try), in place; returns the paths tracked.
+
+    The trace sums the whole fibre at t1 (t2), so a path may reach it by any route: a route around another
+    side of a branch point that the straight one passes close to ends on a fibre point too, possibly
+    another than the straight route's. A point some other path already reached counts as failed again
+    (``failed`` is recomputed from the distinct finite endpoints), so the test passes only on the whole,
+    distinct fibre."""
+    paths = 0
+    for _ in range(tries):
+        bi, ki = np.nonzero(failed)
+        if not len(bi):
+            break
+        mid = Q0.copy()
+        mid[-1] = 0.7 * step * np.exp(1j * rng.uniform(0.0, 2.0 * np.pi))
+        with np.errstate(all="ignore"):
+            y, _ = system.track(Q0[None], mid[None], S[ki], None, tracker.TIGHT)
+            ok = np.all(np.isfinite(y), axis=1)
+            if ok.any():
+                z, _ = system.track(mid[None], targets, y[ok], bi[ok], tracker.TIGHT)
+                ends[bi[ok], ki[ok]] = z
+        paths += len(bi) + int(ok.sum())
+        for b in range(2):
+            failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
+    return paths
 
 
 def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.ndarray, np.ndarray],
