@@ -60,8 +60,9 @@ TABLES = os.path.join(ROOT, "tables")
 CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "7r5s": "7r5s-tdoa3d-direct:all",
          "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
 #: Seeds (start networks) per cell by default: two for every settled cell (the second seed's count from
-#: another start network must agree); one for 5r/9s, whose first seed has not settled yet.
-SEEDS = {"10r4s": (0, 1), "7r5s": (0, 1), "6r6s": (0, 1), "5r9s": (0,)}
+#: another start network must agree), three for 6r/6s, whose first two settled one root apart (3919, 3920);
+#: one for 5r/9s, whose first seed has not settled yet.
+SEEDS = {"10r4s": (0, 1), "7r5s": (0, 1), "6r6s": (0, 1, 2), "5r9s": (0,)}
 #: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
 #: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
 #: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
