@@ -55,8 +55,11 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
     "N (monodromy + trace test, not certified)": every seed settled at N and a trace test passed;
     "N (monodromy, k seeds, not certified)": settled, same N on every seed (and their root sets, carried to one
     instance, pool to N: column union), no trace test passed;
-    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree (N: the largest count or the
-    pool of the seeds' roots, whichever is larger).
+    "N (monodromy, k of j seeds, not certified)": every seed settled, k >= 2 of them at N, the others below N,
+    and no pool of the seeds' roots above N (6r/6s: 3920 on seeds 1 and 2, as sets; seed 0 one root short);
+    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree otherwise (N: the largest count
+    or the pool of the seeds' roots, whichever is larger). "+ trace test" replaces "k seeds" where a trace
+    test passed on a seed at N.
     """
     path = os.path.join(ROOT, "tables", "monodromy3d.csv")
     if not os.path.exists(path):
@@ -69,20 +72,26 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
     out = {}
     for cell, seeds in by_cell.items():
         config = Formulation.parse(seeds[0]["formulation"]).config
-        counts = {int(r["roots"]) for r in seeds}
-        pooled = max((int(r["union"].split()[0]) for r in seeds if r.get("union")), default=0)
-        settled = all(r["status"] == "settled" for r in seeds) and len(counts) == 1 and pooled <= max(counts)
-        if not settled:
-            text = f">={max(max(counts), pooled)} (monodromy, lower bound)"
-        elif any(r.get("trace_test") == "passed" for r in seeds):
-            text = f"{counts.pop()} (monodromy + trace test, not certified)"
-        else:
-            text = f"{counts.pop()} (monodromy, {len(seeds)} seed{'s' if len(seeds) > 1 else ''}, not certified)"
-        out[(config.model, config.dim, config.m, config.n)] = text
+        out[(config.model, config.dim, config.m, config.n)] = _evidence(seeds)
     note = ("Cells marked (monodromy ...): no GF(p) count (F4 cap); the count is numerical evidence from "
             "tables/monodromy3d.* (scripts/monodromy_counts.py: seeds, loops, paths, trace-test residual).\n"
             if out else "")
     return out, note
+
+
+def _evidence(seeds: list[dict]) -> str:
+    """One cell's text from its seeds' rows of monodromy3d.csv (:func:`monodromy_evidence`)."""
+    counts = [int(r["roots"]) for r in seeds]
+    pooled = max((int(r["union"].split()[0]) for r in seeds if r.get("union")), default=0)
+    top = max(max(counts), pooled)
+    at_top = [r for r, c in zip(seeds, counts) if c == top]
+    if not all(r["status"] == "settled" for r in seeds) or (len(at_top) < 2 and len(seeds) > 1) or pooled > max(counts):
+        return f">={top} (monodromy, lower bound)"
+    if any(r.get("trace_test") == "passed" for r in at_top):
+        return f"{top} (monodromy + trace test, not certified)"
+    if len(at_top) < len(seeds):
+        return f"{top} (monodromy, {len(at_top)} of {len(seeds)} seeds, not certified)"
+    return f"{top} (monodromy, {len(seeds)} seed{'s' if len(seeds) > 1 else ''}, not certified)"
 
 
 def cells() -> list[TDOAConfig]:

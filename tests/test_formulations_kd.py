@@ -401,6 +401,25 @@ def _script(name: str):
     return module
 
 
+def test_table3d_monodromy_evidence_rules():
+    """scripts/table3d.py's text for a cell's monodromy seeds: agreeing settled seeds; two of three at the top
+    with the third short and no larger pool (6r/6s); a trace test that passed; anything else a lower bound."""
+    evidence = _script("table3d")._evidence
+
+    def row(roots, status="settled", union="", trace="not run"):
+        return {"roots": str(roots), "status": status, "union": union, "trace_test": trace}
+
+    assert evidence([row(6148, union="6148"), row(6148, union="6148 (33 paths lost)")]) == \
+        "6148 (monodromy, 2 seeds, not certified)"
+    assert evidence([row(3919, union="3919 (4 paths lost)"), row(3920, union="3920"), row(3920, union="3920")]) == \
+        "3920 (monodromy, 2 of 3 seeds, not certified)"
+    assert evidence([row(6148, union="6148", trace="passed"), row(6148)]) == "6148 (monodromy + trace test, not certified)"
+    assert evidence([row(3919, union="3919"), row(3920, union="3920")]) == ">=3920 (monodromy, lower bound)"  # 1 of 2
+    assert evidence([row(3920, union="3921"), row(3920, union="3920")]) == ">=3921 (monodromy, lower bound)"
+    assert evidence([row(12965, status="not settled")]) == ">=12965 (monodromy, lower bound)"
+    assert evidence([row(2321)]) == "2321 (monodromy, 1 seed, not certified)"
+
+
 def test_table_scripts_cover_the_minimal_cells_and_check_the_cross_check():
     toa = _script("toa_table")
     labels = {c.label for c in toa.cells()}
