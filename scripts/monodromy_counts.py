@@ -2,7 +2,8 @@
 writes tables/monodromy3d.{csv,md} (results) and prints the seconds.
 
 Per cell and seed: the cell's square formulation (10r/4s: compaction A, B2-B4, C2-C10, 13 unknowns, every
-measurement used, det H saturated; 7r/5s, 6r/6s, 5r/9s: the direct parametrization, see CELLS), a generic
+measurement used, det H saturated; 7r/5s, 6r/6s, 5r/9s: the direct parametrization, see CELLS; 10r4s-direct:
+10r/4s in the direct parametrization as well, its second formulation), a generic
 complex start network (solvers.generate.complex_instance, seeded) and its root, then monodromy loops (solvers.methods.homotopy.monodromy_count: triangles through
 random complex parameters, all known roots tracked in one batch on the compiled tape tracker) until
 --stall loops bring no new root or --loops loops are done. Checkpoints (resumable) go to
@@ -20,7 +21,7 @@ for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witness
 in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
 relative residual of the affine fit, the number of witnesses and the paths it tracked.
 
-Usage: python scripts/monodromy_counts.py [10r4s 7r5s 6r6s 5r9s] [--seeds 0 1] [--loops 60] [--stall 10]
+Usage: python scripts/monodromy_counts.py [10r4s 10r4s-direct 7r5s 6r6s 5r9s] [--seeds 0 1] [--loops 60] [--stall 10]
        [--seconds 1800] [--trace-seconds 3600] [--trace-stall 3] [--threads N]
        [--dask ADDRESS|local [--dask-chunk 2000]]
 (--threads: the batches of each tracking call side by side on N threads, the same results; --seconds 0 --trace-seconds 0: read the checkpoints only, no loop and no trace test run.)
@@ -56,13 +57,14 @@ TABLES = os.path.join(ROOT, "tables")
 #: parametrization (receivers in the gauge frame r_1 = 0, r_2 on x, r_3 in the xy-plane, transmitters,
 #: offsets: 3m + 4n - 6 = mn unknowns, one equation d_ij^2 = |r_i - s_j|^2 per measurement), whose roots come
 #: in orbits of the 8 reflections of that frame (x, y, z -> -x, -y, -z): one root per orbit is tracked and
-#: counted, so its counts are networks up to the Euclidean group, like the compaction counts.
-CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "7r5s": "7r5s-tdoa3d-direct:all",
-         "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
+#: counted, so its counts are networks up to the Euclidean group, like the compaction counts. "10r4s-direct":
+#: 10r/4s in the direct parametrization too (40 unknowns), a second formulation of the same cell.
+CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "10r4s-direct": "10r4s-tdoa3d-direct:all",
+         "7r5s": "7r5s-tdoa3d-direct:all", "6r6s": "6r6s-tdoa3d-direct:all", "5r9s": "5r9s-tdoa3d-direct:all"}
 #: Seeds (start networks) per cell by default: two for every settled cell (the second seed's count from
 #: another start network must agree), three for 6r/6s, whose first two settled one root apart (3919, 3920);
 #: one for 5r/9s, whose first seed has not settled yet.
-SEEDS = {"10r4s": (0, 1), "7r5s": (0, 1), "6r6s": (0, 1, 2), "5r9s": (0,)}
+SEEDS = {"10r4s": (0, 1), "10r4s-direct": (0,), "7r5s": (0, 1), "6r6s": (0, 1, 2), "5r9s": (0,)}
 #: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
 #: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
 #: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13

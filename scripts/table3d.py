@@ -69,10 +69,11 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
     by_cell: dict[str, list[dict]] = {}
     for row in rows:
         by_cell.setdefault(row["cell"], []).append(row)
-    out = {}
-    for cell, seeds in by_cell.items():
+    by_config: dict[tuple, list[list[dict]]] = {}
+    for cell, seeds in by_cell.items():  # a cell's formulations in the CSV's order, the main one first
         config = Formulation.parse(seeds[0]["formulation"]).config
-        out[(config.model, config.dim, config.m, config.n)] = _evidence(seeds)
+        by_config.setdefault((config.model, config.dim, config.m, config.n), []).append(seeds)
+    out = {key: _formulations(formulations) for key, formulations in by_config.items()}
     note = ("Cells marked (monodromy ...): no GF(p) count (F4 cap); the count is numerical evidence from "
             "tables/monodromy3d.* (scripts/monodromy_counts.py: seeds, loops, paths, trace-test residual).\n"
             if out else "")
@@ -92,6 +93,19 @@ def _evidence(seeds: list[dict]) -> str:
     if len(at_top) < len(seeds):
         return f"{top} (monodromy, {len(at_top)} of {len(seeds)} seeds, not certified)"
     return f"{top} (monodromy, {len(seeds)} seed{'s' if len(seeds) > 1 else ''}, not certified)"
+
+
+def _formulations(formulations: list[list[dict]]) -> str:
+    """A cell's text from its formulations' seeds (:func:`_evidence` of the first; a second formulation that
+    settles at the same count is named as agreeing, any other outcome is shown beside it)."""
+    text = _evidence(formulations[0])
+    for seeds in formulations[1:]:
+        ours, theirs = text.split()[0], _evidence(seeds).split()[0]
+        if theirs == ours and not ours.startswith(">="):
+            text = text[:-1] + "; a second formulation agrees)"
+        else:
+            text = text[:-1] + f"; a second formulation: {theirs})"
+    return text
 
 
 def cells() -> list[TDOAConfig]:

@@ -418,6 +418,11 @@ def test_table3d_monodromy_evidence_rules():
     assert evidence([row(3920, union="3921"), row(3920, union="3920")]) == ">=3921 (monodromy, lower bound)"
     assert evidence([row(12965, status="not settled")]) == ">=12965 (monodromy, lower bound)"
     assert evidence([row(2321)]) == "2321 (monodromy, 1 seed, not certified)"
+    both = _script("table3d")._formulations
+    main = [row(6148, union="6148"), row(6148, union="6148")]
+    assert both([main, [row(6148)]]) == "6148 (monodromy, 2 seeds, not certified; a second formulation agrees)"
+    assert both([main, [row(5000, status="not settled")]]) == \
+        "6148 (monodromy, 2 seeds, not certified; a second formulation: >=5000)"
 
 
 def test_table_scripts_cover_the_minimal_cells_and_check_the_cross_check():
