@@ -209,7 +209,7 @@ def markdown(rows: list[dict]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("cells", nargs="*", default=list(DEFAULT_CELLS), choices=list(CELLS),
+    parser.add_argument("cells", nargs="*", default=list(DEFAULT_CELLS),
                         help=f"any of {', '.join(CELLS)} (default: {' '.join(DEFAULT_CELLS)})")
     parser.add_argument("--seeds", type=int, nargs="+", default=None,
                         help="seeds of every cell (default: SEEDS, per cell)")
@@ -225,6 +225,9 @@ def main(argv: list[str] | None = None) -> int:
                         "address, or 'local' for a LocalCluster of one process per core (same results)")
     parser.add_argument("--dask-chunk", type=int, default=2000, metavar="N", help="paths per Dask task (default 2000)")
     args = parser.parse_args(argv)
+    unknown = [c for c in args.cells if c not in CELLS]
+    if unknown:
+        parser.error(f"unknown cell {unknown[0]!r}; valid: {', '.join(CELLS)}")
     if args.threads is not None:
         if args.threads < 1:
             parser.error(f"--threads must be a positive integer, not {args.threads}")
