@@ -100,3 +100,26 @@ def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
     assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
     monkeypatch.setattr(trace, "_detours", lambda *args, **kw: 0)
     assert trace.trace_test_system(system, q0, roots, other, options).status == "inconclusive"
+
+
+def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
+    """Q_0 = {a . x = 1} u {lam = 0}: witness loops can reach the roots themselves (lam = 0; the 10r/4s loops
+    reached all 6148). Mixed into the witnesses, they are summed once with the roots and the test passes
+    (2D TOA 3r/3s); with one root left out of R but reached by the loops, it fails and says so."""
+    import dataclasses
+
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    count = hm.monodromy_count
+
+    def with_roots(*args, **kwargs):
+        found = count(*args, **kwargs)
+        return dataclasses.replace(found, roots=np.vstack([found.roots, np.column_stack([roots, np.zeros(len(roots))])]))
+
+    monkeypatch.setattr(hm, "monodromy_count", with_roots)
+    options = trace.TraceOptions(seed=1)
+    test = trace.trace_test_system(system, q0, roots, other, options)
+    assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
+    messages = []
+    short = trace.trace_test_system(system, q0, roots[1:], other, options, progress=messages.append)
+    assert short.status == "failed", short
+    assert any("reached 1 root(s)" in m for m in messages), messages

@@ -51,7 +51,11 @@ from . import homotopy as hm
 from . import slp, tape_kernel, tape_native, tracker
 from .tracker import TrackerOptions
 
-__all__ = ["TraceOptions", "TraceSystem", "TraceTest", "trace_equations", "trace_test", "PASS_TOL"]
+__all__ = ["LAM_ZERO", "TraceOptions", "TraceSystem", "TraceTest", "trace_equations", "trace_test", "PASS_TOL"]
+
+#: A witness point with |lam| below this (relative to 1 + |x|) lies on the lam = 0 component (the roots'); the
+#: 10r/4s witness loops gave exact zeros up to 1e-88 there and 3e-3 for the smallest true witness.
+LAM_ZERO = 1e-10
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
 #: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
@@ -169,7 +173,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     a = a / (a @ x_star)
     Q0 = np.concatenate([p, v, a, [0.0]])
     free = np.ones(len(Q0), dtype=bool)
-    free[-1] = False  # the witness loops keep t = 0: they move p, v and a, never onto the lam = 0 component
+    free[-1] = False  # the witness loops keep t = 0 and move p, v and a (their lam = 0 points are set apart below)
 
     def off_locus(y: np.ndarray) -> np.ndarray:
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
@@ -186,6 +190,15 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
                                    progress=progress, excluded=off_locus, free=free)
     W = witnesses.roots
     paths = witnesses.paths
+    # Q_0 is {a . x = 1} u {lam = 0}: the loops also reach points of the lam = 0 component (F(x; p) = 0, the
+    # roots' own; 10r/4s: all 6148 among 142,063 points). They are R's, summed once with R; one R lacks would
+    # make R incomplete, and the trace then fails (R u W is short of the fibre).
+    lam0 = np.abs(W[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(W[:, :N], axis=1))
+    if lam0.any():
+        extra = len(hm.add_new(base, W[lam0])) - K
+        if extra and progress:
+            progress(f"trace test: the witness loops reached {extra} root(s) of F(x; p) = 0 that the roots lack")
+        W = W[~lam0]
     if witnesses.stall < options.stall:  # cut by the time cap: the witnesses are a lower bound, no verdict
         if progress:
             progress(f"trace test: inconclusive, witnesses not settled ({len(W)} after {witnesses.loops} loops)")
