@@ -245,31 +245,40 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
 
 
 def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
-             failed: np.ndarray, rng: np.random.Generator, step: float, tries: int = 3) -> int:
-    """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) through an intermediate pencil point t' (tight
-    step control; a new random t' each try), in place; returns the paths tracked.
+             failed: np.ndarray, rng: np.random.Generator, step: float,
+             bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
+    """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) around the straight segment 0 -> t_b (tight step
+    control), in place; returns the paths tracked.
 
-    The trace sums the whole fibre at t1 (t2), so a path may reach it by any route: a route around another
-    side of a branch point that the straight one passes close to ends on a fibre point too, possibly
-    another than the straight route's. A point some other path already reached counts as failed again
-    (``failed`` is recomputed from the distinct finite endpoints), so the test passes only on the whole,
-    distinct fibre."""
+    A path fails on the straight segment when it passes close to a branch point of the fibre. Two legs through
+    the midpoint pushed sideways by ``bump`` times |t_b| go around it: on the side the straight path passed, the
+    detour is homotopic to it and ends on the point it was heading for; on the other side it may end on another
+    path's point. So an endpoint counts only where it is finite and lies on no other endpoint (the good ones
+    and the other detours'), and a good path is never touched; each bump (both sides, then wider) retracks
+    the paths still failed. The trace sums the whole fibre, so only the set of endpoints matters."""
     paths = 0
-    for _ in range(tries):
+    for bump in bumps:
         bi, ki = np.nonzero(failed)
         if not len(bi):
             break
-        mid = Q0.copy()
-        mid[-1] = 0.7 * step * np.exp(1j * rng.uniform(0.0, 2.0 * np.pi))
+        mids = targets.copy()
+        mids[:, -1] = 0.5 * targets[:, -1] * (1.0 + 1j * bump)
         with np.errstate(all="ignore"):
-            y, _ = system.track(Q0[None], mid[None], S[ki], None, tracker.TIGHT)
+            y, _ = system.track(Q0[None], mids, S[ki], bi, tracker.TIGHT)
             ok = np.all(np.isfinite(y), axis=1)
+            z = np.full_like(y, np.nan)
             if ok.any():
-                z, _ = system.track(mid[None], targets, y[ok], bi[ok], tracker.TIGHT)
-                ends[bi[ok], ki[ok]] = z
+                z[ok], _ = system.track(mids, targets, y[ok], bi[ok], tracker.TIGHT)
         paths += len(bi) + int(ok.sum())
         for b in range(2):
-            failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
+            rows = np.flatnonzero(bi == b)
+            good = ends[b][~failed[b]]
+            cand = z[rows]
+            finite = np.all(np.isfinite(cand), axis=1)
+            clash = hm._duplicated(np.vstack([good, cand[finite]]))[len(good):]
+            take = rows[finite][~clash]
+            ends[b, ki[take]] = z[take]
+            failed[b, ki[take]] = False
     return paths
 
 
