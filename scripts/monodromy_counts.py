@@ -192,7 +192,9 @@ def markdown(rows: list[dict]) -> str:
              "**3D TDOA minimal cells: root counts by monodromy** (up to rotation, reflection and translation; "
              "'settled': no new root in the last loops, else a lower bound; trace test: solvers.methods.trace, "
              f"'passed' when the affine fit's relative residual is <= {trace.PASS_TOL:.0e}, 'inconclusive' when its "
-             "witness set was not settled (its size then a lower bound, no residual) or a path was lost; group order "
+             "witness set was not settled (its size then a lower bound, no residual) or a path was lost, 'failed' "
+             "when the roots and witnesses together fall short of the whole fibre (a root or a witness missing: "
+             "witnesses settled after only a few loops can still lack some); group order "
              "8: direct parametrization, roots counted one per orbit of the gauge frame's reflections; union of the "
              "seeds: the other seeds' roots carried to this seed's network and pooled with its own)", "",
              "| cell | formulation | unknowns | group order | seed | roots | status | loops | paths tracked "
