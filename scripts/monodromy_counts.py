@@ -65,9 +65,6 @@ CELLS = {"10r4s": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "10r4s-direct": "10r4s-tdoa3
 #: another start network must agree), three for 6r/6s, whose first two settled one root apart (3919, 3920);
 #: one for 5r/9s, whose first seed has not settled yet, and one for 10r4s-direct (a second formulation).
 SEEDS = {"10r4s": (0, 1), "10r4s-direct": (0,), "7r5s": (0, 1), "6r6s": (0, 1, 2), "5r9s": (0,)}
-#: The cells a run without names covers (their checkpoints are in the committed table); a cell named without
-#: an entry in SEEDS runs on seed 0 unless --seeds says otherwise.
-DEFAULT_CELLS = tuple(SEEDS)
 #: Unknowns the trace test's pencil uses (indices into the formulation's unknowns). 10r/4s: b1, b2, b3. b
 #: (like H) goes to infinity whenever a root escapes along the line of data, so the pencil has no base point
 #: on the curve; the offsets do not (2D 9r/3s: every root's path lost with the pencil on o), and all 13
@@ -211,8 +208,7 @@ def markdown(rows: list[dict]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("cells", nargs="*", default=list(DEFAULT_CELLS),
-                        help=f"any of {', '.join(CELLS)} (default: {' '.join(DEFAULT_CELLS)})")
+    parser.add_argument("cells", nargs="*", default=list(CELLS), help=f"any of {', '.join(CELLS)} (default: all)")
     parser.add_argument("--seeds", type=int, nargs="+", default=None,
                         help="seeds of every cell (default: SEEDS, per cell)")
     parser.add_argument("--loops", type=int, default=60, help="loop budget per seed (default 60)")
@@ -230,13 +226,13 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [c for c in args.cells if c not in CELLS]
     if unknown:
         parser.error(f"unknown cell {unknown[0]!r}; valid: {', '.join(CELLS)}")
-    if args.threads is not None:
-        if args.threads < 1:
-            parser.error(f"--threads must be a positive integer, not {args.threads}")
+    try:
         tape_kernel.set_threads(args.threads)
+    except ValueError:
+        parser.error(f"--threads must be a positive integer, not {args.threads}")
     rows = []
     for cell in args.cells:
-        seeds = args.seeds if args.seeds is not None else SEEDS.get(cell, (0,))
+        seeds = args.seeds if args.seeds is not None else SEEDS[cell]
         cell_rows = []
         for seed in seeds:
             try:

@@ -223,7 +223,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         paths += len(bi)
         for b in range(2):
             failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
-        paths += _detours(system, Q0, targets, S, ends, failed, rng, options.step)
+        paths += _detours(system, Q0, targets, S, ends, failed)
     flat = ends.reshape(2 * M, -1)
     ok = np.all(np.isfinite(flat), axis=1)
     flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
@@ -245,8 +245,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
 
 
 def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
-             failed: np.ndarray, rng: np.random.Generator, step: float,
-             bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
+             failed: np.ndarray, bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
     """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) around the straight segment 0 -> t_b (tight step
     control), in place; returns the paths tracked.
 
