@@ -418,11 +418,34 @@ def test_table3d_monodromy_evidence_rules():
     assert evidence([row(3920, union="3921"), row(3920, union="3920")]) == ">=3921 (monodromy, lower bound)"
     assert evidence([row(12965, status="not settled")]) == ">=12965 (monodromy, lower bound)"
     assert evidence([row(2321)]) == "2321 (monodromy, 1 seed, not certified)"
+    gf = _script("table3d").with_gf_counts
+    monodromy = {("tdoa", 3, 10, 4): "6148 (monodromy, 2 seeds, not certified)",
+                 ("tdoa", 3, 7, 5): "2321 (monodromy, 2 seeds, not certified)"}
+    assert gf(monodromy, {("tdoa", 3, 10, 4): (6148, 2), ("tdoa", 3, 7, 5): (2320, 2), ("tdoa", 3, 5, 9): (9, 2)}) == {
+        ("tdoa", 3, 10, 4): "6148 (GF(p), 2 primes, F4 with a larger budget; monodromy agrees)",
+        ("tdoa", 3, 7, 5): "2320 (GF(p), 2 primes, F4 with a larger budget; monodromy: 2321)",
+        ("tdoa", 3, 5, 9): "9 (GF(p), 2 primes, F4 with a larger budget)"}
+    assert gf(monodromy, {}) == monodromy
     both = _script("table3d")._formulations
     main = [row(6148, union="6148"), row(6148, union="6148")]
     assert both([main, [row(6148)]]) == "6148 (monodromy, 2 seeds, not certified; a second formulation agrees)"
     assert both([main, [row(5000, status="not settled")]]) == \
         "6148 (monodromy, 2 seeds, not certified; a second formulation: >=5000)"
+
+
+def test_table3d_minimal_script_runs_under_its_caps(tmp_path, capsys):
+    """scripts/table3d_minimal.py: a formulation stopped by its wall-time cap is a 'timeout' row (never dropped)
+    in a table of its own; unknown cells and bad budgets are refused."""
+    script = _script("table3d_minimal")
+    assert script.formulation("10r4s").label == "10r4s-tdoa3d:A,B2,B3,B4,C2-C10"
+    assert script.main(["10r4s", "--seconds", "0.5", "--out-dir", str(tmp_path)]) == 0
+    (record,) = cell_degrees.read_records(str(tmp_path / "table3d_minimal.csv"))
+    assert record.status == "timeout" and record.degree is None and "0.5 s wall-time cap" in record.note
+    assert "| 10 | timeout |" in (tmp_path / "table3d_minimal.md").read_text()
+    for argv, fragment in ((["11r4s"], "unknown cell(s) 11r4s"), (["--seconds", "0"], "must be positive")):
+        with pytest.raises(SystemExit):
+            script.main([*argv, "--out-dir", str(tmp_path)])
+        assert fragment in capsys.readouterr().err
 
 
 def test_table_scripts_cover_the_minimal_cells_and_check_the_cross_check():

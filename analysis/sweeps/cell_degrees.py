@@ -126,7 +126,8 @@ def _exponent_dicts(polys: Sequence[Poly]) -> list[dict]:
 
 
 def cell_degree(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_PRIMES, seed: int = 0,
-                max_cells: int = 60_000_000, msolve: str | None = None) -> CellDegree:
+                max_cells: int = 60_000_000, msolve: str | None = None, max_memory: int | None = None,
+                threads: int = 1, verbose: bool = False) -> CellDegree:
     """The degree of one formulation (module docstring), agreed by every prime.
 
     Parameters
@@ -136,6 +137,8 @@ def cell_degree(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_
     seed : the instance's seed (the same seed on every prime).
     max_cells : F4 matrix cap (rows x cols); above it the row has status ``cap``.
     msolve : an msolve executable: its degree on the first prime must agree (EngineDisagreement).
+    max_memory, threads, verbose : F4's memory cap (bytes; default :data:`analysis.engine.f4.DEFAULT_MAX_MEMORY`;
+        above it the row has status ``cap`` too), row-reduction threads, one line per F4 round on stderr.
 
     Raises PrimeDisagreement when primes disagree, NotDivisible when a direct degree is not a multiple of
     the gauge group's order, InconsistentSample when the known root fails an equation.
@@ -155,7 +158,10 @@ def cell_degree(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_
                           seconds=time.perf_counter() - t0,
                           note=f"Jacobian rank {rank} < {nvars} unknowns at the known root: no Groebner basis computed")
     try:
-        report = analyse(system, primes, F4Options(max_matrix_cells=max_cells))
+        options = F4Options(max_matrix_cells=max_cells, threads=threads, verbose=verbose)
+        if max_memory is not None:
+            options = dataclasses.replace(options, max_memory=max_memory)
+        report = analyse(system, primes, options)
     except MatrixTooLarge as e:
         return CellDegree(**base, status="cap", degree=None, up_to_gauge=None, max_matrix="",
                           seconds=time.perf_counter() - t0, note=str(e))
@@ -186,10 +192,11 @@ def cell_degree(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_
                       seconds=time.perf_counter() - t0, msolve_degree=msolve_degree, note=note)
 
 
-def _child(conn, label: str, primes: tuple[int, ...], seed: int, max_cells: int, msolve: str | None) -> None:
+def _child(conn, label: str, primes: tuple[int, ...], seed: int, max_cells: int, msolve: str | None,
+           options: dict) -> None:
     """Child process body of :func:`cell_degree_capped`: the record, or the exception, through the pipe."""
     try:
-        conn.send(("ok", cell_degree(label, primes, seed, max_cells, msolve)))
+        conn.send(("ok", cell_degree(label, primes, seed, max_cells, msolve, **options)))
     except BaseException as e:  # sent to the parent, which re-raises it
         conn.send(("error", e))
     finally:
@@ -197,8 +204,10 @@ def _child(conn, label: str, primes: tuple[int, ...], seed: int, max_cells: int,
 
 
 def cell_degree_capped(formulation: Formulation | str, seconds: float, primes: Sequence[int] = DEFAULT_PRIMES,
-                       seed: int = 0, max_cells: int = 60_000_000, msolve: str | None = None) -> CellDegree:
-    """:func:`cell_degree` in one child process stopped after ``seconds`` of wall time.
+                       seed: int = 0, max_cells: int = 60_000_000, msolve: str | None = None,
+                       **options) -> CellDegree:
+    """:func:`cell_degree` in one child process stopped after ``seconds`` of wall time (``options``: its
+    max_memory, threads and verbose).
 
     A formulation that runs out of time gets status ``timeout`` (its cap in the note), never dropped;
     exceptions raised in the child (disagreeing primes, inconsistent samples) are raised here.
@@ -208,7 +217,7 @@ def cell_degree_capped(formulation: Formulation | str, seconds: float, primes: S
     ctx = multiprocessing.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     t0 = time.perf_counter()
-    proc = ctx.Process(target=_child, args=(child, formulation.label, tuple(primes), seed, max_cells, msolve))
+    proc = ctx.Process(target=_child, args=(child, formulation.label, tuple(primes), seed, max_cells, msolve, options))
     proc.start()
     child.close()
     try:
