@@ -9,8 +9,9 @@ checked on every Groebner basis), with no cell cap and a cap on F4's memory (--m
 shows it in the minimal cell of tables/table3d.md beside the monodromy count of tables/monodromy3d.*.
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/table3d_minimal.py [CELL ...] [--seconds S] [--max-memory-gib G]
-[--threads N] [--reuse]. CELL: any of 10r4s 7r5s 6r6s 5r9s (default all); the cells not named keep their
-committed rows. Long: 10r/4s about an hour on one core; F4 prints one line per round on stderr.
+[--threads N] [--out-dir DIR] [--reuse]. CELL: any of 10r4s 7r5s 6r6s 5r9s (default all); the cells not
+named keep their committed rows (tables/table3d_minimal.csv); --reuse computes nothing and writes the
+committed rows again (the same bytes). Long: 10r/4s about an hour on one core; F4 prints one line per round on stderr.
 """
 from __future__ import annotations
 
@@ -48,9 +49,10 @@ def formulation(cell: str) -> Formulation:
     return Formulation.from_spec(TDOAConfig(m, n, dim=3), "all")
 
 
-def committed(out_dir: str) -> dict:
-    """The committed records by formulation label (none when the table does not exist yet)."""
-    path = os.path.join(out_dir, f"{STEM}.csv")
+def committed() -> dict:
+    """The committed records (tables/table3d_minimal.csv) by formulation label (none when the table does not
+    exist yet)."""
+    path = os.path.join(ROOT, "tables", f"{STEM}.csv")
     return {r.formulation: r for r in read_records(path)} if os.path.exists(path) else {}
 
 
@@ -69,8 +71,8 @@ def main(argv=None) -> int:
     if args.seconds <= 0 or args.max_memory_gib <= 0 or args.threads < 1:
         parser.error("--seconds and --max-memory-gib must be positive, --threads at least 1")
     info = provenance(ROOT)
-    old = committed(args.out_dir)
-    meta_path = os.path.join(args.out_dir, f"{STEM}.meta.json")
+    old = committed()
+    meta_path = os.path.join(ROOT, "tables", f"{STEM}.meta.json")
     meta = {}
     if os.path.exists(meta_path):
         import json

@@ -439,13 +439,29 @@ def test_table3d_minimal_script_runs_under_its_caps(tmp_path, capsys):
     script = _script("table3d_minimal")
     assert script.formulation("10r4s").label == "10r4s-tdoa3d:A,B2,B3,B4,C2-C10"
     assert script.main(["10r4s", "--seconds", "0.5", "--out-dir", str(tmp_path)]) == 0
-    (record,) = cell_degrees.read_records(str(tmp_path / "table3d_minimal.csv"))
+    records = cell_degrees.read_records(str(tmp_path / "table3d_minimal.csv"))
+    (record,) = [r for r in records if r.config == "10r4s-tdoa3d"]
     assert record.status == "timeout" and record.degree is None and "0.5 s wall-time cap" in record.note
     assert "| 10 | timeout |" in (tmp_path / "table3d_minimal.md").read_text()
+    assert [r.config for r in records] == [f"{c}-tdoa3d" for c in script.CELLS
+                                           if c == "10r4s" or script.formulation(c).label in script.committed()]
     for argv, fragment in ((["11r4s"], "unknown cell(s) 11r4s"), (["--seconds", "0"], "must be positive")):
         with pytest.raises(SystemExit):
             script.main([*argv, "--out-dir", str(tmp_path)])
         assert fragment in capsys.readouterr().err
+
+
+def test_committed_table3d_minimal_is_what_its_script_writes(tmp_path):
+    """scripts/table3d_minimal.py --reuse writes the committed CSV and Markdown again, byte for byte."""
+    import os
+
+    script = _script("table3d_minimal")
+    if not script.committed():
+        pytest.skip("tables/table3d_minimal.csv not committed")
+    assert script.main(["--reuse", "--out-dir", str(tmp_path)]) == 0
+    for ext in ("csv", "md"):
+        committed = os.path.join(script.ROOT, "tables", f"table3d_minimal.{ext}")
+        assert (tmp_path / f"table3d_minimal.{ext}").read_text() == open(committed).read(), ext
 
 
 def test_table_scripts_cover_the_minimal_cells_and_check_the_cross_check():

@@ -794,10 +794,23 @@ def _f4(
             print(
                 f"[f4] deg {d:3d}  pairs {npairs:5d}  matrix {nrows:6d} x {ncols:6d}  "
                 f"density {stats.density:6.2%}  new {stats.new:4d}  zero {stats.zero_reductions:5d}  "
-                f"{stats.seconds:7.3f}s",
+                f"{stats.seconds:7.3f}s  memory estimate {format_bytes(need)}{_peak_rss()}",
                 file=sys.stderr,
             )
     return tuple(_reduce_basis(state, backend, options.threads)), tuple(rounds)
+
+
+def _peak_rss() -> str:
+    """``, peak RSS 4.1 GiB``: the process's peak resident memory so far (Linux /proc), for the verbose
+    lines beside :func:`matrix_memory`'s estimate; empty where /proc is not there."""
+    try:
+        with open("/proc/self/status") as handle:
+            for line in handle:
+                if line.startswith("VmHWM:"):
+                    return f", peak RSS {format_bytes(int(line.split()[1]) * 1024)}"
+    except OSError:
+        pass
+    return ""
 
 
 def _insert_rows(state: _State, rows: SparseRows, columns: np.ndarray) -> bool:
