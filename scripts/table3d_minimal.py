@@ -11,7 +11,7 @@ shows it in the minimal cell of tables/table3d.md beside the monodromy count of 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/table3d_minimal.py [CELL ...] [--seconds S] [--max-memory-gib G]
 [--threads N] [--out-dir DIR] [--reuse]. CELL: any of 10r4s 7r5s 6r6s 5r9s (default all); the cells not
 named keep their committed rows (tables/table3d_minimal.csv); --reuse computes nothing and writes the
-committed rows again (the same bytes). Long: 10r/4s about an hour on one core; F4 prints one line per round on stderr.
+committed rows again (the same bytes). Long: up to hours a cell; F4 prints one line per round on stderr.
 """
 from __future__ import annotations
 
