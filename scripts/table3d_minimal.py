@@ -21,6 +21,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import datetime  # noqa: E402
+import json  # noqa: E402
 import sys  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -73,13 +74,10 @@ def main(argv=None) -> int:
     info = provenance(ROOT)
     old = committed()
     meta_path = os.path.join(ROOT, "tables", f"{STEM}.meta.json")
-    meta = {}
+    runs = {}
     if os.path.exists(meta_path):
-        import json
-
         with open(meta_path) as handle:
-            meta = json.load(handle)
-    runs = meta.get("runs", {})
+            runs = json.load(handle)["runs"]
     records = []
     for cell in CELLS:
         label = formulation(cell).label
@@ -95,8 +93,9 @@ def main(argv=None) -> int:
         records.append(r)
         runs[cell] = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), **info,
                       "seconds_cap": args.seconds, "max_memory_gib": args.max_memory_gib, "threads": args.threads}
+    written = {r.config.split("-")[0] for r in records}  # each row's run record, in the rows' (CELLS) order
     meta = {"primes": list(DEFAULT_PRIMES), "seed": 0, "max_matrix_cells": "none (memory and wall-time caps)",
-            "runs": runs}
+            "runs": {cell: runs[cell] for cell in CELLS if cell in written and cell in runs}}
     paths = write_table(records, args.out_dir, STEM, "3D TDOA minimal cells over GF(p): F4 with a larger budget",
                         "python scripts/table3d_minimal.py", meta, NOTES)
     print("wrote " + ", ".join(paths), file=sys.stderr)
