@@ -71,6 +71,10 @@ SEEDS = {"10r4s": (0, 1), "10r4s-direct": (0,), "7r5s": (0, 1), "6r6s": (0, 1, 2
 #: unknowns need more witnesses (9r/3s: 2045 with all, 1290 with b or with H, for 75 roots). The compaction
 #: unknowns have no symmetry (group order 1), so no two roots share their b.
 TRACE_COORDINATES = {"10r4s": (6, 7, 8)}
+#: |t1| = |t2| of the trace test's pencil (trace.TraceOptions.step, 0.5 by default). 10r/4s: 0.2. At 0.3 and 0.5
+#: one track of 284,132 (at 0.5 a witness of norm 11) is lost on every route, straight, around and by
+#: continuation, and the test is inconclusive; at 0.2 none is (docs/minimal-3d.md, section 4).
+TRACE_STEP = {"10r4s": 0.2}
 COLUMNS = ["cell", "formulation", "unknowns", "seed", "roots", "status", "loops", "paths", "loops_without_new",
            "group_order", "trace_test", "trace_residual", "witnesses", "trace_paths", "union"]
 
@@ -110,7 +114,7 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
            "witnesses": "", "trace_paths": ""}
     if status == "settled" and group is None:  # (with one root per orbit the trace needs the orbits: not done)
         test = trace_test(system, q0, result.roots, path / f"{cell}-seed{seed}", TRACE_COORDINATES.get(cell), seed,
-                          trace_stall, trace_seconds)
+                          trace_stall, trace_seconds, TRACE_STEP.get(cell, trace.TraceOptions.step))
         residual = "" if np.isnan(test["residual"]) else f"{test['residual']:.0e}"
         row.update({"trace_test": test["status"], "trace_residual": residual,
                     "witnesses": test["witnesses"], "trace_paths": test["paths"]})
@@ -160,15 +164,16 @@ def union(cell: str, seeds: list[int]) -> dict | None:
 
 
 def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, seed: int, stall: int,
-               seconds: float) -> dict:
+               seconds: float, step: float = trace.TraceOptions.step) -> dict:
     """The trace test's record for a settled count, read from <stem>-trace.json when it was run on the same
     roots and options (an inconclusive one only when ``seconds`` is 0), else run and stored (the witnesses
     resume from <stem>-witnesses.json; ``seconds`` 0: no new witness loop, only what that checkpoint holds)."""
     config = Formulation.parse(system.name).config
     F2, x2 = complex_instance(config.m, config.n, np.random.default_rng(1000 + seed), config.dim, config.model)
-    options = trace.TraceOptions(seed=seed, stall=stall, seconds=seconds,
+    options = trace.TraceOptions(seed=seed, stall=stall, seconds=seconds, step=step,
                                  coordinates=tuple(coordinates) if coordinates else None)
-    key = {"roots": len(roots), "seed": seed, "stall": stall, "coordinates": list(coordinates or [])}
+    key = {"roots": len(roots), "seed": seed, "stall": stall, "coordinates": list(coordinates or []),
+           "step": step, "test": trace.TEST_VERSION}
     stored = trace.load_record(f"{stem}-trace.json")
     if stored and stored.get("key") == key and (stored["status"] != "inconclusive" or seconds <= 0):
         return stored

@@ -2,6 +2,8 @@
 when one root (or one witness) is missing."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -83,7 +85,8 @@ def test_union_of_two_seeds_finds_a_root_one_checkpoint_lacks(tmp_path, monkeypa
 def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
     """The pencil's tracks from t = 0 to t1, t2: two paths made to fail on the straight route (plain and tight)
     are retracked around it through a midpoint pushed sideways (trace._detours), and the test still passes on
-    the whole, distinct fibre (2D TOA 3r/3s); without the detours the same run is inconclusive."""
+    the whole, distinct fibre (2D TOA 3r/3s); without the detours, natural-parameter continuation
+    (trace._continuation) recovers them; without both the same run is inconclusive."""
     system, q0, roots, other = _roots("3r3stoa", 8)
     straight = trace.TraceSystem.track
 
@@ -98,7 +101,10 @@ def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
     options = trace.TraceOptions(seed=1)
     test = trace.trace_test_system(system, q0, roots, other, options)
     assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
-    monkeypatch.setattr(trace, "_detours", lambda *args, **kw: 0)
+    monkeypatch.setattr(trace, "_detours", lambda *args, **kw: 0)  # the continuation fallback alone recovers them
+    test = trace.trace_test_system(system, q0, roots, other, options)
+    assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
+    monkeypatch.setattr(trace, "_continuation", lambda *args, **kw: 0)
     assert trace.trace_test_system(system, q0, roots, other, options).status == "inconclusive"
 
 
@@ -106,8 +112,6 @@ def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
     """Q_0 = {a . x = 1} u {lam = 0}: witness loops can reach the roots themselves (lam = 0; the 10r/4s loops
     reached all 6148). Mixed into the witnesses, they are summed once with the roots and the test passes
     (2D TOA 3r/3s); with one root left out of R but reached by the loops, it fails and says so."""
-    import dataclasses
-
     system, q0, roots, other = _roots("3r3stoa", 8)
     count = hm.monodromy_count
 
@@ -123,3 +127,59 @@ def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
     short = trace.trace_test_system(system, q0, roots[1:], other, options, progress=messages.append)
     assert short.status == "failed", short
     assert any("reached 1 root(s)" in m for m in messages), messages
+
+
+def test_endpoints_off_the_fibre_count_as_failed_paths(monkeypatch):
+    """trace._failed: an endpoint counts only where it is finite, converged (Newton's next step below START_TOL
+    after two), off the excluded locus and on no other endpoint. Two tracks made to end off the fibre are
+    retracked and the test passes (2D TOA 3r/3s); counted as points, as before this check, they make it fail
+    (10r/4s: 3 of 284,128 tracks had slid onto the det H = 0 locus, residual 1.1e-5 instead of 2.3e-8)."""
+    from solvers.methods import slp
+
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    straight, criterion = trace.TraceSystem.track, trace._failed
+
+    def drifting(self, q0_, q1_, x0, inst=None, options=None):
+        x, stats = straight(self, q0_, q1_, x0, inst, options)
+        q0_, q1_ = np.atleast_2d(q0_), np.atleast_2d(q1_)
+        if options is None and np.all(q0_[:, -1] == 0) and np.allclose(np.abs(q1_[:, -1]), 0.5):
+            x[:2] = x[:2] + 0.3 * (1.0 + np.abs(x[:2]))  # far from the fibre: not converged after two steps
+        return x, stats
+
+    monkeypatch.setattr(trace.TraceSystem, "track", drifting)
+    options = trace.TraceOptions(seed=1)
+    test = trace.trace_test_system(system, q0, roots, other, options)
+    assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
+    monkeypatch.setattr(trace, "_failed", lambda s, t, e, o, others=None: ~np.all(np.isfinite(e), axis=1))
+    assert trace.trace_test_system(system, q0, roots, other, options).status == "failed"
+
+    # the criterion on endpoints at t = 0: roots 0-2, root 0 again, not finite, root 3 moved off, root 4 masked
+    ts = trace.TraceSystem(*slp.system_equations(system.name))
+    N = len(system.unknowns)
+    Q0 = np.concatenate([q0, np.zeros(len(q0)), np.ones(N) / N, [0.0]])
+    good = ts.newton(np.column_stack([roots, np.zeros(len(roots))]), Q0[None], steps=2)
+    ends = np.vstack([good[:3], good[:1], np.full((1, N + 1), np.nan), good[3:4] + 0.3, good[4:5]])
+    bad = criterion(ts, Q0, ends, lambda y: np.all(np.isclose(y, good[4]), axis=1))
+    assert bad.tolist() == [True, False, False, True, True, True, True]
+
+
+def test_a_checkpoint_resumed_under_another_acceptance_counts_its_stall_again(tmp_path):
+    """homotopy.monodromy_count: a checkpoint settled under START_TOL, resumed with the trace test's looser
+    acceptance (WITNESS_TOL), keeps its roots and runs stall_loops more loops (the loops that found nothing under
+    the old rule say nothing under the new one); resumed under the same rule it runs none."""
+    label = SOLVERS["3r3stoa"]
+    config = Formulation.parse(label).config
+    system = from_formulation(label, saturate_det_h=True)
+    F, x0 = complex_instance(config.m, config.n, np.random.default_rng(5), config.dim, config.model)
+    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    path = str(tmp_path / "count.json")
+    strict = hm.HomotopyOptions(seed=3, stall_loops=4)
+    first = hm.monodromy_count(solver, F.ravel(), x0, strict, 1e9, path, excluded=hm._excluded(system, F.ravel()))
+    assert len(first.roots) == 8 and first.stall == 4
+    again = hm.monodromy_count(solver, F.ravel(), x0, strict, 1e9, path)
+    assert again.loops == first.loops
+    messages = []
+    loose = hm.monodromy_count(solver, F.ravel(), x0, dataclasses.replace(strict, accept_tol=trace.WITNESS_TOL), 1e9,
+                               path, progress=messages.append, excluded=hm._excluded(system, F.ravel()))
+    assert loose.loops == first.loops + 4 and len(loose.roots) == 8 and loose.stall == 4
+    assert "start again" in messages[0]

@@ -121,6 +121,9 @@ class HomotopyOptions:
     radius: float = 1.0
     verify_trials: int = 20
     tracker: TrackerOptions = TrackerOptions()
+    #: a loop's endpoint counts when Newton's next step is below this, relative (:func:`accepted`); the trace
+    #: test's witness loops take a looser one (trace.WITNESS_TOL)
+    accept_tol: float = START_TOL
 
 
 # --------------------------------------------------------------------------------------------------
@@ -754,19 +757,20 @@ def _monodromy_loop(solver: HomotopySolver, q0: np.ndarray, roots: np.ndarray, r
         paths += len(xs)
         xs = track(a, b, xs)
         xs = xs[np.all(np.isfinite(xs), axis=1)]
-    return add_new(roots, accepted(solver, xs, q0, excluded), group), paths
+    return add_new(roots, accepted(solver, xs, q0, excluded, options.accept_tol), group), paths
 
 
-def accepted(solver, xs: np.ndarray, q0: np.ndarray, excluded: Callable[..., np.ndarray] | None = None) -> np.ndarray:
+def accepted(solver, xs: np.ndarray, q0: np.ndarray, excluded: Callable[..., np.ndarray] | None = None,
+             tol: float = START_TOL) -> np.ndarray:
     """The endpoints xs (K, N) that are roots at q0: finite, polished by three Newton steps after which the next
-    step is below START_TOL (relative), and (``excluded``: a mask of points on the locus of the non-vanishing
+    step is below ``tol`` (relative), and (``excluded``: a mask of points on the locus of the non-vanishing
     conditions) off that locus."""
     xs = xs[np.all(np.isfinite(xs), axis=1)]
     if not len(xs):
         return xs
     xs = solver.newton(xs, q0[None], steps=3)
     step = np.linalg.norm(solver.newton(xs, q0[None]) - xs, axis=1) / (1.0 + np.linalg.norm(xs, axis=1))
-    keep = step < START_TOL
+    keep = step < tol
     if excluded is not None:
         keep &= ~excluded(xs)
     return xs[keep & np.all(np.isfinite(xs), axis=1)]
@@ -879,9 +883,10 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
     """Grow the roots at q0 by monodromy loops until ``options.stall_loops`` loops bring nothing new, or
     ``options.max_loops`` loops, or ``seconds`` have passed (then the count is a lower bound).
 
-    checkpoint: a JSON file (plain text: q0, roots, loops, paths, stall, seconds, the rng state) written
-    after every loop and resumed from when it exists for the same q0, so that a long count survives an
-    interruption. Numerical evidence only: a root count without the GF(p) certificate of :func:`build`.
+    checkpoint: a JSON file (plain text: q0, roots, loops, paths, stall, seconds, the rng state, the acceptance
+    tolerance) written after every loop and resumed from when it exists for the same q0, so that a long count
+    survives an interruption; under another ``options.accept_tol`` its roots are kept and its loops without a
+    new root count again from 0. Numerical evidence only: a root count without the GF(p) certificate of :func:`build`.
     ``free``: the parameters the loops move, ``group``: roots kept one per orbit, ``track``: where the paths are
     tracked (:func:`_monodromy_loop`).
     Completeness: :mod:`.trace`.
@@ -898,6 +903,12 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
             roots = _complex_array(saved["roots"])
             loops, paths, stall, spent = saved["loops"], saved["paths"], saved["stall"], saved["seconds"]
             rng.bit_generator.state = saved["rng"]
+            if saved.get("accept_tol", START_TOL) != options.accept_tol:  # loops without a new root under
+                stall = 0  # another acceptance rule do not count towards this one's
+                if progress:
+                    progress(f"checkpoint of {loops} loops kept ({len(roots)} roots); its loops without a new one "
+                             f"start again: endpoints now accepted at {options.accept_tol:.0e}, "
+                             f"not {saved.get('accept_tol', START_TOL):.0e}")
     t0 = time.perf_counter()
     while loops < options.max_loops and stall < options.stall_loops and time.perf_counter() - t0 < seconds:
         before = len(roots)
@@ -906,7 +917,8 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
         stall = 0 if len(roots) > before else stall + 1
         if checkpoint:
             record = {"q0": _pairs(q0), "roots": _pairs(roots), "loops": loops, "paths": paths, "stall": stall,
-                      "seconds": round(spent + time.perf_counter() - t0, 1), "rng": rng.bit_generator.state}
+                      "seconds": round(spent + time.perf_counter() - t0, 1), "rng": rng.bit_generator.state,
+                      "accept_tol": options.accept_tol}
             tmp = checkpoint + ".tmp"
             with open(tmp, "w", encoding="utf-8") as fh:
                 json.dump(record, fh)
@@ -917,12 +929,12 @@ def monodromy_count(solver: HomotopySolver, q0: np.ndarray, x0: np.ndarray, opti
     return MonodromyCount(roots, loops, paths, stall, spent + time.perf_counter() - t0)
 
 
-def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[..., np.ndarray] | None:
+def _excluded(system: ParametricSystem, q0: np.ndarray, rel: float = 1e-8) -> Callable[..., np.ndarray] | None:
     """Mask of points where a non-vanishing condition is (numerically) zero at parameters q0, or None.
     The mask is ``mask(x)``, or ``mask(x, q)`` with parameters q (K, P) per point (the trace test's witnesses
     lie over different parameters).
 
-    A condition of degree d counts as zero when it cancels to rounding level (its value below 1e-8
+    A condition of degree d counts as zero when it cancels to rounding level (its value below ``rel``
     times the sum of its terms' moduli) or when all its terms are at noise level for the point's size
     (their sum below (1e-8 (1 + |x|))^d, e.g. H = 0 computed as 1e-12). A single threshold relative to
     |x| would also exclude genuine roots whose condition is small only because its variables are
@@ -946,7 +958,7 @@ def _excluded(system: ParametricSystem, q0: np.ndarray) -> Callable[..., np.ndar
         for terms, degree in conditions:
             values = np.array([np.broadcast_to(v, (len(x),)) for v in terms(*x.T, *qs)])
             size = np.abs(values).sum(axis=0)
-            out |= (np.abs(values.sum(axis=0)) <= 1e-8 * size) | (size <= noise ** degree)
+            out |= (np.abs(values.sum(axis=0)) <= rel * size) | (size <= noise ** degree)
         return out
 
     return mask

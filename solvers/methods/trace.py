@@ -34,7 +34,9 @@ that the roots exclude (``excluded`` masks, as in :func:`homotopy._excluded`); C
 the part off that locus, a union of curves whose points over generic lam are the isolated roots. Paths
 from points of C stay on C; a witness landing on the excluded locus is not kept.
 
-A failed path (lost, or two landing on one point) makes the test "inconclusive", never "passed".
+A failed path makes the test "inconclusive", never "passed": lost, two landing on one point, an endpoint where
+Newton's method has not converged, or one on the excluded locus (a path that slid onto the spurious component
+there: 3 of 10r/4s's 284,128 tracks did, and counted as points of the fibre its residual was 1.1e-5, not 2.3e-8).
 """
 from __future__ import annotations
 
@@ -56,6 +58,21 @@ __all__ = ["LAM_ZERO", "TraceOptions", "TraceSystem", "TraceTest", "trace_equati
 #: A witness point with |lam| below this (relative to 1 + |x|) lies on the lam = 0 component (the roots'); the
 #: 10r/4s witness loops gave exact zeros up to 1e-88 there and 3e-3 for the smallest true witness.
 LAM_ZERO = 1e-10
+
+#: The witness loops' acceptance (``HomotopyOptions.accept_tol``) and the endpoints' convergence test: looser than
+#: a root count's START_TOL. Ill-conditioned witnesses stall there: 10r/4s's loops rejected a genuine one whose
+#: next Newton step stayed at 5.8e-8. A point that is not in the fibre but passes can only make the trace fail.
+WITNESS_TOL = 1e-6
+
+#: The excluded locus for the trace test: a non-vanishing condition counts as zero below this relative size
+#: (``homotopy._excluded``'s ``rel``; 1e-8 for root counts). 10r/4s has a genuine witness of norm 1.3e6 with
+#: det H cancelling to 7.5e-9 of its terms; points on the spurious locus itself sit at 1e-17 and below.
+LOCUS_REL = 1e-13
+
+#: Version of the test's rules, kept with stored outcomes (scripts/monodromy_counts.py) so that an outcome under
+#: other rules is not read back. 2 (2026-11-28): endpoints off the fibre fail, t1 and t2 a third of a turn apart,
+#: WITNESS_TOL and LOCUS_REL, the continuation fallback.
+TEST_VERSION = 2
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
 #: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
@@ -175,7 +192,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     free = np.ones(len(Q0), dtype=bool)
     free[-1] = False  # the witness loops keep t = 0 and move p, v and a (their lam = 0 points are set apart below)
 
-    def off_locus(y: np.ndarray) -> np.ndarray:
+    def on_locus(y: np.ndarray) -> np.ndarray:
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
 
     start = system.newton(np.concatenate([x_star, [1.0]])[None], Q0[None], steps=3)
@@ -185,9 +202,10 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
         raise hm.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
     base = system.newton(base, Q0[None], steps=2)
-    loop_options = hm.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall)
+    loop_options = hm.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall,
+                                      accept_tol=WITNESS_TOL)
     witnesses = hm.monodromy_count(system, Q0, start, loop_options, options.seconds, checkpoint,
-                                   progress=progress, excluded=off_locus, free=free)
+                                   progress=progress, excluded=on_locus, free=free)
     W = witnesses.roots
     paths = witnesses.paths
     # Q_0 is {a . x = 1} u {lam = 0}: the loops also reach points of the lam = 0 component (F(x; p) = 0, the
@@ -204,8 +222,10 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
             progress(f"trace test: inconclusive, witnesses not settled ({len(W)} after {witnesses.loops} loops)")
         return TraceTest("inconclusive", float("nan"), K, len(W), witnesses.loops, paths,
                          round(time.perf_counter() - t_start, 1), 0)
-    # the pencil: t = 0 (the sets as they are), t1 and t2 on a circle of radius step (random angles)
-    angles = rng.uniform(0.0, 2.0 * np.pi, size=2)
+    # the pencil: t = 0 (the sets as they are), t1 and t2 on a circle of radius step, a third of a turn apart (a
+    # random first angle). Two independent angles can fall close (the 10r/4s run of 2026-11-27: 0.10 rad apart),
+    # and a missing point's non-affine part, c t^2 + ..., shows in the fit only as c t2 (t2 - t1).
+    angles = rng.uniform(0.0, 2.0 * np.pi) + np.array([0.0, 2.0 * np.pi / 3.0])
     ts = np.array([0.0, *(options.step * np.exp(1j * angles))])
     S = np.vstack([base, W])
     M = len(S)
@@ -214,16 +234,14 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     ends, _ = system.track(Q0[None], targets, np.tile(S, (2, 1)), inst)
     paths += 2 * M
     ends = ends.reshape(2, M, -1)
-    failed = np.zeros((2, M), dtype=bool)
-    for b in range(2):
-        failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
+    failed = np.array([_failed(system, targets[b], ends[b], on_locus) for b in range(2)])
     bi, ki = np.nonzero(failed)
     if len(bi):  # retrack with tight step control
         ends[bi, ki], _ = system.track(Q0[None], targets, S[ki], bi, tracker.TIGHT)
         paths += len(bi)
-        for b in range(2):
-            failed[b] = ~np.all(np.isfinite(ends[b]), axis=1) | hm._duplicated(ends[b])
-        paths += _detours(system, Q0, targets, S, ends, failed)
+        failed = np.array([_failed(system, targets[b], ends[b], on_locus) for b in range(2)])
+        paths += _detours(system, Q0, targets, S, ends, failed, on_locus)
+        paths += _continuation(system, Q0, targets, S, ends, failed, on_locus)
     flat = ends.reshape(2 * M, -1)
     ok = np.all(np.isfinite(flat), axis=1)
     flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
@@ -244,8 +262,26 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
                      round(time.perf_counter() - t_start, 1), n_failed)
 
 
+def _failed(system: TraceSystem, target: np.ndarray, ends: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray],
+            others: np.ndarray | None = None) -> np.ndarray:
+    """Mask of the endpoints (M, N + 1) at ``target`` that are not a point of the fibre C n Q_t: not finite, on
+    the excluded locus (a path that slid onto the spurious det H = 0 component: 10r/4s, 3 of 284,128 tracks),
+    not converged (the next Newton step after two still above WITNESS_TOL), or on another endpoint's point
+    (among ``ends`` and ``others``)."""
+    bad = ~np.all(np.isfinite(ends), axis=1)
+    idx = np.flatnonzero(~bad)
+    if len(idx):
+        with np.errstate(all="ignore"):
+            y = system.newton(ends[idx], target[None], steps=2)
+        bad[idx] |= ~(system.step(y, target) <= WITNESS_TOL) | on_locus(y)
+    pool = ends if others is None else np.vstack([others, ends])
+    bad |= hm._duplicated(pool)[len(pool) - len(ends):]
+    return bad
+
+
 def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
-             failed: np.ndarray, bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
+             failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray] | None = None,
+             bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
     """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) around the straight segment 0 -> t_b (tight step
     control), in place; returns the paths tracked.
 
@@ -254,7 +290,9 @@ def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.nda
     detour is homotopic to it and ends on the point it was heading for; on the other side it may end on another
     path's point. So an endpoint counts only where it is finite and lies on no other endpoint (the good ones
     and the other detours'), and a good path is never touched; each bump (both sides, then wider) retracks
-    the paths still failed. The trace sums the whole fibre, so only the set of endpoints matters."""
+    the paths still failed. The trace sums the whole fibre, so only the set of endpoints matters. An endpoint
+    must also pass :func:`_failed`'s other tests (converged, off the excluded locus ``on_locus``)."""
+    on_locus = on_locus or (lambda y: np.zeros(len(y), dtype=bool))
     paths = 0
     for bump in bumps:
         bi, ki = np.nonzero(failed)
@@ -272,11 +310,41 @@ def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.nda
         for b in range(2):
             rows = np.flatnonzero(bi == b)
             good = ends[b][~failed[b]]
-            cand = z[rows]
-            finite = np.all(np.isfinite(cand), axis=1)
-            clash = hm._duplicated(np.vstack([good, cand[finite]]))[len(good):]
-            take = rows[finite][~clash]
+            take = rows[~_failed(system, targets[b], z[rows], on_locus, good)]
             ends[b, ki[take]] = z[take]
+            failed[b, ki[take]] = False
+    return paths
+
+
+def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
+                  failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray], n: int = 2000,
+                  bumps: tuple[float | None, ...] = (None, 0.3, -0.3)) -> int:
+    """The paths still failed after :func:`_detours`, followed by natural-parameter continuation instead: t
+    moved to t_b in n equal steps, four Newton steps at each (no predictor, no step control), on the straight
+    segment and then, for those still failed, through the midpoint pushed sideways by each bump (as the
+    detours). It needs no tangent, so it follows a point whose Jacobian is too ill-conditioned for the tracker's
+    predictor (10r/4s: a witness of norm 1.3e6, whose tracks were lost on every route). An endpoint must pass
+    :func:`_failed` against the others, as a detour's. Returns the paths followed."""
+    paths = 0
+    for bump in bumps:
+        bi, ki = np.nonzero(failed)
+        if not len(bi):
+            break
+        legs = [(Q0[None, :], targets)]
+        if bump is not None:
+            mids = targets.copy()
+            mids[:, -1] = 0.5 * targets[:, -1] * (1.0 + 1j * bump)
+            legs = [(Q0[None, :], mids), (mids, targets)]
+        y = S[ki].copy()
+        with np.errstate(all="ignore"):
+            for a, b in legs:
+                for j in range(1, n + 1):
+                    y = system.newton(y, a + (b - a) * (j / n), steps=4, inst=bi)
+        paths += len(bi)
+        for b in range(2):
+            rows = np.flatnonzero(bi == b)
+            take = rows[~_failed(system, targets[b], y[rows], on_locus, ends[b][~failed[b]])]
+            ends[b, ki[take]] = y[take]
             failed[b, ki[take]] = False
     return paths
 
@@ -290,8 +358,8 @@ def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.
     equations, unknowns, parameters = slp.system_equations(system.name)
     if list(unknowns) != list(system.unknowns) or list(parameters) != list(system.parameters):
         raise ValueError(f"{system.name}: the program's unknowns or parameters differ from the system's")
-    return trace_test(equations, unknowns, parameters, p, roots, other, options, hm._excluded(system, p),
-                      checkpoint, progress)
+    return trace_test(equations, unknowns, parameters, p, roots, other, options,
+                      hm._excluded(system, p, rel=LOCUS_REL), checkpoint, progress)
 
 
 def load_record(path: str) -> dict | None:
