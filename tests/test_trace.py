@@ -11,7 +11,7 @@ from analysis.formulations.parametric import from_formulation
 from analysis.formulations.tdoa import Formulation
 from solvers.generate import SOLVERS, complex_instance
 from solvers.methods import homotopy as hm
-from solvers.methods import trace
+from solvers.methods import slp, trace
 
 
 def _roots(key: str, count: int):
@@ -130,12 +130,10 @@ def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
 
 
 def test_endpoints_off_the_fibre_count_as_failed_paths(monkeypatch):
-    """trace._failed: an endpoint counts only where it is finite, converged (Newton's next step below START_TOL
-    after two), off the excluded locus and on no other endpoint. Two tracks made to end off the fibre are
+    """trace._failed: an endpoint counts only where it is finite, converged (Newton's next step below
+    WITNESS_TOL after two), off the excluded locus and on no other endpoint. Two tracks made to end off the fibre are
     retracked and the test passes (2D TOA 3r/3s); counted as points, as before this check, they make it fail
     (10r/4s: 3 of 284,128 tracks had slid onto the det H = 0 locus, residual 1.1e-5 instead of 2.3e-8)."""
-    from solvers.methods import slp
-
     system, q0, roots, other = _roots("3r3stoa", 8)
     straight, criterion = trace.TraceSystem.track, trace._failed
 

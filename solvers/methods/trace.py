@@ -280,7 +280,7 @@ def _failed(system: TraceSystem, target: np.ndarray, ends: np.ndarray, on_locus:
 
 
 def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
-             failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray] | None = None,
+             failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray],
              bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
     """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) around the straight segment 0 -> t_b (tight step
     control), in place; returns the paths tracked.
@@ -292,14 +292,12 @@ def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.nda
     and the other detours'), and a good path is never touched; each bump (both sides, then wider) retracks
     the paths still failed. The trace sums the whole fibre, so only the set of endpoints matters. An endpoint
     must also pass :func:`_failed`'s other tests (converged, off the excluded locus ``on_locus``)."""
-    on_locus = on_locus or (lambda y: np.zeros(len(y), dtype=bool))
     paths = 0
     for bump in bumps:
         bi, ki = np.nonzero(failed)
         if not len(bi):
             break
-        mids = targets.copy()
-        mids[:, -1] = 0.5 * targets[:, -1] * (1.0 + 1j * bump)
+        mids = _midpoints(targets, bump)
         with np.errstate(all="ignore"):
             y, _ = system.track(Q0[None], mids, S[ki], bi, tracker.TIGHT)
             ok = np.all(np.isfinite(y), axis=1)
@@ -307,13 +305,26 @@ def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.nda
             if ok.any():
                 z[ok], _ = system.track(mids, targets, y[ok], bi[ok], tracker.TIGHT)
         paths += len(bi) + int(ok.sum())
-        for b in range(2):
-            rows = np.flatnonzero(bi == b)
-            good = ends[b][~failed[b]]
-            take = rows[~_failed(system, targets[b], z[rows], on_locus, good)]
-            ends[b, ki[take]] = z[take]
-            failed[b, ki[take]] = False
+        _keep(system, targets, ends, failed, bi, ki, z, on_locus)
     return paths
+
+
+def _midpoints(targets: np.ndarray, bump: float) -> np.ndarray:
+    """The targets (2, Q) with t moved to the midpoint of 0 -> t_b pushed sideways by ``bump`` times |t_b|."""
+    mids = targets.copy()
+    mids[:, -1] = 0.5 * targets[:, -1] * (1.0 + 1j * bump)
+    return mids
+
+
+def _keep(system: TraceSystem, targets: np.ndarray, ends: np.ndarray, failed: np.ndarray, bi: np.ndarray,
+          ki: np.ndarray, z: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray]) -> None:
+    """Retracked endpoints z of the failed paths (bi, ki) replace them in ``ends`` where they pass
+    :func:`_failed` against the good endpoints and each other (in place)."""
+    for b in range(2):
+        rows = np.flatnonzero(bi == b)
+        take = rows[~_failed(system, targets[b], z[rows], on_locus, ends[b][~failed[b]])]
+        ends[b, ki[take]] = z[take]
+        failed[b, ki[take]] = False
 
 
 def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
@@ -332,8 +343,7 @@ def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: n
             break
         legs = [(Q0[None, :], targets)]
         if bump is not None:
-            mids = targets.copy()
-            mids[:, -1] = 0.5 * targets[:, -1] * (1.0 + 1j * bump)
+            mids = _midpoints(targets, bump)
             legs = [(Q0[None, :], mids), (mids, targets)]
         y = S[ki].copy()
         with np.errstate(all="ignore"):
@@ -341,11 +351,7 @@ def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: n
                 for j in range(1, n + 1):
                     y = system.newton(y, a + (b - a) * (j / n), steps=4, inst=bi)
         paths += len(bi)
-        for b in range(2):
-            rows = np.flatnonzero(bi == b)
-            take = rows[~_failed(system, targets[b], y[rows], on_locus, ends[b][~failed[b]])]
-            ends[b, ki[take]] = y[take]
-            failed[b, ki[take]] = False
+        _keep(system, targets, ends, failed, bi, ki, y, on_locus)
     return paths
 
 
