@@ -5,8 +5,8 @@ unknowns), the number of roots |B| (GF(p) degree), generation time (a fresh buil
 directory, not timed in tests), the first call in this process (loading the compiled tracker from its
 on-disk cache) apart, median runtime of one solve (best of three rounds), its ratio to numpy's ``eig`` of an
 eig_n x eig_n complex matrix timed in the same process (eig_n = |B|; a pencil solver's own pencil size), time per path,
-for homotopy solvers the evaluator of the tracker (``tape``: straight-line program, solvers.methods.tape_kernel;
-``tape (compiled)``: its C code, solvers.methods.tape_native; ``monomials``: tracker.track) and its evaluations of H, dH/dx, dH/ds per second at |B| paths per call
+for homotopy solvers the evaluator of the tracker (``tape``: straight-line program, solvers.continuation.tape_kernel;
+``tape (compiled)``: its C code, solvers.continuation.tape_native; ``monomials``: tracker.track) and its evaluations of H, dH/dx, dH/ds per second at |B| paths per call
 (scripts/bench_tape.py), batched throughput, and, on N seeded
 noiseless networks (positions
 N(0, 10^2), offsets N(0, 1), via solvers.synthetic.random_network): median / 90th / 99th percentile of the

@@ -59,9 +59,9 @@ import numpy as np  # noqa: E402
 from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers import generate as gen  # noqa: E402
 from solvers.api import calibrations  # noqa: E402
+from solvers.continuation.tracking import unresolved  # noqa: E402
 from solvers.metrics import offset_error, position_error  # noqa: E402
 from solvers.refine import refine  # noqa: E402
-from solvers.methods.homotopy import unresolved  # noqa: E402
 from solvers.recovery import to_gauge  # noqa: E402
 from solvers.synthetic import random_network, room_network, true_root  # noqa: E402
 
@@ -215,8 +215,9 @@ def _network_record(module, spec: dict, seed: int, eig: bool) -> dict:
 
 
 #: The homotopy runtime's sources: a cached network record is valid for one spec and one version of these.
-KERNELS = ("solvers/methods/homotopy.py", "solvers/methods/tracker.py", "solvers/methods/tape_kernel.py",
-           "solvers/methods/tape_native.py", "solvers/methods/slp.py", "solvers/api.py")
+KERNELS = ("solvers/methods/homotopy.py", "solvers/continuation/tracking.py", "solvers/continuation/tracker.py",
+           "solvers/continuation/tape_kernel.py", "solvers/continuation/tape_native.py", "solvers/continuation/slp.py",
+           "solvers/api.py")
 
 
 def _kernel_sha() -> str:

@@ -1,7 +1,7 @@
 """Benchmark the batched tape tracker against the per-path monomial tracker (issue 20, items 2 and 7).
 
 Per solver (a committed homotopy solver whose system has an unexpanded straight-line program,
-solvers.methods.slp.system_equations; positions solvers compared in their own unknowns): on N
+solvers.continuation.slp.system_equations; positions solvers compared in their own unknowns): on N
 seeded noiseless networks (solvers.synthetic.random_network, as scripts/bench_solvers.py), each
 evaluator ("monomials": tracker.track; "tape": tape_kernel.track) solves every network through the
 generated module's solve path (solve_scaled: scaling, tracking, retracking, detours, Newton on the
@@ -9,7 +9,7 @@ target); reported: median ms of one solve (best of three rounds over the first `
 its ratio to numpy's complex eig of the root count's size (one BLAS thread) timed in this process,
 microseconds per path, failures (no candidate within 1e-6 of the true root) and log10 error quantiles
 of the raw endpoints, and where the tape solver's time goes (tape evaluations, LU + solves, the rest;
-the kernels as the solver runs them: its compiled code where solvers.methods.tape_native builds it)
+the kernels as the solver runs them: its compiled code where solvers.continuation.tape_native builds it)
 from the steps the tracker took and the kernels' per-path costs measured here.
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/bench_tape_tracker.py [--trials 200] [--solvers 9r3s 6r3s]
@@ -32,8 +32,10 @@ sys.path.insert(0, ROOT)
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
+from solvers.continuation import tape_kernel, tape_native  # noqa: E402
+from solvers.continuation.tracking import HomotopySolver  # noqa: E402
 from solvers.generate import GENERATED_DIR  # noqa: E402
-from solvers.methods import homotopy, tape_kernel, tape_native  # noqa: E402
+from solvers.methods import homotopy  # noqa: E402
 from solvers.synthetic import random_network  # noqa: E402
 
 from bench_solvers import _truth  # noqa: E402  (scripts/ is on the path of a script)
@@ -48,9 +50,9 @@ def _module(label: str):
     return importlib.import_module(f"solvers.generated.{name[:-3]}")
 
 
-def _solver(module, evaluator: str) -> homotopy.HomotopySolver:
+def _solver(module, evaluator: str) -> HomotopySolver:
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
-        return homotopy.HomotopySolver(homotopy.load_spec(fh.read()), module.coefficients, evaluator)
+        return HomotopySolver(homotopy.load_spec(fh.read()), module.coefficients, evaluator)
 
 
 @njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them

@@ -5,7 +5,7 @@ Per solver (a committed homotopy solver with a straight-line program; default 9r
 
 1. **Evaluation anchor.** The tracker's numba tape interpreter (the full tape: H, J, dH/ds) at P = K, 16,
    4, 1 live paths per call, against the same tape written out as straight-line C code by
-   :mod:`solvers.methods.tape_native` (registers as local variables: one path per pass, and four paths per
+   :mod:`solvers.continuation.tape_native` (registers as local variables: one path per pass, and four paths per
    pass in vector registers, the solvers' choice), compiled by the system's C compiler (its compile
    seconds reported; skipped without a compiler).
 2. **LU anchor.** LU with partial pivoting and two solves of the N x N Jacobians: the tracker's batched
@@ -46,7 +46,7 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from solvers.methods import tape_kernel, tape_native  # noqa: E402
+from solvers.continuation import tape_kernel, tape_native  # noqa: E402
 from solvers.synthetic import random_network  # noqa: E402
 
 from bench_tape import best  # noqa: E402  (scripts/ is on the path of a script)

@@ -1,7 +1,7 @@
 """Numerical companion of the 4r/5s count: monodromy finds the 344 orbits, then real/physical counts.
 
 The 4r/5s `receivers` formulation (analysis.formulations.positions; 5 unknowns, Q_1..Q_5) is solved numerically by
-the project's parameter homotopy in the data F (solvers.methods.homotopy: complex straight segments,
+the project's parameter homotopy in the data F (solvers.continuation.tracking: complex straight segments,
 the compiled tracker, Newton steps on the endpoints):
 
 1. Monodromy: from the known root of a seeded real instance F0, track one root per known orbit (the
@@ -37,26 +37,26 @@ import numpy as np  # noqa: E402
 
 from analysis.formulations.parametric import from_positions  # noqa: E402
 from analysis.formulations.positions import network_from_root, positions_system, sample_real_positions  # noqa: E402
-from solvers.methods import homotopy  # noqa: E402
+from solvers.continuation import tracking  # noqa: E402
 
 M, N = 4, 5
 SCALE = 10.0
 
 
-def homotopy_solver(system) -> homotopy.HomotopySolver:
-    """The project's parameter homotopy (solvers.methods.homotopy, compiled tracker) on a positions system.
+def homotopy_solver(system) -> tracking.HomotopySolver:
+    """The project's parameter homotopy (solvers.continuation.tracking, compiled tracker) on a positions system.
 
     The parameters are the data F (row-major). No start system is stored: the monodromy below finds
     the roots and every segment is given explicitly (``start_parameters`` is a placeholder).
     """
-    exps, eq = homotopy.structure(system)
+    exps, eq = tracking.structure(system)
     spec = {"exponents": exps.tolist(), "term_equation": eq.tolist(),
             "coefficient_degree": int(max(system.coefficient_degrees)),
             "start_parameters": [[0.0, 0.0]] * len(system.parameters), "start_roots": []}
-    return homotopy.HomotopySolver(spec, homotopy.load_coefficients(homotopy.coefficient_source(system)))
+    return tracking.HomotopySolver(spec, tracking.load_coefficients(tracking.coefficient_source(system)))
 
 
-def track(solver: homotopy.HomotopySolver, Fa: np.ndarray, Fb: np.ndarray, x: np.ndarray):
+def track(solver: tracking.HomotopySolver, Fa: np.ndarray, Fb: np.ndarray, x: np.ndarray):
     """Track every finite row of x from the data Fa to Fb (straight segment), then two Newton steps at Fb.
 
     Returns (x (P, 5), ok (P,)); rows that did not reach Fb are NaN.

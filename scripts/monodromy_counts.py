@@ -4,7 +4,7 @@ writes tables/monodromy3d.{csv,md} (results) and prints the seconds.
 Per cell and seed: the cell's square formulation (10r/4s: compaction A, B2-B4, C2-C10, 13 unknowns, every
 measurement used, det H saturated; 7r/5s, 6r/6s, 5r/9s: the direct parametrization, see CELLS; 10r4s-direct:
 10r/4s in the direct parametrization as well, its second formulation), a generic
-complex start network (solvers.generate.complex_instance, seeded) and its root, then monodromy loops (solvers.methods.homotopy.monodromy_count: triangles through
+complex start network (solvers.generate.complex_instance, seeded) and its root, then monodromy loops (solvers.continuation.monodromy.monodromy_count: triangles through
 random complex parameters, all known roots tracked in one batch on the compiled tape tracker) until
 --stall loops bring no new root or --loops loops are done. Checkpoints (resumable) go to
 $TDOA_WORKBENCH_CACHE/monodromy/<cell>-seed<k>.json. The compaction unknowns are invariant under the
@@ -16,7 +16,7 @@ A count is reported as "settled" (stopped growing for --stall loops; two seeds s
 lower bound ("not settled": at least N after L loops). With two settled seeds, the second seed's roots are
 carried to each seed's instance and pooled with its roots (column union, cached in <cell>-union-seed<k>.json):
 equal counts are then equal sets, and a pool larger than either count shows a "settled" count was short. A settled count then gets the trace test
-(solvers.methods.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
+(solvers.continuation.trace: the pencil on the coordinates of TRACE_COORDINATES, a second seeded complex network
 for the witnesses' start, their monodromy checkpointed in <cell>-seed<k>-witnesses.json, the outcome kept
 in <cell>-seed<k>-trace.json so that a rerun reads it): its status (passed / failed / inconclusive), the
 relative residual of the affine fit, the number of witnesses and the paths it tracked.
@@ -46,9 +46,10 @@ from analysis.formulations.tdoa import Formulation  # noqa: E402
 from analysis.formulations.parametric import from_formulation  # noqa: E402
 from analysis.sweeps.paths import cache_dir  # noqa: E402
 from solvers.generate import complex_instance, gauge_reflections  # noqa: E402
-from solvers.methods import homotopy as hm  # noqa: E402
-from solvers.methods import tape_kernel, trace  # noqa: E402
-from solvers.methods.dask_tracks import DaskTracks  # noqa: E402
+from solvers.continuation import monodromy as md  # noqa: E402
+from solvers.continuation import tape_kernel, trace  # noqa: E402
+from solvers.continuation import tracking as tk  # noqa: E402
+from solvers.continuation.dask_tracks import DaskTracks  # noqa: E402
 
 TABLES = os.path.join(ROOT, "tables")
 
@@ -82,7 +83,7 @@ COLUMNS = ["cell", "formulation", "unknowns", "seed", "roots", "status", "loops"
 def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_stall: int = 3,
           trace_seconds: float = 3600.0, dask: str | None = None, dask_chunk: int = 2000) -> tuple[dict, float]:
     """One row of monodromy3d.csv and the seconds it took (checkpointed, resumable). ``dask``: a scheduler
-    address or "local": the loops' paths are tracked on that cluster (solvers.methods.dask_tracks), in chunks
+    address or "local": the loops' paths are tracked on that cluster (solvers.continuation.dask_tracks), in chunks
     of ``dask_chunk``, with the same results."""
     label = CELLS[cell]
     form = Formulation.parse(label)
@@ -92,17 +93,17 @@ def count(cell: str, seed: int, loops: int, stall: int, seconds: float, trace_st
     F, x0 = complex_instance(config.m, config.n, np.random.default_rng(seed), config.dim, config.model,
                              config.parametrization)
     q0 = F.ravel()
-    solver, x0 = hm.start_solver(system, q0, x0, seed)
+    solver, x0 = md.start_solver(system, q0, x0, seed)
     group = gauge_reflections(system.unknowns) if direct else None
-    options = hm.HomotopyOptions(seed=seed, max_loops=loops, stall_loops=stall)
+    options = tk.HomotopyOptions(seed=seed, max_loops=loops, stall_loops=stall)
     path = cache_dir("monodromy")
     path.mkdir(parents=True, exist_ok=True)
     tracks = DaskTracks(dask, label, not direct, q0, x0, chunk=dask_chunk) if dask and seconds > 0 else None
     try:
-        result = hm.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
+        result = md.monodromy_count(solver, q0, x0, options, seconds, str(path / f"{cell}-seed{seed}.json"),
                                     progress=lambda msg: print(f"  {cell} seed {seed}: {msg}", file=sys.stderr,
                                                                flush=True),
-                                    excluded=hm._excluded(system, q0), group=group, track=tracks)
+                                    excluded=md._excluded(system, q0), group=group, track=tracks)
     finally:
         if tracks is not None:
             tracks.close()
@@ -145,18 +146,18 @@ def union(cell: str, seeds: list[int]) -> dict | None:
     direct = config.parametrization == "direct"
     system = from_formulation(label, saturate_det_h=not direct)
     group = gauge_reflections(system.unknowns) if direct else None
-    q0, pool = hm._complex_array(saved[0]["q0"]), hm._complex_array(saved[0]["roots"])
+    q0, pool = tk._complex_array(saved[0]["q0"]), tk._complex_array(saved[0]["roots"])
     _, x0 = complex_instance(config.m, config.n, np.random.default_rng(seeds[0]), config.dim, config.model,
                              config.parametrization)
-    solver, _ = hm.start_solver(system, q0, x0, seeds[0])
-    excluded = hm._excluded(system, q0)
+    solver, _ = md.start_solver(system, q0, x0, seeds[0])
+    excluded = md._excluded(system, q0)
     new = lost = 0
     for d in saved[1:]:
-        xs, _ = solver.track(hm._complex_array(d["q0"])[None], q0[None], hm._complex_array(d["roots"]))
-        roots = hm.accepted(solver, xs, q0, excluded)  # (the monodromy loops' own test of a root)
+        xs, _ = solver.track(tk._complex_array(d["q0"])[None], q0[None], tk._complex_array(d["roots"]))
+        roots = md.accepted(solver, xs, q0, excluded)  # (the monodromy loops' own test of a root)
         lost += len(xs) - len(roots)
         before = len(pool)
-        pool = hm.add_new(pool, roots, group)
+        pool = md.add_new(pool, roots, group)
         new += len(pool) - before
     out = {"union": len(pool), "new": new, "lost": lost, "key": key}
     record.write_text(json.dumps(out), encoding="utf-8")
@@ -192,7 +193,7 @@ def trace_test(system, q0: np.ndarray, roots: np.ndarray, stem, coordinates, see
 def markdown(rows: list[dict]) -> str:
     lines = ["<!-- Regenerate: python scripts/monodromy_counts.py; numerical evidence only (no GF(p) certificate) -->", "",
              "**3D TDOA minimal cells: root counts by monodromy** (up to rotation, reflection and translation; "
-             "'settled': no new root in the last loops, else a lower bound; trace test: solvers.methods.trace, "
+             "'settled': no new root in the last loops, else a lower bound; trace test: solvers.continuation.trace, "
              f"'passed' when the affine fit's relative residual is <= {trace.PASS_TOL:.0e}, 'inconclusive' when its "
              "witness set was not settled (its size then a lower bound, no residual) or a path was lost, 'failed' "
              "when the roots and witnesses together fall short of the whole fibre (a root or a witness missing: "

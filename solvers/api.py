@@ -451,7 +451,7 @@ def _kd_candidates(F: np.ndarray, dim: int, model: str) -> tuple[list[Calibratio
     whether its root set was complete (every path ended on a finite root of its own; a root set with
     lost or coinciding endpoints may miss the true network) and whether it is suspect (one root per orbit
     tracked, and more than :data:`SUSPECT_FRACTION` of the endpoints on an image of another)."""
-    from .methods.homotopy import unresolved
+    from .continuation.tracking import unresolved
 
     choice = select_solver_kd(*F.shape, dim, model)
     module = importlib.import_module(choice.module)

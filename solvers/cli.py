@@ -652,8 +652,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
     from analysis.formulations.parametric import ParametricError, parse
     from solvers import generate as gen
+    from solvers.continuation.tracking import HomotopyError
     from solvers.methods.action_matrix import ActionMatrixError
-    from solvers.methods.homotopy import HomotopyError
     from solvers.subsystem import SUBSYSTEMS
 
     if args.seed < 0:

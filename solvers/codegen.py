@@ -16,7 +16,7 @@ Pencil coefficients are emitted in factored form: the equations are rebuilt symb
 sum of small determinants in (c, e) instead of a degree-6 polynomial in f expanded into thousands of
 cancelling terms (which lost about 10 of the 16 digits). ``sympy.cse`` shares the subexpressions;
 the same function runs on Python floats, numpy arrays and complex arrays. Homotopy coefficients come
-from :func:`solvers.methods.homotopy.coefficient_source`.
+from :func:`solvers.continuation.tracking.coefficient_source`.
 
 Data normalisation: a root of the data F / s maps back to F by h -> h / s^2, b -> b, o -> o * s
 (positions and offsets scale with the data, H = (4 S^T S)^-1 scales as 1/s^2, b = -1/2 S^-1 s_1 is
@@ -263,11 +263,11 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
     return ModuleParts(
         summary=f"parameter homotopy with {paths} paths in {nvars} unknowns.",
         description=((f"The {paths} roots of a generic complex start instance (certified count over GF(p), found by\n"
-                      f"monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.{tracked}")
+                      f"monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.{tracked}")
                      if "evidence" not in spec else
                      (f"The {paths} roots of a generic complex start instance (NOT certified over GF(p): numerical\n"
                       f"evidence alone, monodromy until {spec['evidence']['stall_loops']} loops found no new root) are "
-                      f"tracked to the data\nby the compiled tracker of solvers.methods.tracker.{tracked}")),
+                      f"tracked to the data\nby the compiled tracker of solvers.continuation.tracker.{tracked}")),
         rows=paths, pshape=pshape, config=tuple(config) if config else None,
         imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import homotopy as _method",
         method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"
@@ -345,7 +345,7 @@ def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str)
     """The module text of a spec (JSON text as stored; its sha256 goes into the header).
 
     coefficients: the source of the module's ``coefficients`` function (:func:`pencil_coefficients`,
-    :func:`solvers.methods.homotopy.coefficient_source`); command: the shell command that regenerates
+    :func:`solvers.continuation.tracking.coefficient_source`); command: the shell command that regenerates
     the module, printed in its header.
     """
     spec = read_spec(spec_text)

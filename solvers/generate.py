@@ -48,7 +48,8 @@ from analysis.formulations.tdoa import Formulation
 from analysis.formulations.parametric import ParametricSystem, from_formulation, from_positions, square, squared_name
 
 from . import codegen
-from .methods import action_matrix, homotopy, offset_kernel, pencil, tracker
+from .continuation import monodromy, tracker, tracking
+from .methods import action_matrix, homotopy, offset_kernel, pencil
 from .methods.spec import METHODS as METHOD_NAMES
 from .methods.spec import TemplateOptions, dump_spec, solver_method
 
@@ -116,8 +117,8 @@ SQUARED = {"5r4s": 7}
 SQUARE_MINORS = {"5r5s": ("M123_123", "M124_124", "M134_134", "M234_234")}
 
 #: Step control of a configuration's tracking, written into its spec over the method's defaults: "tracker"
-#: (the plain track, :class:`solvers.methods.tracker.TrackerOptions` fields) and "retrack" (fields replaced
-#: in :data:`solvers.methods.tracker.TIGHT` for the retracks and detours). 4r/5s: 5-40 of its 344 paths
+#: (the plain track, :class:`solvers.continuation.tracker.TrackerOptions` fields) and "retrack" (fields replaced
+#: in :data:`solvers.continuation.tracker.TIGHT` for the retracks and detours). 4r/5s: 5-40 of its 344 paths
 #: crawl through an ill-conditioned stretch (Jacobian condition 1e8-1e10, also in projective coordinates)
 #: at steps of 1e-5; a plain limit of 400 (600) hands them sooner to the retracks: on the 1000 seeded
 #: networks of tables/solvers.csv the same two failures (406, 665), 6 % less time on 20 of them. Lower
@@ -367,9 +368,9 @@ class HomotopyMethod:
 
     def build(self, job: Job, seed: int, progress: Callable[[str], None] | None) -> Built:
         system, full = job.system, job.full
-        options = homotopy.HomotopyOptions(seed=seed)
+        options = tracking.HomotopyOptions(seed=seed)
         if not system.is_square:
-            raise homotopy.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
+            raise tracking.HomotopyError(f"{system.name} has {len(system.equations)} equations in "
                                          f"{len(system.unknowns)} unknowns: a homotopy solver needs a square system")
         system.check_parameters_occur()
         _check_names(system)
@@ -378,12 +379,12 @@ class HomotopyMethod:
         full_report = None
         if full is not None:
             if tuple(full.unknowns) != tuple(system.unknowns) or tuple(full.parameters) != tuple(system.parameters):
-                raise homotopy.HomotopyError(f"{full.name} and {system.name} differ in unknowns or parameters")
+                raise tracking.HomotopyError(f"{full.name} and {system.name} differ in unknowns or parameters")
             if progress:
                 progress(f"{full.name}: certifying the full system's root count over GF(p) (two primes x 2 seeds)")
             full_report = full.degree(seeds=(0, 1))
             if not full_report.zero_dimensional or full_report.degree == 0:
-                raise homotopy.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
+                raise tracking.HomotopyError(f"{full.name}: the full system is not zero-dimensional with roots "
                                              f"(dimension {full_report.dimension}, degree {full_report.degree})")
         # verified once, below: a squared system on the paths it will track (not on all its roots), a system
         # with its own step control as it will run
@@ -394,7 +395,7 @@ class HomotopyMethod:
             if progress:
                 progress(f"{system.name}: no GF(p) certificate; the roots of the monodromy checkpoint {job.checkpoint}, "
                          "checked against the system")
-            checkpoint = homotopy.read_checkpoint(job.checkpoint)
+            checkpoint = monodromy.read_checkpoint(job.checkpoint)
             ck_options = dataclasses.replace(build_options, stall_loops=SETTLED_LOOPS,
                                              verify_trials=min(build_options.verify_trials, CHECKPOINT_VERIFY_TRIALS))
             spec, source, build = homotopy.build(system, None, None, job.trials, ck_options, progress,
@@ -422,9 +423,9 @@ class HomotopyMethod:
                 progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
             report = system.degree(seeds=job.seeds)
             if not report.zero_dimensional:
-                raise homotopy.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
+                raise tracking.HomotopyError(f"{system.name} is positive-dimensional (dimension {report.dimension}): add equations")
             if report.degree == 0:
-                raise homotopy.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
+                raise tracking.HomotopyError(f"{system.name} has no solutions at generic parameters (inconsistent)")
             spec, source, build = homotopy.build(system, report.degree, job.start, job.trials, build_options, progress)
             certified = {"primes": list(report.primes), "seeds": list(job.seeds), "degree": report.degree,
                          "saturated_by": list(system.nonzero)}
@@ -434,7 +435,7 @@ class HomotopyMethod:
                 "config": list(job.config) if job.config else None,
                 **({"unused_parameters": list(system.unused)} if system.unused else {}),
                 "scale_powers": list(system.scale_powers) if system.scale_powers else None}
-        coefficients = homotopy.load_coefficients(source)
+        coefficients = tracking.load_coefficients(source)
         if full_report is not None:
             tracked = homotopy.full_system_roots(full, spec, coefficients, full_report.degree)
             spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
@@ -448,7 +449,7 @@ class HomotopyMethod:
         if (job.step_control or {}).get("starts", 1) > 1:
             if progress:
                 progress(f"{system.name}: solving {job.step_control['starts'] - 1} further start system(s)")
-            spec["starts"] = homotopy.extra_starts(spec, homotopy.load_coefficients(source), job.step_control["starts"] - 1)
+            spec["starts"] = homotopy.extra_starts(spec, tracking.load_coefficients(source), job.step_control["starts"] - 1)
         if (full_report is not None or job.step_control) and job.trials is not None and options.verify_trials:
             # verified on the paths and with the step control it will run with
             build["verified"] = homotopy.verify(full.name if full_report is not None else system.name, spec,
@@ -478,10 +479,10 @@ class ActionMatrixMethod:
                 "config": list(job.config) if job.config else None,
                 **({"unused_parameters": list(system.unused)} if system.unused else {}),
                 "scale_powers": list(system.scale_powers) if system.scale_powers else None}
-        source = homotopy.coefficient_source(action_matrix.extended_system(system))
+        source = tracking.coefficient_source(action_matrix.extended_system(system))
         build = {"template": "x".join(map(str, spec["template"]["size"])), "action": f"y{spec['template']['action']}"}
         if job.trials is not None:
-            build["verified"] = action_matrix.verify(system.name, spec, homotopy.load_coefficients(source), job.trials, 20)
+            build["verified"] = action_matrix.verify(system.name, spec, tracking.load_coefficients(source), job.trials, 20)
         return Built(spec, source, report.degree, report.degree, build)
 
 
@@ -498,7 +499,7 @@ METHODS: dict[str, Method] = {
 assert tuple(METHODS) == METHOD_NAMES
 
 
-#: Names the generated coefficient function uses itself (solvers.methods.homotopy.coefficient_source:
+#: Names the generated coefficient function uses itself (solvers.methods.tracking.coefficient_source:
 #: its argument q, numpy, its result, sympy.cse's t_0, t_1, ...): a system's names must differ.
 GENERATED_CODE_NAMES = re.compile(r"q|np|out|coefficients|t_\d+")
 
@@ -507,7 +508,7 @@ def _check_names(system: ParametricSystem) -> None:
     names = system.unknowns + system.parameters + tuple(name for name, _ in system.definitions)
     taken = [v for v in names if GENERATED_CODE_NAMES.fullmatch(v)]
     if taken:
-        raise homotopy.HomotopyError(f"{system.name}: the names {', '.join(taken)} are used by the generated solver "
+        raise tracking.HomotopyError(f"{system.name}: the names {', '.join(taken)} are used by the generated solver "
                                      "code (q, np, out, coefficients, t_0, t_1, ...); rename them")
 
 
@@ -520,7 +521,7 @@ def _check_linear_in_parameters(system: ParametricSystem) -> None:
         if k is not None:
             sizes = np.cumsum([len(eq) for eq in system.terms])
             where = f" (equation {int(np.searchsorted(sizes, k, side='right')) + 1} has a coefficient of degree {degrees[k]})"
-        raise homotopy.HomotopyError(
+        raise tracking.HomotopyError(
             f"{system.name}: the parameters enter non-linearly{where}; the generator draws a start pair (generic "
             "complex parameters with a known root) only for systems linear in their parameters. Give one: "
             "`tdoa-workbench generate FILE --out DIR --start START.json` (parameters and a root there) or "
@@ -647,7 +648,7 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
     parameters). command: the regenerating command printed in the module's header (default:
     :func:`committed_command` for a committed configuration written to :data:`GENERATED_DIR`, the
     ``tdoa-workbench generate`` command for another label, else a description of this call).
-    from_monodromy: a checkpoint of :func:`solvers.methods.homotopy.monodromy_count` (scripts/monodromy_counts.py,
+    from_monodromy: a checkpoint of :func:`solvers.continuation.monodromy.monodromy_count` (scripts/monodromy_counts.py,
     the same system and settled: :data:`SETTLED_LOOPS` loops without a new root) whose start parameters and roots
     the solver takes instead of growing them again; every root is checked to satisfy the system there (implies
     evidence "monodromy"; the spec's evidence records the checkpoint's loops, paths and loops without a new root).
@@ -695,11 +696,11 @@ def emit_committed(json_path: str) -> tuple[str, str]:
     elif "_kernel" in stem:
         coefficients = codegen.offset_kernel_coefficients(codegen.read_spec(text))
     elif "_action" in stem:
-        coefficients = homotopy.coefficient_source(action_matrix.extended_system(solver_system(label)))
+        coefficients = tracking.coefficient_source(action_matrix.extended_system(solver_system(label)))
         return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients,
                                                            committed_command(label, "action-matrix"))
     else:
-        coefficients = homotopy.coefficient_source(solver_system(label))
+        coefficients = tracking.coefficient_source(solver_system(label))
     return json_path[:-5] + ".py", codegen.emit_module(text, stem + ".json", coefficients, committed_command(label))
 
 

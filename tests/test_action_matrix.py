@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from solvers import api
+from solvers.continuation import tracking
 from solvers.generate import GENERATED_DIR, solver_system
 from solvers.methods import action_matrix as am
-from solvers.methods import homotopy
 from solvers.synthetic import ROOM, room_network, true_root
 
 
@@ -112,4 +112,4 @@ def test_api_runs_the_preferred_method():
 def test_spec_format_is_checked():
     with pytest.raises(am.ActionMatrixError, match="format"):
         am.load_spec('{"format": "tdoa-homotopy/1"}')
-    assert homotopy.coefficient_source(am.extended_system(solver_system("3r3stoa"))).startswith("def coefficients")
+    assert tracking.coefficient_source(am.extended_system(solver_system("3r3stoa"))).startswith("def coefficients")

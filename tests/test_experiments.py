@@ -309,5 +309,5 @@ def test_the_solver_fingerprint_covers_the_experiments_solvers_and_nothing_else(
 
     names = {p.name for p in _solver_sources(Path(solvers.__file__).resolve().parent)}
     assert {"tdoa_9r3s_homotopy75.py", "tdoa_9r3s_homotopy75.json", "tdoa_6r4s_pencil37.py", "homotopy.py",
-            "tracker.py", "tape_kernel.py", "slp.py", "pencil.py", "runtime.py"} <= names
+            "tracking.py", "tracker.py", "tape_kernel.py", "slp.py", "pencil.py", "runtime.py"} <= names
     assert not {n for n in names if "9r5s3d" in n or n.startswith(("tdoa_5r5s", "tdoa_4r5s")) or n == "offset_kernel.py"}

@@ -211,6 +211,17 @@ def test_no_import_circle(package, expected):
             visit(node, [])
 
 
+def test_continuation_imports_no_solving_method():
+    """solvers.continuation (path tracking, monodromy, the trace test) lies below the solving methods: within
+    solvers it imports only itself (anywhere in a module, inside functions too), never solvers.methods,
+    solvers.generate or the generated solvers."""
+    graph = _import_graph("solvers")
+    inside = {m for m in graph if m.startswith("solvers.continuation")}
+    assert {"solvers.continuation.tracking", "solvers.continuation.monodromy", "solvers.continuation.trace"} <= inside
+    assert "solvers.continuation.tracking" in graph["solvers.methods.homotopy"]  # the edges are read at all
+    wrong = sorted(f"{m} -> {t}" for m in inside for t in graph[m] if not t.startswith("solvers.continuation"))
+    assert not wrong, "solvers.continuation imports outside itself: " + "; ".join(wrong)
+
 def test_analysis_layers():
     """engine <- formulations <- sweeps: a layer imports only the ones before it (anywhere in a module,
     inside functions too), and the package analysis/ itself imports nothing."""

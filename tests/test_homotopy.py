@@ -11,9 +11,11 @@ import pytest
 import sympy
 
 from analysis.formulations.parametric import ParametricError, from_formulation, parse
+from solvers.continuation import monodromy as md
+from solvers.continuation import tracker
+from solvers.continuation import tracking as tk
 from solvers.generate import GENERATED_DIR, MONODROMY_CHECKPOINTS, SOLVERS
 from solvers.methods import homotopy as hm
-from solvers.methods import tracker
 
 HOMOTOPY_SPECS = sorted(f for f in os.listdir(GENERATED_DIR) if "_homotopy" in f and f.endswith(".json"))
 
@@ -93,8 +95,8 @@ def test_factored_tdoa_system_equals_the_expanded_formulation():
 @pytest.fixture(scope="module")
 def system_9r3s():
     system = from_formulation("9r3s:C2-C9")
-    exps, eq = hm.structure(system)
-    return system, hm.load_coefficients(hm.coefficient_source(system)), tracker.SystemStructure.from_exponents(exps, eq)
+    exps, eq = tk.structure(system)
+    return system, tk.load_coefficients(tk.coefficient_source(system)), tracker.SystemStructure.from_exponents(exps, eq)
 
 
 def test_tracker_evaluation_matches_sympy_and_finite_differences(system_9r3s):
@@ -135,27 +137,27 @@ def test_tracker_follows_a_known_path():
 
 def test_monodromy_finds_every_root_of_a_user_system():
     system = parse(USER, "user")
-    coefficients = hm.load_coefficients(hm.coefficient_source(system))
-    spec, _, report = hm.build(system, 4, options=hm.HomotopyOptions(seed=3, verify_trials=0))
+    coefficients = tk.load_coefficients(tk.coefficient_source(system))
+    spec, _, report = hm.build(system, 4, options=tk.HomotopyOptions(seed=3, verify_trials=0))
     assert len(spec["start_roots"]) == 4
-    solver = hm.HomotopySolver(spec, coefficients)
+    solver = tk.HomotopySolver(spec, coefficients)
     q = np.array([[2.0, 0.3, 0.1]])
     roots = solver.roots(q)[0]
-    assert np.all(np.isfinite(roots)) and not hm._has_duplicates(roots)
+    assert np.all(np.isfinite(roots)) and not tk._has_duplicates(roots)
     assert solver.residual(roots, q).max() < 1e-12
 
 
 def test_monodromy_that_cannot_reach_the_count_is_an_error():
     system = parse(USER, "user")
-    with pytest.raises(hm.HomotopyError, match="of the certified 5 roots"):
-        hm.build(system, 5, options=hm.HomotopyOptions(seed=3, verify_trials=0, stall_loops=3))
+    with pytest.raises(tk.HomotopyError, match="of the certified 5 roots"):
+        hm.build(system, 5, options=tk.HomotopyOptions(seed=3, verify_trials=0, stall_loops=3))
 
 
 def test_excluded_locus_is_relative_to_the_condition_not_to_the_point():
     # det H = h11 h22 - h12^2: zero when it cancels, not merely when H is small next to the offsets
     system = parse("unknowns: h11, h12, h22, o\nparameters: a\nnonzero: h11*h22 - h12**2\nequations:\n"
                    "h11 - a\nh12 - a\nh22 - a\no - a\n", "deth")
-    mask = hm._excluded(system, np.array([1.0]))
+    mask = md._excluded(system, np.array([1.0]))
     x = np.array([[1e-4, 5e-4, -2.6e-3, 130.0],   # genuine root of the 5r/5s start system's kind
                   [1e-4, 2e-4, 4e-4, 130.0],      # det H = 0 exactly (h12^2 = h11 h22)
                   [1e-12, -2e-12, 3e-12, 130.0],  # H = 0 to rounding (a spurious root of 5r/4s's squared system)
@@ -176,7 +178,7 @@ def test_every_path_of_a_failing_instance_takes_the_same_detour(index):
     H, b, o = true_root(net)
     x = np.concatenate([[H[0, 0], H[0, 1], H[1, 1]], b, o])
     roots = module.solve(net.measurements())
-    assert np.all(np.isfinite(roots)) and not hm._has_duplicates(roots)
+    assert np.all(np.isfinite(roots)) and not tk._has_duplicates(roots)
     assert np.min(np.linalg.norm(roots - x, axis=1)) / np.linalg.norm(x) < 1e-9
 
 
@@ -199,7 +201,7 @@ def test_further_start_systems_find_a_root_the_direct_segment_loses(index):
     direct = hm.solve_scaled(solver, net.measurements(), module.CONFIG, module.SCALE_POWERS, plain=True)
     assert not np.nanmin(np.linalg.norm(direct - truth, axis=1)) / np.linalg.norm(truth) < 1e-6
     roots = module.solve(net.measurements())
-    assert not hm._has_duplicates(roots)  # a few roots near infinity stay lost (NaN rows)
+    assert not tk._has_duplicates(roots)  # a few roots near infinity stay lost (NaN rows)
     assert np.nanmin(np.linalg.norm(roots - truth, axis=1)) / np.linalg.norm(truth) < 1e-9
 
 
@@ -207,14 +209,14 @@ def test_pool_keeps_one_copy_of_each_root_and_pads_with_nan():
     nan = np.nan
     a = np.array([[1.0, 0.0], [1.0, 0.0], [nan, nan], [3.0, 0.0]], complex)   # a jumped pair, a lost path
     b = np.array([[2.0, 0.0], [3.0, 1e-9], [1.0, 0.0], [nan, nan]], complex)  # the missing root 2
-    pooled = hm._pool([a, b])
+    pooled = tk._pool([a, b])
     assert pooled[:3].real.tolist() == [[1, 0], [3, 0], [2, 0]] and np.all(np.isnan(pooled[3]))
-    assert hm._distinct(np.full((2, 2), nan)).shape == (0, 2)
+    assert tk._distinct(np.full((2, 2), nan)).shape == (0, 2)
     # ordered by the next Newton step: a surplus drops the unconverged copy (4r/5s network 85's case)
     a = np.array([[1.0, 0.0], [5.0, 0.0], [nan, nan]], complex)
     b = np.array([[2.0, 0.0], [1.0 + 1e-3, 0.0], [nan, nan]], complex)  # 1.001: an unconverged copy of 1
     step = np.array([1e-16, 1e-15, np.inf, 1e-16, 1e-3, np.inf])
-    assert hm._pool([a, b], step)[:3].real.tolist() == [[1, 0], [2, 0], [5, 0]]
+    assert tk._pool([a, b], step)[:3].real.tolist() == [[1, 0], [2, 0], [5, 0]]
 
 
 @pytest.mark.parametrize("name", [n for n in HOMOTOPY_SPECS if _spec(n)[1].get("full_system")])
@@ -227,8 +229,8 @@ def test_tracked_roots_are_exactly_the_full_systems(name):
     full = from_formulation(SOLVERS[label], saturate_det_h=True)
     assert full.name == spec["full_system"]["system"] and len(full.equations) == spec["full_system"]["equations"]
     module = _module(name[:-5])
-    all_roots = hm.HomotopySolver({k: v for k, v in spec.items() if k != "full_system"}, module.coefficients)
-    res = hm.system_residuals(full, all_roots.x0, all_roots.q0)
+    all_roots = tk.HomotopySolver({k: v for k, v in spec.items() if k != "full_system"}, module.coefficients)
+    res = md.system_residuals(full, all_roots.x0, all_roots.q0)
     tracked = np.zeros(len(res), dtype=bool)
     tracked[spec["full_system"]["tracked"]] = True
     assert res[tracked].max() < hm.FULL_TOL and res[~tracked].min() > hm.FULL_GAP
@@ -258,13 +260,13 @@ def test_squared_system_tracks_only_the_full_systems_roots(tmp_path):
     roots = module.solve(np.array([4.0, 1.0]))
     assert module.PATHS == 2 and roots.shape == (2, 2)
     assert np.allclose(sorted(roots[:, 0].real), [-2, 2]) and np.allclose(roots[:, 0], roots[:, 1])
-    with pytest.raises(hm.HomotopyError, match="differ"):
+    with pytest.raises(tk.HomotopyError, match="differ"):
         generate(square_, out=str(tmp_path), name="t", start=start, full=parse("unknowns: x, z\nparameters: a, b\nequations:\nx - a\nz - b\n", "other"))
 
 
 def test_non_square_system_is_refused():
     system = parse("unknowns: x, y\nparameters: a\nequations:\nx - a\n", "thin")
-    with pytest.raises(hm.HomotopyError, match="square"):
+    with pytest.raises(tk.HomotopyError, match="square"):
         hm.build(system, 1)
 
 
@@ -335,7 +337,7 @@ def test_start_system_is_complete(name):
     tol = (1e-7 if "positions" in spec["system"] else 1e-8 if spec["coefficient_degree"] > 10 or "evidence" in spec
            else 1e-9)
     assert np.max(np.linalg.norm(step, axis=1) / (1 + np.linalg.norm(solver.x0, axis=1))) < tol
-    assert not hm._has_duplicates(solver.x0)
+    assert not tk._has_duplicates(solver.x0)
 
 
 def _known_root_errors(module, seeds: int) -> np.ndarray:
@@ -399,7 +401,7 @@ def test_committed_spec_carries_its_configurations_step_control(name):
     starts = control.pop("starts", 1)  # a count: the spec holds the further start systems
     for key, fields in control.items():
         assert {k: spec[key][k] for k in fields} == fields
-    solver = hm.HomotopySolver(spec, _module(name[:-5]).coefficients)
+    solver = tk.HomotopySolver(spec, _module(name[:-5]).coefficients)
     assert len(spec.get("starts", [])) == starts - 1 and len(solver.starts) == starts
     assert solver.retrack == dataclasses.replace(tracker.TIGHT, **spec.get("retrack", {}))
     assert solver.options == tracker.TrackerOptions(**spec.get("tracker", {}))
@@ -407,7 +409,7 @@ def test_committed_spec_carries_its_configurations_step_control(name):
 
 
 def test_add_new_by_sorted_projections_decides_as_the_full_comparison():
-    """homotopy.add_new compares each endpoint only with the roots whose projection on a fixed direction is
+    """monodromy.add_new compares each endpoint only with the roots whose projection on a fixed direction is
     within reach; its result is the same as comparing with every root and image, in order (random roots,
     endpoints near roots or their images at 1e-9..1e-5, new points, repeats among the new ones)."""
     from solvers.generate import gauge_reflections
@@ -429,11 +431,11 @@ def test_add_new_by_sorted_projections_decides_as_the_full_comparison():
         signs = group[rng.integers(0, len(group), size=K)] if trial % 2 else np.ones((K, 9))
         xs = base[rng.integers(0, len(base), size=K)] * signs + 10.0 ** rng.uniform(-9, -5, size=(K, 1)) * rng.normal(size=(K, 9))
         g = group if trial % 2 else None
-        assert np.array_equal(hm.add_new(roots, xs, g), reference(roots, xs, g)), trial
+        assert np.array_equal(md.add_new(roots, xs, g), reference(roots, xs, g)), trial
 
 
 def test_duplicated_by_projection_decides_as_the_gram_matrix():
-    """Above GRAM_ROWS finite rows homotopy._duplicated compares by sorted projections (a 10^5-point trace test
+    """Above GRAM_ROWS finite rows tracking._duplicated compares by sorted projections (a 10^5-point trace test
     would need a 10^10-entry Gram matrix); on random sets with near copies and images of rows, and NaN rows,
     it marks the same rows as the Gram-matrix test."""
     from solvers.generate import gauge_reflections
@@ -451,5 +453,5 @@ def test_duplicated_by_projection_decides_as_the_gram_matrix():
         x[rng.integers(0, K, 2)] = np.nan
         ok = np.all(np.isfinite(x), axis=1)
         by_projection = np.zeros(K, dtype=bool)
-        by_projection[ok] = hm._duplicated_by_projection(x[ok], 1e-6, g)
-        assert np.array_equal(by_projection, hm._duplicated(x, 1e-6, g)), trial
+        by_projection[ok] = tk._duplicated_by_projection(x[ok], 1e-6, g)
+        assert np.array_equal(by_projection, tk._duplicated(x, 1e-6, g)), trial

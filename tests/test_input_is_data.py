@@ -78,9 +78,9 @@ FORBIDDEN = {"eval", "exec", "sympify", "parse_expr", "S", "lambdify"}
 ALLOWED = {
     # compiles the coefficient function printed by coefficient_source from sympy expressions built by
     # the project's parser (names checked to be identifiers, numbers printed by sympy)
-    ("solvers/methods/homotopy.py", "exec"),
+    ("solvers/continuation/tracking.py", "exec"),
     # the non-vanishing conditions as numpy functions, from the same parsed expressions
-    ("solvers/methods/homotopy.py", "lambdify"),
+    ("solvers/continuation/monodromy.py", "lambdify"),
 }
 
 

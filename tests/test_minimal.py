@@ -11,9 +11,10 @@ import pytest
 from analysis.formulations.tdoa import Formulation, gf_equations, sample_gf_instance
 from analysis.formulations.parametric import from_formulation
 from solvers import api
+from solvers.continuation import monodromy as md
+from solvers.continuation import slp, tape_kernel
+from solvers.continuation import tracking as tk
 from solvers.generate import SOLVERS, GenerationError, complex_instance, generate
-from solvers.methods import homotopy as hm
-from solvers.methods import slp, tape_kernel
 from solvers.metrics import position_error
 from solvers.synthetic import ROOM, room_network
 
@@ -55,8 +56,8 @@ def test_program_agrees_with_the_expanded_system(label):
     """The straight-line program (slp.kd_equations) and the generated coefficient function of the same
     formulas agree at a random complex point."""
     system = from_formulation(label, saturate_det_h=True)
-    coefficients = hm.load_coefficients(hm.coefficient_source(system))
-    exps, eq = hm.structure(system)
+    coefficients = tk.load_coefficients(tk.coefficient_source(system))
+    exps, eq = tk.structure(system)
     rng = np.random.default_rng(1)
     x = rng.normal(size=len(system.unknowns)) + 1j * rng.normal(size=len(system.unknowns))
     q = rng.normal(size=len(system.parameters)) + 1j * rng.normal(size=len(system.parameters))
@@ -74,8 +75,8 @@ def test_complex_start_is_a_root(dim, model):
     label = SOLVERS["6r4s3dtoa" if dim == 3 else "3r3stoa"]
     m, n = Formulation.parse(label).config.m, Formulation.parse(label).config.n
     system = from_formulation(label, saturate_det_h=True)
-    coefficients = hm.load_coefficients(hm.coefficient_source(system))
-    exps, eq = hm.structure(system)
+    coefficients = tk.load_coefficients(tk.coefficient_source(system))
+    exps, eq = tk.structure(system)
     F, x = complex_instance(m, n, np.random.default_rng(0), dim, model)
     c = coefficients(F.ravel()[None])[0]
     value = np.zeros(len(x), dtype=complex)
@@ -202,7 +203,7 @@ def _toa_2d_solver():
     label = SOLVERS["3r3stoa"]
     system = from_formulation(label, saturate_det_h=True)
     F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa")
-    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    solver, x0 = md.start_solver(system, F.ravel(), x0)
     return system, solver, F.ravel(), x0
 
 
@@ -210,17 +211,17 @@ def test_monodromy_count_resumes_from_its_checkpoint(tmp_path):
     """Two loops, checkpoint, two more: the same roots as four loops at once (the rng state is saved);
     with enough loops the count settles at the certified 8."""
     system, solver, q0, x0 = _toa_2d_solver()
-    options = hm.HomotopyOptions(seed=3, max_loops=4, stall_loops=50)
+    options = tk.HomotopyOptions(seed=3, max_loops=4, stall_loops=50)
     path = str(tmp_path / "count.json")
-    first = hm.monodromy_count(solver, q0, x0, dataclasses.replace(options, max_loops=2), 1e9, path)
-    again = hm.monodromy_count(solver, q0, x0, dataclasses.replace(options, max_loops=2), 1e9, path)
+    first = md.monodromy_count(solver, q0, x0, dataclasses.replace(options, max_loops=2), 1e9, path)
+    again = md.monodromy_count(solver, q0, x0, dataclasses.replace(options, max_loops=2), 1e9, path)
     assert again.loops == 2 and again.paths == first.paths and len(again.roots) == len(first.roots)  # no loop re-run
-    resumed = hm.monodromy_count(solver, q0, x0, options, 1e9, path)
-    straight = hm.monodromy_count(solver, q0, x0, options, 1e9)
+    resumed = md.monodromy_count(solver, q0, x0, options, 1e9, path)
+    straight = md.monodromy_count(solver, q0, x0, options, 1e9)
     assert first.loops == 2 and resumed.loops == straight.loops == 4 and resumed.paths == straight.paths
     assert np.allclose(resumed.roots, straight.roots, rtol=1e-9, atol=1e-9)  # the file keeps START_DIGITS = 11 digits
-    settled = hm.monodromy_count(solver, q0, x0, hm.HomotopyOptions(seed=3, stall_loops=8), 1e9,
-                                 excluded=hm._excluded(system, q0))
+    settled = md.monodromy_count(solver, q0, x0, tk.HomotopyOptions(seed=3, stall_loops=8), 1e9,
+                                 excluded=md._excluded(system, q0))
     assert settled.stall == 8 and len(settled.roots) == 8
 
 
@@ -247,34 +248,34 @@ def test_monodromy_by_orbits_of_the_direct_parametrization():
     label = "3r3s-toa2d-direct:all"
     system = from_formulation(label)
     F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa", "direct")
-    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    solver, x0 = md.start_solver(system, F.ravel(), x0)
     group = gauge_reflections(system.unknowns)
     assert group.shape == (4, len(system.unknowns))
     assert solver.residual(group * x0, F.ravel()[None]).max() < 1e-10  # every image is a root
-    settled = hm.monodromy_count(solver, F.ravel(), x0, hm.HomotopyOptions(seed=3, stall_loops=8), 1e9, group=group)
+    settled = md.monodromy_count(solver, F.ravel(), x0, tk.HomotopyOptions(seed=3, stall_loops=8), 1e9, group=group)
     assert settled.stall == 8 and len(settled.roots) == 8
 
 
 def test_monodromy_loops_on_a_dask_cluster_give_the_same_count():
-    """--dask: each leg's paths tracked in chunks on a Dask cluster's workers (solvers.methods.dask_tracks; an
+    """--dask: each leg's paths tracked in chunks on a Dask cluster's workers (solvers.continuation.dask_tracks; an
     in-process cluster here) give the same roots, bit for bit, as the loop in one process (2D TOA 3r/3s; the
     direct parametrization by orbits: 8 orbits)."""
     pytest.importorskip("dask.distributed", reason="pip install -e '.[dev]' installs dask[distributed]")
     from dask.distributed import Client, LocalCluster
 
     from solvers.generate import gauge_reflections
-    from solvers.methods import dask_tracks
+    from solvers.continuation import dask_tracks
 
     label = "3r3s-toa2d-direct:all"
     system = from_formulation(label)
     F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa", "direct")
-    solver, x0 = hm.start_solver(system, F.ravel(), x0)
-    options = hm.HomotopyOptions(seed=3, max_loops=6, stall_loops=50)
+    solver, x0 = md.start_solver(system, F.ravel(), x0)
+    options = tk.HomotopyOptions(seed=3, max_loops=6, stall_loops=50)
     group = gauge_reflections(system.unknowns)
-    here = hm.monodromy_count(solver, F.ravel(), x0, options, 1e9, group=group)
+    here = md.monodromy_count(solver, F.ravel(), x0, options, 1e9, group=group)
     with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
         with Client(cluster) as client, dask_tracks.DaskTracks(client, label, False, F.ravel(), x0, chunk=3) as tracks:
-            there = hm.monodromy_count(solver, F.ravel(), x0, options, 1e9, group=group, track=tracks)
+            there = md.monodromy_count(solver, F.ravel(), x0, options, 1e9, group=group, track=tracks)
     assert there.paths == here.paths and len(there.roots) == len(here.roots) == 8
     assert np.array_equal(there.roots, here.roots)
     with pytest.raises(ValueError, match="--dask"):

@@ -14,9 +14,10 @@ import pytest
 
 from analysis.formulations.parametric import from_formulation
 from solvers import api
+from solvers.continuation import monodromy as md
+from solvers.continuation import tracking as tk
 from solvers.generate import (GENERATED_DIR, MONODROMY_CHECKPOINTS, SETTLED_LOOPS, SOLVERS, GenerationError,
                               complex_instance, gauge_reflections, generate)
-from solvers.methods import homotopy as hm
 from solvers.metrics import position_error
 from solvers.synthetic import ROOM, room_network
 
@@ -28,9 +29,9 @@ def checkpoint(tmp_path_factory):
     """A settled monodromy checkpoint of 2D TOA 3r/3s direct (the file scripts/monodromy_counts.py writes)."""
     system = from_formulation(LABEL)
     F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa", "direct")
-    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    solver, x0 = md.start_solver(system, F.ravel(), x0)
     path = str(tmp_path_factory.mktemp("monodromy") / "3r3s-seed5.json")
-    grown = hm.monodromy_count(solver, F.ravel(), x0, hm.HomotopyOptions(seed=3, stall_loops=SETTLED_LOOPS), 1e9,
+    grown = md.monodromy_count(solver, F.ravel(), x0, tk.HomotopyOptions(seed=3, stall_loops=SETTLED_LOOPS), 1e9,
                                path, group=gauge_reflections(system.unknowns))
     assert len(grown.roots) == 8 and grown.stall == SETTLED_LOOPS
     return path
@@ -51,22 +52,22 @@ def test_checkpoint_loader_accepts_its_roots_and_rejects_others(checkpoint, tmp_
     digit, a root of other data, and a root that is a reflection of another are each rejected with a named error."""
     system = from_formulation(LABEL)
     group = gauge_reflections(system.unknowns)
-    ck = hm.read_checkpoint(checkpoint)
-    roots = hm.checked_roots(system, ck.q0, ck.roots, group)
-    assert roots.shape == (8, 9) and hm.system_residuals(system, roots, ck.q0).max() < 1e-12
+    ck = md.read_checkpoint(checkpoint)
+    roots = md.checked_roots(system, ck.q0, ck.roots, group)
+    assert roots.shape == (8, 9) and md.system_residuals(system, roots, ck.q0).max() < 1e-12
 
     moved = ck.roots.copy()
     moved[3, 2] *= 1 + 1e-6
-    with pytest.raises(hm.HomotopyError, match="1 of 8 checkpoint roots do not satisfy"):
-        hm.checked_roots(system, ck.q0, moved, group)
+    with pytest.raises(tk.HomotopyError, match="1 of 8 checkpoint roots do not satisfy"):
+        md.checked_roots(system, ck.q0, moved, group)
     other, _ = complex_instance(3, 3, np.random.default_rng(6), 2, "toa", "direct")
-    with pytest.raises(hm.HomotopyError, match="8 of 8 checkpoint roots do not satisfy"):
-        hm.checked_roots(system, other.ravel(), ck.roots, group)
+    with pytest.raises(tk.HomotopyError, match="8 of 8 checkpoint roots do not satisfy"):
+        md.checked_roots(system, other.ravel(), ck.roots, group)
     imaged = np.vstack([ck.roots, ck.roots[:1] * group[1]])  # a root and its mirror image: one orbit twice
-    with pytest.raises(hm.HomotopyError, match="image of another under the group"):
-        hm.checked_roots(system, ck.q0, imaged, group)
-    with pytest.raises(hm.HomotopyError, match="not a monodromy checkpoint"):
-        hm.read_checkpoint(_rewritten(checkpoint, tmp_path, lambda d: d.pop("roots")))
+    with pytest.raises(tk.HomotopyError, match="image of another under the group"):
+        md.checked_roots(system, ck.q0, imaged, group)
+    with pytest.raises(tk.HomotopyError, match="not a monodromy checkpoint"):
+        md.read_checkpoint(_rewritten(checkpoint, tmp_path, lambda d: d.pop("roots")))
 
 
 def test_generate_from_a_checkpoint(checkpoint, tmp_path):
@@ -81,7 +82,7 @@ def test_generate_from_a_checkpoint(checkpoint, tmp_path):
     assert stem.endswith("_homotopy8")
     with open(os.path.join(out, stem + ".json"), encoding="utf-8") as fh:
         spec = json.load(fh)
-    ck = hm.read_checkpoint(checkpoint)
+    ck = md.read_checkpoint(checkpoint)
     evidence = spec["evidence"]
     assert "certified" not in spec and evidence["method"] == "monodromy" and evidence["orbits"] == 8
     assert (evidence["loops"], evidence["paths_tracked"], evidence["loops_without_new"]) == (ck.loops, ck.paths, ck.stall)
@@ -103,10 +104,10 @@ def test_generate_from_a_checkpoint(checkpoint, tmp_path):
     assert cals and min(position_error(c, net) for c in cals) < 1e-9
 
     moved = _rewritten(checkpoint, tmp_path, lambda d: d["roots"][0][0].__setitem__(0, d["roots"][0][0][0] + 1e-3))
-    with pytest.raises(hm.HomotopyError, match="do not satisfy"):
+    with pytest.raises(tk.HomotopyError, match="do not satisfy"):
         generate(LABEL, out=str(tmp_path / "bad"), from_monodromy=moved)
     unsettled = _rewritten(checkpoint, tmp_path, lambda d: d.__setitem__("stall", SETTLED_LOOPS - 1))
-    with pytest.raises(hm.HomotopyError, match="not settled"):
+    with pytest.raises(tk.HomotopyError, match="not settled"):
         generate(LABEL, out=str(tmp_path / "bad"), from_monodromy=unsettled)
     with pytest.raises(GenerationError, match="no such monodromy checkpoint"):
         generate(LABEL, out=str(tmp_path / "bad"), from_monodromy=str(tmp_path / "missing.json"))
@@ -145,11 +146,11 @@ def test_committed_minimal_3d_start_roots_satisfy_their_system(label, shape):
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = json.load(fh)
     system = from_formulation(module.SYSTEM)
-    q0 = hm._complex_array(spec["start_parameters"])
-    roots = hm._complex_array(spec["start_roots"])
+    q0 = tk._complex_array(spec["start_parameters"])
+    roots = tk._complex_array(spec["start_roots"])
     assert roots.shape == shape
     sample = roots[::20]
-    assert hm.checked_roots(system, q0, sample, np.array(spec["group"]["signs"])).shape == sample.shape
+    assert md.checked_roots(system, q0, sample, np.array(spec["group"]["signs"])).shape == sample.shape
 
 
 @pytest.mark.slow

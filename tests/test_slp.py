@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
+from solvers.continuation import slp, tape_kernel, tracker
 from solvers.generate import GENERATED_DIR, SOLVERS
-from solvers.methods import slp, tape_kernel, tracker
 
 
 def test_program_shares_and_folds():
@@ -133,11 +133,12 @@ def test_expanded_tape_matches_tracker_kernel():
     """A system without a program from its formulas (a user's) gets one traced from its generated
     coefficient function and monomials (evaluator "tape"); on 5r/4s it equals the monomial kernel."""
     from solvers.generated import tdoa_5r4s_homotopy152 as module
+    from solvers.continuation import tracking as tk
     from solvers.methods import homotopy
 
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = homotopy.load_spec(fh.read())
-    solver = homotopy.HomotopySolver(spec, module.coefficients, "monomials")
+    solver = tk.HomotopySolver(spec, module.coefficients, "monomials")
     tapes = slp.homotopy_tapes(slp.expanded_equations(module.coefficients, spec["exponents"], spec["term_equation"]),
                                spec["unknowns"], spec["parameters"])
     rng = np.random.default_rng(11)
@@ -156,18 +157,19 @@ def test_solver_takes_a_program_only_for_its_own_equations():
     """A spec whose system is labelled like a formulation but whose equations differ (here one term's
     coefficient doubled) gets no program: the tapes are checked against the generated system."""
     from solvers.generated import tdoa_9r3s_homotopy75 as module
+    from solvers.continuation import tracking as tk
     from solvers.methods import homotopy
 
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = homotopy.load_spec(fh.read())
-    assert homotopy._tapes(spec, module.coefficients, "auto") is not None
+    assert tk._tapes(spec, module.coefficients, "auto") is not None
 
     def other(q):
         c = module.coefficients(q)
         c[:, 0] *= 2.0
         return c
 
-    assert homotopy._tapes(spec, other, "auto") is None
+    assert tk._tapes(spec, other, "auto") is None
 
 
 @pytest.mark.parametrize("label", ["5r4s", "5r5s", "4r5s"])
@@ -175,17 +177,18 @@ def test_auto_tracks_the_validated_programs(label):
     """"auto" tracks the committed minors-squared and positions solvers on their programs (validated on
     seeded networks, tables/NOTES.md); a system with minors that is not validated keeps the monomials;
     "tape" takes any program."""
+    from solvers.continuation import tracking as tk
     from solvers.methods import homotopy
 
     module = importlib.import_module(f"solvers.generated.{MODULES[label]}")
     with open(os.path.join(GENERATED_DIR, module.SPEC_FILE), encoding="utf-8") as fh:
         spec = homotopy.load_spec(fh.read())
-    assert module.SYSTEM in homotopy.VALIDATED_PROGRAMS
+    assert module.SYSTEM in tk.VALIDATED_PROGRAMS
     assert module.solver().tapes is not None
-    assert homotopy._tapes(spec, module.coefficients, "tape").full.n_instructions < 2000  # from the formulas
+    assert tk._tapes(spec, module.coefficients, "tape").full.n_instructions < 2000  # from the formulas
     if "seed 0" in spec["system"]:
         spec["system"] = spec["system"].replace("seed 0", "seed 1")  # another squaring: not validated
-        assert homotopy._tapes(spec, module.coefficients, "auto") is None
+        assert tk._tapes(spec, module.coefficients, "auto") is None
 
 
 def test_taylor_coefficients_of_a_known_path():

@@ -116,12 +116,12 @@ def test_4r6s_finds_a_root_the_first_subset_misses():
 def test_4r6s_plain_pass_first(monkeypatch):
     # a homotopy base runs its plain track alone on every subset before its full solve: on a network whose
     # true root the plain track holds, the full solve (retracks, further start systems) never runs
-    from solvers.methods import homotopy as hm
+    from solvers.continuation import tracking as tk
 
     def refused(self, q):
         raise AssertionError("the full solve ran")
 
-    monkeypatch.setattr(hm.HomotopySolver, "roots", refused)
+    monkeypatch.setattr(tk.HomotopySolver, "roots", refused)
     kept, err = _kept_errors(random_network(4, 6, np.random.default_rng(11)))
     assert len(kept) == 1 and err[0] < 1e-10
 

@@ -1,4 +1,4 @@
-"""The tapes' compiled straight-line code, the compiled LU and the compiled tracker (solvers.methods.tape_native)
+"""The tapes' compiled straight-line code, the compiled LU and the compiled tracker (solvers.continuation.tape_native)
 give the same bits as the interpreter, the batched LU and numba's tracker: a solver's roots do not depend on
 which ran."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from solvers.methods import tape_kernel, tape_native
+from solvers.continuation import tape_kernel, tape_native
 
 from analysis.engine.native import disabled
 
@@ -134,7 +134,7 @@ def test_compiled_tracker_equals_numba_tracker(predictor, corrector):
     end), and Newton steps alone."""
     import dataclasses
 
-    from solvers.methods import tracker
+    from solvers.continuation import tracker
     from solvers.synthetic import random_network
 
     _, solver = _solver()

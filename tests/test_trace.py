@@ -1,4 +1,4 @@
-"""The trace test (solvers.methods.trace) on certified cells: it passes on the complete root set and fails
+"""The trace test (solvers.continuation.trace) on certified cells: it passes on the complete root set and fails
 when one root (or one witness) is missing."""
 from __future__ import annotations
 
@@ -9,9 +9,10 @@ import pytest
 
 from analysis.formulations.parametric import from_formulation
 from analysis.formulations.tdoa import Formulation
+from solvers.continuation import monodromy as md
+from solvers.continuation import slp, trace
+from solvers.continuation import tracking as tk
 from solvers.generate import SOLVERS, complex_instance
-from solvers.methods import homotopy as hm
-from solvers.methods import slp, trace
 
 
 def _roots(key: str, count: int):
@@ -21,9 +22,9 @@ def _roots(key: str, count: int):
     config = Formulation.parse(label).config
     system = from_formulation(label, saturate_det_h=True)
     F, x0 = complex_instance(config.m, config.n, np.random.default_rng(5), config.dim, config.model)
-    solver, x0 = hm.start_solver(system, F.ravel(), x0)
-    found = hm.monodromy_count(solver, F.ravel(), x0, hm.HomotopyOptions(seed=3, stall_loops=8), 1e9,
-                               excluded=hm._excluded(system, F.ravel()))
+    solver, x0 = md.start_solver(system, F.ravel(), x0)
+    found = md.monodromy_count(solver, F.ravel(), x0, tk.HomotopyOptions(seed=3, stall_loops=8), 1e9,
+                               excluded=md._excluded(system, F.ravel()))
     assert len(found.roots) == count
     F2, x2 = complex_instance(config.m, config.n, np.random.default_rng(6), config.dim, config.model)
     return system, F.ravel(), found.roots, (F2.ravel(), x2)
@@ -51,7 +52,7 @@ def test_trace_test_is_inconclusive_on_a_cut_witness_set_and_checks_its_inputs()
     system, q0, roots, other = _roots("3r3stoa", 8)
     cut = trace.trace_test_system(system, q0, roots, other, trace.TraceOptions(seed=1, max_loops=1))
     assert cut.status == "inconclusive" and cut.witness_loops == 1
-    with pytest.raises(hm.HomotopyError, match="not roots"):
+    with pytest.raises(tk.HomotopyError, match="not roots"):
         trace.trace_test_system(system, q0, roots + 0.1, other)
 
 
@@ -113,13 +114,13 @@ def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
     reached all 6148). Mixed into the witnesses, they are summed once with the roots and the test passes
     (2D TOA 3r/3s); with one root left out of R but reached by the loops, it fails and says so."""
     system, q0, roots, other = _roots("3r3stoa", 8)
-    count = hm.monodromy_count
+    count = md.monodromy_count
 
     def with_roots(*args, **kwargs):
         found = count(*args, **kwargs)
         return dataclasses.replace(found, roots=np.vstack([found.roots, np.column_stack([roots, np.zeros(len(roots))])]))
 
-    monkeypatch.setattr(hm, "monodromy_count", with_roots)
+    monkeypatch.setattr(md, "monodromy_count", with_roots)
     options = trace.TraceOptions(seed=1)
     test = trace.trace_test_system(system, q0, roots, other, options)
     assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
@@ -162,22 +163,22 @@ def test_endpoints_off_the_fibre_count_as_failed_paths(monkeypatch):
 
 
 def test_a_checkpoint_resumed_under_another_acceptance_counts_its_stall_again(tmp_path):
-    """homotopy.monodromy_count: a checkpoint settled under START_TOL, resumed with the trace test's looser
+    """monodromy.monodromy_count: a checkpoint settled under START_TOL, resumed with the trace test's looser
     acceptance (WITNESS_TOL), keeps its roots and runs stall_loops more loops (the loops that found nothing under
     the old rule say nothing under the new one); resumed under the same rule it runs none."""
     label = SOLVERS["3r3stoa"]
     config = Formulation.parse(label).config
     system = from_formulation(label, saturate_det_h=True)
     F, x0 = complex_instance(config.m, config.n, np.random.default_rng(5), config.dim, config.model)
-    solver, x0 = hm.start_solver(system, F.ravel(), x0)
+    solver, x0 = md.start_solver(system, F.ravel(), x0)
     path = str(tmp_path / "count.json")
-    strict = hm.HomotopyOptions(seed=3, stall_loops=4)
-    first = hm.monodromy_count(solver, F.ravel(), x0, strict, 1e9, path, excluded=hm._excluded(system, F.ravel()))
+    strict = tk.HomotopyOptions(seed=3, stall_loops=4)
+    first = md.monodromy_count(solver, F.ravel(), x0, strict, 1e9, path, excluded=md._excluded(system, F.ravel()))
     assert len(first.roots) == 8 and first.stall == 4
-    again = hm.monodromy_count(solver, F.ravel(), x0, strict, 1e9, path)
+    again = md.monodromy_count(solver, F.ravel(), x0, strict, 1e9, path)
     assert again.loops == first.loops
     messages = []
-    loose = hm.monodromy_count(solver, F.ravel(), x0, dataclasses.replace(strict, accept_tol=trace.WITNESS_TOL), 1e9,
-                               path, progress=messages.append, excluded=hm._excluded(system, F.ravel()))
+    loose = md.monodromy_count(solver, F.ravel(), x0, dataclasses.replace(strict, accept_tol=trace.WITNESS_TOL), 1e9,
+                               path, progress=messages.append, excluded=md._excluded(system, F.ravel()))
     assert loose.loops == first.loops + 4 and len(loose.roots) == 8 and loose.stall == 4
     assert "start again" in messages[0]

@@ -37,7 +37,7 @@ def _cache_dirs() -> list[Path]:
 
 DISABLE_ENV = "TDOA_WORKBENCH_NATIVE"
 """Set to ``off`` to run the numba/numpy kernels instead of the C ones (a comparison, a broken compiler);
-the homotopy solvers' compiled tapes (:mod:`solvers.methods.tape_native`) obey it too."""
+the homotopy solvers' compiled tapes (:mod:`solvers.continuation.tape_native`) obey it too."""
 
 
 def disabled() -> bool:

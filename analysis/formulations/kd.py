@@ -567,7 +567,7 @@ def formulas(formulation: Formulation, x, f: Sequence[Sequence], zero, quarter, 
     e p), D~_ij = c_ij + 2 e_{i+1,1} o_1 - 2 e_{i+1,j+1} o_{j+1} with c_ij = e p - e p; B_j for
     j >= K + 2 with u = adj(M) D~[:K, j-1], M = D~[:K, :K], multiplied by det(M)^2 (for TDOA det M
     depends on the offsets and is returned as a condition). Used by analysis.formulations.parametric (sympy) and
-    solvers.methods.slp (straight-line programs), so that a system and its program cannot diverge.
+    solvers.continuation.slp (straight-line programs), so that a system and its program cannot diverge.
     """
     config = formulation.config
     k, m, n, tdoa = config.dim, config.m, config.n, config.model == "tdoa"

@@ -44,16 +44,16 @@ def _file_digest(paths: Iterable[Path]) -> str:
 
 def _solver_sources(package: Path) -> list[Path]:
     """The files the experiments' solvers are made of: the generated modules and specs of :data:`CONFIGS`
-    (``solvers/generated/tdoa_<config>_*``) and the modules of ``solvers/methods`` and ``solvers/runtime.py``
-    they import, directly or through each other (read from the source, imports inside functions included).
-    Other solvers (a 3D one, another cell's) are not among them: changing them leaves the batches' cache
+    (``solvers/generated/tdoa_<config>_*``) and the modules of ``solvers/methods``, ``solvers/continuation`` and
+    ``solvers/runtime.py`` they import, directly or through each other (read from the source, imports inside
+    functions included). Other solvers (a 3D one, another cell's) are not among them: changing them leaves the batches' cache
     and the experiments' provenance alone."""
     import ast
 
     generated = package / "generated"
     modules = sorted(p for p in generated.glob("tdoa_*") if p.is_file() and p.suffix in (".py", ".json")
                      and p.name.split("_")[1] in CONFIGS) if generated.is_dir() else []
-    kernels = {*(package / "methods").glob("*.py"), package / "runtime.py"}
+    kernels = {*(package / "methods").glob("*.py"), *(package / "continuation").glob("*.py"), package / "runtime.py"}
     found: set[Path] = set()
     todo = [p for p in modules if p.suffix == ".py"]
     while todo:

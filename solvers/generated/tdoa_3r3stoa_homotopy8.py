@@ -4,7 +4,7 @@
 """Solver for 3r3s-toa2d:A,B2,B3,C2-C3: parameter homotopy with 8 paths in 5 unknowns.
 
 The 8 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 
 solve(F) -> (8, 5) complex candidate roots in the unknown order h11, h12, h22, b1, b2;
 solve_batch(F) for F of shape (..., 3, 3) -> (..., 8, 5). Candidates may be complex or

@@ -4,7 +4,7 @@
 """Solver for 4r5s:positions-receivers-orbits: parameter homotopy with 344 paths in 5 unknowns.
 
 The 344 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 They are tracked from 3 start instances (the spec's further ones seeded, their roots
 found at generation), each instance's distinct endpoints pooled; nothing is retracked.
 

@@ -4,7 +4,7 @@
 """Solver for 4r6s-toa3d-gram:all: parameter homotopy with 38 paths in 6 unknowns.
 
 The 38 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 
 solve(F) -> (38, 6) complex candidate roots in the unknown order g11, g12, g13, g22, g23, g33;
 solve_batch(F) for F of shape (..., 4, 6) -> (..., 38, 6). Candidates may be complex or

@@ -4,7 +4,7 @@
 """Solver for 5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0): parameter homotopy with 152 paths in 9 unknowns.
 
 The 152 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 The spec stores all 300 roots of the squared system; only the 152 that also
 satisfy the full system (11 equations, 152 roots certified over GF(p)) are tracked.
 

@@ -4,7 +4,7 @@
 """Solver for 5r5s-toa3d:A,B2,B3,B4,B5,C2-C5: parameter homotopy with 42 paths in 9 unknowns.
 
 The 42 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 
 solve(F) -> (42, 9) complex candidate roots in the unknown order h11, h12, h13, h22, h23, h33, b1, b2, b3;
 solve_batch(F) for F of shape (..., 5, 5) -> (..., 42, 9). Candidates may be complex or

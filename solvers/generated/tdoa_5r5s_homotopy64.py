@@ -4,7 +4,7 @@
 """Solver for 5r5s:B2,B3,C2-C5,M123_123,M124_124,M134_134,M234_234: parameter homotopy with 64 paths in 10 unknowns.
 
 The 64 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 The spec stores all 330 roots of the squared system; only the 64 that also
 satisfy the full system (22 equations, 64 roots certified over GF(p)) are tracked.
 

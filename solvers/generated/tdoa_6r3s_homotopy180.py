@@ -4,7 +4,7 @@
 """Solver for 6r3s:A,B2,B3,C2-C6: parameter homotopy with 180 paths in 8 unknowns.
 
 The 180 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 
 solve(F) -> (180, 8) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3;
 solve_batch(F) for F of shape (..., 6, 3) -> (..., 180, 8). Candidates may be complex or

@@ -4,7 +4,7 @@
 """Solver for 6r4s-toa3d:A,B2,B3,B4,C2-C6: parameter homotopy with 38 paths in 9 unknowns.
 
 The 38 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 
 solve(F) -> (38, 9) complex candidate roots in the unknown order h11, h12, h13, h22, h23, h33, b1, b2, b3;
 solve_batch(F) for F of shape (..., 6, 4) -> (..., 38, 9). Candidates may be complex or

@@ -5,7 +5,7 @@
 
 The 2321 roots of a generic complex start instance (NOT certified over GF(p): numerical
 evidence alone, monodromy until 10 loops found no new root) are tracked to the data
-by the compiled tracker of solvers.methods.tracker.
+by the compiled tracker of solvers.continuation.tracker.
 The system's 18568 roots come in orbits of the 8 gauge reflections (sign vectors
 in the spec's "group"); one root per orbit is stored and tracked, and solve returns one per orbit.
 

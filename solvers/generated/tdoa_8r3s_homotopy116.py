@@ -4,7 +4,7 @@
 """Solver for 8r3s:B2,C2-C8: parameter homotopy with 116 paths in 8 unknowns.
 
 The 116 roots of a generic complex start instance (certified count over GF(p), found by
-monodromy) are tracked to the data by the compiled tracker of solvers.methods.tracker.
+monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.
 
 solve(F) -> (116, 8) complex candidate roots in the unknown order h11, h12, h22, b1, b2, o1, o2, o3;
 solve_batch(F) for F of shape (..., 8, 3) -> (..., 116, 8). Candidates may be complex or

@@ -484,7 +484,7 @@ def build(system, degree: int, primes: tuple[int, int] = (65521, 65519), progres
     :class:`ActionMatrixError` when the saturated count differs from ``degree``, when a variable is
     not a standard monomial, or when the template fails on seed 1 or on the second prime.
     """
-    from .homotopy import structure as term_structure
+    from ..continuation.tracking import structure as term_structure
 
     t0 = time.perf_counter()
     ext = extended_system(system)

@@ -1,6 +1,6 @@
 """The compiled side of straight-line programs: the tape interpreter and the batched path tracker.
 
-This module owns the instruction set of :class:`solvers.methods.slp.Tape` and everything numba compiles
+This module owns the instruction set of :class:`solvers.continuation.slp.Tape` and everything numba compiles
 for it (in one file: numba's on-disk cache is invalidated by changes to the file that defines a
 function, not by changes to the functions it calls from other files).
 
@@ -9,11 +9,11 @@ imaginary parts) of shape (registers, points); every instruction runs over all p
 in its inner loop, so the cost of dispatching an instruction (a few ns) is spread over the points and
 the loop over points is plain vectorisable arithmetic. One kernel for every system, compiled once and
 cached on disk: no system needs its own compile. Where the machine has a C compiler, each solver's tapes
-are also written out as straight-line C (:mod:`solvers.methods.tape_native`, built in the background on
+are also written out as straight-line C (:mod:`solvers.continuation.tape_native`, built in the background on
 first use); the tracker then calls that code through its address (:func:`_call_native`: one compiled
 tracker for every solver), with bit-identical results, 1.5-3x faster, most in the lock step's tail.
 
-Batched tracker (:func:`track`). The predictor-corrector of :mod:`solvers.methods.tracker` (classical
+Batched tracker (:func:`track`). The predictor-corrector of :mod:`solvers.continuation.tracker` (classical
 RK4 on the tangent field, Newton corrector, step size from the first Newton correction; tight
 retracking by the caller), the step logic of ``tracker._track_one`` kept path by path but run in lock
 step. A second predictor, Pade (:func:`_pade`, :func:`_taylor`): at each accepted point the path's
@@ -44,7 +44,7 @@ from numba.extending import intrinsic
 
 from .tracker import TrackerOptions
 
-# The tapes' types (solvers.methods.slp.Tape, HomotopyTapes) are named in annotations only as strings:
+# The tapes' types (solvers.continuation.slp.Tape, HomotopyTapes) are named in annotations only as strings:
 # slp imports this module's opcodes, and this module never imports slp (one direction of dependency).
 
 __all__ = ["OPCODES", "PREDICTORS", "THREADS_ENV", "capacity", "evaluate", "newton", "run", "run_tape", "run_tape_numpy",
@@ -145,7 +145,7 @@ def run_tape(code, imm, Rr, Ri, Or, Oi, P):
 def run_tape_numpy(code, imm, Rr, Ri, Or, Oi, P):
     """:func:`run_tape` in plain numpy, one instruction at a time over all points (the same operations in the
     same order, so the same bits): the reference interpreter, and the one :func:`run` uses, so that checking a
-    tape at a few points (:func:`solvers.methods.homotopy._agrees`, at every solver's construction) does not
+    tape at a few points (:func:`solvers.continuation.tracking._agrees`, at every solver's construction) does not
     make numba compile the interpreter (6 s of a first call in a fresh environment)."""
     for k in range(code.shape[0]):
         op, d, a, b, c = (int(v) for v in code[k])
@@ -268,7 +268,7 @@ def _solve(Ar, Ai, base, N, piv, br, bi, P):
         _mul_row(br, bi, i, Ar, Ai, base + i * N + i, P)
 
 
-#: Points per pass of a tape's compiled code (:mod:`solvers.methods.tape_native`): the tracker's arrays have
+#: Points per pass of a tape's compiled code (:mod:`solvers.continuation.tape_native`): the tracker's arrays have
 #: room for a multiple of it.
 WIDTH = 4
 

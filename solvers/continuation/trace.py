@@ -30,7 +30,7 @@ reason a pencil in lam alone, i.e. a trace over the parameter line, is not affin
 a . x puts at t = infinity.
 
 The TDOA systems' det H saturation: F = 0 also holds on a positive-dimensional spurious locus (det H = 0)
-that the roots exclude (``excluded`` masks, as in :func:`homotopy._excluded`); C here means the closure of
+that the roots exclude (``excluded`` masks, as in :func:`monodromy._excluded`); C here means the closure of
 the part off that locus, a union of curves whose points over generic lam are the isolated roots. Paths
 from points of C stay on C; a witness landing on the excluded locus is not kept.
 
@@ -49,8 +49,9 @@ from typing import Callable
 
 import numpy as np
 
-from . import homotopy as hm
+from . import monodromy as md
 from . import slp, tape_kernel, tape_native, tracker
+from . import tracking as tk
 from .tracker import TrackerOptions
 
 __all__ = ["LAM_ZERO", "TraceOptions", "TraceSystem", "TraceTest", "trace_equations", "trace_test", "PASS_TOL"]
@@ -65,7 +66,7 @@ LAM_ZERO = 1e-10
 WITNESS_TOL = 1e-6
 
 #: The excluded locus for the trace test: a non-vanishing condition counts as zero below this relative size
-#: (``homotopy._excluded``'s ``rel``; 1e-8 for root counts). 10r/4s has a genuine witness of norm 1.3e6 with
+#: (``monodromy._excluded``'s ``rel``; 1e-8 for root counts). 10r/4s has a genuine witness of norm 1.3e6 with
 #: det H cancelling to 7.5e-9 of its terms; points on the spurious locus itself sit at 1e-17 and below.
 LOCUS_REL = 1e-13
 
@@ -134,7 +135,7 @@ def trace_equations(equations: Callable, N: int, P: int) -> Callable:
 
 class TraceSystem:
     """The trace system's compiled tapes with the two calls monodromy needs (``track``, ``newton``:
-    :func:`homotopy._monodromy_loop` takes it in place of a :class:`homotopy.HomotopySolver`)."""
+    :func:`monodromy._monodromy_loop` takes it in place of a :class:`tracking.HomotopySolver`)."""
 
     def __init__(self, equations: Callable, unknowns: list[str], parameters: list[str]):
         self.N, self.P = len(unknowns), len(parameters)
@@ -173,8 +174,8 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     """Trace test of the roots (K, N) of ``equations(x, q)`` at parameters p (P,).
 
     other: a second instance (p*, x*) with a known root (generic, complex); excluded: mask(x, q) of points on
-    the locus the roots exclude (:func:`homotopy._excluded`); checkpoint: the witness monodromy's resumable
-    file (:func:`homotopy.monodromy_count`). Returns a :class:`TraceTest`.
+    the locus the roots exclude (:func:`monodromy._excluded`); checkpoint: the witness monodromy's resumable
+    file (:func:`monodromy.monodromy_count`). Returns a :class:`TraceTest`.
     """
     t_start = time.perf_counter()
     p = np.asarray(p, dtype=complex)
@@ -196,15 +197,15 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
 
     start = system.newton(np.concatenate([x_star, [1.0]])[None], Q0[None], steps=3)
-    if system.step(start, Q0).max() > hm.START_TOL:
-        raise hm.HomotopyError(f"the second instance's root is not a root (Newton step {system.step(start, Q0).max():.1e})")
+    if system.step(start, Q0).max() > tk.START_TOL:
+        raise tk.HomotopyError(f"the second instance's root is not a root (Newton step {system.step(start, Q0).max():.1e})")
     base = np.column_stack([roots, np.zeros(K)])
     if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
-        raise hm.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
+        raise tk.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
     base = system.newton(base, Q0[None], steps=2)
-    loop_options = hm.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall,
+    loop_options = tk.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall,
                                       accept_tol=WITNESS_TOL)
-    witnesses = hm.monodromy_count(system, Q0, start, loop_options, options.seconds, checkpoint,
+    witnesses = md.monodromy_count(system, Q0, start, loop_options, options.seconds, checkpoint,
                                    progress=progress, excluded=on_locus, free=free)
     W = witnesses.roots
     paths = witnesses.paths
@@ -213,7 +214,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     # make R incomplete, and the trace then fails (R u W is short of the fibre).
     lam0 = np.abs(W[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(W[:, :N], axis=1))
     if lam0.any():
-        extra = len(hm.add_new(base, W[lam0])) - K
+        extra = len(md.add_new(base, W[lam0])) - K
         if extra and progress:
             progress(f"trace test: the witness loops reached {extra} root(s) of F(x; p) = 0 that the roots lack")
         W = W[~lam0]
@@ -275,7 +276,7 @@ def _failed(system: TraceSystem, target: np.ndarray, ends: np.ndarray, on_locus:
             y = system.newton(ends[idx], target[None], steps=2)
         bad[idx] |= ~(system.step(y, target) <= WITNESS_TOL) | on_locus(y)
     pool = ends if others is None else np.vstack([others, ends])
-    bad |= hm._duplicated(pool)[len(pool) - len(ends):]
+    bad |= tk._duplicated(pool)[len(pool) - len(ends):]
     return bad
 
 
@@ -365,7 +366,7 @@ def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.
     if list(unknowns) != list(system.unknowns) or list(parameters) != list(system.parameters):
         raise ValueError(f"{system.name}: the program's unknowns or parameters differ from the system's")
     return trace_test(equations, unknowns, parameters, p, roots, other, options,
-                      hm._excluded(system, p, rel=LOCUS_REL), checkpoint, progress)
+                      md._excluded(system, p, rel=LOCUS_REL), checkpoint, progress)
 
 
 def load_record(path: str) -> dict | None:

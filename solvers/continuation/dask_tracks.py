@@ -1,6 +1,6 @@
 """Monodromy loops on a Dask cluster: each leg's batch of paths split among the workers.
 
-A monodromy loop (:func:`solvers.methods.homotopy.monodromy_count`) tracks every known root along three
+A monodromy loop (:func:`solvers.continuation.monodromy.monodromy_count`) tracks every known root along three
 segments; at 10^4-10^5 roots in 35-45 unknowns a leg takes minutes to an hour on one core. :class:`DaskTracks`
 is a drop-in for the loop's ``track(a, b, xs)``: it cuts xs into chunks of ``chunk`` paths, tracks each on a
 worker of a ``dask.distributed`` cluster (``address``: a scheduler, or ``"local"`` for a LocalCluster of
@@ -21,7 +21,7 @@ import numpy as np
 
 from analysis.formulations.parametric import from_formulation
 
-from . import homotopy as hm
+from .monodromy import start_solver
 
 __all__ = ["DaskTracks", "track_chunk"]
 
@@ -33,7 +33,7 @@ def _solver(label: str, saturate: bool, q0: np.ndarray, x0: np.ndarray):
     key = (label, saturate, q0.tobytes(), x0.tobytes())
     if key not in _SOLVERS:
         _SOLVERS.clear()  # one system per loop: keep the memory of one solver
-        _SOLVERS[key] = hm.start_solver(from_formulation(label, saturate_det_h=saturate), q0, x0)[0]
+        _SOLVERS[key] = start_solver(from_formulation(label, saturate_det_h=saturate), q0, x0)[0]
     return _SOLVERS[key]
 
 

@@ -9,7 +9,7 @@ time, creating new nodes in the same program (so derivative nodes share subexpre
 other and with the values). :meth:`Program.compile` keeps what the outputs need, fuses a product read
 by one sum into it, schedules the outputs in a given order (depth first) and allocates registers by
 liveness: the :class:`Tape` is an array of instructions ``(opcode, destination, a, b, c)`` with a real
-immediate, run for many points at once by :mod:`solvers.methods.tape_kernel` (which owns the
+immediate, run for many points at once by :mod:`solvers.continuation.tape_kernel` (which owns the
 instruction set).
 
 :func:`homotopy_program` builds, for a parameter homotopy H(x, s) = F(x; q0 + s (q1 - q0)), the
@@ -619,7 +619,7 @@ def system_equations(name: str) -> tuple[Callable[[list[Value], list[Value]], li
     its minors squared (``5r4s:A,B2,B3,C2-C5,minors(4) (minors squared, seed 0)``: the equations that
     are not minors are kept, as solvers.generate squares them) or a positions formulation
     (``4r5s:positions-receivers-orbits``). ValueError for a name of none of these forms or without a
-    program. A caller checks the program against the system it stands for (homotopy._agrees).
+    program. A caller checks the program against the system it stands for (tracking._agrees).
     """
     from analysis.formulations.tdoa import _family, as_formulation, data_symbols
     from analysis.formulations.parametric import parse_squared_name, square_combinations

@@ -33,7 +33,7 @@ __all__ = ["SystemStructure", "TrackerOptions", "evaluate", "segment_coefficient
 
 #: Predictors: classical Runge-Kutta on the tangent field (three extra factorisations per step), or cubic
 #: Hermite extrapolation through the last two points and tangents (none; first step by RK4), or (the
-#: batched tape tracker only, :mod:`solvers.methods.tape_kernel`) a Pade approximant of type (2, 1) from
+#: batched tape tracker only, :mod:`solvers.continuation.tape_kernel`) a Pade approximant of type (2, 1) from
 #: the path's Taylor coefficients (no factorisation in the predictor).
 PREDICTORS = ("rk4", "hermite", "pade")
 
