@@ -155,10 +155,10 @@ class MonodromyCount:
 
 
 def start_solver(system: ParametricSystem, q0: np.ndarray, x0: np.ndarray,
-                 seed: int = 0) -> tuple[HomotopySolver, np.ndarray]:
+                 seed: int = 0, evaluator: str = "auto") -> tuple[HomotopySolver, np.ndarray]:
     """A solver of ``system`` with the one start pair (q0, x0) and no certified count, for counting roots by
-    monodromy (:func:`monodromy_count`): (solver, x0 refined by Newton's method). Raises
-    :class:`HomotopyError` when x0 is not a root at q0."""
+    monodromy (:func:`monodromy_count`, :func:`.graph.graph_monodromy`): (solver, x0 refined by Newton's method).
+    ``evaluator``: :data:`.tracking.EVALUATORS`. Raises :class:`HomotopyError` when x0 is not a root at q0."""
     coefficients = load_coefficients(coefficient_source(system))
     exps, eq = structure(system)
     q0 = np.asarray(q0, dtype=complex)
@@ -166,7 +166,7 @@ def start_solver(system: ParametricSystem, q0: np.ndarray, x0: np.ndarray,
             "parameters": list(system.parameters), "degree": 0, "coefficient_degree": int(max(system.coefficient_degrees)),
             "monodromy": {"seed": seed}, "tracker": {}, "term_equation": eq.tolist(), "exponents": exps.tolist(),
             "start_parameters": _pairs(q0), "start_roots": _pairs(np.atleast_2d(x0))}
-    solver = HomotopySolver(spec, coefficients)
+    solver = HomotopySolver(spec, coefficients, evaluator)
     x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
     if solver.residual(x0, q0[None]).max() > 1e-8:
         raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")

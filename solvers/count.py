@@ -1,0 +1,375 @@
+"""How many solutions? The number of isolated solutions of a parametric system at a generic complex parameter,
+where F4's GF(p) count does not reach: monodromy on a complete graph, every solution proven, sets compared.
+
+For a square parametric system F(x; q) = 0 (a system file, a TDOA/TOA formulation, 2D or 3D) and a seed:
+1. a generic complex start pair (q0, x0): a complex network and its root for a formulation; for a user's
+   system a random x0 and parameters q0 that make it a root (a point of the affine space of such q when the
+   parameters enter linearly, else Gauss-Newton on q);
+2. monodromy on a complete graph of parameter nodes (:func:`solvers.continuation.graph.graph_monodromy`): every
+   solution tracked once per edge, until the graph closes;
+3. the solutions at q0 proven one by one (:func:`solvers.continuation.certify.certify`, Krawczyk's test in ball
+   arithmetic) and their boxes checked pairwise disjoint (one solution per orbit of the system's group: boxes
+   disjoint from every image of every other box);
+4. a check that can fail: random known solutions carried around fresh loops must land in the set;
+5. for every further seed the same from its own start pair, and its set carried to the first seed's q0: the
+   sets must be equal (every endpoint one of the first set's, one-to-one);
+6. optionally the trace test (:mod:`solvers.continuation.trace`) on the first seed's set, with its witnesses
+   found by the same graph strategy.
+
+The evidence is said in words, the strongest that holds (STYLE.md, habit 16): "at least N, proven" (every
+solution proven and distinct: a lower bound that is a theorem), "complete by trace test (residual r)" added when
+the trace test passed, else "lower bound (numerical)" with the reason. A count is never called complete on a
+rule that only stops looking.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from analysis.formulations.parametric import ParametricSystem
+from analysis.formulations.tdoa import Formulation
+
+from .continuation import certify as certify_mod
+from .continuation import graph, monodromy, tracker
+from .continuation import trace as trace_mod
+from .continuation.tracking import HomotopyError, coefficient_source, load_coefficients, structure
+from .generate import GenerationError, SOLVERS, _job, complex_instance
+
+__all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "CELLS"]
+
+#: The 3D TDOA minimal cells without a committed solver, by configuration key (the others: solvers.generate.SOLVERS).
+#: 10r/4s: the compaction formulation with every measurement (13 unknowns, det H saturated); 5r/9s: the direct
+#: parametrization (receivers in the gauge frame, transmitters, offsets; one solution per orbit of the frame's
+#: 8 reflections).
+CELLS = {"10r4s3d": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "5r9s3d": "5r9s-tdoa3d-direct:all"}
+
+#: Seeded random known solutions carried around each fresh verification loop.
+VERIFY_SAMPLE = 64
+
+
+@dataclass(frozen=True)
+class CountOptions:
+    """seeds: one start pair each (the first is the reference; every other seed's set is carried to it);
+    nodes: the monodromy graph's nodes; verify_loops: fresh loops the sampled solutions are carried around;
+    certify: prove every solution (Krawczyk); trace: run the trace test on the first seed's set (TDOA/TOA
+    formulations and systems with a program; slow for large sets); seconds: wall-time cap of each graph;
+    checkpoints: a directory for the graphs' resumable files (None: none); tracker: the tracking options (None:
+    the solver's)."""
+
+    seeds: tuple[int, ...] = (0, 1)
+    nodes: int = 4
+    verify_loops: int = 1
+    certify: bool = True
+    trace: bool = False
+    trace_step: float = trace_mod.TraceOptions.step
+    seconds: float = float("inf")
+    checkpoints: str | None = None
+    tracker: tracker.TrackerOptions | None = None
+
+
+@dataclass(frozen=True)
+class SeedCount:
+    """One seed's graph: its solutions at its own q0, the graph's numbers, and (the first seed) the proof."""
+
+    seed: int
+    solutions: int
+    closed: bool
+    open_tracks: int
+    paths: int
+    rounds: int
+    seconds: float
+    carried: str = ""  # how this seed's set compares with the first seed's ("equal as sets", ...)
+
+
+@dataclass(frozen=True)
+class CountResult:
+    """The count and its evidence. ``count``: solutions (one per orbit of the group when ``group_order`` > 1) at
+    the first seed's q0; ``evidence``: in words (module docstring); ``complete``: the trace test passed;
+    ``proven``: solutions proven (Krawczyk) with pairwise disjoint boxes."""
+
+    system: str
+    unknowns: int
+    parameters: int
+    group_order: int
+    count: int
+    evidence: str
+    proven: int
+    seeds: tuple[SeedCount, ...]
+    loops_checked: str
+    trace: dict | None
+    seconds: float
+    certify_seconds: float = 0.0
+    notes: tuple[str, ...] = field(default=())
+
+    def record(self) -> dict:
+        out = dataclasses.asdict(self)
+        out["seeds"] = [dataclasses.asdict(s) for s in self.seeds]
+        return out
+
+    def summary(self) -> str:
+        what = "orbits" if self.group_order > 1 else "solutions"
+        lines = [f"{self.system}: {self.count} {what}" + (f" of a group of order {self.group_order}" if self.group_order > 1 else "")
+                 + f" ({self.unknowns} unknowns, {self.parameters} parameters)",
+                 f"evidence: {self.evidence}"]
+        for s in self.seeds:
+            lines.append(f"seed {s.seed}: {s.solutions} {what}, graph {'closed' if s.closed else f'not closed ({s.open_tracks} tracks open)'}, "
+                         f"{s.paths} paths, {s.rounds} rounds, {s.seconds:.1f} s" + (f"; {s.carried}" if s.carried else ""))
+        lines.append(f"loops: {self.loops_checked}")
+        if self.trace is not None:
+            t = self.trace
+            lines.append(f"trace test: {t['status']}, residual {t['residual']:.1e}, {t['witnesses']} witnesses, {t['paths']} paths")
+        lines += [f"note: {n}" for n in self.notes]
+        lines.append(f"{self.seconds:.1f} s in all ({self.certify_seconds:.1f} s proving)")
+        return "\n".join(lines)
+
+
+def tdoa_target(config: str, dim: int = 2, model: str = "tdoa") -> str:
+    """The formulation label counted for a configuration ("7r5s", or a formulation label "7r5s-tdoa3d-direct:all"
+    as it is): the committed solver's formulation (solvers.generate.SOLVERS) or :data:`CELLS`."""
+    if ":" in config:
+        return config
+    key = config.replace("/", "") + ("3d" if dim == 3 else "") + ("toa" if model == "toa" else "")
+    if key in SOLVERS and isinstance(SOLVERS[key], str):
+        return key
+    if key in CELLS:
+        return CELLS[key]
+    known = sorted(set(SOLVERS) | set(CELLS))
+    raise GenerationError(f"no formulation registered for {config} (dim {dim}, {model}); give a formulation label "
+                          f"such as 7r5s-tdoa3d-direct:all, or one of {', '.join(known)}")
+
+
+def _gauss_newton_start(system: ParametricSystem, coefficients: Callable, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A random complex x0 and parameters q0 that make it a root, for parameters that enter non-linearly: Newton's
+    method on F(x0; q) = 0 in q (least-norm steps, P >= N), from random complex q."""
+    exps, eq = structure(system)
+    N, P = len(system.unknowns), len(system.parameters)
+    x0 = rng.normal(size=N) + 1j * rng.normal(size=N)
+    mons = np.prod(x0[None, :] ** exps, axis=1)
+
+    def f(q: np.ndarray) -> np.ndarray:
+        out = np.zeros(N, dtype=complex)
+        np.add.at(out, eq, coefficients(q[None])[0] * mons)
+        return out
+
+    for attempt in range(10):
+        q = rng.normal(size=P) + 1j * rng.normal(size=P)
+        for _ in range(60):
+            r = f(q)
+            h = 1e-7 * (1.0 + np.abs(q))
+            J = np.column_stack([(f(q + h[k] * np.eye(P)[k]) - r) / h[k] for k in range(P)])
+            q = q - np.linalg.lstsq(J, r, rcond=None)[0]
+            if np.linalg.norm(f(q)) < 1e-13 * (1.0 + np.linalg.norm(q)):
+                return q, x0
+    raise HomotopyError(f"{system.name}: no parameters found that make a random point a root (Newton's method on "
+                        "the parameters did not converge); give a start pair")
+
+
+def _start(target, seed: int) -> tuple[ParametricSystem, np.ndarray, np.ndarray, np.ndarray | None]:
+    """(system, q0, x0, group) for a target (a ParametricSystem or a formulation/configuration label) and seed."""
+    job, _, _ = _job(target, None, None, "homotopy")
+    system = job.system
+    rng = np.random.default_rng(seed)
+    if job.start is not None:
+        q0, x0 = job.start(rng)
+    else:
+        coefficients = load_coefficients(coefficient_source(system))
+        try:
+            from .methods.homotopy import affine_start
+            q0, x0 = affine_start(system, coefficients, rng)
+        except HomotopyError:
+            q0, x0 = _gauss_newton_start(system, coefficients, rng)
+    group = job.group
+    if group is None and system.symmetry:
+        group = np.array([[1] * len(system.unknowns)] + [list(g) for g in system.symmetry], dtype=float)
+    return system, np.asarray(q0, dtype=complex), np.asarray(x0, dtype=complex), group
+
+
+def _evaluator(system: ParametricSystem) -> str:
+    """The tracker's evaluator: the formulations' validated programs ("auto"), else the tape traced from the
+    expanded system (compiled C, as for the formulations)."""
+    try:
+        Formulation.parse(system.name)
+        return "auto"
+    except Exception:  # a user's system: its name is no formulation label
+        return "tape"
+
+
+def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, system: ParametricSystem,
+           excluded, options) -> tuple[np.ndarray, np.ndarray]:
+    """Track xs (K, N) from qa to qb (straight, tight retrack, local detours for the failures): endpoints and the
+    mask of those accepted as solutions at qb."""
+    inst = np.zeros(len(xs), dtype=np.int64)
+    ends, _ = solver.track(qa[None], qb[None], xs, inst, options)
+    ends, ok = graph._accept(solver, ends, qb[None], inst, 1e-6, excluded)
+    for attempt, detour in enumerate([None] + list(graph.DETOURS)):
+        bad = np.flatnonzero(~ok)
+        if not len(bad):
+            break
+        if detour is None:
+            e, _ = solver.track(qa[None], qb[None], xs[bad], inst[bad], tracker.TIGHT)
+        else:
+            e, _ = graph._local_detours(solver, [(qa, qb)], xs[bad], inst[bad], *detour)
+        e, good = graph._accept(solver, e, qb[None], inst[bad], 1e-6, excluded)
+        ends[bad[good]] = e[good]
+        ok[bad[good]] = True
+    return ends, ok
+
+
+def _compare(known: np.ndarray, carried: np.ndarray, ok: np.ndarray, group) -> tuple[str, int]:
+    """How a carried set compares with the known set: (words, number of solutions the known set lacks)."""
+    m = graph._match(known, carried[ok], group)
+    outside = int((m < 0).sum())
+    hits = m[m >= 0]
+    twice = len(hits) - len(np.unique(hits))
+    lost = int((~ok).sum())
+    if outside == 0 and twice == 0 and lost == 0 and len(hits) == len(known):
+        return "equal as sets", 0
+    parts = []
+    if lost:
+        parts.append(f"{lost} paths lost")
+    if outside:
+        parts.append(f"{outside} land outside the set")
+    if twice:
+        parts.append(f"{twice} land on a solution twice")
+    return "not equal: " + ", ".join(parts), outside
+
+
+def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Generator, loops: int, group, excluded,
+                options) -> tuple[str, int]:
+    """Carry VERIFY_SAMPLE random known solutions around ``loops`` fresh random triangles: (words, outside)."""
+    if loops <= 0 or not len(roots):
+        return "not checked", 0
+    scale = np.sqrt(np.mean(np.abs(q0) ** 2))
+    landed = outside = lost = 0
+    for _ in range(loops):
+        pick = rng.choice(len(roots), size=min(VERIFY_SAMPLE, len(roots)), replace=False)
+        xs, q = roots[pick], q0
+        ok = np.ones(len(xs), dtype=bool)
+        for _leg in range(2):
+            qn = q0 + scale * (rng.normal(size=len(q0)) + 1j * rng.normal(size=len(q0)))
+            xs, good = _carry(solver, q, xs, qn, None, excluded, options)
+            ok &= good
+            q = qn
+        xs, good = _carry(solver, q, np.where(ok[:, None], xs, 0.0), q0, None, excluded, options)
+        ok &= good
+        m = graph._match(roots, xs[ok], group)
+        landed += int((m >= 0).sum())
+        outside += int((m < 0).sum())
+        lost += int((~ok).sum())
+    words = f"{landed} of {landed + outside + lost} sampled solutions carried around {loops} fresh loop(s) landed in the set"
+    if outside:
+        words += f", {outside} outside it (the set is incomplete)"
+    if lost:
+        words += f", {lost} paths lost"
+    return words, outside
+
+
+def count(target, options: CountOptions = CountOptions(), progress: Callable[[str], None] | None = None) -> CountResult:
+    """The number of solutions of ``target`` (a :class:`ParametricSystem`, a formulation label or a committed
+    configuration such as "7r5s3d") at a generic complex parameter, with its evidence (module docstring)."""
+    t0 = time.perf_counter()
+    say = progress or (lambda msg: None)
+    if not options.seeds:
+        raise ValueError("count needs at least one seed")
+    notes: list[str] = []
+    seeds: list[SeedCount] = []
+    first = None
+    excluded0 = solver0 = None
+    for seed in options.seeds:
+        system, q0, x0, group = _start(target, seed)
+        solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=_evaluator(system))
+        excluded = monodromy._excluded(system, q0)
+        checkpoint = None
+        if options.checkpoints:
+            os.makedirs(options.checkpoints, exist_ok=True)
+            stem = "".join(ch if ch.isalnum() else "_" for ch in system.name)[:80]
+            checkpoint = os.path.join(options.checkpoints, f"{stem}-seed{seed}-graph.json")
+        result = graph.graph_monodromy(
+            solver, q0, x0, graph.GraphOptions(nodes=options.nodes, seed=seed, seconds=options.seconds,
+                                               tracker=options.tracker),
+            group=group, excluded=excluded, checkpoint=checkpoint,
+            progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"))
+        carried = ""
+        if first is None:
+            first = (system, q0, result.roots, group)
+            excluded0, solver0 = excluded, solver
+        else:
+            ends, ok = _carry(solver0, q0, result.roots, first[1], system, excluded0, options.tracker or solver0.options)
+            carried, outside = _compare(first[2], ends, ok, group)
+            if outside:
+                notes.append(f"seed {seed}'s set carried to seed {options.seeds[0]}'s parameters has {outside} solution(s) "
+                             "the first set lacks")
+        seeds.append(SeedCount(seed, len(result.roots), result.closed, result.open_edges, result.paths, result.rounds,
+                               round(result.seconds, 1), carried))
+        say(f"seed {seed}: {len(result.roots)} solutions, graph {'closed' if result.closed else 'not closed'}"
+            + (f", {carried}" if carried else "") + f" ({result.seconds:.0f} s)")
+    system, q0, roots, group = first
+    rng = np.random.default_rng([options.seeds[0], 7])
+    loops_checked, outside = _loop_check(solver0, q0, roots, rng, options.verify_loops, group, excluded0,
+                                         options.tracker or solver0.options)
+    say(f"loops: {loops_checked}")
+    proven, cert_seconds = 0, 0.0
+    if options.certify:
+        cert = certify_mod.certify(system, q0, roots, progress=say)
+        meets = certify_mod.disjoint(cert.centres, np.where(cert.proven, cert.radii, 0.0), group)
+        proven = int((cert.proven & ~meets).sum())
+        cert_seconds = cert.seconds
+        if meets.any():
+            notes.append(f"{int(meets.sum())} proven boxes meet another box or an image of one")
+        if not cert.proven.all():
+            notes.append(f"{int((~cert.proven).sum())} solution(s) not proven by Krawczyk's test")
+        say(f"certify: {proven} of {len(roots)} proven, boxes disjoint ({cert.seconds:.0f} s)")
+    trace_record = None
+    if options.trace:
+        trace_record = _trace(system, q0, roots, group, options, say)
+    consistent = all(s.closed for s in seeds) and all(s.carried in ("", "equal as sets") for s in seeds) and not outside
+    if options.certify and proven == len(roots) and len(roots):
+        evidence = f"at least {len(roots)}, proven (Krawczyk's test, disjoint boxes)"
+    else:
+        evidence = "lower bound (numerical)"
+    if trace_record is not None and trace_record["status"] == "passed" and proven == len(roots):
+        evidence += f"; complete by trace test (residual {trace_record['residual']:.0e})"
+    if not consistent:
+        notes.append("the graphs did not all close or the seeds' sets differ: a solution may be missing")
+    elif len(options.seeds) > 1:
+        notes.append(f"graphs closed on {len(options.seeds)} seeds, their sets equal")
+    return CountResult(system.name, len(system.unknowns), len(system.parameters), 1 if group is None else len(group),
+                       len(roots), evidence, proven, tuple(seeds), loops_checked, trace_record,
+                       round(time.perf_counter() - t0, 1), round(cert_seconds, 1), tuple(notes))
+
+
+def _trace(system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, group, options: CountOptions,
+           say: Callable[[str], None]) -> dict:
+    """The trace test's record on the first seed's solutions (expanded to whole orbits with a group)."""
+    if group is not None:
+        return {"status": "not run", "residual": float("nan"), "witnesses": 0, "paths": 0,
+                "reason": "the trace test needs the orbits expanded (group order > 1): not run"}
+    _, q_star, x_star, _ = _start(system if not _is_label(system.name) else system.name, options.seeds[0] + 1000)
+    test = trace_mod.trace_test_system(system, q0, roots, (q_star, x_star),
+                                       trace_mod.TraceOptions(seed=options.seeds[0], step=options.trace_step), progress=say)
+    return test.record()
+
+
+def _is_label(name: str) -> bool:
+    try:
+        Formulation.parse(name)
+        return True
+    except Exception:
+        return False
+
+
+def main_progress(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def write_record(result: CountResult, path: str) -> None:
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(result.record(), fh, indent=1, default=float)
+        fh.write("\n")
