@@ -39,7 +39,7 @@ from analysis.formulations.tdoa import Formulation
 from .continuation import certify as certify_mod
 from .continuation import graph, monodromy, tracker
 from .continuation import trace as trace_mod
-from .continuation.tracking import HomotopyError, coefficient_source, load_coefficients, structure
+from .continuation.tracking import HomotopyError, _duplicated, coefficient_source, load_coefficients, structure
 from .generate import GenerationError, SOLVERS, _job, complex_instance
 
 __all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "CELLS"]
@@ -171,12 +171,16 @@ def _gauss_newton_start(system: ParametricSystem, coefficients: Callable, rng: n
                         "the parameters did not converge); give a start pair")
 
 
-def _start(target, seed: int) -> tuple[ParametricSystem, np.ndarray, np.ndarray, np.ndarray | None]:
-    """(system, q0, x0, group) for a target (a ParametricSystem or a formulation/configuration label) and seed."""
+def _start(target, seed: int, start: tuple[np.ndarray, np.ndarray] | None = None
+           ) -> tuple[ParametricSystem, np.ndarray, np.ndarray, np.ndarray | None]:
+    """(system, q0, x0, group) for a target (a ParametricSystem or a formulation/configuration label) and seed;
+    ``start``: the user's start pair (q0, x0) instead of a drawn one."""
     job, _, _ = _job(target, None, None, "homotopy")
     system = job.system
     rng = np.random.default_rng(seed)
-    if job.start is not None:
+    if start is not None:
+        q0, x0 = start
+    elif job.start is not None:
         q0, x0 = job.start(rng)
     else:
         coefficients = load_coefficients(coefficient_source(system))
@@ -201,25 +205,39 @@ def _evaluator(system: ParametricSystem) -> str:
         return "tape"
 
 
-def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, system: ParametricSystem,
-           excluded, options) -> tuple[np.ndarray, np.ndarray]:
-    """Track xs (K, N) from qa to qb (straight, tight retrack, local detours for the failures): endpoints and the
-    mask of those accepted as solutions at qb."""
+def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, excluded, options,
+           group: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Track xs (K, N) from qa to qb: endpoints and the mask of those accepted as solutions at qb. A path that
+    fails, or lands where another lands (with ``group``: on an image of another's endpoint; path jumping), is
+    retracked with tight steps (:data:`graph.STRAIGHT`), then around its stall point (:data:`graph.DETOURS`); a retracked endpoint is
+    kept only where it lands on no other endpoint."""
     inst = np.zeros(len(xs), dtype=np.int64)
     ends, _ = solver.track(qa[None], qb[None], xs, inst, options)
     ends, ok = graph._accept(solver, ends, qb[None], inst, 1e-6, excluded)
-    for attempt, detour in enumerate([None] + list(graph.DETOURS)):
+    ok &= ~_clashes(ends, ok, group)
+    for detour in list(graph.STRAIGHT) + list(graph.DETOURS):
         bad = np.flatnonzero(~ok)
         if not len(bad):
             break
-        if detour is None:
-            e, _ = solver.track(qa[None], qb[None], xs[bad], inst[bad], tracker.TIGHT)
+        if isinstance(detour, tracker.TrackerOptions):
+            e, _ = solver.track(qa[None], qb[None], xs[bad], inst[bad], detour)
         else:
             e, _ = graph._local_detours(solver, [(qa, qb)], xs[bad], inst[bad], *detour)
         e, good = graph._accept(solver, e, qb[None], inst[bad], 1e-6, excluded)
-        ends[bad[good]] = e[good]
-        ok[bad[good]] = True
+        for k, y, g in zip(bad, e, good):  # kept only where it lands on no endpoint kept so far
+            if g and graph._match(ends[ok], y[None], group)[0] < 0:
+                ends[k] = y
+                ok[k] = True
     return ends, ok
+
+
+def _clashes(ends: np.ndarray, ok: np.ndarray, group) -> np.ndarray:
+    """Mask of the accepted endpoints that coincide with another accepted one (or an image of one)."""
+    out = np.zeros(len(ends), dtype=bool)
+    idx = np.flatnonzero(ok)
+    if len(idx) > 1:
+        out[idx] = _duplicated(ends[idx], group=group)
+    return out
 
 
 def _compare(known: np.ndarray, carried: np.ndarray, ok: np.ndarray, group) -> tuple[str, int]:
@@ -254,10 +272,10 @@ def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Genera
         ok = np.ones(len(xs), dtype=bool)
         for _leg in range(2):
             qn = q0 + scale * (rng.normal(size=len(q0)) + 1j * rng.normal(size=len(q0)))
-            xs, good = _carry(solver, q, xs, qn, None, excluded, options)
+            xs, good = _carry(solver, q, xs, qn, excluded, options, group)
             ok &= good
             q = qn
-        xs, good = _carry(solver, q, np.where(ok[:, None], xs, 0.0), q0, None, excluded, options)
+        xs, good = _carry(solver, q, np.where(ok[:, None], xs, 0.0), q0, excluded, options, group)
         ok &= good
         m = graph._match(roots, xs[ok], group)
         landed += int((m >= 0).sum())
@@ -271,9 +289,12 @@ def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Genera
     return words, outside
 
 
-def count(target, options: CountOptions = CountOptions(), progress: Callable[[str], None] | None = None) -> CountResult:
+def count(target, options: CountOptions = CountOptions(), progress: Callable[[str], None] | None = None,
+          start: tuple[np.ndarray, np.ndarray] | None = None) -> CountResult:
     """The number of solutions of ``target`` (a :class:`ParametricSystem`, a formulation label or a committed
-    configuration such as "7r5s3d") at a generic complex parameter, with its evidence (module docstring)."""
+    configuration such as "7r5s3d") at a generic complex parameter, with its evidence (module docstring).
+    ``start``: a start pair (q0, x0) for the first seed (a system whose parameters enter non-linearly and
+    that Newton's method on the parameters does not solve); the other seeds draw theirs."""
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
     if not options.seeds:
@@ -283,7 +304,7 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
     first = None
     excluded0 = solver0 = None
     for seed in options.seeds:
-        system, q0, x0, group = _start(target, seed)
+        system, q0, x0, group = _start(target, seed, start if seed == options.seeds[0] else None)
         solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=_evaluator(system))
         excluded = monodromy._excluded(system, q0)
         checkpoint = None
@@ -301,7 +322,7 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
             first = (system, q0, result.roots, group)
             excluded0, solver0 = excluded, solver
         else:
-            ends, ok = _carry(solver0, q0, result.roots, first[1], system, excluded0, options.tracker or solver0.options)
+            ends, ok = _carry(solver0, q0, result.roots, first[1], excluded0, options.tracker or solver0.options, group)
             carried, outside = _compare(first[2], ends, ok, group)
             if outside:
                 notes.append(f"seed {seed}'s set carried to seed {options.seeds[0]}'s parameters has {outside} solution(s) "

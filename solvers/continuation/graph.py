@@ -26,6 +26,7 @@ form of :class:`solvers.continuation.tracking.HomotopySolver` (the trace test's 
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -43,9 +44,17 @@ __all__ = ["GraphOptions", "GraphCount", "graph_monodromy", "RETRIES"]
 #: straight track failed, plain and tight (:func:`_local_detours`).
 DETOURS = ((0.005, 1.0), (0.005, -1.0), (0.02, 1.0), (0.02, -1.0))
 
-#: Retracks of a (solution, edge) whose track failed before the pair is left open: one with tight step control
-#: on the edge's segment, then the local detours.
-RETRIES = 1 + len(DETOURS)
+#: Step control of the straight retracks of a (solution, edge) whose plain track failed, in turn: tight steps,
+#: then tight steps with no practical limit on their number (4r/5s: a path crawls through an ill-conditioned
+#: stretch in 5,500 RK4 steps, more than TIGHT's 4,000; the Pade predictor took 15,000 there).
+STRAIGHT = (tracker.TIGHT, dataclasses.replace(tracker.TIGHT, max_steps=100_000, predictor="rk4"))
+
+#: Retracks of a (solution, edge) whose track failed before the pair is left open: the straight ones, then the
+#: local detours.
+RETRIES = len(STRAIGHT) + len(DETOURS)
+
+#: Independent loops the graph keeps when edges with failed tracks leave it (the complete graph on 4 nodes has 3).
+MIN_LOOPS = 2
 
 #: Relative distance under which two endpoints are one solution (as :func:`monodromy.add_new`).
 SAME = 1e-6
@@ -289,7 +298,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
         if not work:
             break
         rounds += 1
-        for attempt in range(RETRIES + 1):  # 0: plain, 1: tight, 2...: local detours
+        for attempt in range(RETRIES + 1):  # 0: plain, then STRAIGHT, then DETOURS
             part = [(i, j, idx[nodes[i].tries[j][idx] == attempt]) for i, j, idx in work]
             part = [(i, j, idx) for i, j, idx in part if len(idx)]
             if not part:
@@ -297,19 +306,19 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
             qb = np.array([nodes[j].q for _, j, _ in part])
             inst = np.concatenate([np.full(len(idx), e) for e, (_, _, idx) in enumerate(part)])
             xs = np.vstack([nodes[i].roots[idx] for i, _, idx in part])
-            if attempt < 2:
+            if attempt < len(STRAIGHT) + 1:
                 ways = [[nodes[i].q, nodes[j].q] for i, j, _ in part]
-                ends, tracked = _track_routes(system, ways, xs, inst, tracker.TIGHT if attempt else plain)
+                ends, tracked = _track_routes(system, ways, xs, inst, STRAIGHT[attempt - 1] if attempt else plain)
             else:
                 ends, tracked = _local_detours(system, [(nodes[i].q, nodes[j].q) for i, j, _ in part], xs, inst,
-                                               *DETOURS[attempt - 2])
+                                               *DETOURS[attempt - 1 - len(STRAIGHT)])
             paths += tracked
             ends, ok = _accept(system, ends, qb, inst, options.accept_tol, excluded)
             start = 0
             for e, (i, j, idx) in enumerate(part):
                 sl = slice(start, start + len(idx))
                 start += len(idx)
-                jumps += _record(nodes, i, j, idx, ends[sl], ok[sl], group, detour=attempt >= 2)
+                jumps += _record(nodes, i, j, idx, ends[sl], ok[sl], group, detour=attempt > len(STRAIGHT))
         if progress:
             progress(f"round {rounds}: {' / '.join(str(len(n.roots)) for n in nodes)} solutions at the "
                      f"{K} nodes, {paths} paths, {sum(int((n.image[j] < 0).sum()) for n in nodes for j in n.image)} "
@@ -317,14 +326,41 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
         if checkpoint and time.perf_counter() - last_save > 60.0:
             _save(checkpoint, record())
             last_save = time.perf_counter()
+    # edges whose open tracks failed every retry (a segment passing close to a point where several solutions
+    # meet: 3D TOA 4r/6s seed 1, four paths stalling at one s from both ends) leave the graph, when the other
+    # edges still join every node in at least MIN_LOOPS independent loops
+    finished = options.target is None and time.perf_counter() - t0 < options.seconds
+    dropped = [(i, j) for i, n in enumerate(nodes) for j in n.image if i < j and (
+        (n.image[j] < 0).any() or (nodes[j].image[i] < 0).any())]
+    if finished and dropped and _loops(nodes, dropped) >= MIN_LOOPS:
+        for i, j in dropped:
+            del nodes[i].image[j], nodes[i].tries[j], nodes[j].image[i], nodes[j].tries[i]
+            if progress:
+                progress(f"edge {i}-{j} dropped: tracks along it failed every retry")
     if checkpoint:
         _save(checkpoint, record())
     open_edges = sum(int((n.image[j] < 0).sum()) for n in nodes for j in n.image)
     counts = tuple(len(n.roots) for n in nodes)
-    edges = K * (K - 1) // 2
-    closed = open_edges == 0 and len(set(counts)) == 1
+    edges = sum(len(n.image) for n in nodes) // 2
+    closed = open_edges == 0 and len(set(counts)) == 1 and _loops(nodes, []) >= MIN_LOOPS
     return GraphCount(nodes[0].roots, counts, np.array(qs), paths, rounds, open_edges, closed,
                       spent + time.perf_counter() - t0, jumps, tuple(n.roots for n in nodes), edges)
+
+
+def _loops(nodes: list[_Node], without: list[tuple[int, int]]) -> int:
+    """Independent loops of the graph's edges less ``without`` (edges - nodes + 1), 0 when they do not join every
+    node."""
+    cut = {frozenset(e) for e in without}
+    seen, todo = {0}, [0]
+    while todo:
+        i = todo.pop()
+        for j in nodes[i].image:
+            if j not in seen and frozenset((i, j)) not in cut:
+                seen.add(j)
+                todo.append(j)
+    if len(seen) < len(nodes):
+        return 0
+    return sum(len(n.image) for n in nodes) // 2 - len(cut) - len(nodes) + 1
 
 
 def _record(nodes: list[_Node], i: int, j: int, idx: np.ndarray, ends: np.ndarray, ok: np.ndarray,
