@@ -133,7 +133,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
             "(seeded by --prime-seed) until at least 3 agree and are a majority, primes dividing a leading "
             "coefficient or denominator skipped; --gb then prints the basis over Q (Chinese remaindering and "
             "rational reconstruction, checked modulo a fresh prime). --prime P (repeatable) computes modulo the "
-            "given primes instead, which must agree. See docs/engine.md."
+            "given primes as well, which must agree with each other and with the random primes' majority (exit 3 "
+            "otherwise). See docs/engine.md."
         ),
     )
     p.add_argument("file", nargs="?", help="system in msolve format ('-' for stdin)")
@@ -158,7 +159,8 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         help="write the (first prime's) system for msolve|m2|singular to PATH and continue; with --saturate or "
              "--saturate-det-h the saturated one (an extra variable t and t*f - 1)",
     )
-    p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
+    p.add_argument("--prime", type=int, action="append",
+                   help="prime to compute modulo (repeatable); over characteristic 0 checked against random primes")
     p.add_argument("--prime-seed", type=_nonnegative("--prime-seed"), default=0, metavar="N",
                    help="characteristic 0: the random 31-bit primes are drawn by a seed hashed from the system and N "
                    "(default 0); another N draws other primes")
