@@ -2,9 +2,10 @@
 
 Subcommands
 -----------
-degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
-           or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``; ``--model toa``,
-           ``--dim 3``, ``--parametrization direct`` for TOA, 3D and the positions as unknowns)
+degree     number of solutions (|B|), dimension and Gröbner basis of a system file (msolve's format or
+           the sectioned one, analysis.formulations.systemfile), or of a TDOA formulation
+           (``--tdoa 6r4s --equations B2,C2-C6,minors``; ``--model toa``, ``--dim 3``,
+           ``--parametrization direct`` for TOA, 3D and the positions as unknowns)
 tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
 generate   build a numeric solver (spec over GF(p) + module) into --out DIR and print its statistics
 template-check  how many action-matrix relations single elimination templates of a formulation or of
@@ -922,7 +923,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    "numbers (default: none)")
     p.add_argument("--delimiter", metavar="D", help=f"cell delimiter: {', '.join(DELIMITERS)} (default: detected)")
     p.add_argument("--header", choices=HEADERS, default="auto", help="which of the first row (transmitter names) and "
-                   "first column (receiver names) hold names (default: auto, see the README)")
+                   "first column (receiver names) hold names (default: auto: names when the first row / column holds text, an "
+                   "empty corner cell, distinct integers as transmitter names or a row index; docs/calibrate.md)")
     p.add_argument("--transpose", action="store_true", help="the file has one row per transmitter and one column "
                    "per receiver")
     p.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2: a network in the plane (default); 3: in "
@@ -1034,7 +1036,8 @@ def _print_calibration(result, meas, units: str | None = None) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tdoa-workbench",
-        description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
+        description="Polynomial-system complexity analysis (Groebner bases over GF(p), root counts of your own "
+        "systems), minimal-solver generation and self-calibration of TDOA/TOA sensor networks in 2D and 3D.",
     )
     parser.add_argument("--version", action=_VersionAction, nargs=0, help="show the program's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
