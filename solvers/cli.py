@@ -766,8 +766,8 @@ def _add_template_check(sub: argparse._SubParsersAction) -> None:
         "(exact ranks). A template is complete when it reaches all of them. Families: total (all monomials of "
         "degree <= d), offsets (monomials in o_j), linear-offsets ((H, b)-degree <= 1 times offsets). Bases: "
         "grevlex standard monomials, or (formulations) those of the elimination ideal in the offsets. A "
-        "formulation is sampled as a consistent GF(p) instance; a characteristic-0 file is reduced mod p, and "
-        "its number of roots is confirmed mod a second prime.")
+        "formulation is sampled as a consistent GF(p) instance; a characteristic-0 file is reduced mod p, and p "
+        "must agree with the majority of random 31-bit primes, as degree's --prime (exit 3 otherwise).")
     p.add_argument("system", help="formulation label (e.g. 9r3s:C2-C9) or a plain system FILE (msolve's format, or the "
                    "parametric one without parameters)")
     p.add_argument("--family", default="total", help="multiplier family: total, offsets, linear-offsets (default total)")
@@ -796,7 +796,7 @@ def _file_system(path: str, prime: int, basis: str):
     """Equations over GF(p), unknowns, basis and a description for a user's system file."""
     from analysis.engine.io import InputError, System
     from analysis.engine.ring import BadPrime, check_prime
-    from solvers.feasibility import SECOND_PRIME, system_basis
+    from solvers.feasibility import system_basis
 
     if basis != "grevlex":
         raise UserError(f"--basis {basis} needs a TDOA formulation; a system file uses the grevlex basis")
@@ -813,11 +813,16 @@ def _file_system(path: str, prime: int, basis: str):
     B = system_basis(equations, system.variables, prime)
     note = f"GF({prime})"
     if not system.characteristic:
-        other = SECOND_PRIME if prime != SECOND_PRIME else 65521
-        check = system_basis([dict(f.terms()) for f in system.to_ring(other)[1] if f], system.variables, other)
-        if len(check) != len(B):
-            raise UserError(f"{path}: {len(B)} roots mod {prime} but {len(check)} mod {other}; try another --prime")
-        note += f", confirmed mod {other}"
+        # the prime is checked like degree's --prime: against the majority of random 31-bit primes (exit 3 if
+        # it is outvoted), so that an unlucky prime's basis is never taken for the system's
+        from analysis.engine.degree import analyse_prime
+        from analysis.engine.modular import analyse_rational, input_seed
+
+        rational = analyse_rational(system.polynomials, "grevlex", system.nvars,
+                                    lambda p: analyse_prime(system.to_ring(p)[1]), (prime,),
+                                    input_seed(system.variables, system.polynomials))
+        random = len(rational.computed) - 1
+        note += f", agreeing with {random} random 31-bit primes"
     return equations, tuple(system.variables), B, prime, note
 
 

@@ -93,3 +93,14 @@ def test_template_check_reads_a_plain_sys(capsys, tmp_path):
     assert code == 0 and out.startswith(f"{path}: |B| = 16")
     code, _, err = run(capsys, "template-check", EXAMPLES / "circle.sys")
     assert code == 2 and "has parameters (a, b, c)" in err
+
+
+def test_template_check_checks_its_prime_against_random_primes(capsys, tmp_path):
+    """Issue 46: the prime of template-check (65521 by default) is checked like degree's --prime; a system that
+    is inconsistent over Q but not mod 65521 is an error (exit 3), not a basis of 2 monomials."""
+    path = tmp_path / "unlucky.ms"
+    path.write_text("x\n0\nx^2-1, x^2+65520\n")
+    code, out, err = run(capsys, "template-check", path)
+    assert code == 3 and out == "" and "--prime 65521 is unlucky" in err and "degree 0, dimension -1" in err
+    code, out, _ = run(capsys, "template-check", EXAMPLES / "katsura4.ms", "--degrees", "1")
+    assert code == 0 and "agreeing with 3 random 31-bit primes" in out

@@ -198,7 +198,7 @@ def analyse_rational(
         raise PrimeDisagreement(
             f"--prime {', '.join(map(str, primes))} is unlucky for this system: degree {mine.degree}, dimension "
             f"{mine.dimension} there, but {len(best)} of {len(results)} random 31-bit primes (seed {seed}) agree on "
-            f"degree {theirs.degree}, dimension {theirs.dimension}; leave out --prime")
+            f"degree {theirs.degree}, dimension {theirs.dimension}; try another --prime")
     agreeing = {r.prime for r in best}
     others = tuple(r.prime for r in results if r.prime not in agreeing)
     report = _agreed(given + best)
