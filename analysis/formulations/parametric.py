@@ -39,7 +39,7 @@ from ..engine.degree import DEFAULT_PRIMES, DegreeReport, PrimeDisagreement, ana
 from ..engine.io import InputError, parse_polynomial
 from ..engine.quotient import saturated_degree
 from ..engine.ring import Poly, Ring
-from .systemfile import ParametricError, check_names, sections
+from .sections import ParametricError, check_names, sections
 
 __all__ = ["ParametricSystem", "ParametricError", "GFSample", "parse", "from_formulation"]
 
