@@ -267,7 +267,8 @@ def _degree_parametric(args: argparse.Namespace, system) -> int:
     two seeds, all agreeing, saturated by its nonzero conditions (ParametricSystem.degree, as generate certifies)."""
     from analysis.engine.degree import DEFAULT_PRIMES
 
-    refused = [flag for flag, given in (("--prime", args.prime), ("--gb", args.gb), ("--saturate", args.saturate),
+    refused = [flag for flag, given in (("--prime", args.prime), ("--prime-seed", args.prime_seed),
+                                        ("--gb", args.gb), ("--saturate", args.saturate),
                                         ("--export", args.export), ("--order", args.order != "grevlex"),
                                         ("--engine", args.engine != "own"), ("--msolve", args.msolve),
                                         ("--no-check", args.no_check)) if given]
