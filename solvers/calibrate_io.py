@@ -34,6 +34,7 @@ line as an editor counts it, column as the cell's position in its line).
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
 import os
@@ -358,14 +359,36 @@ def write_json(report: dict, path: str) -> None:
         handle.write("\n")
 
 
+CIRCLE_SHARE = 0.03
+"""The largest 1-sigma circle of a map is magnified to about this share of the map's extent (a centimetre
+standard deviation on a map of metres is otherwise thinner than the line that draws it)."""
+
+
+def circle_magnification(extent: float, stds) -> int:
+    """The factor (1, 2, 5, 10, 20, 50, ...) by which a map's 1-sigma circles are magnified: the largest one
+    that keeps the largest circle within :data:`CIRCLE_SHARE` of the extent, at least 1."""
+    stds = np.asarray(stds, dtype=float)
+    stds = stds[np.isfinite(stds) & (stds > 0)]
+    if not stds.size or not np.isfinite(extent) or extent <= 0:
+        return 1
+    limit = CIRCLE_SHARE * extent / stds.max()
+    factor = 1
+    for step in itertools.cycle((2, 2.5, 2)):  # 1, 2, 5, 10, 20, 50, ...
+        if factor * step > limit:
+            return factor
+        factor = round(factor * step)
+
+
 def plot_calibration(result, path: str, measurements: Measurements | None = None, units: str | None = None) -> None:
-    """Map of the calibration: receivers (triangles), transmitters (circles), 1-sigma circles, and
-    every rejected measurement as a dashed red line between its receiver and transmitter; `units`
-    labels the axes. A 3D calibration is drawn as its three projections (xy, xz, yz)."""
+    """Map of the calibration: receivers (triangles), transmitters (circles), 1-sigma circles (magnified
+    by :func:`circle_magnification`, the factor in the legend), and every rejected measurement as a
+    dashed red line between its receiver and transmitter; `units` labels the axes. A 3D calibration is
+    drawn as its three projections (xy, xz, yz)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     names_r = measurements.receivers if measurements else [str(i + 1) for i in range(result.m)]
     names_t = measurements.transmitters if measurements else [str(j + 1) for j in range(result.n)]
@@ -373,6 +396,10 @@ def plot_calibration(result, path: str, measurements: Measurements | None = None
     fig, axs = plt.subplots(1, len(views), figsize=(7 * len(views), 7), squeeze=False)
     R, S = result.receivers, result.transmitters
     rejected = ~result.inliers & np.isfinite(result.residuals)
+    placed = np.vstack([R, S])
+    placed = placed[np.all(np.isfinite(placed), axis=1)]
+    extent = float(np.ptp(placed, axis=0).max()) if len(placed) else 0.0
+    magnify = circle_magnification(extent, np.concatenate([result.receiver_std, result.transmitter_std]))
     for ax, (a, b) in zip(axs[0], views):
         first = True
         for i, j in zip(*np.nonzero(rejected)):
@@ -387,7 +414,9 @@ def plot_calibration(result, path: str, measurements: Measurements | None = None
                     continue
                 ax.annotate(name, P[k, [a, b]], textcoords="offset points", xytext=(4, 4), fontsize=8)
                 if np.isfinite(std[k]) and std[k] > 0:
-                    ax.add_patch(plt.Circle(P[k, [a, b]], std[k], fill=False, color="gray", lw=0.5))
+                    ax.add_patch(plt.Circle(P[k, [a, b]], magnify * std[k], fill=False, color="gray", lw=0.5))
+        ax.add_line(Line2D([], [], ls="", marker="o", mfc="none", color="gray", lw=0.5,
+                           label="1-sigma circles" + (f" x {magnify}" if magnify > 1 else "")))
         ax.set_aspect("equal")
         unit = f" [{units}]" if units else ""
         ax.set_xlabel("xyz"[a] + unit)

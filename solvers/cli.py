@@ -2,9 +2,10 @@
 
 Subcommands
 -----------
-degree     number of solutions (|B|), dimension and Gröbner basis of a system in msolve format,
-           or of a TDOA formulation (``--tdoa 6r4s --equations B2,C2-C6,minors``; ``--model toa``,
-           ``--dim 3``, ``--parametrization direct`` for TOA, 3D and the positions as unknowns)
+degree     number of solutions (|B|), dimension and Gröbner basis of a system file (msolve's format or
+           the sectioned one, analysis.formulations.systemfile), or of a TDOA formulation
+           (``--tdoa 6r4s --equations B2,C2-C6,minors``; ``--model toa``, ``--dim 3``,
+           ``--parametrization direct`` for TOA, 3D and the positions as unknowns)
 tables     the complexity sweep: Tables 2 and 3 of the paper and tables/formulations.csv
 generate   build a numeric solver (spec over GF(p) + module) into --out DIR and print its statistics
 count      number of solutions of a parametric system beyond F4 (graph monodromy, Krawczyk proofs, seeds compared)
@@ -129,15 +130,19 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
         description=(
             "Compute the reduced Groebner basis of a system and report its degree |B| (the number of "
             "standard monomials), or its dimension if it is not zero-dimensional. FILE is in msolve's "
-            "format: line 1 comma-separated variables, line 2 the characteristic (0 or a prime), then "
-            "comma-separated polynomials. Characteristic 0 systems are reduced modulo random 31-bit primes "
+            "format (line 1 comma-separated variables, line 2 the characteristic (0 or a prime), then "
+            "comma-separated polynomials) or in the parametric format of generate ('unknowns:', optional "
+            "'parameters:' and 'nonzero:', 'equations:'); one with parameters is counted at random parameter "
+            "values modulo two primes for two seeds (--seed), one without is a plain system over Q. "
+            "Characteristic 0 systems are reduced modulo random 31-bit primes "
             "(seeded by --prime-seed) until at least 3 agree and are a majority, primes dividing a leading "
             "coefficient or denominator skipped; --gb then prints the basis over Q (Chinese remaindering and "
             "rational reconstruction, checked modulo a fresh prime). --prime P (repeatable) computes modulo the "
-            "given primes instead, which must agree. See docs/engine.md."
+            "given primes as well, which must agree with each other and with the random primes' majority (exit 3 "
+            "otherwise). See docs/engine.md."
         ),
     )
-    p.add_argument("file", nargs="?", help="system in msolve format ('-' for stdin)")
+    p.add_argument("file", nargs="?", help="system file, msolve's format or the parametric one ('-' for stdin)")
     p.add_argument("--tdoa", metavar="CONFIG", help="a TDOA configuration instead of FILE, e.g. 6r4s or 9r/3s")
     p.add_argument(
         "--equations",
@@ -152,14 +157,16 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
                    "(unknowns the gauge-fixed positions and offsets; degree = 2^K x the compaction count) or gram "
                    "(TOA: the receivers' Gram matrix G; saturate by det G with --saturate-det-h)")
     p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
-                   help="with --tdoa: seed of the consistent random instance")
+                   help="with --tdoa: seed of the consistent random instance; with a parametric FILE: the first "
+                   "of the two seeds of its random parameter values (default 0)")
     p.add_argument("--saturate-det-h", action="store_true", help="with --tdoa: saturate by det H (times det D~[:3,:3] when 3D TDOA's B5..Bn are used)")
     p.add_argument(
         "--export", nargs=2, metavar=("FORMAT", "PATH"),
         help="write the (first prime's) system for msolve|m2|singular to PATH and continue; with --saturate or "
              "--saturate-det-h the saturated one (an extra variable t and t*f - 1)",
     )
-    p.add_argument("--prime", type=int, action="append", help="prime to compute modulo (repeatable)")
+    p.add_argument("--prime", type=int, action="append",
+                   help="prime to compute modulo (repeatable); over characteristic 0 checked against random primes")
     p.add_argument("--prime-seed", type=_nonnegative("--prime-seed"), default=0, metavar="N",
                    help="characteristic 0: the random 31-bit primes are drawn by a seed hashed from the system and N "
                    "(default 0); another N draws other primes")
@@ -238,8 +245,53 @@ def _bezout_bound(polys) -> int:
     return out
 
 
+def read_system_arg(path: str, name: str | None = None):
+    """The system in FILE ('-': stdin), in either format (analysis.formulations.systemfile.read_system_text): an
+    analysis.engine.io.System (a plain system) or a ParametricSystem named ``name`` (default: the path); a
+    one-line UserError for anything wrong. Every verb that takes a system FILE reads it here."""
+    from analysis.engine.io import InputError, decode_text
+    from analysis.formulations.systemfile import ParametricError, read_system_text
+
+    try:
+        data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
+    except OSError as e:
+        raise UserError(f"cannot read {path}: {e.strerror}") from None
+    source = "<stdin>" if path == "-" else path
+    try:
+        return read_system_text(decode_text(data, source), name or source)
+    except (InputError, ParametricError) as e:
+        raise UserError(str(e)) from None
+
+
+def _degree_parametric(args: argparse.Namespace, system) -> int:
+    """Degree of a parametric system: its number of roots at random parameter values modulo two primes and for
+    two seeds, all agreeing, saturated by its nonzero conditions (ParametricSystem.degree, as generate certifies)."""
+    from analysis.engine.degree import DEFAULT_PRIMES
+
+    refused = [flag for flag, given in (("--prime", args.prime), ("--prime-seed", args.prime_seed),
+                                        ("--gb", args.gb), ("--saturate", args.saturate),
+                                        ("--export", args.export), ("--order", args.order != "grevlex"),
+                                        ("--engine", args.engine != "own"), ("--msolve", args.msolve),
+                                        ("--no-check", args.no_check)) if given]
+    if refused:
+        raise UserError(f"{args.file} has parameters ({', '.join(system.parameters)}): {', '.join(refused)} applies to "
+                        "plain systems; a parametric one is counted in grevlex at random parameter values modulo "
+                        f"{' and '.join(map(str, DEFAULT_PRIMES))} (--seed N draws other values; a nonzero: line "
+                        "saturates)")
+    seeds = (args.seed, args.seed + 1)
+    report = system.degree(DEFAULT_PRIMES, seeds, options=_f4_options(args))
+    out = {"system": system.name, "unknowns": list(system.unknowns), "parameters": list(system.parameters),
+           **report.as_dict(),
+           "status": f"{len(DEFAULT_PRIMES)} primes x 2 seeds ({seeds[0]}, {seeds[1]}) of random parameter values "
+                     "agree: the number of roots at generic parameter values, over GF(p)"}
+    if system.nonzero:
+        out["saturated_by"] = " * ".join(system.nonzero)
+    header = f"{system.name}: {len(system.unknowns)} unknowns, parameters {', '.join(system.parameters)}"
+    return _finish_report(out, report, args, header)
+
+
 def cmd_degree(args: argparse.Namespace) -> int:
-    from analysis.engine.io import InputError, System, decode_text, parse_msolve, parse_polynomial
+    from analysis.engine.io import InputError, System, parse_polynomial
     from analysis.engine.ring import check_prime, BadPrime
 
     if args.tdoa:
@@ -249,15 +301,10 @@ def cmd_degree(args: argparse.Namespace) -> int:
     if args.equations or args.saturate_det_h or args.model or args.dim is not None or args.parametrization:
         raise UserError("--equations, --model, --dim, --parametrization and --saturate-det-h need --tdoa CONFIG")
     if args.file is None:
-        raise UserError("give a FILE in msolve format, or --tdoa CONFIG --equations SPEC")
-    try:
-        data = sys.stdin.buffer.read() if args.file == "-" else open(args.file, "rb").read()
-    except OSError as e:
-        raise UserError(f"cannot read {args.file}: {e.strerror}") from None
-    try:
-        system: System = parse_msolve(decode_text(data, "<stdin>" if args.file == "-" else args.file), source=args.file)
-    except InputError as e:
-        raise UserError(str(e)) from None
+        raise UserError("give a system FILE (msolve's format or the parametric one), or --tdoa CONFIG --equations SPEC")
+    system = read_system_arg(args.file)
+    if not isinstance(system, System):
+        return _degree_parametric(args, system)
     try:
         primes = tuple(check_prime(p) for p in args.prime) if args.prime else None
     except BadPrime as e:
@@ -651,7 +698,8 @@ def _read_start(path: str, system) -> tuple:
 def cmd_generate(args: argparse.Namespace) -> int:
     import shlex
 
-    from analysis.formulations.parametric import ParametricError, parse
+    from analysis.engine.io import System
+    from analysis.formulations.parametric import ParametricError
     from solvers import generate as gen
     from solvers.continuation.tracking import HomotopyError
     from solvers.methods.action_matrix import ActionMatrixError
@@ -690,7 +738,11 @@ def cmd_generate(args: argparse.Namespace) -> int:
     command += f" --from-monodromy {shlex.quote(args.from_monodromy)}" if args.from_monodromy else ""
     try:
         if is_file:
-            system = parse(_read_text(target), os.path.basename(target))
+            system = read_system_arg(target, os.path.basename(target))
+            if isinstance(system, System):
+                raise UserError(f"{target} is a plain system (no parameters): a solver needs data to vary; declare "
+                                "the data as 'parameters:' (docs/generate.md), or count the solutions with "
+                                f"`tdoa-workbench degree {target}`")
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
             result = gen.generate(system, args.method, out=args.out, name=name, seed=args.seed, start=start,
@@ -781,14 +833,15 @@ def _add_template_check(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "template-check", help="do single elimination templates of a system reach the action-matrix relations?",
         description="Multiply the equations of a TDOA formulation (a label such as 9r3s:C2-C9) or of your own "
-        "system (a FILE in msolve format) by a family of monomials up to each degree and count, over GF(p), how "
+        "system (a plain system FILE) by a family of monomials up to each degree and count, over GF(p), how "
         "many of the relations x*B \\ B -> B that the action matrix of ACTION needs the Macaulay matrix reaches "
         "(exact ranks). A template is complete when it reaches all of them. Families: total (all monomials of "
         "degree <= d), offsets (monomials in o_j), linear-offsets ((H, b)-degree <= 1 times offsets). Bases: "
         "grevlex standard monomials, or (formulations) those of the elimination ideal in the offsets. A "
-        "formulation is sampled as a consistent GF(p) instance; a characteristic-0 file is reduced mod p, and "
-        "its number of roots is confirmed mod a second prime.")
-    p.add_argument("system", help="formulation label (e.g. 9r3s:C2-C9) or a system FILE in msolve format")
+        "formulation is sampled as a consistent GF(p) instance; a characteristic-0 file is reduced mod p, and p "
+        "must agree with the majority of random 31-bit primes, as degree's --prime (exit 3 otherwise).")
+    p.add_argument("system", help="formulation label (e.g. 9r3s:C2-C9) or a plain system FILE (msolve's format, or the "
+                   "parametric one without parameters)")
     p.add_argument("--family", default="total", help="multiplier family: total, offsets, linear-offsets (default total)")
     p.add_argument("--degrees", default="1-3", help="multiplier degrees, e.g. 2 or 1-4 (default 1-3)")
     p.add_argument("--action", help="action unknown (default: the first offset, else the first unknown)")
@@ -813,29 +866,35 @@ def _degree_range(text: str) -> range:
 
 def _file_system(path: str, prime: int, basis: str):
     """Equations over GF(p), unknowns, basis and a description for a user's system file."""
-    from analysis.engine.io import InputError, read_system
+    from analysis.engine.io import InputError, System
     from analysis.engine.ring import BadPrime, check_prime
-    from solvers.feasibility import SECOND_PRIME, system_basis
+    from solvers.feasibility import system_basis
 
     if basis != "grevlex":
         raise UserError(f"--basis {basis} needs a TDOA formulation; a system file uses the grevlex basis")
+    system = read_system_arg(path)
+    if not isinstance(system, System):
+        raise UserError(f"{path} has parameters ({', '.join(system.parameters)}); template-check reads a plain system "
+                        "(msolve's format, or the parametric one without 'parameters:')")
     try:
-        system = read_system(path)
         prime = system.characteristic or check_prime(prime)
         polys = system.to_ring(prime)[1]
     except (InputError, BadPrime) as e:
         raise UserError(str(e)) from None
-    except OSError as e:
-        raise UserError(f"cannot read {path}: {e.strerror}") from None
     equations = [dict(f.terms()) for f in polys if f]
     B = system_basis(equations, system.variables, prime)
     note = f"GF({prime})"
     if not system.characteristic:
-        other = SECOND_PRIME if prime != SECOND_PRIME else 65521
-        check = system_basis([dict(f.terms()) for f in system.to_ring(other)[1] if f], system.variables, other)
-        if len(check) != len(B):
-            raise UserError(f"{path}: {len(B)} roots mod {prime} but {len(check)} mod {other}; try another --prime")
-        note += f", confirmed mod {other}"
+        # the prime is checked like degree's --prime: against the majority of random 31-bit primes (exit 3 if
+        # it is outvoted), so that an unlucky prime's basis is never taken for the system's
+        from analysis.engine.degree import analyse_prime
+        from analysis.engine.modular import analyse_rational, input_seed
+
+        rational = analyse_rational(system.polynomials, "grevlex", system.nvars,
+                                    lambda p: analyse_prime(system.to_ring(p)[1]), (prime,),
+                                    input_seed(system.variables, system.polynomials))
+        random = len(rational.computed) - 1
+        note += f", agreeing with {random} random 31-bit primes"
     return equations, tuple(system.variables), B, prime, note
 
 
@@ -941,7 +1000,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    "numbers (default: none)")
     p.add_argument("--delimiter", metavar="D", help=f"cell delimiter: {', '.join(DELIMITERS)} (default: detected)")
     p.add_argument("--header", choices=HEADERS, default="auto", help="which of the first row (transmitter names) and "
-                   "first column (receiver names) hold names (default: auto, see the README)")
+                   "first column (receiver names) hold names (default: auto: names when the first row / column holds text, an "
+                   "empty corner cell, distinct integers as transmitter names or a row index; docs/calibrate.md)")
     p.add_argument("--transpose", action="store_true", help="the file has one row per transmitter and one column "
                    "per receiver")
     p.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2: a network in the plane (default); 3: in "
@@ -1053,7 +1113,8 @@ def _print_calibration(result, meas, units: str | None = None) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tdoa-workbench",
-        description="Polynomial-system complexity analysis and minimal-solver generation for 2D TDOA self-calibration.",
+        description="Polynomial-system complexity analysis (Groebner bases over GF(p), root counts of your own "
+        "systems), minimal-solver generation and self-calibration of TDOA/TOA sensor networks in 2D and 3D.",
     )
     parser.add_argument("--version", action=_VersionAction, nargs=0, help="show the program's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -50,10 +50,7 @@ MODULE_TEMPLATE = '''\
 
 {description}
 
-solve(F) -> ({rows}, {nvars}) complex candidate roots in the unknown order {unknown_list};
-solve_batch(F) for F of shape (..., {pshape}) -> (..., {rows}, {nvars}). Candidates may be complex or
-spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
-positions and offsets{calibrations_doc}.
+{usage}
 """
 from __future__ import annotations
 
@@ -84,6 +81,20 @@ def solver():
 
 {solve}{calibrations}
 '''
+
+TDOA_USAGE = """\
+solve(F) -> ({rows}, {nvars}) complex candidate roots in the unknown order {unknown_list};
+solve_batch(F) for F of shape (..., {pshape}) -> (..., {rows}, {nvars}). Candidates may be complex or
+spurious (NaN rows for lost ones); solvers.api.calibrations turns a TDOA solver's roots into
+positions and offsets (here: calibrations(F))."""
+"""The usage paragraph of a TDOA solver's docstring (a module with a configuration)."""
+
+SYSTEM_USAGE = """\
+solve(q) -> ({rows}, {nvars}) complex candidate roots in the unknown order {unknown_list}, for the
+parameter values q in the order {parameter_list}; solve_batch(q) for q of shape (..., {pshape}) ->
+(..., {rows}, {nvars}). Candidates may be complex or spurious (NaN rows for lost paths); the real ones
+are the rows with a negligible imaginary part."""
+"""The usage paragraph of a solver for a user's parametric system (no configuration, no TDOA helpers)."""
 
 CALIBRATIONS_SOURCE = '''
 
@@ -232,15 +243,17 @@ def _load_source(solver_class: str) -> str:
             f"            _SOLVER.append(_method.{solver_class}(_method.load_spec(fh.read()), coefficients))")
 
 
-def _scaled_solve_source(pshape: tuple[int, ...], rows: int, nvars: int) -> str:
-    """``solve_batch`` / ``solve`` through the method's ``solve_scaled`` (data normalised by their RMS)."""
+def _scaled_solve_source(pshape: tuple[int, ...], rows: int, nvars: int, tdoa: bool = True) -> str:
+    """``solve_batch`` / ``solve`` through the method's ``solve_scaled`` (data normalised by their RMS);
+    the argument is the data F of a TDOA solver, else the parameter values q."""
     shape = ", ".join(map(str, pshape))
-    return (f"def solve_batch(F):\n"
-            f'    """Candidate roots for a batch of data F (..., {shape}) -> (..., {rows}, {nvars}) complex."""\n'
-            f"    return _method.solve_scaled(solver(), F, {pshape!r}, SCALE_POWERS)\n\n\n"
-            f"def solve(F):\n"
-            f'    """Candidate roots ({rows}, {nvars}) for one instance F ({shape})."""\n'
-            f"    return solve_batch(np.asarray(F)[None])[0]")
+    arg, what = ("F", "data F") if tdoa else ("q", "parameter values q")
+    return (f"def solve_batch({arg}):\n"
+            f'    """Candidate roots for a batch of {what} (..., {shape}) -> (..., {rows}, {nvars}) complex."""\n'
+            f"    return _method.solve_scaled(solver(), {arg}, {pshape!r}, SCALE_POWERS)\n\n\n"
+            f"def solve({arg}):\n"
+            f'    """Candidate roots ({rows}, {nvars}) for one instance {arg} ({shape})."""\n'
+            f"    return solve_batch(np.asarray({arg})[None])[0]")
 
 
 def _homotopy_parts(spec: dict) -> ModuleParts:
@@ -273,7 +286,7 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
         method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"
                           f"START_ROOTS = {len(spec['start_roots'])}" + (f"\nGROUP_ORDER = {group['order']}" if group else "")),
         scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
-        load=_load_source("HomotopySolver"), solve=_scaled_solve_source(pshape, paths, nvars))
+        load=_load_source("HomotopySolver"), solve=_scaled_solve_source(pshape, paths, nvars, config is not None))
 
 
 def offset_kernel_coefficients(spec: dict) -> str:
@@ -325,7 +338,7 @@ def _action_matrix_parts(spec: dict) -> ModuleParts:
         imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import action_matrix as _method",
         method_constants=f"TEMPLATE = ({tpl['size'][0]}, {tpl['size'][1]})\nBASIS = {basis}",
         scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
-        load=_load_source("ActionMatrixSolver"), solve=_scaled_solve_source(pshape, degree, nvars))
+        load=_load_source("ActionMatrixSolver"), solve=_scaled_solve_source(pshape, degree, nvars, config is not None))
 
 
 #: Method (spec kind) -> the text it puts into the template's holes.
@@ -354,13 +367,14 @@ def emit_module(spec_text: str, spec_file: str, coefficients: str, command: str)
         raise ValueError(f"unknown solver kind {kind!r}; valid: {', '.join(METHOD_PARTS)}")
     parts = METHOD_PARTS[kind](spec)
     unknowns = tuple(spec["unknowns"])
+    usage = (TDOA_USAGE if parts.config is not None else SYSTEM_USAGE).format(
+        rows=parts.rows, nvars=len(unknowns), unknown_list=", ".join(unknowns), pshape=", ".join(map(str, parts.pshape)),
+        parameter_list=", ".join(spec.get("parameters", ())))
     return MODULE_TEMPLATE.format(
         method=kind, spec_file=spec_file, command=command, spec_sha=spec_sha256(spec_text),
         system=spec["system"] if kind in ("homotopy", "action-matrix") else spec["formulation"],
-        summary=parts.summary, description=parts.description, rows=parts.rows, nvars=len(unknowns),
-        unknown_list=", ".join(unknowns), pshape=", ".join(map(str, parts.pshape)),
+        summary=parts.summary, description=parts.description, usage=usage,
         imports=parts.imports, config=repr(parts.config), unknowns=repr(unknowns), degree=int(spec["degree"]),
         method_constants=parts.method_constants, scale_powers=repr(parts.scale_powers),
         coefficients=coefficients.rstrip("\n"), load=parts.load, solve=parts.solve,
-        calibrations=CALIBRATIONS_SOURCE if parts.config is not None else "",
-        calibrations_doc=" (here: calibrations(F))" if parts.config is not None else "")
+        calibrations=CALIBRATIONS_SOURCE if parts.config is not None else "")

@@ -161,3 +161,20 @@ def test_solver_table_covers_every_committed_solver():
     assert table == bench.markdown(list(rows.values())), "stale: run scripts/bench_solvers.py"
     with open(os.path.join(os.path.dirname(tables), bench.DOCS_PAGE), encoding="utf-8") as fh:
         assert "".join(bench.README_MARKERS[:1]) + table + bench.README_MARKERS[1] in fh.read(), "docs table is stale"
+
+
+def test_a_user_systems_module_speaks_of_its_own_system():
+    """Issue 46: a solver for a parametric system without a TDOA configuration documents solve(q) with its
+    parameters, and neither solve(F) nor the TDOA helpers (the committed 3r/3s TOA spec, its configuration
+    taken away, stands for a user's system)."""
+    from solvers.codegen import emit_module
+
+    path = next(p for p in SPECS if os.path.basename(p) == "tdoa_3r3stoa_homotopy8.json")
+    with open(path, encoding="utf-8") as fh:
+        spec = json.load(fh)
+    spec.pop("config")
+    text = emit_module(json.dumps(spec), "mine.json", "def coefficients(q):\n    return q\n", "tdoa-workbench generate")
+    doc = text.split('"""')[1]
+    assert f"solve(q) -> (8, {len(spec['unknowns'])})" in doc and ", ".join(spec["parameters"]) in doc
+    assert "solve(F)" not in doc and "TDOA" not in doc and "calibrations" not in text
+    assert "def solve(q):" in text and "def solve_batch(q):" in text

@@ -94,7 +94,10 @@ def test_an_unlucky_leading_coefficient_is_skipped_before_any_work():
 
 def test_given_primes_are_used_and_must_agree():
     report, _, _ = rational("x,y\n0\nx^2-2,y^2-3\n", primes=(65521, 32749))
-    assert report.computed == (65521, 32749) and report.report.degree == 4
+    assert report.computed[:2] == (65521, 32749) and report.report.degree == 4
+    assert len(report.computed) >= 2 + MIN_AGREE  # checked against a random majority, as without --prime
+    assert {65521, 32749} <= {r.prime for r in report.report.per_prime}
+    assert "the given prime(s) 65521, 32749 and 3 of 3 random" in report.status
     with pytest.raises(PrimeDisagreement):  # 65521 * 32749 = 2145747229 kills the determinant mod both
         rational("x,y\n0\nx+2*y, 3*x+2145747235*y, x^2+y^2-1\n", primes=(65521, 32749, 7))
     with pytest.raises(ValueError, match="--prime 7 is unlucky"):
@@ -149,6 +152,28 @@ def test_issue_unlucky_given_primes_are_an_error(capsys, tmp_path):
     code, out, err = run(capsys, tmp_path, "x,y\n0\nx+2*y, 3*x+2145747235*y, x^2+y^2-1\n",
                          "--prime", "65521", "--prime", "32749", "--prime", "101")
     assert code == 3 and "primes disagree" in err
+
+
+@pytest.mark.parametrize("text, prime", [
+    ("x\n0\nx^2-1, x^2+65520\n", 65521),  # issue 46: inconsistent over Q, "degree 2" mod 65521 with exit 0
+    ("x,y\n0\nx+2*y, 3*x+2145747235*y, x^2+y^2-1\n", 32749),  # the determinant vanishes mod 32749
+])
+def test_issue46_an_unlucky_given_prime_is_outvoted_by_random_primes(capsys, tmp_path, text, prime):
+    """One user prime alone used to be reported (exit 0) with a wrong answer; now random primes check it."""
+    code, out, err = run(capsys, tmp_path, text, "--prime", str(prime))
+    assert code == 3 and out == ""
+    assert f"--prime {prime} is unlucky" in err and "random 31-bit primes" in err and "degree 0, dimension -1" in err
+    assert len(err.strip().splitlines()) == 1
+    code, out, _ = run(capsys, tmp_path, text, "--json")  # the right answer, from random primes
+    assert code == 0 and json.loads(out)["dimension"] == -1
+
+
+def test_issue46_a_lucky_given_prime_joins_the_gb_over_q(capsys, tmp_path):
+    code, out, _ = run(capsys, tmp_path, "x,y\n0\n3*x^2+2*y-1, 2*x*y-5/7\n", "--prime", "65521", "--gb", "--json")
+    report = json.loads(out)
+    assert code == 0 and report["primes"][0] == 65521 and len(report["primes"]) == 1 + MIN_AGREE
+    assert report["groebner_basis"] == ["y^2 + 15/28*x - 1/2*y", "x*y - 5/14", "x^2 + 2/3*y - 1/3"]
+    assert report["status"].startswith("the given prime(s) 65521 and 3 of 3 random 31-bit primes")
 
 
 def test_issue_gb_is_printed_over_q(capsys, tmp_path):

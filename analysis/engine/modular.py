@@ -174,27 +174,56 @@ def analyse_rational(
     exact: the exact polynomials (input and saturating polynomial), for :func:`unlucky_reason`.
     compute: prime -> that prime's :class:`PrimeResult`.
     primes: the user's primes: each is checked by :func:`unlucky_reason` (a :class:`ValueError` names a
-        bad one) and all must agree (:class:`PrimeDisagreement`); no further primes are drawn.
-    seed: seed of the random primes used when ``primes`` is None: at least :data:`MIN_AGREE` of them
-        must agree and be a strict majority; primes are drawn until then (at most :data:`MAX_PRIMES`).
+        bad one), all must agree, and they must agree with the random primes' majority, which is drawn as
+        without them (:class:`PrimeDisagreement` otherwise): a given prime is checked like a random one.
+    seed: seed of the random primes: at least :data:`MIN_AGREE` of them must agree and be a strict
+        majority; primes are drawn until then (at most :data:`MAX_PRIMES`).
     """
+    given: list[PrimeResult] = []
     if primes:
         for p in primes:
             reason = unlucky_reason(exact, p, order, nvars)
             if reason:
                 raise ValueError(f"--prime {p} is unlucky for this system ({reason}); choose another prime, or "
                                  "leave out --prime for random 31-bit primes")
-        results = [compute(p) for p in primes]
-        if len({signature(r) for r in results}) > 1:
+        given = [compute(p) for p in primes]
+        if len({signature(r) for r in given}) > 1:
             summary = ", ".join(f"p={r.prime}: degree {r.degree}, dimension {r.dimension}, {r.gb_size} leading "
-                                "monomials" for r in results)
+                                "monomials" for r in given)
             raise PrimeDisagreement(f"primes disagree ({summary}); at least one is unlucky: try other primes, "
                                     "or leave out --prime for a majority of random primes")
-        report = _agreed(results)
-        status = (f"{len(results)} given primes agree (degree, dimension, leading monomials)"
-                  if len(results) > 1 else "one given prime: not checked by a second prime")
-        return RationalReport(report, tuple(primes), (), (), status)
-    draw = random_primes(seed)
+    best, results, skipped = _random_majority(exact, order, nvars, compute, seed, exclude=tuple(primes or ()))
+    if given and signature(given[0]) != signature(best[0]):
+        mine, theirs = given[0], best[0]
+        raise PrimeDisagreement(
+            f"--prime {', '.join(map(str, primes))} is unlucky for this system: degree {mine.degree}, dimension "
+            f"{mine.dimension} there, but {len(best)} of {len(results)} random 31-bit primes (seed {seed}) agree on "
+            f"degree {theirs.degree}, dimension {theirs.dimension}; try another --prime")
+    agreeing = {r.prime for r in best}
+    others = tuple(r.prime for r in results if r.prime not in agreeing)
+    report = _agreed(given + best)
+    k, m = len(results), len(best)
+    status = ((f"the given prime(s) {', '.join(map(str, primes))} and " if given else "")
+              + f"{m} of {k} random 31-bit primes (seed {seed}) agree on degree, dimension and leading monomials"
+              + (f"; {len(others)} unlucky prime(s) outvoted: {', '.join(map(str, others))}" if others else "")
+              + (f"; {len(skipped)} skipped (leading coefficient or denominator)" if skipped else "")
+              + f"; wrong with probability <= {error_bound(m, k):.1e} if the input has 1000 unlucky primes")
+    computed = tuple(r.prime for r in given) + tuple(r.prime for r in results)
+    return RationalReport(report, computed, others, tuple(skipped), status)
+
+
+def _random_majority(
+    exact: Sequence[Coefficients],
+    order: str,
+    nvars: int,
+    compute: Callable[[int], PrimeResult],
+    seed: int,
+    exclude: Sequence[int] = (),
+) -> tuple[list[PrimeResult], list[PrimeResult], list[tuple[int, str]]]:
+    """Random primes (not in ``exclude``) drawn until at least :data:`MIN_AGREE` agree and are a strict
+    majority: (the majority, every prime computed, the (prime, reason) of those rejected by
+    :func:`unlucky_reason`). Raises :class:`PrimeDisagreement` after :data:`MAX_PRIMES` primes."""
+    draw = random_primes(seed, exclude)
     results: list[PrimeResult] = []
     skipped: list[tuple[int, str]] = []
     while True:
@@ -204,25 +233,16 @@ def analyse_rational(
             skipped.append((p, reason))
             if len(skipped) > MAX_SKIPPED:
                 raise ValueError(f"{len(skipped)} random primes divide a leading coefficient or denominator "
-                                 f"(last: {reason}); give --prime")
+                                 f"(last: {reason}); try another --prime-seed")
             continue
         results.append(compute(p))
         best = _majority(results)
         if len(best) >= MIN_AGREE and 2 * len(best) > len(results):
-            break
+            return best, results, skipped
         if len(results) >= MAX_PRIMES:
             summary = ", ".join(f"p={r.prime}: degree {r.degree}, dimension {r.dimension}" for r in results)
             raise PrimeDisagreement(f"no majority of {MIN_AGREE} among {len(results)} random primes ({summary}); "
                                     "try another --prime-seed")
-    agreeing = {r.prime for r in best}
-    others = tuple(r.prime for r in results if r.prime not in agreeing)
-    report = _agreed(best)
-    k, m = len(results), len(best)
-    status = (f"{m} of {k} random 31-bit primes (seed {seed}) agree on degree, dimension and leading monomials"
-              + (f"; {len(others)} unlucky prime(s) outvoted: {', '.join(map(str, others))}" if others else "")
-              + (f"; {len(skipped)} skipped (leading coefficient or denominator)" if skipped else "")
-              + f"; wrong with probability <= {error_bound(m, k):.1e} if the input has 1000 unlucky primes")
-    return RationalReport(report, tuple(r.prime for r in results), others, tuple(skipped), status)
 
 
 # -- the basis over Q -------------------------------------------------------------------------------

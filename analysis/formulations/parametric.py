@@ -14,7 +14,7 @@ Text format (``parse``)::
 
     # comment
     unknowns: x, y
-    parameters: a, b
+    parameters: a, b      (a file without parameters is a plain system: analysis.formulations.systemfile)
     nonzero: x            (optional; products and several entries allowed)
     equations:
     x^2 + y^2 - a
@@ -27,7 +27,6 @@ as further variables, and nothing in it is evaluated.
 """
 from __future__ import annotations
 
-import keyword
 import re
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -40,19 +39,13 @@ from ..engine.degree import DEFAULT_PRIMES, DegreeReport, PrimeDisagreement, ana
 from ..engine.io import InputError, parse_polynomial
 from ..engine.quotient import saturated_degree
 from ..engine.ring import Poly, Ring
+from .sections import ParametricError, check_names, sections
 
 __all__ = ["ParametricSystem", "ParametricError", "GFSample", "parse", "from_formulation"]
 
 
-class ParametricError(ValueError):
-    """A parametric system that cannot be used as given (bad names, parameters that do not occur, ...)."""
-
-
 #: (parameter values mod p, a known root mod p or None) for one prime and one seed.
 GFSample = tuple[list[int], "list[int] | None"]
-
-_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
-
 
 @dataclass(frozen=True)
 class ParametricSystem:
@@ -84,11 +77,8 @@ class ParametricSystem:
     gf_sampler: Callable[[int, int], GFSample] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        for kind, names in (("unknown", self.unknowns), ("parameter", self.parameters)):
-            for v in names:
-                if not _NAME.match(v) or keyword.iskeyword(v):
-                    raise ParametricError(f"{self.name}: {kind} name {v!r} is not a name (a letter followed by "
-                                          "letters, digits or '_'; not a Python keyword)")
+        check_names(self.name, "unknown", self.unknowns)
+        check_names(self.name, "parameter", self.parameters)
         clash = set(self.unknowns) & set(self.parameters)
         if clash:
             raise ParametricError(f"{self.name}: {sorted(clash)} declared both as unknown and parameter")
@@ -364,36 +354,10 @@ def parse(text: str, name: str = "<system>") -> ParametricSystem:
     (:func:`analysis.engine.io.parse_polynomial`, parameters as further variables) and nothing is evaluated.
     Errors are :class:`ParametricError` naming ``name``, the line and the column.
     """
-    fields: dict[str, list[tuple[str, int, int]]] = {}
-    current = None
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0]
-        if not line.strip():
-            continue
-        offset = 0
-        head, sep, rest = line.partition(":")
-        key = head.strip().lower()
-        if sep and key in ("unknowns", "variables", "parameters", "nonzero", "equations"):
-            key = "unknowns" if key == "variables" else key
-            if key in fields:
-                raise ParametricError(f"{name}, line {lineno}: '{key}:' given twice")
-            fields[key] = []
-            current = key
-            offset, line = len(head) + 1, rest
-            if not line.strip():
-                continue
-        if current is None:
-            raise ParametricError(f"{name}, line {lineno}: expected 'unknowns:', 'parameters:' or 'equations:' first")
-        for piece in re.finditer(r"[^;]+" if current == "equations" else r"[^,]+", line):
-            item = piece.group().strip()
-            if item:
-                col = offset + piece.start() + len(piece.group()) - len(piece.group().lstrip()) + 1
-                fields[current].append((item, lineno, col))
-    for key in ("unknowns", "parameters", "equations"):
-        if not fields.get(key):
-            raise ParametricError(f"{name}: no '{key}:' section (or it is empty)")
+    fields = sections(text, name)
     texts = {k: tuple(item for item, _, _ in v) for k, v in fields.items()}
-    system = ParametricSystem(name, texts["unknowns"], texts["parameters"], texts["equations"], texts.get("nonzero", ()))
+    system = ParametricSystem(name, texts["unknowns"], texts.get("parameters", ()), texts["equations"],
+                              texts.get("nonzero", ()))
     # read every polynomial now, so that errors name the line and column in the file
     system.__dict__["exprs"] = tuple(system._parse_expr(t, f"equation {k + 1}", where=(ln, col))
                                      for k, (t, ln, col) in enumerate(fields["equations"]))

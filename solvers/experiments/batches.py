@@ -23,7 +23,8 @@ from analysis.sweeps.complexity import single_threaded_blas_env
 from analysis.sweeps.paths import cache_dir
 from analysis.sweeps.progress import Progress
 
-from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INIT_LABEL, INITS, Init, check_init, config_key, config_label
+from .config import (CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INIT_LABEL, INITS, NOISE_SIGMAS, Init, check_init, config_key,
+                     config_label)
 from .trial import TRIAL_COLUMNS, TrialOptions, load_solve_network, run_trial
 
 #: Per-batch CSV cache in the user cache directory (analysis.sweeps.paths), keyed by every parameter that
@@ -44,16 +45,16 @@ def _file_digest(paths: Iterable[Path]) -> str:
 
 def _solver_sources(package: Path) -> list[Path]:
     """The files the experiments' solvers are made of: the generated modules and specs of :data:`CONFIGS`
-    (``solvers/generated/tdoa_<config>_*``) and the modules of ``solvers/methods``, ``solvers/continuation`` and
-    ``solvers/runtime.py`` they import, directly or through each other (read from the source, imports inside
-    functions included). Other solvers (a 3D one, another cell's) are not among them: changing them leaves the batches' cache
-    and the experiments' provenance alone."""
+    (``solvers/generated/tdoa_<config>_*``) and the modules of the ``solvers`` package they import, directly or
+    through each other (read from the source, imports inside functions included; a module moved to another
+    subpackage stays covered). Other solvers (a 3D one, another cell's) are not among them: changing them
+    leaves the batches' cache and the experiments' provenance alone."""
     import ast
 
     generated = package / "generated"
     modules = sorted(p for p in generated.glob("tdoa_*") if p.is_file() and p.suffix in (".py", ".json")
                      and p.name.split("_")[1] in CONFIGS) if generated.is_dir() else []
-    kernels = {*(package / "methods").glob("*.py"), *(package / "continuation").glob("*.py"), package / "runtime.py"}
+    kernels = {p for p in package.rglob("*.py") if not p.is_relative_to(generated) and p.name != "__init__.py"}
     found: set[Path] = set()
     todo = [p for p in modules if p.suffix == ".py"]
     while todo:
@@ -89,7 +90,7 @@ def code_fingerprint(init: str) -> str:
     paths = [here / f"{name}.py" for name in ("synthetic", "recovery", "refine", "metrics")]
     if init == "solver":
         paths += [here / "api.py", *_solver_sources(here)]
-    return _file_digest(paths)
+    return _file_digest(set(paths))
 
 
 def _cache_key(config: str, init: str, trials: int, sigma: float, seed: int, options: TrialOptions) -> dict:
@@ -357,7 +358,7 @@ def batch_record(frames: Iterable[pd.DataFrame | str]) -> dict:
 def noise_sweep(
     configs: Sequence[str] = tuple(CONFIGS),
     inits: Sequence[str] = INITS,
-    sigmas: Sequence[float] = tuple(np.logspace(-6, -1, 11)),
+    sigmas: Sequence[float] = NOISE_SIGMAS,
     trials: int = 100,
     seed: int = DEFAULT_SEED,
     **kwargs: object,

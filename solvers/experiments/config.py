@@ -30,6 +30,14 @@ INIT_LABEL = {"random": "rand", "solver": "ours"}
 DEFAULT_SEED = 0
 DEFAULT_JOBS = 2
 
+#: Fig. 2's noise levels, 11 log-spaced in 1e-6..1e-1, each read from its decimal text: the same float on every
+#: machine and numpy (np.logspace(-6, -1, 11) gives 1e-05 on some and 9.999999999999999e-06 on others, through
+#: pow's last bit), so that the trials, their cache keys and the committed provenance do not depend on the library.
+#: The half decades are the values np.logspace gave for the committed Fig. 2.
+NOISE_SIGMAS: tuple[float, ...] = tuple(map(float, (
+    "1e-06", "3.162277660168379e-06", "1e-05", "3.1622776601683795e-05", "0.0001", "0.00031622776601683794",
+    "0.001", "0.0031622776601683794", "0.01", "0.03162277660168379", "0.1")))
+
 
 def config_shape(config: str) -> tuple[int, int]:
     """Return (m, n) of a configuration written "9r3s" or "9r/3s"; raise ValueError otherwise."""

@@ -15,12 +15,11 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from . import batches
 from .batches import CACHE_VERSION, WorkerPool, batch_record, code_fingerprint, noise_sweep, run_trials
-from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INITS, PROVENANCE_PATH, TABLES_DIR
+from .config import CONFIGS, DEFAULT_JOBS, DEFAULT_SEED, INITS, NOISE_SIGMAS, PROVENANCE_PATH, TABLES_DIR
 from .figures import plot_histograms, plot_noise
 from .provenance import provenance, relative_paths, update_provenance
 from .summary import summarise
@@ -38,7 +37,7 @@ class ReproductionPlan:
 
 
 QUICK = ReproductionPlan("quick", 100, (1e-5, 1e-4, 1e-3, 1e-2, 1e-1), 50)
-FULL = ReproductionPlan("full", 1000, tuple(float(s) for s in np.logspace(-6, -1, 11)), 100)
+FULL = ReproductionPlan("full", 1000, NOISE_SIGMAS, 100)
 
 
 
