@@ -793,7 +793,7 @@ def _add_count(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_count(args: argparse.Namespace) -> int:
-    from analysis.formulations.parametric import ParametricError, parse
+    from analysis.formulations.parametric import ParametricError, ParametricSystem
     from solvers import count as counting
     from solvers.continuation import tape_kernel
     from solvers.continuation.tracking import HomotopyError
@@ -808,7 +808,10 @@ def cmd_count(args: argparse.Namespace) -> int:
     tape_kernel.set_threads(args.threads)
     try:
         if args.system is not None:
-            target = parse(_read_text(args.system), os.path.basename(args.system))
+            target = read_system_arg(args.system, os.path.basename(args.system))
+            if not isinstance(target, ParametricSystem):
+                raise UserError(f"{args.system}: a system without parameters has one instance, not a generic one; "
+                                "count its solutions with: tdoa-workbench degree " + args.system)
             if not target.is_square():
                 raise UserError(f"{args.system}: {len(target.equations)} equations in {len(target.unknowns)} unknowns; "
                                 "count needs a square system")

@@ -86,8 +86,9 @@ class GraphOptions:
 @dataclass(frozen=True)
 class GraphCount:
     """The outcome: the solutions at the base point (one per orbit with a group), every node's count, the
-    nodes, the paths tracked, the rounds, the (solution, edge) pairs left open, whether the graph closed, and
-    the seconds (this run and the checkpoint it resumed)."""
+    nodes, the paths tracked, the rounds, the (solution, edge) pairs left open, whether the graph closed, the
+    seconds (this run and the checkpoint it resumed), the jumps seen, every node's solutions, the edges left and
+    whether the run ended for want of work (not cut by ``seconds`` or stopped at ``target``)."""
 
     roots: np.ndarray
     counts: tuple[int, ...]
@@ -100,6 +101,7 @@ class GraphCount:
     jumps: int = 0
     node_roots: tuple = field(default=(), repr=False, compare=False)
     edges: int = 0
+    finished: bool = True
 
 
 class _Node:
@@ -329,7 +331,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
     # edges whose open tracks failed every retry (a segment passing close to a point where several solutions
     # meet: 3D TOA 4r/6s seed 1, four paths stalling at one s from both ends) leave the graph, when the other
     # edges still join every node in at least MIN_LOOPS independent loops
-    finished = options.target is None and time.perf_counter() - t0 < options.seconds
+    finished = time.perf_counter() - t0 < options.seconds and (options.target is None or len(nodes[0].roots) < options.target)
     dropped = [(i, j) for i, n in enumerate(nodes) for j in n.image if i < j and (
         (n.image[j] < 0).any() or (nodes[j].image[i] < 0).any())]
     if finished and dropped and _loops(nodes, dropped) >= MIN_LOOPS:
@@ -344,7 +346,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
     edges = sum(len(n.image) for n in nodes) // 2
     closed = open_edges == 0 and len(set(counts)) == 1 and _loops(nodes, []) >= MIN_LOOPS
     return GraphCount(nodes[0].roots, counts, np.array(qs), paths, rounds, open_edges, closed,
-                      spent + time.perf_counter() - t0, jumps, tuple(n.roots for n in nodes), edges)
+                      spent + time.perf_counter() - t0, jumps, tuple(n.roots for n in nodes), edges, finished)
 
 
 def _loops(nodes: list[_Node], without: list[tuple[int, int]]) -> int:

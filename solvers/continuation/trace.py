@@ -49,6 +49,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import graph
 from . import monodromy as md
 from . import slp, tape_kernel, tape_native, tracker
 from . import tracking as tk
@@ -73,17 +74,23 @@ LOCUS_REL = 1e-13
 #: Version of the test's rules, kept with stored outcomes (scripts/monodromy_counts.py) so that an outcome under
 #: other rules is not read back. 2 (2026-11-28): endpoints off the fibre fail, t1 and t2 a third of a turn apart,
 #: WITNESS_TOL and LOCUS_REL, the continuation fallback.
-TEST_VERSION = 2
+TEST_VERSION = 3
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
 #: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
 PASS_TOL = 1e-9
 
+#: The test also passes when its residual is within this factor of the rounding level of the points summed (the
+#: sum of their next Newton steps, relative to the same size): ill-conditioned points (norms to 10^6) carry
+#: errors of cond x eps that no tracking removes (2D 6r/3s, all 8 coordinates: residuals 3e-9 .. 2e-8 against a
+#: floor of 6e-9 .. 8e-9 at |t| = 0.2 .. 1; one root left out: 5e-5).
+FLOOR_FACTOR = 10.0
+
 
 @dataclass(frozen=True)
 class TraceOptions:
-    """seed: rng of a, t1, t2 and the witness loops; stall/max_loops: the witnesses' monodromy stops after
-    ``stall`` loops without a new one (or ``max_loops``); step: |t1| = |t2| (the pencil's parameter;
+    """seed: rng of a, t1, t2 and the witnesses' monodromy graph; nodes: that graph's nodes
+    (:func:`.graph.graph_monodromy`; the witnesses count only when it closes); step: |t1| = |t2| (the pencil's parameter;
     lam ~ t on the roots); seconds: time cap of the witness monodromy (then inconclusive); coordinates: the
     unknowns the pencil's linear form a . x and the traces use (default all). Fewer coordinates, fewer
     witnesses (the witnesses are the poles of a . x on C), but a coordinate that is the same on two roots of
@@ -92,8 +99,7 @@ class TraceOptions:
     paths are lost (2D 9r/3s: the offsets; H or b are fine)."""
 
     seed: int = 0
-    stall: int = 5
-    max_loops: int = 200
+    nodes: int = 4
     step: float = 0.5
     seconds: float = 1e9
     coordinates: tuple[int, ...] | None = None
@@ -101,8 +107,9 @@ class TraceOptions:
 
 @dataclass(frozen=True)
 class TraceTest:
-    """The test's outcome: status "passed" (residual <= PASS_TOL), "failed" or "inconclusive" (a path lost,
-    or the witness monodromy cut by its time cap), with the numbers that back it."""
+    """The test's outcome: status "passed" (residual <= PASS_TOL, or within FLOOR_FACTOR of the points' rounding
+    level ``floor``), "failed" or "inconclusive" (a path lost, or the witness monodromy cut by its time cap), with
+    the numbers that back it."""
 
     status: str
     residual: float
@@ -112,6 +119,7 @@ class TraceTest:
     paths: int
     seconds: float
     failed_paths: int
+    floor: float = float("nan")
 
     def record(self) -> dict:
         return dataclasses.asdict(self)
@@ -203,10 +211,14 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
         raise tk.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
     base = system.newton(base, Q0[None], steps=2)
-    loop_options = tk.HomotopyOptions(seed=options.seed, max_loops=options.max_loops, stall_loops=options.stall,
-                                      accept_tol=WITNESS_TOL)
-    witnesses = md.monodromy_count(system, Q0, start, loop_options, options.seconds, checkpoint,
-                                   progress=progress, excluded=on_locus, free=free)
+    def on_locus_at(y: np.ndarray, Q: np.ndarray) -> np.ndarray:  # at each point's own node's (p, v)
+        if excluded is None:
+            return np.zeros(len(y), bool)
+        return excluded(y[:, :N], Q[:, :P] + y[:, N:N + 1] * Q[:, P:2 * P])
+
+    witnesses = graph.graph_monodromy(system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed,
+                                                                            accept_tol=WITNESS_TOL, seconds=options.seconds),
+                                      excluded=on_locus_at, free=free, checkpoint=checkpoint, progress=progress)
     W = witnesses.roots
     paths = witnesses.paths
     # Q_0 is {a . x = 1} u {lam = 0}: the loops also reach points of the lam = 0 component (F(x; p) = 0, the
@@ -218,10 +230,13 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         if extra and progress:
             progress(f"trace test: the witness loops reached {extra} root(s) of F(x; p) = 0 that the roots lack")
         W = W[~lam0]
-    if witnesses.stall < options.stall:  # cut by the time cap: the witnesses are a lower bound, no verdict
+    # the witnesses' graph need not close: the test itself tells whether roots and witnesses are the whole fibre
+    # (6r/3s: 185 of 23,000 witness tracks stall on every retry, edges near the det H = 0 component); a graph cut
+    # by the time cap has not looked everywhere, and gives no verdict
+    if not witnesses.finished:
         if progress:
-            progress(f"trace test: inconclusive, witnesses not settled ({len(W)} after {witnesses.loops} loops)")
-        return TraceTest("inconclusive", float("nan"), K, len(W), witnesses.loops, paths,
+            progress(f"trace test: inconclusive, the witnesses' graph was cut by the time cap ({len(W)} witnesses)")
+        return TraceTest("inconclusive", float("nan"), K, len(W), witnesses.rounds, paths,
                          round(time.perf_counter() - t_start, 1), 0)
     # the pencil: t = 0 (the sets as they are), t1 and t2 on a circle of radius step, a third of a turn apart (a
     # random first angle). Two independent angles can fall close (the 10r/4s run of 2026-11-27: 0.10 rad apart),
@@ -249,18 +264,25 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     ends = flat.reshape(2, M, -1)
     n_failed = int(failed.sum())
     sets = [S, ends[0], ends[1]]
-    sets = [s[:, np.append(used, True)] for s in sets]  # the pencil's coordinates and lam
-    traces = np.array([s.sum(axis=0) for s in sets])
-    size = max(float(np.linalg.norm(s, axis=1).sum()) for s in sets) if not n_failed else 1.0
+    keep = np.append(used, True)  # the pencil's coordinates and lam
+    # each point's accuracy: its next Newton step (rounding level times its condition); the traces' own error
+    # is at most their sum, which the fit's residual cannot be expected to beat
+    noise = [np.abs(system.newton(s_, q[None]) - s_)[:, keep] if not n_failed else np.zeros((0, keep.sum()))
+             for s_, q in zip(sets, [Q0, *targets])]
+    sets = [s_[:, keep] for s_ in sets]
+    traces = np.array([s_.sum(axis=0) for s_ in sets])
+    size = max(float(np.linalg.norm(s_, axis=1).sum()) for s_ in sets) if not n_failed else 1.0
     residual = _affine_residual(traces, ts, size) if not n_failed else float("nan")
+    floor = float(sum(np.linalg.norm(e.sum(axis=0)) for e in noise) / size) if not n_failed else float("nan")
     if n_failed:
         status = "inconclusive"
     else:
-        status = "passed" if residual <= PASS_TOL else "failed"
+        status = "passed" if residual <= max(PASS_TOL, FLOOR_FACTOR * floor) else "failed"
     if progress:
-        progress(f"trace test: {status}, residual {residual:.1e}, {K} roots + {len(W)} witnesses, {paths} paths")
-    return TraceTest(status, residual, K, len(W), witnesses.loops, paths,
-                     round(time.perf_counter() - t_start, 1), n_failed)
+        progress(f"trace test: {status}, residual {residual:.1e} (the points' Newton steps sum to {floor:.1e}), "
+                 f"{K} roots + {len(W)} witnesses, {paths} paths")
+    return TraceTest(status, residual, K, len(W), witnesses.rounds, paths,
+                     round(time.perf_counter() - t_start, 1), n_failed, floor)
 
 
 def _failed(system: TraceSystem, target: np.ndarray, ends: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray],
@@ -360,9 +382,14 @@ def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.
                       options: TraceOptions = TraceOptions(), checkpoint: str | None = None,
                       progress: Callable[[str], None] | None = None) -> TraceTest:
     """:func:`trace_test` of a formulation's :class:`analysis.formulations.parametric.ParametricSystem` (its
-    equations written from the formulas, :func:`slp.system_equations`; its non-vanishing conditions
-    excluded)."""
-    equations, unknowns, parameters = slp.system_equations(system.name)
+    equations written from the formulas, :func:`slp.system_equations`, or a user's system's expanded ones; its
+    non-vanishing conditions excluded)."""
+    try:
+        equations, unknowns, parameters = slp.system_equations(system.name)
+    except ValueError:  # a user's system: its expanded equations (the coefficient code traced on program values)
+        exps, eq = tk.structure(system)
+        equations = slp.expanded_equations(tk.load_coefficients(tk.coefficient_source(system)), exps, eq)
+        unknowns, parameters = list(system.unknowns), list(system.parameters)
     if list(unknowns) != list(system.unknowns) or list(parameters) != list(system.parameters):
         raise ValueError(f"{system.name}: the program's unknowns or parameters differ from the system's")
     return trace_test(equations, unknowns, parameters, p, roots, other, options,
