@@ -68,7 +68,9 @@ class GraphOptions:
     than a solver's 1e-8: ill-conditioned solutions of norm 10^3-10^6 stall at 1e-7-1e-5 in double precision,
     and dropping one leaves a count short; :mod:`.certify` proves or refutes each kept one afterwards);
     target: stop as soon as node 0 holds this many (a count known otherwise); seconds: wall-time cap (the
-    graph is then not closed); tracker: the tracking options (None: the system's)."""
+    graph is then not closed); tracker: the tracking options (None: the system's); retries: at most this many of
+    the :data:`RETRIES` retracks of a failed track (None: all; the trace test's witnesses take the tight one only,
+    the test itself telling whether a point is missing)."""
 
     nodes: int = 4
     seed: int = 0
@@ -77,6 +79,7 @@ class GraphOptions:
     target: int | None = None
     seconds: float = float("inf")
     tracker: tracker.TrackerOptions | None = None
+    retries: int | None = None
 
     def __post_init__(self) -> None:
         if self.nodes < 2:
@@ -280,6 +283,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
                 progress(f"resumed from {checkpoint}: {len(nodes[0].roots)} solutions at the base point, "
                          f"{paths} paths, {rounds} rounds")
     plain = options.tracker or system.options
+    retries = RETRIES if options.retries is None else min(options.retries, RETRIES)
     last_save = time.perf_counter()
 
     def record() -> dict:
@@ -294,13 +298,13 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
         if time.perf_counter() - t0 >= options.seconds:
             break
         # every (solution, edge) whose image is unknown and whose retracks are not used up
-        work = [(i, j, np.flatnonzero((n.image[j] < 0) & (n.tries[j] <= RETRIES)))
+        work = [(i, j, np.flatnonzero((n.image[j] < 0) & (n.tries[j] <= retries)))
                 for i, n in enumerate(nodes) for j in n.image]
         work = [(i, j, idx) for i, j, idx in work if len(idx)]
         if not work:
             break
         rounds += 1
-        for attempt in range(RETRIES + 1):  # 0: plain, then STRAIGHT, then DETOURS
+        for attempt in range(retries + 1):  # 0: plain, then STRAIGHT, then DETOURS
             part = [(i, j, idx[nodes[i].tries[j][idx] == attempt]) for i, j, idx in work]
             part = [(i, j, idx) for i, j, idx in part if len(idx)]
             if not part:

@@ -216,7 +216,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
             return np.zeros(len(y), bool)
         return excluded(y[:, :N], Q[:, :P] + y[:, N:N + 1] * Q[:, P:2 * P])
 
-    witnesses = graph.graph_monodromy(system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed,
+    witnesses = graph.graph_monodromy(system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed, retries=1,
                                                                             accept_tol=WITNESS_TOL, seconds=options.seconds),
                                       excluded=on_locus_at, free=free, checkpoint=checkpoint, progress=progress)
     W = witnesses.roots
