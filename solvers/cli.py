@@ -812,7 +812,7 @@ def cmd_count(args: argparse.Namespace) -> int:
             if not isinstance(target, ParametricSystem):
                 raise UserError(f"{args.system}: a system without parameters has one instance, not a generic one; "
                                 "count its solutions with: tdoa-workbench degree " + args.system)
-            if not target.is_square():
+            if not target.is_square:
                 raise UserError(f"{args.system}: {len(target.equations)} equations in {len(target.unknowns)} unknowns; "
                                 "count needs a square system")
         else:

@@ -54,6 +54,12 @@ CELLS = {"10r4s3d": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "5r9s3d": "5r9s-tdoa3d-dir
 #: Seeded random known solutions carried around each fresh verification loop.
 VERIFY_SAMPLE = 64
 
+#: Rounds in which the graphs run again, from the union of what every seed and the fresh loops found, when
+#: they found solutions the first seed's closed graph lacked (a family whose branch points few of the graph's
+#: triangles wind around: examples/circle.sys, seed 1, 1 of 4 on 4 and on 6 nodes), each with more nodes.
+AUGMENT = 3
+NODES_PER_AUGMENT = 2
+
 
 @dataclass(frozen=True)
 class CountOptions:
@@ -261,12 +267,14 @@ def _compare(known: np.ndarray, carried: np.ndarray, ok: np.ndarray, group) -> t
 
 
 def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Generator, loops: int, group, excluded,
-                options) -> tuple[str, int]:
-    """Carry VERIFY_SAMPLE random known solutions around ``loops`` fresh random triangles: (words, outside)."""
+                options) -> tuple[str, int, np.ndarray]:
+    """Carry VERIFY_SAMPLE random known solutions around ``loops`` fresh random triangles: (words, the number that
+    landed outside the set, those endpoints)."""
     if loops <= 0 or not len(roots):
-        return "not checked", 0
+        return "not checked", 0, np.zeros((0, roots.shape[1]), dtype=complex)
     scale = np.sqrt(np.mean(np.abs(q0) ** 2))
     landed = outside = lost = 0
+    new = []
     for _ in range(loops):
         pick = rng.choice(len(roots), size=min(VERIFY_SAMPLE, len(roots)), replace=False)
         xs, q = roots[pick], q0
@@ -282,12 +290,13 @@ def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Genera
         landed += int((m >= 0).sum())
         outside += int((m < 0).sum())
         lost += int((~ok).sum())
+        new.append(xs[ok][m < 0])
     words = f"{landed} of {landed + outside + lost} sampled solutions carried around {loops} fresh loop(s) landed in the set"
     if outside:
         words += f", {outside} outside it (the set is incomplete)"
     if lost:
         words += f", {lost} paths lost"
-    return words, outside
+    return words, outside, np.vstack(new)
 
 
 def count(target, options: CountOptions = CountOptions(), progress: Callable[[str], None] | None = None,
@@ -301,38 +310,57 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
     if not options.seeds:
         raise ValueError("count needs at least one seed")
     notes: list[str] = []
-    seeds: list[SeedCount] = []
-    first = None
-    excluded0 = solver0 = None
+    runs = []  # per seed: (system, q0, group, solver, excluded)
+    known = []  # per seed: the solutions its next graph starts from
     for seed in options.seeds:
         system, q0, x0, group = _start(target, seed, start if seed == options.seeds[0] else None)
         solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=_evaluator(system))
-        excluded = monodromy._excluded(system, q0)
-        checkpoint = _checkpoint(options, system, seed, "graph")
-        result = graph.graph_monodromy(
-            solver, q0, x0, graph.GraphOptions(nodes=options.nodes, seed=seed, seconds=options.seconds,
-                                               tracker=options.tracker),
-            group=group, excluded=excluded, checkpoint=checkpoint,
-            progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"))
-        carried = ""
-        if first is None:
-            first = (system, q0, result.roots, group)
-            excluded0, solver0 = excluded, solver
-        else:
-            ends, ok = _carry(solver0, q0, result.roots, first[1], excluded0, options.tracker or solver0.options, group)
-            carried, outside = _compare(first[2], ends, ok, group)
-            if outside:
-                notes.append(f"seed {seed}'s set carried to seed {options.seeds[0]}'s parameters has {outside} solution(s) "
-                             "the first set lacks")
-        seeds.append(SeedCount(seed, len(result.roots), result.closed, result.open_edges, result.paths, result.rounds,
-                               round(result.seconds, 1), carried))
-        say(f"seed {seed}: {len(result.roots)} solutions, graph {'closed' if result.closed else 'not closed'}"
-            + (f", {carried}" if carried else "") + f" ({result.seconds:.0f} s)")
-    system, q0, roots, group = first
+        runs.append((system, q0, group, solver, monodromy._excluded(system, q0)))
+        known.append(x0)
+    system, q0, group, solver0, excluded0 = runs[0]
+    track0 = options.tracker or solver0.options
     rng = np.random.default_rng([options.seeds[0], 7])
-    loops_checked, outside = _loop_check(solver0, q0, roots, rng, options.verify_loops, group, excluded0,
-                                         options.tracker or solver0.options)
-    say(f"loops: {loops_checked}")
+    for attempt in range(AUGMENT + 1):
+        seeds: list[SeedCount] = []
+        results = []
+        nodes = options.nodes + NODES_PER_AUGMENT * attempt
+        for k, seed in enumerate(options.seeds):
+            system_k, q0_k, _, solver_k, excluded_k = runs[k]
+            result = graph.graph_monodromy(
+                solver_k, q0_k, known[k], graph.GraphOptions(nodes=nodes, seed=seed + 1000 * attempt,
+                                                             seconds=options.seconds, tracker=options.tracker),
+                group=group, excluded=excluded_k, checkpoint=_checkpoint(options, system_k, seed, f"graph{attempt}"),
+                progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"))
+            results.append(result)
+            carried = ""
+            if k:
+                ends, ok = _carry(solver0, q0_k, result.roots, q0, excluded0, track0, group)
+                carried, _ = _compare(results[0].roots, ends, ok, group)
+            seeds.append(SeedCount(seed, len(result.roots), result.closed, result.open_edges, result.paths,
+                                   result.rounds, round(result.seconds, 1), carried))
+            say(f"seed {seed}: {len(result.roots)} solutions, graph {'closed' if result.closed else 'not closed'}"
+                + (f", {carried}" if carried else "") + f" ({result.seconds:.0f} s)")
+        roots = results[0].roots
+        loops_checked, outside, landed = _loop_check(solver0, q0, roots, rng, options.verify_loops, group, excluded0,
+                                                     track0)
+        say(f"loops: {loops_checked}")
+        # the union at the first seed's q0: every other seed's set carried there and the loops' endpoints
+        union = np.vstack([roots, landed])
+        for k in range(1, len(runs)):
+            ends, ok = _carry(solver0, runs[k][1], results[k].roots, q0, excluded0, track0, group)
+            union = np.vstack([union, ends[ok]])
+        fresh = graph._match(roots, union[len(roots):], group) < 0
+        if not fresh.any() or attempt == AUGMENT:
+            break
+        extra = union[len(roots):][fresh]
+        extra = extra[graph._distinct_new(extra, group) == np.arange(len(extra))]
+        notes.append(f"round {attempt + 1}: the seeds' sets or the loops held {len(extra)} solution(s) the first "
+                     f"graph lacked; every graph ran again from the union, with {nodes + NODES_PER_AUGMENT} nodes")
+        say(notes[-1])
+        known[0] = np.vstack([roots, extra])
+        for k in range(1, len(runs)):  # the union carried to every other seed's q0
+            ends, ok = _carry(runs[k][3], q0, known[0], runs[k][1], runs[k][4], track0, group)
+            known[k] = np.vstack([results[k].roots, ends[ok]])
     proven, cert_seconds = 0, 0.0
     if options.certify:
         cert = certify_mod.certify(system, q0, roots, progress=say)
