@@ -90,10 +90,9 @@ def _memory_size(text: str) -> int:
     return int(value)
 
 
-def _default_max_memory() -> str:
-    from analysis.engine.f4 import DEFAULT_MAX_MEMORY
-
-    return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
+def _default_max_memory() -> str | None:
+    """$TDOA_WORKBENCH_MAX_MEMORY, or None: F4's default (a share of the machine's available memory)."""
+    return os.environ.get(MAX_MEMORY_ENV) or None
 
 
 def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
@@ -121,6 +120,16 @@ def _export(system, fmt: str, path: str) -> None:
         write_system(system, path, fmt)
     except OSError as e:
         raise UserError(f"--export: cannot write {path}: {e.strerror}; give a file in an existing, writable directory") from None
+
+
+def _add_f4_caps(p: argparse.ArgumentParser) -> None:
+    """--max-cells and --max-memory, the F4 caps of every verb that runs the engine on a system file (the
+    75% is analysis.engine.f4.MEMORY_SHARE, not imported here: --help stays free of numpy; a test compares)."""
+    p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=None, metavar="N",
+                   help="cap on F4 matrix rows*cols (default none: the memory cap decides)")
+    p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
+                   help=f"stop before an F4 matrix needs more memory than this (its sparse rows and their reduction), "
+                   f"e.g. 4G (default ${MAX_MEMORY_ENV}, else 75%% of the machine's available memory)")
 
 
 def _add_degree(sub: argparse._SubParsersAction) -> None:
@@ -178,10 +187,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gb", action="store_true",
                    help="also print the reduced Groebner basis (over Q for characteristic 0, else over GF(p))")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=400_000_000,
-                   help="cap on F4 matrix rows*cols")
-    p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
-                   help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
+    _add_f4_caps(p)
     p.add_argument("--backend", default="auto",
                    help="linear algebra backend: auto (default: the compiled C sparse kernel, built on first use by the "
                    "system's C compiler; without one numba's sparse kernel on large sparse matrices, else numpy; -v "
@@ -353,6 +359,7 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
     import dataclasses
 
     from analysis.engine.degree import CHECK_CELLS, analyse_prime
+    from analysis.engine.f4 import tighter_cells
     from analysis.engine.io import format_polynomial
     from analysis.engine.linalg import MatrixTooLarge
     from analysis.engine.modular import analyse_rational, input_seed, order_key, rational_basis
@@ -366,7 +373,7 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
         exe = _engine(args, f)
         computed.append(p)
         if exe is not None and not args.no_check and len(computed) == 2:
-            capped = dataclasses.replace(options, max_matrix_cells=min(CHECK_CELLS, options.max_matrix_cells))
+            capped = dataclasses.replace(options, max_matrix_cells=tighter_cells(CHECK_CELLS, options.max_matrix_cells))
             try:
                 return analyse_prime(f, capped, sat(p) if sat else None, "rabinowitsch")
             except MatrixTooLarge:
