@@ -656,7 +656,13 @@ def _add_solve(sub: argparse._SubParsersAction) -> None:
             "points as the degree, each with a nonsingular Jacobian). See docs/cli.md."
         ),
     )
-    p.add_argument("system", metavar="SYSTEM", help="system file (.ms or a parametric system; '-' for stdin)")
+    p.add_argument("system", metavar="SYSTEM",
+                   help="system file (.ms or a parametric system; '-' for stdin) or a TDOA formulation label such as "
+                   "6r3s-tdoa2d-direct:all (parameters f<i>_<j>, the TDOA measurements)")
+    p.add_argument("--method", choices=("auto", "action-matrix", "homotopy"), default="auto",
+                   help="action-matrix (the basis over Q, eigenvectors), homotopy (a parametric system: its generated "
+                   "parameter-homotopy solver, built once into the cache) or auto (default: homotopy for a formulation "
+                   "label, action-matrix for a file)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="a parameter's value: an integer, a decimal or p/q, read exactly (repeatable)")
     p.add_argument("--params", metavar="FILE", help="parameter values, one NAME=VALUE a line ('#' comments)")
@@ -666,7 +672,8 @@ def _add_solve(sub: argparse._SubParsersAction) -> None:
                      help="print one CSV row per solution: index, real, residual, condition, then NAME_re, NAME_im "
                      "per unknown")
     p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
-                   help="seed of the random linear form whose action matrix is diagonalised (default 0)")
+                   help="seed of the random linear form whose action matrix is diagonalised, or of the homotopy "
+                   "solver's monodromy (default 0)")
     p.add_argument("--prime-seed", type=_nonnegative("--prime-seed"), default=0, metavar="N",
                    help="the random 31-bit primes are drawn by a seed hashed from the system and N (default 0)")
     _add_f4_caps(p)
@@ -674,32 +681,36 @@ def _add_solve(sub: argparse._SubParsersAction) -> None:
 
 
 def _solve_input(args: argparse.Namespace):
-    """(System over Q, number of unknowns to report) of solve's SYSTEM and parameter values."""
+    """(system, parameter values, target) of solve's SYSTEM: an analysis.engine.io.System (values None) for
+    msolve's format, else a ParametricSystem, with the formulation label as target for a label."""
     from analysis.engine.io import InputError, decode_text, parse_msolve
-    from analysis.formulations.parametric import parse
-    from solvers.system_solve import instance_system, parameter_values
+    from analysis.formulations.parametric import from_formulation, parse
+    from solvers.system_solve import parameter_values
 
+    items = list(args.param)
+    if args.params:
+        items += [line.split("#", 1)[0].strip() for line in _read_text(args.params).splitlines()]
+        items = [item for item in items if item]
+    values = parameter_values(items, "--param/--params")
+    if args.system != "-" and ":" in args.system and not os.path.exists(args.system):
+        from analysis.formulations.tdoa import as_formulation
+
+        label = as_formulation(args.system).label
+        return from_formulation(label), values, label
     try:
         data = sys.stdin.buffer.read() if args.system == "-" else open(args.system, "rb").read()
     except OSError as e:
         raise UserError(f"cannot read {args.system}: {e.strerror}") from None
     source = "<stdin>" if args.system == "-" else args.system
     text = decode_text(data, source)
-    items = list(args.param)
-    if args.params:
-        items += [line.split("#", 1)[0].strip() for line in _read_text(args.params).splitlines()]
-        items = [item for item in items if item]
-    values = parameter_values(items, "--param/--params")
     first = next((line.split("#", 1)[0].strip() for line in text.splitlines() if line.split("#", 1)[0].strip()), "")
     if re.match(r"(unknowns|variables|parameters)\s*:", first, re.IGNORECASE):
-        system = parse(text, source)
-        instance = instance_system(system, values, source)
-        return instance, len(system.unknowns)
+        return parse(text, source), values, None
     if values:
         raise UserError(f"{source} is in msolve's format, which has no parameters; --param/--params are for "
                         "parametric systems")
     try:
-        return parse_msolve(text, source=source), None
+        return parse_msolve(text, source=source), None, None
     except InputError as e:
         raise UserError(str(e)) from None
 
@@ -708,13 +719,31 @@ def cmd_solve(args: argparse.Namespace) -> int:
     import csv
     import json
 
-    from solvers.system_solve import solve_system
+    from solvers.system_solve import instance_system, solve_by_homotopy, solve_system
 
-    system, shown = _solve_input(args)
-    options = _f4_options(argparse.Namespace(backend="auto", max_cells=args.max_cells, max_memory=args.max_memory,
-                                             verbose=False, threads=1), linear_substitution=True)
-    result = solve_system(system, seed=args.seed, prime_seed=args.prime_seed, options=options, hidden=shown,
-                          progress=lambda line: print(line, file=sys.stderr, flush=True))
+    system, values, target = _solve_input(args)
+    method = args.method if args.method != "auto" else "homotopy" if target else "action-matrix"
+
+    def progress(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    if method == "homotopy":
+        if values is None:
+            raise UserError("--method homotopy is for parametric systems (a system in msolve's format has no "
+                            "parameters to move); use --method action-matrix")
+        from solvers.generate import GenerationError
+        from solvers.methods.homotopy import HomotopyError
+
+        try:
+            result = solve_by_homotopy(system, values, target, seed=args.seed, source=args.system, progress=progress)
+        except (HomotopyError, GenerationError) as exc:
+            raise UserError(f"{exc}; another --seed draws another monodromy") from None
+    else:
+        options = _f4_options(argparse.Namespace(backend="auto", max_cells=args.max_cells, max_memory=args.max_memory,
+                                                 verbose=False, threads=1), linear_substitution=True)
+        instance = system if values is None else instance_system(system, values, args.system)
+        result = solve_system(instance, seed=args.seed, prime_seed=args.prime_seed, options=options,
+                              hidden=None if values is None else len(system.unknowns), progress=progress)
     if args.json:
         print(json.dumps(result.as_dict()))
     elif args.csv:
@@ -725,7 +754,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
             writer.writerow([k, int(s.real), f"{s.residual:.3e}", f"{s.condition:.3e}"]
                             + [repr(float(getattr(z, part))) for z in s.values for part in ("real", "imag")])
     else:
-        print(f"degree {result.degree}  (certified over GF(p): {result.certificate})")
+        print(f"degree {result.degree}  ({result.certificate})")
         print(f"method: {result.method}" + (f"; {result.basis_status}" if result.basis_status else ""))
         print(f"status: {result.status}")
         print(f"{len(result.solutions)} solutions, {result.n_real} real; max residual {result.max_residual:.2g}; "

@@ -110,3 +110,62 @@ def test_cli_errors_are_one_line(capsys, tmp_path, text, args, fragment):
     path.write_text(text)
     code, out, err = run(capsys, "solve", str(path), *args)
     assert code == 2 and out == "" and fragment in err and len(err.strip().splitlines()) == 1
+
+
+def _network_values(seed: int = 1):
+    from solvers.synthetic import random_network
+
+    net = random_network(6, 3, rng=np.random.default_rng(seed))
+    F = net.measurements()
+    return net, {f"f{i + 1}_{j + 1}": Fraction(float(F[i, j])) for i in range(6) for j in range(3)}
+
+
+def test_homotopy_route_with_the_committed_6r3s_solver(monkeypatch):
+    """The homotopy route (track, polish on the exact instance, check) on the committed 6r/3s solver (its
+    system has definitions and a nonzero condition): 180 points, the network's own root (H, b, o) among
+    the real ones."""
+    import solvers.system_solve as ss
+    from solvers.generate import solver_system
+    from solvers.generated import tdoa_6r3s_homotopy180 as module
+    from solvers.synthetic import true_root
+
+    spec = json.loads((ROOT / "solvers" / "generated" / "tdoa_6r3s_homotopy180.json").read_text())
+    monkeypatch.setattr(ss, "generated_solver", lambda *args, **kw: (module, spec))
+    net, values = _network_values()
+    result = ss.solve_by_homotopy(solver_system("6r3s"), values)
+    assert result.method == ss.HOMOTOPY and result.degree == 180 and len(result.solutions) == 180
+    assert result.max_residual < 1e-6 and "certified over GF(p)" in result.certificate
+    assert result.complete == ("NOT" not in result.status)
+    H, b, o = true_root(net)
+    truth = np.array([H[0, 0], H[0, 1], H[1, 1], *b, *o])
+    assert min(np.abs(np.array(s.values) - truth).max() for s in result.solutions if s.real) < 1e-8
+
+
+@pytest.mark.slow
+def test_direct_6r3s_all_720_solutions(capsys, tmp_path, monkeypatch):
+    """`solve 6r3s-tdoa2d-direct:all` with a seeded network's measurements: the generated homotopy solver
+    (about 60 s the first time, into a fresh cache) gives all 720 solutions, residuals below 1e-8."""
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "cache"))
+    _, values = _network_values()
+    params = tmp_path / "f.txt"
+    params.write_text("".join(f"{k} = {float(v)!r}\n" for k, v in values.items()))
+    code, out, _ = run(capsys, "solve", "6r3s-tdoa2d-direct:all", "--params", str(params), "--json")
+    report = json.loads(out)
+    assert code == 0 and report["degree"] == 720 and report["n_solutions"] == 720 and report["complete"]
+    assert report["max_residual"] < 1e-8 and report["method"] == "parameter homotopy" and report["n_real"] > 0
+
+
+@pytest.mark.slow
+def test_circle_by_both_methods(capsys, tmp_path, monkeypatch):
+    """examples/circle.sys: the homotopy route (generated into a fresh cache) and the action matrix agree."""
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path / "cache"))
+    args = ("solve", str(ROOT / "examples" / "circle.sys"), "--param", "a=5", "--param", "b=1", "--param", "c=3/2",
+            "--json")
+    points = []
+    for method in ("action-matrix", "homotopy"):
+        code, out, _ = run(capsys, *args, "--method", method)
+        report = json.loads(out)
+        assert code == 0 and report["complete"] and report["n_solutions"] == 4
+        points.append(sorted((complex(*v) if isinstance(v, list) else complex(v) for v in
+                              (s["values"]["x"] for s in report["solutions"])), key=lambda z: (z.real, z.imag)))
+    assert np.allclose(points[0], points[1], atol=1e-10)
