@@ -409,12 +409,13 @@ class _Parser:
 
 # -- fast path: files that are sums of terms ----------------------------------------------------------
 
-_NAME_RE = MSOLVE_NAME
-_FACTOR = rf"(?:{_NAME_RE})(?:[ \t]*(?:\^|\*\*)[ \t]*[0-9]+)?"
-_MONOMIAL = rf"{_FACTOR}(?:[ \t]*\*[ \t]*{_FACTOR})*"
-_TERM = re.compile(rf"[ \t]*(?P<sign>[+-])[ \t]*(?:(?P<num>[0-9]+)(?:[ \t]*/[ \t]*(?P<den>[0-9]+))?"
-                   rf"(?:[ \t]*\*[ \t]*(?P<mono>{_MONOMIAL}))?|(?P<bare>{_MONOMIAL}))[ \t]*")
-_FACTOR_PARTS = re.compile(rf"({_NAME_RE})(?:[ \t]*(?:\^|\*\*)[ \t]*([0-9]+))?")
+_FACTOR = rf"(?>{MSOLVE_NAME})(?:\s*+(?:\^|\*\*)\s*+[0-9]++)?"
+_MONOMIAL = rf"{_FACTOR}(?:\s*+\*\s*+{_FACTOR})*+"
+_PIECES = re.compile(rf"(,)|([+-]?)\s*+(?:([0-9]++)(?:\s*+/\s*+([0-9]++))?(?:\s*+\*\s*+({_MONOMIAL}))?"
+                     rf"|({_MONOMIAL}))|(\S)")
+"""The pieces of a text of sums of terms, in one pass: (comma, sign, numerator, denominator, monomial
+after a number, monomial alone, any other character: not a sum of terms)."""
+_FACTOR_PARTS = re.compile(rf"({MSOLVE_NAME})(?:\s*(?:\^|\*\*)\s*([0-9]+))?")
 _SIMPLE_EXPONENT = len(str(MAX_DEGREE)) - 1
 """Exponents of at most this many digits are below MAX_DEGREE without a check."""
 
@@ -423,75 +424,65 @@ def parse_sums(text: str, variables: Sequence[str], characteristic: int = 0
                ) -> tuple[list[Coefficients], list[int]] | None:
     """The polynomials of comma-separated text when every one is a sum of terms ``[+-] [c[/d]] [*]
     x^k*y...`` (no parentheses, no powers of numbers, no division by a variable): the form CAS and
-    generators write, read at about a million terms a second; None for anything else (or any error),
-    which the recursive-descent parser then reads (and reports, with line and column). Same result as
-    that parser on every text it accepts (tests compare). Returns (polynomials, offset in text of each polynomial's first character)."""
-    if "(" in text or ")" in text:
-        return None
+    generators write, read in one regular-expression pass and one Python step per term (about a million
+    terms a second); None for anything else (or any error), which the recursive-descent parser then
+    reads (and reports, with line and column). Same result as that parser on every text it accepts
+    (tests compare). Returns (polynomials, offset in text of each polynomial's first character)."""
     index = {v: i for i, v in enumerate(variables)}
     nvars = len(variables)
-    chunks = text.split(",")
-    if chunks and not chunks[-1].strip():
-        chunks.pop()  # a trailing comma is tolerated
-    if not chunks:
-        return None
-    out: list[Coefficients] = []
-    starts: list[int] = []
-    term_iter = _TERM.finditer
     factors = _FACTOR_PARTS.findall
-    keys: dict[str | None, tuple[int, ...]] = {}  # monomial text -> exponents (files repeat their monomials)
-    offset = 0
-    for chunk in chunks:
-        body = chunk.replace("\n", " ").replace("\r", " ").strip()
-        if not body:
-            return None
+    keys: dict[str, tuple[int, ...]] = {}  # monomial text -> exponents (files repeat their monomials)
+    out: list[Coefficients] = []
+    poly: dict[tuple[int, ...], "int | Fraction"] = {}
+    terms = 0
+    for comma, sign, num, den, mono, bare, bad in _PIECES.findall(text):
+        if bad or (comma and not terms) or (not comma and terms and not sign):
+            return None  # another character, an empty polynomial, or two terms without an operator
+        if comma:
+            out.append(poly)
+            poly, terms = {}, 0
+            continue
+        terms += 1
+        if num:
+            if den:
+                d = _int_from_digits(den)
+                if d == 0 or (characteristic and d % characteristic == 0):
+                    return None
+                c = Fraction(_int_from_digits(num), d)
+            else:
+                c = int(num) if len(num) <= _CHUNK else _int_from_digits(num)
+        else:
+            c, mono = 1, bare
+        if sign == "-":
+            c = -c
+        key = keys.get(mono)
+        if key is None:
+            e = [0] * nvars
+            for name, k in factors(mono):
+                i = index.get(name)
+                if i is None or len(k) > _SIMPLE_EXPONENT:
+                    return None
+                e[i] += int(k) if k else 1
+            if sum(e) > MAX_DEGREE:
+                return None
+            keys[mono] = key = tuple(e)
+        if key in poly:
+            v = poly[key] + c
+            if v:
+                poly[key] = v
+            else:
+                del poly[key]
+        elif c:
+            poly[key] = c
+    if terms:
+        out.append(poly)  # no trailing comma: the last polynomial ends the text
+    if not out:
+        return None
+    starts, offset = [], 0
+    for chunk in text.split(",")[:len(out)]:
         starts.append(offset + len(chunk) - len(chunk.lstrip()))
         offset += len(chunk) + 1
-        if body[0] not in "+-":
-            body = "+" + body
-        poly: dict[tuple[int, ...], Fraction] = {}
-        end = 0
-        for m in term_iter(body):
-            if m.start() != end:
-                return None
-            end = m.end()
-            num, den, mono, bare = m.group("num", "den", "mono", "bare")
-            if num is not None:
-                if den is not None:
-                    d = _int_from_digits(den)
-                    if d == 0 or (characteristic and d % characteristic == 0):
-                        return None
-                    c = Fraction(_int_from_digits(num), d)
-                else:
-                    c = int(num) if len(num) <= _CHUNK else _int_from_digits(num)
-            else:
-                c, mono = 1, bare
-            if m.group("sign") == "-":
-                c = -c
-            key = keys.get(mono)
-            if key is None:
-                e = [0] * nvars
-                if mono is not None:
-                    for name, k in factors(mono):
-                        i = index.get(name)
-                        if i is None or len(k) > _SIMPLE_EXPONENT:
-                            return None
-                        e[i] += int(k) if k else 1
-                    if sum(e) > MAX_DEGREE:
-                        return None
-                keys[mono] = key = tuple(e)
-            if key in poly:
-                v = poly[key] + c
-                if v:
-                    poly[key] = v
-                else:
-                    del poly[key]
-            elif c:
-                poly[key] = c
-        if end != len(body):
-            return None
-        out.append({k: Fraction(c) if type(c) is int else c for k, c in poly.items()})
-    return out, starts
+    return [{k: Fraction(c) if type(c) is int else c for k, c in f.items()} for f in out], starts
 
 
 def _strip_comment(text: str) -> str:
