@@ -681,10 +681,11 @@ def _add_solve(sub: argparse._SubParsersAction) -> None:
 
 
 def _solve_input(args: argparse.Namespace):
-    """(system, parameter values, target) of solve's SYSTEM: an analysis.engine.io.System (values None) for
-    msolve's format, else a ParametricSystem, with the formulation label as target for a label."""
-    from analysis.engine.io import InputError, decode_text, parse_msolve
-    from analysis.formulations.parametric import from_formulation, parse
+    """(system, parameter values, target, unknowns shown) of solve's SYSTEM: a plain system (values None) read
+    by the one reader (read_system_arg), a parametric system with its values, or a formulation label's
+    parametric system with the label as target."""
+    from analysis.engine.io import System
+    from analysis.formulations.parametric import from_formulation
     from solvers.system_solve import parameter_values
 
     items = list(args.param)
@@ -696,23 +697,16 @@ def _solve_input(args: argparse.Namespace):
         from analysis.formulations.tdoa import as_formulation
 
         label = as_formulation(args.system).label
-        return from_formulation(label), values, label
-    try:
-        data = sys.stdin.buffer.read() if args.system == "-" else open(args.system, "rb").read()
-    except OSError as e:
-        raise UserError(f"cannot read {args.system}: {e.strerror}") from None
-    source = "<stdin>" if args.system == "-" else args.system
-    text = decode_text(data, source)
-    first = next((line.split("#", 1)[0].strip() for line in text.splitlines() if line.split("#", 1)[0].strip()), "")
-    if re.match(r"(unknowns|variables|parameters)\s*:", first, re.IGNORECASE):
-        return parse(text, source), values, None
+        system = from_formulation(label)
+        return system, values, label, len(system.unknowns)
+    system = read_system_arg(args.system)
+    if not isinstance(system, System):
+        return system, values, None, len(system.unknowns)
     if values:
-        raise UserError(f"{source} is in msolve's format, which has no parameters; --param/--params are for "
-                        "parametric systems")
-    try:
-        return parse_msolve(text, source=source), None, None
-    except InputError as e:
-        raise UserError(str(e)) from None
+        raise UserError(f"{args.system} has no parameters; --param/--params are for parametric systems")
+    # a plain file's nonzero: conditions come as one more unknown t (System.saturated_by), not printed
+    saturated = system.source.endswith("*f - 1")
+    return system, None, None, system.nvars - 1 if saturated else system.nvars
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
@@ -721,7 +715,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
     from solvers.system_solve import instance_system, solve_by_homotopy, solve_system
 
-    system, values, target = _solve_input(args)
+    system, values, target, shown = _solve_input(args)
     method = args.method if args.method != "auto" else "homotopy" if target else "action-matrix"
 
     def progress(line: str) -> None:
@@ -742,8 +736,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
         options = _f4_options(argparse.Namespace(backend="auto", max_cells=args.max_cells, max_memory=args.max_memory,
                                                  verbose=False, threads=1), linear_substitution=True)
         instance = system if values is None else instance_system(system, values, args.system)
-        result = solve_system(instance, seed=args.seed, prime_seed=args.prime_seed, options=options,
-                              hidden=None if values is None else len(system.unknowns), progress=progress)
+        result = solve_system(instance, seed=args.seed, prime_seed=args.prime_seed, options=options, hidden=shown,
+                              progress=progress)
     if args.json:
         print(json.dumps(result.as_dict()))
     elif args.csv:

@@ -201,15 +201,11 @@ def instance_system(system, values: Mapping[str, Fraction], source: str = "<syst
     polys = tuple(substitute(t, f"equation {k + 1}") for k, t in enumerate(system.equations))
     instance = System(tuple(system.unknowns), 0, polys, source=source)
     if system.nonzero and saturate:
+        from analysis.formulations.systemfile import _multiply
+
         product: dict = {(0,) * n: Fraction(1)}
         for k, t in enumerate(system.nonzero):
-            factor = substitute(t, f"nonzero condition {k + 1}")
-            step: dict = {}
-            for e1, c1 in product.items():
-                for e2, c2 in factor.items():
-                    e = tuple(a + b for a, b in zip(e1, e2))
-                    step[e] = step.get(e, Fraction(0)) + c1 * c2
-            product = {e: c for e, c in step.items() if c}
+            product = _multiply(product, substitute(t, f"nonzero condition {k + 1}"))
         instance = instance.saturated_by(product)
     return instance
 
