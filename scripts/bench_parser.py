@@ -15,13 +15,13 @@ clock minus the start-up of a trivial Singular run; ``ratio`` = degree_s / singu
 answer the same question (the degree, or that the system is inconsistent) and their answers are compared
 (``agree``). Each child runs under ``--cap`` seconds (default 300).
 
-Writes tables/bench_parser.csv (the figures) and tables/bench_parser.timing.json (date, machine,
-versions: a run record). Usage: python scripts/bench_parser.py [--cases NAME ...] [--cap 300] [--out DIR]
+Writes tables/bench_parser.timing.json (untracked: seconds are facts of the run, not results): the rows
+and the run record (date, machine, versions), and prints one line per case. Usage:
+python scripts/bench_parser.py [--cases NAME ...] [--cap 300] [--out DIR]
 """
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime as _dt
 import json
 import platform
@@ -149,16 +149,12 @@ def main() -> int:
             startup = min(runs)
         rows = [bench(name, tmp, args.cap, singular, startup) for name in args.cases]
     args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "bench_parser.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, COLUMNS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
     version = subprocess.run([singular, "-v", "-q", "-c", "quit;"], capture_output=True, text=True).stdout.strip() \
         if singular else None
     record = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
               "processor": platform.processor() or platform.machine(), "python": platform.python_version(),
               "singular": singular, "singular_version": (version or "").splitlines()[:1],
-              "singular_startup_s": round(startup, 3), "seed": SEED}
+              "singular_startup_s": round(startup, 3), "seed": SEED, "columns": COLUMNS, "rows": rows}
     (args.out / "bench_parser.timing.json").write_text(json.dumps(record, indent=1) + "\n")
     for row in rows:
         print(", ".join(f"{k}={row.get(k, '')}" for k in COLUMNS))
