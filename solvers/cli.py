@@ -90,10 +90,9 @@ def _memory_size(text: str) -> int:
     return int(value)
 
 
-def _default_max_memory() -> str:
-    from analysis.engine.f4 import DEFAULT_MAX_MEMORY
-
-    return os.environ.get(MAX_MEMORY_ENV) or f"{DEFAULT_MAX_MEMORY >> 30}G"
+def _default_max_memory() -> str | None:
+    """$TDOA_WORKBENCH_MAX_MEMORY, or None: F4's default (a share of the machine's available memory)."""
+    return os.environ.get(MAX_MEMORY_ENV) or None
 
 
 def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
@@ -121,6 +120,16 @@ def _export(system, fmt: str, path: str) -> None:
         write_system(system, path, fmt)
     except OSError as e:
         raise UserError(f"--export: cannot write {path}: {e.strerror}; give a file in an existing, writable directory") from None
+
+
+def _add_f4_caps(p: argparse.ArgumentParser) -> None:
+    """--max-cells and --max-memory, the F4 caps of every verb that runs the engine on a system file (the
+    75% is analysis.engine.f4.MEMORY_SHARE, not imported here: --help stays free of numpy; a test compares)."""
+    p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=None, metavar="N",
+                   help="cap on F4 matrix rows*cols (default none: the memory cap decides)")
+    p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
+                   help=f"stop before an F4 matrix needs more memory than this (its sparse rows and their reduction), "
+                   f"e.g. 4G (default ${MAX_MEMORY_ENV}, else 75%% of the machine's available memory)")
 
 
 def _add_degree(sub: argparse._SubParsersAction) -> None:
@@ -178,10 +187,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gb", action="store_true",
                    help="also print the reduced Groebner basis (over Q for characteristic 0, else over GF(p))")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--max-cells", type=_nonnegative("--max-cells"), default=400_000_000,
-                   help="cap on F4 matrix rows*cols")
-    p.add_argument("--max-memory", type=_memory_size, default=_default_max_memory(), metavar="SIZE",
-                   help=f"stop before an F4 matrix needs more memory than this, e.g. 4G (default 8G or ${MAX_MEMORY_ENV})")
+    _add_f4_caps(p)
     p.add_argument("--backend", default="auto",
                    help="linear algebra backend: auto (default: the compiled C sparse kernel, built on first use by the "
                    "system's C compiler; without one numba's sparse kernel on large sparse matrices, else numpy; -v "
@@ -353,6 +359,7 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
     import dataclasses
 
     from analysis.engine.degree import CHECK_CELLS, analyse_prime
+    from analysis.engine.f4 import tighter_cells
     from analysis.engine.io import format_polynomial
     from analysis.engine.linalg import MatrixTooLarge
     from analysis.engine.modular import analyse_rational, input_seed, order_key, rational_basis
@@ -366,7 +373,7 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
         exe = _engine(args, f)
         computed.append(p)
         if exe is not None and not args.no_check and len(computed) == 2:
-            capped = dataclasses.replace(options, max_matrix_cells=min(CHECK_CELLS, options.max_matrix_cells))
+            capped = dataclasses.replace(options, max_matrix_cells=tighter_cells(CHECK_CELLS, options.max_matrix_cells))
             try:
                 return analyse_prime(f, capped, sat(p) if sat else None, "rabinowitsch")
             except MatrixTooLarge:
@@ -633,6 +640,125 @@ def _read_text(path: str) -> str:
         raise UserError(f"{path}: not a UTF-8 text file") from None
     except OSError as exc:
         raise UserError(f"{path}: {exc.strerror or exc}") from None
+
+
+def _add_solve(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "solve", help="every solution of a zero-dimensional system, real ones marked, with residuals",
+        description=(
+            "Every solution of a zero-dimensional polynomial system over Q. SYSTEM is in msolve's format "
+            "(as for degree, characteristic 0) or a parametric system ('unknowns:', 'parameters:', 'equations:' "
+            "and optional 'nonzero:' lines, as for generate) with its parameter values given by --param or "
+            "--params. The number of solutions (with multiplicity) is the degree certified over GF(p) by a "
+            "majority of random 31-bit primes; the points come from the action matrices of the basis over Q "
+            "(Chinese remaindering and rational reconstruction), their eigenvectors in floating point and "
+            "Newton steps on the input. The status says whether every solution was found (as many distinct "
+            "points as the degree, each with a nonsingular Jacobian). See docs/cli.md."
+        ),
+    )
+    p.add_argument("system", metavar="SYSTEM",
+                   help="system file (.ms or a parametric system; '-' for stdin) or a TDOA formulation label such as "
+                   "6r3s-tdoa2d-direct:all (parameters f<i>_<j>, the TDOA measurements)")
+    p.add_argument("--method", choices=("auto", "action-matrix", "homotopy"), default="auto",
+                   help="action-matrix (the basis over Q, eigenvectors), homotopy (a parametric system: its generated "
+                   "parameter-homotopy solver, built once into the cache) or auto (default: homotopy for a formulation "
+                   "label, action-matrix for a file)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a parameter's value: an integer, a decimal or p/q, read exactly (repeatable)")
+    p.add_argument("--params", metavar="FILE", help="parameter values, one NAME=VALUE a line ('#' comments)")
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="print one JSON object")
+    out.add_argument("--csv", action="store_true",
+                     help="print one CSV row per solution: index, real, residual, condition, then NAME_re, NAME_im "
+                     "per unknown")
+    p.add_argument("--seed", type=_nonnegative("--seed"), default=0,
+                   help="seed of the random linear form whose action matrix is diagonalised, or of the homotopy "
+                   "solver's monodromy (default 0)")
+    p.add_argument("--prime-seed", type=_nonnegative("--prime-seed"), default=0, metavar="N",
+                   help="the random 31-bit primes are drawn by a seed hashed from the system and N (default 0)")
+    _add_f4_caps(p)
+    p.set_defaults(func=cmd_solve)
+
+
+def _solve_input(args: argparse.Namespace):
+    """(system, parameter values, target, unknowns shown) of solve's SYSTEM: a plain system (values None) read
+    by the one reader (read_system_arg), a parametric system with its values, or a formulation label's
+    parametric system with the label as target."""
+    from analysis.engine.io import System
+    from analysis.formulations.parametric import from_formulation
+    from solvers.system_solve import parameter_values
+
+    items = list(args.param)
+    if args.params:
+        items += [line.split("#", 1)[0].strip() for line in _read_text(args.params).splitlines()]
+        items = [item for item in items if item]
+    values = parameter_values(items, "--param/--params")
+    if args.system != "-" and ":" in args.system and not os.path.exists(args.system):
+        from analysis.formulations.tdoa import as_formulation
+
+        label = as_formulation(args.system).label
+        system = from_formulation(label)
+        return system, values, label, len(system.unknowns)
+    system = read_system_arg(args.system)
+    if not isinstance(system, System):
+        return system, values, None, len(system.unknowns)
+    if values:
+        raise UserError(f"{args.system} has no parameters; --param/--params are for parametric systems")
+    # a plain file's nonzero: conditions come as one more unknown t (System.saturated_by), not printed
+    saturated = system.source.endswith("*f - 1")
+    return system, None, None, system.nvars - 1 if saturated else system.nvars
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    import csv
+    import json
+
+    from solvers.system_solve import instance_system, solve_by_homotopy, solve_system
+
+    system, values, target, shown = _solve_input(args)
+    method = args.method if args.method != "auto" else "homotopy" if target else "action-matrix"
+
+    def progress(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    if method == "homotopy":
+        if values is None:
+            raise UserError("--method homotopy is for parametric systems (a system in msolve's format has no "
+                            "parameters to move); use --method action-matrix")
+        from solvers.generate import GenerationError
+        from solvers.methods.homotopy import HomotopyError
+
+        try:
+            result = solve_by_homotopy(system, values, target, seed=args.seed, source=args.system, progress=progress)
+        except (HomotopyError, GenerationError) as exc:
+            raise UserError(f"{exc}; another --seed draws another monodromy") from None
+    else:
+        options = _f4_options(argparse.Namespace(backend="auto", max_cells=args.max_cells, max_memory=args.max_memory,
+                                                 verbose=False, threads=1), linear_substitution=True)
+        instance = system if values is None else instance_system(system, values, args.system)
+        result = solve_system(instance, seed=args.seed, prime_seed=args.prime_seed, options=options, hidden=shown,
+                              progress=progress)
+    if args.json:
+        print(json.dumps(result.as_dict()))
+    elif args.csv:
+        writer = csv.writer(sys.stdout, lineterminator="\n")
+        writer.writerow(["index", "real", "residual", "condition"]
+                        + [f"{u}_{part}" for u in result.unknowns for part in ("re", "im")])
+        for k, s in enumerate(result.solutions, 1):
+            writer.writerow([k, int(s.real), f"{s.residual:.3e}", f"{s.condition:.3e}"]
+                            + [repr(float(getattr(z, part))) for z in s.values for part in ("real", "imag")])
+    else:
+        print(f"degree {result.degree}  ({result.certificate})")
+        print(f"method: {result.method}" + (f"; {result.basis_status}" if result.basis_status else ""))
+        print(f"status: {result.status}")
+        print(f"{len(result.solutions)} solutions, {result.n_real} real; max residual {result.max_residual:.2g}; "
+              f"{result.seconds:.2f} s")
+        if result.solutions:
+            print("  #  real  residual  " + "  ".join(result.unknowns))
+            for k, s in enumerate(result.solutions, 1):
+                coords = "  ".join(f"{z.real:.15g}" if s.real else f"{z.real:.15g}{z.imag:+.15g}i" for z in s.values)
+                print(f"{k:3d}  {'real' if s.real else '-   '}  {s.residual:8.1e}  {coords}")
+    return 0 if result.complete else 3
 
 
 def _add_generate(sub: argparse._SubParsersAction) -> None:
@@ -1123,6 +1249,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_degree(sub)
     _add_tables(sub)
+    _add_solve(sub)
     _add_generate(sub)
     _add_count(sub)
     _add_template_check(sub)

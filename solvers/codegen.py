@@ -237,10 +237,11 @@ def _pencil_parts(spec: dict) -> ModuleParts:
                f"    return runtime.solve_one(solver(), coefficients, F, CONFIG, polish)"))
 
 
-def _load_source(solver_class: str) -> str:
-    """The body of ``solver()`` for a method whose kernel takes the spec text and the coefficient function."""
+def _load_source(solver_class: str, extra: str = "") -> str:
+    """The body of ``solver()`` for a method whose kernel takes the spec text and the coefficient function
+    (``extra``: further keyword arguments, e.g. ``, evaluator="tape"``)."""
     return ("        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), SPEC_FILE), encoding=\"utf-8\") as fh:\n"
-            f"            _SOLVER.append(_method.{solver_class}(_method.load_spec(fh.read()), coefficients))")
+            f"            _SOLVER.append(_method.{solver_class}(_method.load_spec(fh.read()), coefficients{extra}))")
 
 
 def _scaled_solve_source(pshape: tuple[int, ...], rows: int, nvars: int, tdoa: bool = True) -> str:
@@ -273,20 +274,28 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
     if spec.get("starts"):
         tracked += (f"\nThey are tracked from {len(spec['starts']) + 1} start instances (the spec's further ones seeded, their roots\n"
                     f"found at generation), each instance's distinct endpoints pooled; nothing is retracked.")
+    # a user's system (no configuration) has no validated program of its formulation: its paths run on the
+    # tape traced from its coefficients, the C kernels where a compiler is present (no numba compile on first use)
+    user = not config
+    by = ("the tape tracker of solvers.continuation.tape_kernel\n(on the program traced from coefficients; "
+          "compiled C where a C compiler is present)" if user else
+          "the compiled tracker of solvers.continuation.tracker")
+    data = "parameter values" if user else "data"
     return ModuleParts(
         summary=f"parameter homotopy with {paths} paths in {nvars} unknowns.",
         description=((f"The {paths} roots of a generic complex start instance (certified count over GF(p), found by\n"
-                      f"monodromy) are tracked to the data by the compiled tracker of solvers.continuation.tracker.{tracked}")
+                      f"monodromy) are tracked to the {data} by {by}.{tracked}")
                      if "evidence" not in spec else
                      (f"The {paths} roots of a generic complex start instance (NOT certified over GF(p): numerical\n"
                       f"evidence alone, monodromy until {spec['evidence']['stall_loops']} loops found no new root) are "
-                      f"tracked to the data\nby the compiled tracker of solvers.continuation.tracker.{tracked}")),
+                      f"tracked to the {data}\nby {by}.{tracked}")),
         rows=paths, pshape=pshape, config=tuple(config) if config else None,
         imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import homotopy as _method",
         method_constants=(f"PARAMETERS = {len(spec['parameters'])}\nPATHS = {paths}\n"
                           f"START_ROOTS = {len(spec['start_roots'])}" + (f"\nGROUP_ORDER = {group['order']}" if group else "")),
         scale_powers=tuple(spec["scale_powers"]) if spec.get("scale_powers") else None,
-        load=_load_source("HomotopySolver"), solve=_scaled_solve_source(pshape, paths, nvars, config is not None))
+        load=_load_source("HomotopySolver", ', evaluator="tape"' if user else ""),
+        solve=_scaled_solve_source(pshape, paths, nvars, config is not None))
 
 
 def offset_kernel_coefficients(spec: dict) -> str:

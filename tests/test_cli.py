@@ -75,6 +75,26 @@ def test_bad_input_is_one_line_with_status_2(capsys, tmp_path, text, args, fragm
     assert fragment in err and len(err.strip().splitlines()) == 1
 
 
+def test_memory_share_in_help_is_the_engines():
+    """--help names the default memory share as a literal (no numpy at parse time); it is F4's."""
+    from analysis.engine.f4 import MEMORY_SHARE
+    from solvers.cli import build_parser
+
+    helps = [a.help for a in build_parser()._subparsers._group_actions[0].choices["degree"]._actions
+             if "--max-memory" in a.option_strings]
+    assert f"{MEMORY_SHARE:.0%}%" in helps[0]
+
+
+@pytest.mark.slow
+def test_direct_6r3s_degree_with_default_caps(capsys):
+    """The direct 6r/3s system (18 unknowns): its 32299 x 18831 F4 matrix (608M cells, once refused by a
+    400M-cell cap) needs about 200 MiB by the estimate; with default options the degree is 720 (~6 s)."""
+    code, out, _ = run(capsys, "degree", "--tdoa", "6r3s", "--parametrization", "direct", "--equations", "all",
+                       "--json")
+    report = json.loads(out)
+    assert code == 0 and report["degree"] == 720 and report["max_matrix"] == [32299, 18831]
+
+
 def test_missing_file_is_reported(capsys, tmp_path):
     code, _, err = run(capsys, "degree", str(tmp_path / "nope.ms"))
     assert code == 2 and "cannot read" in err

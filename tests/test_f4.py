@@ -404,6 +404,32 @@ def test_memory_cap_stops_before_allocating():
         groebner([lex.from_terms(f.terms()) for f in katsura(4)], F4Options(max_memory=100 << 20))
 
 
+def test_default_caps_count_memory_not_cells():
+    """``x^300 + y, x + y + 1``: one 45151 x 45451 matrix (2.05e9 cells, five times the old dense-shape
+    cap) with 135k nonzeros; by default only its memory estimate counts, so it is answered."""
+    from analysis.engine.f4 import matrix_memory
+
+    R = Ring(["x", "y"], 65521)
+    x, y = R.gens()
+    assert F4Options().max_matrix_cells is None and F4Options().max_memory is None
+    gb = groebner([x**300 + y, x + y + 1])
+    assert degree(gb) == 300 and gb.max_matrix[0] * gb.max_matrix[1] > 2_000_000_000
+    assert matrix_memory(45151, 45451, 3 * 45151, dense=False) < 10 << 20  # the sparse estimate: a few MiB
+    assert matrix_memory(45151, 45451, 3 * 45151, dense=True) > 40 << 30  # dense, it would not fit
+
+
+def test_default_memory_cap_is_a_share_of_available_memory(monkeypatch):
+    """The default cap is MEMORY_SHARE of the available memory read at the start of the run."""
+    from analysis.engine import f4
+
+    monkeypatch.setattr(f4, "available_memory", lambda: 1 << 20)
+    assert f4.default_max_memory() == int(f4.MEMORY_SHARE * (1 << 20))
+    with pytest.raises(MatrixTooLarge, match="above the memory cap of 768 KiB .75% of the machine's available memory"):
+        groebner(katsura(7))  # its largest matrix needs about 873 KiB
+    monkeypatch.setattr(f4, "available_memory", lambda: None)
+    assert f4.default_max_memory() == f4.FALLBACK_MAX_MEMORY
+
+
 @pytest.mark.parametrize("name", ["katsura-6", "cyclic-6", "tdoa-9r3s-C8", "dense-4x(2,2,3,3)"])
 def test_pair_update_by_degree_matches_cube(name, monkeypatch):
     """The two ways of choosing the new pairs of a round (all partner pairs at once, or degree by degree

@@ -54,6 +54,10 @@ def test_generate_file_writes_only_into_out_and_the_module_solves(tmp_path, monk
     roots = module.solve(np.array([x * x + y * y, b, b * x - x * y]))
     assert roots.shape == (4, 2)
     assert np.min(np.linalg.norm(roots - [x, y], axis=1)) < 1e-10 * (1 + np.hypot(x, y))
+    # a user's system runs on the tape traced from its coefficients (the C kernels: no numba compile), and its
+    # docstring speaks of its parameters, not of TDOA data
+    assert module.solver().tapes is not None
+    assert "parameter values q in the order a, b, c" in module.__doc__ and "TDOA" not in module.__doc__
     # the header's command, pasted, regenerates the same bytes
     text = (tmp_path / "gen" / "circle_homotopy4.py").read_text()
     line = next(t for t in text.splitlines() if t.startswith("# Regenerate: "))

@@ -426,3 +426,81 @@ def test_integers_of_any_length(tmp_path):
 def test_a_zero_term_is_no_term(text):
     """'x+0' once raised KeyError (a zero constant kept as a term with coefficient 0; found by the fuzz)."""
     assert parse_msolve(f"x\n0\n{text}\n").polynomials == ({(1,): Fraction(1)},)
+
+
+# -- the fast path of sums of terms (analysis.engine.polytext.parse_sums) ---------------------------
+
+SUMS = [
+    "x,y\n0\nx + y, x - y,\n  x*y\n",
+    "x,y\n0\n-2/4*x^3*y**2 + 3 - y*x*x, 0, x - x\n",
+    "x,y\n7\n10*x + 14/3*y - 1,\n y^2\n- x,\n",
+    "x',y[1]\n0\n 12345678901234567890*x'^2*y[1] + 1/3\n",
+    "x,y,z\n0\nx^65535*y - 5/10, z ** 4 *x* y -7*x\n",
+    "x,y\n0\n2 - 2, x\t+\ty\n",
+]
+"""Texts inside the fast path (zero coefficients, repeated variables, continuation lines, tabs, p)."""
+
+
+def _slow(text, monkeypatch):
+    """The recursive-descent parser's reading (the fast path switched off)."""
+    import analysis.engine.io as io
+
+    monkeypatch.setattr(io, "parse_sums", lambda *args: None)
+    try:
+        return io.parse_msolve(text)
+    finally:
+        monkeypatch.undo()
+
+
+@pytest.mark.parametrize("text", SUMS)
+def test_sums_fast_path_reads_like_the_parser(text, monkeypatch):
+    from analysis.engine.polytext import parse_sums
+
+    body = text.split("\n", 2)[2]
+    assert parse_sums(body, text.split("\n")[0].split(","), int(text.split("\n")[1])) is not None  # fast path taken
+    fast, slow = parse_msolve(text), _slow(text, monkeypatch)
+    assert fast == slow and fast.lines == slow.lines
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sums_fast_path_random_systems(seed, monkeypatch):
+    """Random sums with signs, fractions, powers written ^ or ** and spacing: fast == slow."""
+    rng = random.Random(seed)
+    names = [f"v{i}" for i in range(rng.randint(1, 5))]
+    polys = []
+    for _ in range(rng.randint(1, 6)):
+        terms = []
+        for k in range(rng.randint(1, 7)):
+            sign = rng.choice(["+", "-"]) if k else rng.choice(["", "-", "+"])
+            coef = rng.choice(["", f"{rng.randint(0, 10**25)}", f"{rng.randint(0, 99)}/{rng.randint(1, 99)}"])
+            factors = [rng.choice(names) + rng.choice(["", f"^{rng.randint(0, 5)}", f"**{rng.randint(1, 5)}"])
+                       for _ in range(rng.randint(0 if coef else 1, 3))]
+            mono = rng.choice(["*", " * "]).join(factors)
+            terms.append(f"{sign} {coef}{'*' if coef and mono else ''}{mono}")
+        polys.append(rng.choice([" ", "", "\n"]).join(terms))
+    text = ",".join(names) + "\n0\n" + ",\n".join(polys) + "\n"
+    assert parse_msolve(text) == _slow(text, monkeypatch), text
+
+
+def test_outside_the_fast_path_errors_are_the_parsers():
+    """Every error text of the table above is read by the full parser (the fast path declines)."""
+    from analysis.engine.polytext import parse_sums
+
+    for text, _ in ERRORS:
+        parts = text.split("\n", 2)
+        names = parts[0].split(",")
+        header_ok = all(n.isalpha() for n in names) and len(set(names)) == len(names)
+        if len(parts) == 3 and header_ok and parts[1].strip() in ("0", "7"):  # the polynomials' errors
+            assert parse_sums(parts[2], parts[0].split(","), 0) is None, text
+
+
+def test_ten_thousand_digit_coefficients_round_trip():
+    """Integers above Python's 4300-digit str limit are converted by FLINT, both ways."""
+    rng = random.Random(5)
+    digits = str(rng.randint(1, 9)) + "".join(rng.choice("0123456789") for _ in range(12_000))
+    system = parse_msolve(f"x\n0\nx - {digits}/7\n")
+    value = 0
+    for k in range(0, len(digits), 4000):  # Python's own reading, in chunks below its limit
+        value = value * 10 ** len(digits[k:k + 4000]) + int(digits[k:k + 4000])
+    assert system.polynomials[0][(0,)] == -Fraction(value, 7)
+    assert parse_msolve(to_msolve(system)) == system  # written back by FLINT, read again

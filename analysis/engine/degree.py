@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, Literal, Sequence
 
-from .f4 import F4Options, GroebnerResult, groebner
+from .f4 import F4Options, GroebnerResult, groebner, tighter_cells
 from .linalg import MatrixTooLarge
 from .quotient import (count_standard_monomials, dimension, fglm, is_zero_dimensional, saturate, saturated_degree,
                        standard_monomials)
@@ -259,7 +259,7 @@ def analyse_by_msolve(
     if not check:
         results += [_analyse_one(system, p, options, saturate_by, saturation, "msolve", msolve) for p in primes[len(head):]]
         return _agreed(results, "none (not requested)")
-    capped = dataclasses.replace(options, max_matrix_cells=min(check_cells, options.max_matrix_cells))
+    capped = dataclasses.replace(options, max_matrix_cells=tighter_cells(check_cells, options.max_matrix_cells))
     p = primes[-1]
     try:
         own = _analyse_one(system, p, capped, saturate_by, saturation, "own", None)

@@ -36,8 +36,38 @@ pairs of partners at once; above it, degree by degree against the minimal lcms (
 COEFFICIENT_TABLE = 1 << 17
 """Up to this prime the reduced basis shares one int object per field element (see :func:`_reduce_basis`)."""
 
-DEFAULT_MAX_MEMORY = 8 << 30
-"""Default memory cap of one F4 matrix reduction (8 GiB), well inside a 16-24 GB machine."""
+MEMORY_SHARE = 0.75
+"""Share of the machine's available memory (at the start of a run) that the default memory cap allows one
+F4 matrix reduction (:func:`default_max_memory`); the rest is left to the basis, the pair set and the
+machine's other work."""
+
+FALLBACK_MAX_MEMORY = 8 << 30
+"""The default memory cap where the available memory cannot be read (no /proc/meminfo, no sysconf)."""
+
+
+def available_memory() -> int | None:
+    """Bytes of memory the machine can give a process now without swapping (Linux ``MemAvailable``;
+    elsewhere free pages by sysconf), or None where neither can be read."""
+    try:
+        with open("/proc/meminfo") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def default_max_memory() -> int:
+    """The default memory cap of one F4 matrix reduction: :data:`MEMORY_SHARE` of the machine's available
+    memory now (:data:`FALLBACK_MAX_MEMORY` where that cannot be read)."""
+    free = available_memory()
+    return FALLBACK_MAX_MEMORY if free is None else int(MEMORY_SHARE * free)
 
 
 @dataclass(frozen=True)
@@ -46,9 +76,12 @@ class F4Options:
 
     backend: linear algebra backend ("auto": the compiled sparse kernel on large sparse matrices, numpy
         otherwise; "numpy", "sparse", or "python", the reference).
-    max_matrix_cells: stop with :class:`MatrixTooLarge` when rows*cols of a matrix exceeds this.
+    max_matrix_cells: stop with :class:`MatrixTooLarge` when rows*cols of a matrix exceeds this; None
+        (the default): no cap on the shape, the memory cap decides (F4 matrices are sparse: the direct
+        6r/3s system's 32299 x 18831 matrix, 608M cells, needs about 200 MiB).
     max_memory: stop with :class:`MatrixTooLarge` before reducing a matrix whose estimated working
-        memory (:func:`matrix_memory`) exceeds this many bytes.
+        memory (:func:`matrix_memory`) exceeds this many bytes; None (the default): the machine's
+        available memory at the start of the run (:func:`default_max_memory`).
     verbose: print one line per round to stderr.
     threads: threads of the row reduction (the C kernel, built with OpenMP; the other backends and a
         build without OpenMP use one). The basis is the same for every count.
@@ -59,8 +92,8 @@ class F4Options:
     """
 
     backend: str = "auto"
-    max_matrix_cells: int = 400_000_000
-    max_memory: int = DEFAULT_MAX_MEMORY
+    max_matrix_cells: int | None = None
+    max_memory: int | None = None
     verbose: bool = False
     threads: int = 1
     linear_substitution: bool = False
@@ -68,6 +101,11 @@ class F4Options:
     def __post_init__(self):
         if not isinstance(self.threads, int) or self.threads < 1:
             raise ValueError(f"threads must be a positive integer, not {self.threads!r}")
+
+
+def tighter_cells(*caps: int | None) -> int | None:
+    """The smallest of matrix-cell caps, None (no cap) counting as infinite."""
+    return min((c for c in caps if c is not None), default=None)
 
 
 def format_bytes(n: float) -> str:
@@ -730,6 +768,7 @@ def _f4(
 ) -> tuple[tuple[Poly, ...], tuple[RoundStats, ...]]:
     """The F4 loop of :func:`groebner`: (reduced basis, round statistics)."""
     p = ring.prime
+    max_memory = default_max_memory() if options.max_memory is None else options.max_memory
     state = _State(ring, codes)
     rounds: list[RoundStats] = []
 
@@ -755,7 +794,7 @@ def _f4(
         npairs = len(pi)
         rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms), graded))
         nrows, ncols = len(rows.index), len(columns)
-        if nrows * ncols > options.max_matrix_cells:
+        if options.max_matrix_cells is not None and nrows * ncols > options.max_matrix_cells:
             raise MatrixTooLarge(
                 f"F4 matrix {nrows} x {ncols} at degree {d} exceeds the cap of {options.max_matrix_cells} cells"
             )
@@ -765,10 +804,11 @@ def _f4(
         dense = backend.name == "numpy" or (backend.name == "auto" and not sparse_pays(
             len(pivot_rows), int(rows.lengths[pivot_rows].sum()), len(reduce_rows), ncols))
         need = matrix_memory(len(reduce_rows), ncols, nonzeros, dense)
-        if need > options.max_memory:
+        if need > max_memory:
             raise MatrixTooLarge(
                 f"F4 matrix {nrows} x {ncols} at degree {d} needs about {format_bytes(need)}, above the memory cap "
-                f"of {format_bytes(options.max_memory)}"
+                f"of {format_bytes(max_memory)}" + ("" if options.max_memory is not None else
+                                                    f" ({MEMORY_SHARE:.0%} of the machine's available memory)")
             )
         pivot_rows = pivot_rows[leads[pivot_rows].argsort()]  # by lead: the backend need not sort
         # the two blocks straight from the rows' terms (no whole matrix and copies of it)

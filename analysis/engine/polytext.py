@@ -45,28 +45,25 @@ of lifting that process-wide limit."""
 
 
 def _int_from_digits(text: str) -> int:
-    """The integer written in decimal digits, of any length."""
+    """The integer written in decimal digits, of any length (above :data:`_CHUNK` digits by FLINT's
+    subquadratic conversion: a million digits in 0.08 s, where Python's int() takes 4.5 s)."""
     if len(text) <= _CHUNK:
         return int(text)
-    value = 0
-    for start in range(0, len(text), _CHUNK):
-        chunk = text[start:start + _CHUNK]
-        value = value * 10 ** len(chunk) + int(chunk)
-    return value
+    import flint
+
+    return int(flint.fmpz(text))
 
 
 def _int_to_digits(n: int) -> str:
-    """Decimal digits of an integer of any size (with a leading '-' when negative)."""
+    """Decimal digits of an integer of any size (with a leading '-' when negative; FLINT above 10^3600:
+    a million digits in 0.06 s, where chunked divmod took 11.5 s)."""
     if n < 0:
         return "-" + _int_to_digits(-n)
     if n.bit_length() < 3 * _CHUNK:  # below 10^3600: within the limit
         return str(n)
-    base = 10 ** _CHUNK
-    chunks = []
-    while n:
-        n, low = divmod(n, base)
-        chunks.append(low)
-    return str(chunks[-1]) + "".join(str(c).zfill(_CHUNK) for c in reversed(chunks[:-1]))
+    import flint
+
+    return str(flint.fmpz(n))
 
 
 def _short(n: "int | Fraction") -> str:
@@ -408,6 +405,84 @@ class _Parser:
         if tok.kind == "end":
             raise self.fail(tok, "unexpected end of polynomial (missing operand)")
         raise self.fail(tok, f"unexpected {tok.describe()} (expected a number, a variable or '(')")
+
+
+# -- fast path: files that are sums of terms ----------------------------------------------------------
+
+_FACTOR = rf"(?>{MSOLVE_NAME})(?:\s*+(?:\^|\*\*)\s*+[0-9]++)?"
+_MONOMIAL = rf"{_FACTOR}(?:\s*+\*\s*+{_FACTOR})*+"
+_PIECES = re.compile(rf"(,)|([+-]?)\s*+(?:([0-9]++)(?:\s*+/\s*+([0-9]++))?(?:\s*+\*\s*+({_MONOMIAL}))?"
+                     rf"|({_MONOMIAL}))|(\S)")
+"""The pieces of a text of sums of terms, in one pass: (comma, sign, numerator, denominator, monomial
+after a number, monomial alone, any other character: not a sum of terms)."""
+_FACTOR_PARTS = re.compile(rf"({MSOLVE_NAME})(?:\s*(?:\^|\*\*)\s*([0-9]+))?")
+_SIMPLE_EXPONENT = len(str(MAX_DEGREE)) - 1
+"""Exponents of at most this many digits are below MAX_DEGREE without a check."""
+
+
+def parse_sums(text: str, variables: Sequence[str], characteristic: int = 0
+               ) -> tuple[list[Coefficients], list[int]] | None:
+    """The polynomials of comma-separated text when every one is a sum of terms ``[+-] [c[/d]] [*]
+    x^k*y...`` (no parentheses, no powers of numbers, no division by a variable): the form CAS and
+    generators write, read in one regular-expression pass and one Python step per term (about a million
+    terms a second); None for anything else (or any error), which the recursive-descent parser then
+    reads (and reports, with line and column). Same result as that parser on every text it accepts
+    (tests compare). Returns (polynomials, offset in text of each polynomial's first character)."""
+    index = {v: i for i, v in enumerate(variables)}
+    nvars = len(variables)
+    factors = _FACTOR_PARTS.findall
+    keys: dict[str, tuple[int, ...]] = {}  # monomial text -> exponents (files repeat their monomials)
+    out: list[Coefficients] = []
+    poly: dict[tuple[int, ...], "int | Fraction"] = {}
+    terms = 0
+    for comma, sign, num, den, mono, bare, bad in _PIECES.findall(text):
+        if bad or (comma and not terms) or (not comma and terms and not sign):
+            return None  # another character, an empty polynomial, or two terms without an operator
+        if comma:
+            out.append(poly)
+            poly, terms = {}, 0
+            continue
+        terms += 1
+        if num:
+            if den:
+                d = _int_from_digits(den)
+                if d == 0 or (characteristic and d % characteristic == 0):
+                    return None
+                c = Fraction(_int_from_digits(num), d)
+            else:
+                c = int(num) if len(num) <= _CHUNK else _int_from_digits(num)
+        else:
+            c, mono = 1, bare
+        if sign == "-":
+            c = -c
+        key = keys.get(mono)
+        if key is None:
+            e = [0] * nvars
+            for name, k in factors(mono):
+                i = index.get(name)
+                if i is None or len(k) > _SIMPLE_EXPONENT:
+                    return None
+                e[i] += int(k) if k else 1
+            if sum(e) > MAX_DEGREE:
+                return None
+            keys[mono] = key = tuple(e)
+        if key in poly:
+            v = poly[key] + c
+            if v:
+                poly[key] = v
+            else:
+                del poly[key]
+        elif c:
+            poly[key] = c
+    if terms:
+        out.append(poly)  # no trailing comma: the last polynomial ends the text
+    if not out:
+        return None
+    starts, offset = [], 0
+    for chunk in text.split(",")[:len(out)]:
+        starts.append(offset + len(chunk) - len(chunk.lstrip()))
+        offset += len(chunk) + 1
+    return [{k: Fraction(c) if type(c) is int else c for k, c in f.items()} for f in out], starts
 
 
 def _strip_comment(text: str) -> str:

@@ -137,7 +137,7 @@ def cell_degree(formulation: Formulation | str, primes: Sequence[int] = DEFAULT_
     seed : the instance's seed (the same seed on every prime).
     max_cells : F4 matrix cap (rows x cols); above it the row has status ``cap``.
     msolve : an msolve executable: its degree on the first prime must agree (EngineDisagreement).
-    max_memory, threads, verbose : F4's memory cap (bytes; default :data:`analysis.engine.f4.DEFAULT_MAX_MEMORY`;
+    max_memory, threads, verbose : F4's memory cap (bytes; default :func:`analysis.engine.f4.default_max_memory`, a share of the machine's available memory;
         above it the row has status ``cap`` too), row-reduction threads, one line per F4 round on stderr.
 
     Raises PrimeDisagreement when primes disagree, NotDivisible when a direct degree is not a multiple of

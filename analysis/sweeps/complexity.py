@@ -58,7 +58,7 @@ import flint
 import numpy as np
 
 from ..engine.degree import DEFAULT_PRIMES
-from ..engine.f4 import F4Options, GroebnerResult, groebner
+from ..engine.f4 import F4Options, GroebnerResult, groebner, tighter_cells
 from ..formulations.tdoa import Formulation, as_formulation, check_root, gf_equations, sample_gf_instance
 from ..engine.linalg import MatrixTooLarge
 from ..engine.msolve import MsolveRun, MsolveTimeout
@@ -352,7 +352,7 @@ def _instance(formulation: Formulation, prime: int, seed: int, options: F4Option
             return outcome(over_cap, message=skip_f4)
         ring = Ring(formulation.unknowns, prime, "grevlex")
         polys = [ring.from_terms(t) for t in equations]
-        cap = min(options.max_matrix_cells, positive_dimensional_cells) if singular else options.max_matrix_cells
+        cap = tighter_cells(options.max_matrix_cells, positive_dimensional_cells) if singular else options.max_matrix_cells
         capped = dataclasses.replace(options, max_matrix_cells=cap)
         try:
             gb = groebner(polys, capped) if msolve is None else msolve.groebner(polys)
@@ -526,7 +526,8 @@ def _usable(result: FormulationResult, options: F4Options, timeout: float | None
     if saturate and not result.saturation_requested and result.status in ("positive-dimensional", "disagree"):
         return False
     if result.status == "too-large" or (result.status == "positive-dimensional" and result.dimension is None):
-        return options.max_matrix_cells <= result.max_matrix_cells
+        asked, tried = options.max_matrix_cells, result.max_matrix_cells  # None: no cap
+        return tried is None or (asked is not None and asked <= tried)
     if result.status == "timeout":
         return timeout is not None and result.timeout is not None and timeout <= result.timeout
     return True
