@@ -40,7 +40,8 @@ from analysis.formulations.tdoa import Formulation
 from .continuation import certify as certify_mod
 from .continuation import graph, monodromy, tracker
 from .continuation import trace as trace_mod
-from .continuation.tracking import HomotopyError, _duplicated, coefficient_source, load_coefficients, structure
+from .continuation.tracking import (HomotopyError, _duplicated, coefficient_source, evaluator_for,
+                                    load_coefficients, structure)
 from .generate import GenerationError, SOLVERS, _job, complex_instance
 
 __all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "CELLS"]
@@ -202,16 +203,6 @@ def _start(target, seed: int, start: tuple[np.ndarray, np.ndarray] | None = None
     return system, np.asarray(q0, dtype=complex), np.asarray(x0, dtype=complex), group
 
 
-def _evaluator(system: ParametricSystem) -> str:
-    """The tracker's evaluator: the formulations' validated programs ("auto"), else the tape traced from the
-    expanded system (compiled C, as for the formulations)."""
-    try:
-        Formulation.parse(system.name)
-        return "auto"
-    except Exception:  # a user's system: its name is no formulation label
-        return "tape"
-
-
 def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, excluded, options,
            group: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Track xs (K, N) from qa to qb: endpoints and the mask of those accepted as solutions at qb. A path that
@@ -314,7 +305,7 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
     known = []  # per seed: the solutions its next graph starts from
     for seed in options.seeds:
         system, q0, x0, group = _start(target, seed, start if seed == options.seeds[0] else None)
-        solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=_evaluator(system))
+        solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=evaluator_for(system.name))
         runs.append((system, q0, group, solver, monodromy._excluded(system, q0)))
         known.append(x0)
     system, q0, group, solver0, excluded0 = runs[0]

@@ -221,6 +221,19 @@ def _validated(name: str) -> bool:
     return name in VALIDATED_PROGRAMS or not ("minors" in name or ":positions-" in name)
 
 
+def evaluator_for(name: str) -> str:
+    """The evaluator a system's solvers and counts use: "auto" for a system with a program written from its
+    formulation (slp.system_equations: TDOA/TOA formulations, positions), "tape" for any other (a user's system:
+    the program traced from its expanded equations, compiled to C like the formulations')."""
+    from . import slp
+
+    try:
+        slp.system_equations(name)
+        return "auto"
+    except ValueError:
+        return "tape"
+
+
 def _tapes(spec: dict, coefficients: Callable, evaluator: str):
     """The homotopy tapes (slp.HomotopyTapes) of the spec's system for ``evaluator``, or None."""
     if evaluator not in EVALUATORS:

@@ -44,7 +44,7 @@ from ..continuation.monodromy import (MonodromyCheckpoint, _excluded, checked_ro
 from ..continuation.tracker import SystemStructure
 from ..continuation.tracking import (SPEC_FORMAT, START_TOL, HomotopyError, HomotopyOptions, HomotopySolver,
                                      _detour_direction, _distinct, _has_duplicates, _pairs, coefficient_source,
-                                     load_coefficients, structure)
+                                     evaluator_for, load_coefficients, structure)
 from .common import load_format, verify_found
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -182,7 +182,7 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
         "start_parameters": _pairs(np.asarray(q0, dtype=complex)),
         "start_roots": [],
     }
-    solver = HomotopySolver(spec, coefficients)
+    solver = HomotopySolver(spec, coefficients, evaluator_for(system.name))
     solver.q0 = np.asarray(q0, dtype=complex)
     if checkpoint is None:
         x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
