@@ -1,0 +1,138 @@
+"""`count`: graph monodromy, Krawczyk proofs, seeds compared as sets, the trace test (solvers.count,
+solvers.continuation.graph / certify / trace). Each test can fail: a missing solution, a fake one, a dropped
+ill-conditioned one."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from analysis.formulations.parametric import parse
+from solvers import count as counting
+from solvers.continuation import certify, graph, monodromy, trace
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CIRCLE = os.path.join(ROOT, "examples", "circle.sys")
+
+
+@pytest.fixture(scope="module")
+def toa3():
+    """3r/3s TOA in 2D (8 solutions): its start, solver and the graph's closed set."""
+    system, q0, x0, group = counting._start("3r3stoa", 0)
+    solver, x0 = monodromy.start_solver(system, q0, x0, 0)
+    excluded = monodromy._excluded(system, q0)
+    result = graph.graph_monodromy(solver, q0, x0, graph.GraphOptions(), excluded=excluded)
+    return system, q0, solver, excluded, result
+
+
+def test_graph_closes_on_the_8_solutions_of_toa_3r3s(toa3):
+    system, q0, solver, _, result = toa3
+    assert result.closed and result.counts == (8, 8, 8, 8)
+    assert len(result.roots) == 8
+    # each is a solution: the system's residual at q0 vanishes
+    assert np.max(monodromy.system_residuals(system, result.roots, q0)) < 1e-10
+    # the graph tracked each solution about once per edge, not once per loop
+    assert result.paths <= 8 * 6 * 2
+
+
+def test_count_proves_8_and_the_seeds_agree_as_sets():
+    result = counting.count("3r3stoa", counting.CountOptions(seeds=(0, 1)))
+    assert result.count == 8 and result.proven == 8
+    assert result.evidence.startswith("at least 8, proven")
+    assert [s.closed for s in result.seeds] == [True, True]
+    assert result.seeds[1].carried == "equal as sets"
+
+
+def test_a_set_with_one_solution_removed_is_found_incomplete(toa3):
+    system, q0, solver, excluded, result = toa3
+    short = result.roots[1:]
+    # another seed's complete set, carried to q0, lands outside the short set
+    system1, q1, x1, _ = counting._start("3r3stoa", 1)
+    solver1, x1 = monodromy.start_solver(system1, q1, x1, 1)
+    other = graph.graph_monodromy(solver1, q1, x1, graph.GraphOptions(seed=1), excluded=monodromy._excluded(system1, q1))
+    ends, ok = counting._carry(solver, q1, other.roots, q0, excluded, solver.options)
+    words, outside = counting._compare(short, ends, ok, None)
+    assert outside == 1 and words.startswith("not equal")
+    # a graph started from the short set closes again on all 8 (the missing one is an image of the others)
+    regrown = graph.graph_monodromy(solver, q0, short, graph.GraphOptions(seed=3), excluded=excluded)
+    assert len(regrown.roots) == 8
+    # and the trace test fails on it, passes on the whole set
+    _, qs, xs, _ = counting._start("3r3stoa", 1000)
+    full = trace.trace_test_system(system, q0, result.roots, (qs, xs), trace.TraceOptions())
+    cut = trace.trace_test_system(system, q0, short, (qs, xs), trace.TraceOptions())
+    assert full.status == "passed", full
+    assert cut.status == "failed" and cut.residual > 1e3 * max(full.residual, 1e-15)
+
+
+def test_a_fake_solution_is_never_certified(toa3):
+    system, q0, _, _, result = toa3
+    rng = np.random.default_rng(5)
+    fakes = np.vstack([result.roots[:4] + 1e-3 * (1 + np.abs(result.roots[:4])),  # near a solution, not one
+                       rng.normal(size=(4, result.roots.shape[1])) + 1j * rng.normal(size=(4, result.roots.shape[1]))])
+    cert = certify.certify(system, q0, fakes)
+    assert not cert.proven.any()
+    good = certify.certify(system, q0, result.roots)
+    assert good.proven.all()
+    # the same solution twice: its two boxes meet, so it is not counted twice
+    twice = certify.certify(system, q0, np.vstack([result.roots, result.roots[:1]]))
+    meets = certify.disjoint(twice.centres, twice.radii)
+    assert meets[0] and meets[-1] and not meets[1:-1].any()
+
+
+def test_boxes_and_their_images_are_checked_disjoint():
+    centres = np.array([[1.0 + 0j, 2.0], [-1.0, 2.0], [3.0, 4.0]])
+    radii = np.full(3, 1e-9)
+    signs = np.array([[1.0, 1.0], [-1.0, 1.0]])
+    assert not certify.disjoint(centres[[0, 2]], radii[:2], signs).any()
+    meets = certify.disjoint(centres, radii, signs)  # row 1 is row 0's image: one orbit, counted once
+    assert meets[0] and meets[1] and not meets[2]
+
+
+def test_an_ill_conditioned_solution_is_kept_and_proven():
+    """2D 6r/3s, seed 0: three of its 180 solutions fail Krawczyk's test in double precision and are proven at
+    HIGH_PRECISION bits; none is dropped."""
+    result = counting.count("6r3s", counting.CountOptions(seeds=(0,)))
+    assert result.count == 180 and result.proven == 180
+    system, q0, x0, _ = counting._start("6r3s", 0)
+    solver, x0 = monodromy.start_solver(system, q0, x0, 0)
+    roots = graph.graph_monodromy(solver, q0, x0, graph.GraphOptions(), excluded=monodromy._excluded(system, q0)).roots
+    cert = certify.certify(system, q0, roots)
+    assert cert.proven.all() and (cert.bits == certify.HIGH_PRECISION).sum() >= 1
+
+
+class _Stalling:
+    """A stand-in system whose Newton steps stall at a relative size of 1e-7 (an ill-conditioned solution in
+    double precision): the graph's acceptance keeps such an endpoint, a solver's 1e-8 would not."""
+
+    def newton(self, x, q, steps=1, inst=None):
+        return x * (1.0 + 1e-7)
+
+
+def test_the_graph_keeps_an_endpoint_whose_newton_step_stalls_at_1e_7():
+    x = np.array([[3000.0 + 1j, 2.0]])
+    _, ok = graph._accept(_Stalling(), x, np.zeros((1, 1)), np.zeros(1, dtype=np.int64), graph.GraphOptions().accept_tol, None)
+    assert ok.all()
+    _, strict = graph._accept(_Stalling(), x, np.zeros((1, 1)), np.zeros(1, dtype=np.int64), 1e-8, None)
+    assert not strict.any()
+
+
+def test_count_a_user_system_finds_all_4_even_where_one_graph_closes_on_1():
+    """examples/circle.sys, seed 1: the closed 4-node graph holds 1 of the 4 solutions (its triangles wind around
+    no branch point); seed 0's set carried there has more, and the graphs run again from the union."""
+    system = parse(open(CIRCLE, encoding="utf-8").read(), "circle")
+    result = counting.count(system, counting.CountOptions(seeds=(1, 0)))
+    assert result.count == 4 and result.proven == 4, result.summary()
+    assert any("ran again" in n for n in result.notes)
+
+
+def test_cli_count_prints_the_evidence_and_refuses_a_plain_system():
+    run = subprocess.run([sys.executable, "-m", "solvers.cli", "count", "--tdoa", "3r3s", "--model", "toa"],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode == 0, run.stderr
+    assert "evidence: at least 8, proven" in run.stdout
+    bad = subprocess.run([sys.executable, "-m", "solvers.cli", "count", os.path.join(ROOT, "examples", "katsura4.ms")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "degree" in bad.stderr
