@@ -10,7 +10,7 @@ import pytest
 from analysis.formulations.parametric import from_formulation
 from analysis.formulations.tdoa import Formulation
 from solvers.continuation import monodromy as md
-from solvers.continuation import slp, trace
+from solvers.continuation import graph, slp, trace
 from solvers.continuation import tracking as tk
 from solvers.generate import SOLVERS, complex_instance
 
@@ -47,40 +47,12 @@ def test_trace_test_passes_on_all_roots_and_fails_without_one(key, count, coordi
 
 
 def test_trace_test_is_inconclusive_on_a_cut_witness_set_and_checks_its_inputs():
-    """A witness monodromy cut short (one loop, not settled) gives no verdict, and points that are not roots
-    are refused."""
+    """A witness graph cut by its time cap gives no verdict, and points that are not roots are refused."""
     system, q0, roots, other = _roots("3r3stoa", 8)
-    cut = trace.trace_test_system(system, q0, roots, other, trace.TraceOptions(seed=1, max_loops=1))
-    assert cut.status == "inconclusive" and cut.witness_loops == 1
+    cut = trace.trace_test_system(system, q0, roots, other, trace.TraceOptions(seed=1, seconds=0.0))
+    assert cut.status == "inconclusive" and cut.witness_loops == 0
     with pytest.raises(tk.HomotopyError, match="not roots"):
         trace.trace_test_system(system, q0, roots + 0.1, other)
-
-
-def test_union_of_two_seeds_finds_a_root_one_checkpoint_lacks(tmp_path, monkeypatch):
-    """scripts/monodromy_counts.union: the second seed's roots carried to the first seed's instance pool to
-    the full count (2D TOA 3r/3s, 8 roots); with a root deleted from the first checkpoint, the pool still has
-    8 and counts the one only the second seed had (6r/6s 3D: 3919 and 3920 settled, pool 3920)."""
-    import importlib.util
-    import json
-    from pathlib import Path
-
-    spec = importlib.util.spec_from_file_location("monodromy_counts",
-                                                  Path(__file__).resolve().parents[1] / "scripts" / "monodromy_counts.py")
-    counts = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(counts)
-    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path))
-    monkeypatch.setattr(counts, "CELLS", {"t": SOLVERS["3r3stoa"]})
-    for seed in (0, 1):
-        row, _ = counts.count("t", seed, loops=30, stall=6, seconds=1e9, trace_seconds=0)
-        assert row["roots"] == 8 and row["status"] == "settled"
-    pooled = counts.union("t", [0, 1])
-    assert (pooled["union"], pooled["new"], pooled["lost"]) == (8, 0, 0)
-    first = tmp_path / "monodromy" / "t-seed0.json"
-    saved = json.loads(first.read_text())
-    saved["roots"] = saved["roots"][1:]
-    first.write_text(json.dumps(saved))
-    pooled = counts.union("t", [0, 1])
-    assert (pooled["union"], pooled["new"]) == (8, 1)
 
 
 def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
@@ -110,17 +82,17 @@ def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
 
 
 def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
-    """Q_0 = {a . x = 1} u {lam = 0}: witness loops can reach the roots themselves (lam = 0; the 10r/4s loops
+    """Q_0 = {a . x = 1} u {lam = 0}: the witness graph can reach the roots themselves (lam = 0; the 10r/4s loops
     reached all 6148). Mixed into the witnesses, they are summed once with the roots and the test passes
     (2D TOA 3r/3s); with one root left out of R but reached by the loops, it fails and says so."""
     system, q0, roots, other = _roots("3r3stoa", 8)
-    count = md.monodromy_count
+    count = graph.graph_monodromy
 
     def with_roots(*args, **kwargs):
         found = count(*args, **kwargs)
         return dataclasses.replace(found, roots=np.vstack([found.roots, np.column_stack([roots, np.zeros(len(roots))])]))
 
-    monkeypatch.setattr(md, "monodromy_count", with_roots)
+    monkeypatch.setattr(graph, "graph_monodromy", with_roots)
     options = trace.TraceOptions(seed=1)
     test = trace.trace_test_system(system, q0, roots, other, options)
     assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
