@@ -20,8 +20,8 @@ OPENBLAS_NUM_THREADS=1 python scripts/table3d.py [--seconds S] [--max-cells N] [
 
 The minimal cells that F4 leaves open under these caps show their counts from tables/table3d_minimal.csv
 (scripts/table3d_minimal.py: the same formulation, F4 with a larger budget; a GF(p) count) and by monodromy
-from tables/monodromy3d.csv (scripts/monodromy_counts.py; numerical evidence, never certified, and named as
-such in the cell).
+from tables/monodromy3d.csv (scripts/monodromy_counts.py: `count`, every solution proven, the evidence named in
+the cell).
 """
 from __future__ import annotations
 
@@ -79,62 +79,44 @@ def with_gf_counts(monodromy: dict, gf: dict) -> dict:
 
 
 def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
-    """The counts of tables/monodromy3d.csv as grid cells (per cell: its seeds' rows) and the note naming them.
-
-    "N (monodromy + trace test, not certified)": every seed settled at N and a trace test passed;
-    "N (monodromy, k seeds, not certified)": settled, same N on every seed (and their root sets, carried to one
-    instance, pool to N: column union), no trace test passed;
-    "N (monodromy, k of j seeds, not certified)": every seed settled, k >= 2 of them at N, the others below N,
-    and no pool of the seeds' roots above N (6r/6s: 3920 on seeds 1 and 2, as sets; seed 0 one root short);
-    ">=N (monodromy, lower bound)": a seed not settled, or seeds that disagree otherwise (N: the largest count
-    or the pool of the seeds' roots, whichever is larger). "+ trace test" replaces "k seeds" where a trace
-    test passed on a seed at N.
-    """
+    """The counts of tables/monodromy3d.csv (scripts/monodromy_counts.py: `count` on two seeds) as grid cells and
+    the note naming them (:func:`count_text`)."""
     path = os.path.join(ROOT, "tables", "monodromy3d.csv")
     if not os.path.exists(path):
         return {}, ""
     with open(path, newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
-    by_cell: dict[str, list[dict]] = {}
+    out = {}
     for row in rows:
-        by_cell.setdefault(row["cell"], []).append(row)
-    by_config: dict[tuple, list[list[dict]]] = {}
-    for cell, seeds in by_cell.items():  # a cell's formulations in the CSV's order, the main one first
-        config = Formulation.parse(seeds[0]["formulation"]).config
-        by_config.setdefault((config.model, config.dim, config.m, config.n), []).append(seeds)
-    out = {key: _formulations(formulations) for key, formulations in by_config.items()}
-    note = ("Cells marked (monodromy ...): no GF(p) count (F4 cap); the count is numerical evidence from "
-            "tables/monodromy3d.* (scripts/monodromy_counts.py: seeds, loops, paths, trace-test residual).\n"
+        if "evidence" not in row:  # a file of another layout: no cell texts from it
+            continue
+        config = Formulation.parse(row["formulation"]).config
+        out[(config.model, config.dim, config.m, config.n)] = count_text(row)
+    note = ("Cells marked (proven ...) or (lower bound ...): no GF(p) count (F4's memory); the count is from "
+            "tables/monodromy3d.* (scripts/monodromy_counts.py: `count`, monodromy on a complete graph for two seeds, "
+            "every solution proven by Krawczyk's test, the seeds' sets compared, the trace test where it ran).\n"
             if out else "")
     return out, note
 
 
-def _evidence(seeds: list[dict]) -> str:
-    """One cell's text from its seeds' rows of monodromy3d.csv (:func:`monodromy_evidence`)."""
-    counts = [int(r["roots"]) for r in seeds]
-    pooled = max((int(r["union"].split()[0]) for r in seeds if r.get("union")), default=0)
-    top = max(max(counts), pooled)
-    at_top = [r for r, c in zip(seeds, counts) if c == top]
-    if not all(r["status"] == "settled" for r in seeds) or (len(at_top) < 2 and len(seeds) > 1) or pooled > max(counts):
-        return f">={top} (monodromy, lower bound)"
-    if any(r.get("trace_test") == "passed" for r in at_top):
-        return f"{top} (monodromy + trace test, not certified)"
-    if len(at_top) < len(seeds):
-        return f"{top} (monodromy, {len(at_top)} of {len(seeds)} seeds, not certified)"
-    return f"{top} (monodromy, {len(seeds)} seed{'s' if len(seeds) > 1 else ''}, not certified)"
-
-
-def _formulations(formulations: list[list[dict]]) -> str:
-    """A cell's text from its formulations' seeds (:func:`_evidence` of the first; a second formulation that
-    settles at the same count is named as agreeing, any other outcome is shown beside it)."""
-    text = _evidence(formulations[0])
-    for seeds in formulations[1:]:
-        ours, theirs = text.split()[0], _evidence(seeds).split()[0]
-        if theirs == ours and not ours.startswith(">="):
-            text = text[:-1] + "; a second formulation agrees)"
-        else:
-            text = text[:-1] + f"; a second formulation: {theirs})"
-    return text
+def count_text(row: dict) -> str:
+    """One cell's text from its row of monodromy3d.csv, the evidence in words (STYLE.md, habit 16):
+    "N (proven; complete by trace test, residual r)": every solution proven, the trace test passed;
+    "N (proven; k seeds equal as sets)": every solution proven, every seed's graph closed and their sets equal,
+    no trace test passed (N is then a proven lower bound that two seeds reach);
+    ">=N (proven lower bound; ...)": every solution proven, but a graph did not close or the sets differ;
+    ">=N (lower bound, numerical)": not every solution proven."""
+    n, proven = int(row["solutions"]), int(row["proven"])
+    seeds = len(row["seeds"].split())
+    closed = all(g == "closed" for g in row["graphs"].split("; "))
+    equal = all(c == "equal as sets" for c in row["seed_sets"].split("; ")) if seeds > 1 else False
+    if proven < n:
+        return f">={n} (lower bound, numerical)"
+    if row["trace_test"] == "passed":
+        return f"{n} (proven; complete by trace test, residual {row['trace_residual']})"
+    if closed and equal:
+        return f"{n} (proven; {seeds} seeds equal as sets)"
+    return f">={n} (proven lower bound; " + ("graphs not all closed)" if not closed else "the seeds' sets differ)")
 
 
 def cells() -> list[TDOAConfig]:

@@ -401,36 +401,29 @@ def _script(name: str):
     return module
 
 
-def test_table3d_monodromy_evidence_rules():
-    """scripts/table3d.py's text for a cell's monodromy seeds: agreeing settled seeds; two of three at the top
-    with the third short and no larger pool (6r/6s); a trace test that passed; anything else a lower bound."""
-    evidence = _script("table3d")._evidence
+def test_table3d_count_evidence_rules():
+    """scripts/table3d.py's text for a cell's `count` row (tables/monodromy3d.csv): every solution proven with a
+    passed trace test; proven with closed graphs and equal seed sets; proven but not closed or differing; not
+    every solution proven."""
+    text = _script("table3d").count_text
 
-    def row(roots, status="settled", union="", trace="not run"):
-        return {"roots": str(roots), "status": status, "union": union, "trace_test": trace}
+    def row(n, proven=None, graphs="closed; closed", sets="equal as sets", trace="not run", residual=""):
+        return {"solutions": str(n), "proven": str(n if proven is None else proven), "seeds": "0 1", "graphs": graphs,
+                "seed_sets": sets, "trace_test": trace, "trace_residual": residual}
 
-    assert evidence([row(6148, union="6148"), row(6148, union="6148 (33 paths lost)")]) == \
-        "6148 (monodromy, 2 seeds, not certified)"
-    assert evidence([row(3919, union="3919 (4 paths lost)"), row(3920, union="3920"), row(3920, union="3920")]) == \
-        "3920 (monodromy, 2 of 3 seeds, not certified)"
-    assert evidence([row(6148, union="6148", trace="passed"), row(6148)]) == "6148 (monodromy + trace test, not certified)"
-    assert evidence([row(3919, union="3919"), row(3920, union="3920")]) == ">=3920 (monodromy, lower bound)"  # 1 of 2
-    assert evidence([row(3920, union="3921"), row(3920, union="3920")]) == ">=3921 (monodromy, lower bound)"
-    assert evidence([row(12965, status="not settled")]) == ">=12965 (monodromy, lower bound)"
-    assert evidence([row(2321)]) == "2321 (monodromy, 1 seed, not certified)"
+    assert text(row(6148, trace="passed", residual="3e-12")) == "6148 (proven; complete by trace test, residual 3e-12)"
+    assert text(row(2321)) == "2321 (proven; 2 seeds equal as sets)"
+    assert text(row(3920, graphs="closed; not closed (2 tracks open)")) == ">=3920 (proven lower bound; graphs not all closed)"
+    assert text(row(3920, sets="not equal: 1 land outside the set")) == ">=3920 (proven lower bound; the seeds' sets differ)"
+    assert text(row(12965, proven=12960, trace="passed")) == ">=12965 (lower bound, numerical)"
     gf = _script("table3d").with_gf_counts
-    monodromy = {("tdoa", 3, 10, 4): "6148 (monodromy, 2 seeds, not certified)",
-                 ("tdoa", 3, 7, 5): "2321 (monodromy, 2 seeds, not certified)"}
-    assert gf(monodromy, {("tdoa", 3, 10, 4): (6148, 2), ("tdoa", 3, 7, 5): (2320, 2), ("tdoa", 3, 5, 9): (9, 2)}) == {
+    counted = {("tdoa", 3, 10, 4): "6148 (proven; 2 seeds equal as sets)",
+               ("tdoa", 3, 7, 5): "2321 (proven; 2 seeds equal as sets)"}
+    assert gf(counted, {("tdoa", 3, 10, 4): (6148, 2), ("tdoa", 3, 7, 5): (2320, 2), ("tdoa", 3, 5, 9): (9, 2)}) == {
         ("tdoa", 3, 10, 4): "6148 (GF(p), 2 primes, F4 with a larger budget; monodromy agrees)",
         ("tdoa", 3, 7, 5): "2320 (GF(p), 2 primes, F4 with a larger budget; monodromy: 2321)",
         ("tdoa", 3, 5, 9): "9 (GF(p), 2 primes, F4 with a larger budget)"}
-    assert gf(monodromy, {}) == monodromy
-    both = _script("table3d")._formulations
-    main = [row(6148, union="6148"), row(6148, union="6148")]
-    assert both([main, [row(6148)]]) == "6148 (monodromy, 2 seeds, not certified; a second formulation agrees)"
-    assert both([main, [row(5000, status="not settled")]]) == \
-        "6148 (monodromy, 2 seeds, not certified; a second formulation: >=5000)"
+    assert gf(counted, {}) == counted
 
 
 def test_table3d_minimal_script_runs_under_its_caps(tmp_path, capsys):
