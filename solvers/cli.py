@@ -913,6 +913,10 @@ def _add_count(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint", metavar="DIR", help="resumable files of the graphs in DIR (written every minute)")
     p.add_argument("--threads", type=_integer_at_least("--threads", 1), default=None, metavar="N",
                    help="track each batch on N threads (default $TDOA_WORKBENCH_THREADS or 1; the same numbers)")
+    p.add_argument("--dask", metavar="ADDRESS", help="track the graphs' batches on a Dask cluster: a scheduler address, "
+                   "or 'local' for a LocalCluster of one process per core (the same numbers; pip install -e \".[dask]\")")
+    p.add_argument("--dask-chunk", type=_integer_at_least("--dask-chunk", 1), default=2000, metavar="N",
+                   help="paths per Dask task (default 2000)")
     p.add_argument("--start", metavar="JSON", help="FILE only: a start pair for seed 0, as for generate --start")
     p.add_argument("--json", metavar="OUT", help="also write the result as JSON to OUT")
     p.set_defaults(func=cmd_count)
@@ -944,7 +948,8 @@ def cmd_count(args: argparse.Namespace) -> int:
         else:
             target = counting.tdoa_target(args.tdoa, args.dim, args.model)
         options = counting.CountOptions(seeds=tuple(args.seeds), nodes=args.nodes, certify=not args.no_certify,
-                                        trace=args.trace, seconds=args.seconds, checkpoints=args.checkpoint)
+                                        trace=args.trace, seconds=args.seconds, checkpoints=args.checkpoint,
+                                        dask=args.dask, dask_chunk=args.dask_chunk)
         start = _read_start(args.start, target) if args.start else None
         result = counting.count(target, options, progress=lambda msg: print(msg, file=sys.stderr, flush=True), start=start)
     except (ParametricError, HomotopyError, GenerationError, ValueError) as exc:

@@ -69,7 +69,8 @@ class CountOptions:
     certify: prove every solution (Krawczyk); trace: run the trace test on the first seed's set (TDOA/TOA
     formulations and systems with a program; slow for large sets); seconds: wall-time cap of each graph;
     checkpoints: a directory for the graphs' resumable files (None: none); tracker: the tracking options (None:
-    the solver's)."""
+    the solver's); dask: a Dask scheduler address (or "local") whose workers track the graphs' batches, in chunks
+    of dask_chunk paths (solvers.continuation.dask_tracks; the same numbers)."""
 
     seeds: tuple[int, ...] = (0, 1)
     nodes: int = 4
@@ -80,6 +81,8 @@ class CountOptions:
     seconds: float = float("inf")
     checkpoints: str | None = None
     tracker: tracker.TrackerOptions | None = None
+    dask: str | None = None
+    dask_chunk: int = 2000
 
 
 @dataclass(frozen=True)
@@ -310,6 +313,37 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
         known.append(x0)
     system, q0, group, solver0, excluded0 = runs[0]
     track0 = options.tracker or solver0.options
+    clusters = [_cluster(options, *run) for run in runs]
+    try:
+        return _count(target, options, say, notes, runs, known, clusters, t0)
+    finally:
+        for c in clusters:
+            if c is not None:
+                c.close()
+
+
+def _cluster(options: CountOptions, system: ParametricSystem, q0: np.ndarray, group, solver, excluded):
+    """A Dask stand-in for one seed's solver (options.dask), or None."""
+    if not options.dask:
+        return None
+    from .continuation.dask_tracks import DaskSystem
+
+    try:
+        config = Formulation.parse(system.name).config
+        source, saturate = system.name, config.parametrization != "direct"
+    except Exception:  # a user's system travels as its text
+        if system.definitions:
+            raise ValueError(f"{system.name}: a system with definitions cannot be sent to Dask workers as text; "
+                             "count it without --dask") from None
+        source, saturate = system.text(), False
+    return DaskSystem(options.dask, solver, source, saturate, q0, solver.x0, chunk=options.dask_chunk)
+
+
+def _count(target, options: CountOptions, say, notes: list[str], runs: list, known: list, clusters: list,
+           t0: float) -> CountResult:
+    """:func:`count` once its start pairs and solvers are drawn."""
+    system, q0, group, solver0, excluded0 = runs[0]
+    track0 = options.tracker or solver0.options
     rng = np.random.default_rng([options.seeds[0], 7])
     for attempt in range(AUGMENT + 1):
         seeds: list[SeedCount] = []
@@ -317,6 +351,8 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
         nodes = options.nodes + NODES_PER_AUGMENT * attempt
         for k, seed in enumerate(options.seeds):
             system_k, q0_k, _, solver_k, excluded_k = runs[k]
+            if clusters[k] is not None:
+                solver_k = clusters[k]
             result = graph.graph_monodromy(
                 solver_k, q0_k, known[k], graph.GraphOptions(nodes=nodes, seed=seed + 1000 * attempt,
                                                              seconds=options.seconds, tracker=options.tracker),

@@ -256,27 +256,28 @@ def test_monodromy_by_orbits_of_the_direct_parametrization():
     assert settled.stall == 8 and len(settled.roots) == 8
 
 
-def test_monodromy_loops_on_a_dask_cluster_give_the_same_count():
-    """--dask: each leg's paths tracked in chunks on a Dask cluster's workers (solvers.continuation.dask_tracks; an
-    in-process cluster here) give the same roots, bit for bit, as the loop in one process (2D TOA 3r/3s; the
+def test_a_monodromy_graph_on_a_dask_cluster_gives_the_same_count():
+    """--dask: each round's paths tracked in chunks on a Dask cluster's workers (solvers.continuation.dask_tracks; an
+    in-process cluster here) give the same solutions, bit for bit, as the graph in one process (2D TOA 3r/3s; the
     direct parametrization by orbits: 8 orbits)."""
     pytest.importorskip("dask.distributed", reason="pip install -e '.[dev]' installs dask[distributed]")
     from dask.distributed import Client, LocalCluster
 
     from solvers.generate import gauge_reflections
-    from solvers.continuation import dask_tracks
+    from solvers.continuation import dask_tracks, graph
 
     label = "3r3s-toa2d-direct:all"
     system = from_formulation(label)
     F, x0 = complex_instance(3, 3, np.random.default_rng(5), 2, "toa", "direct")
     solver, x0 = md.start_solver(system, F.ravel(), x0)
-    options = tk.HomotopyOptions(seed=3, max_loops=6, stall_loops=50)
     group = gauge_reflections(system.unknowns)
-    here = md.monodromy_count(solver, F.ravel(), x0, options, 1e9, group=group)
+    options = graph.GraphOptions(seed=3)
+    here = graph.graph_monodromy(solver, F.ravel(), x0, options, group=group)
     with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
-        with Client(cluster) as client, dask_tracks.DaskTracks(client, label, False, F.ravel(), x0, chunk=3) as tracks:
-            there = md.monodromy_count(solver, F.ravel(), x0, options, 1e9, group=group, track=tracks)
+        with Client(cluster) as client, dask_tracks.DaskSystem(client, solver, label, False, F.ravel(), x0,
+                                                              chunk=3) as there_system:
+            there = graph.graph_monodromy(there_system, F.ravel(), x0, options, group=group)
     assert there.paths == here.paths and len(there.roots) == len(here.roots) == 8
     assert np.array_equal(there.roots, here.roots)
     with pytest.raises(ValueError, match="--dask"):
-        dask_tracks.DaskTracks("tcp://127.0.0.1:1", label, False, F.ravel(), x0)
+        dask_tracks.DaskSystem("tcp://127.0.0.1:1", solver, label, False, F.ravel(), x0)

@@ -1,54 +1,67 @@
-"""Monodromy loops on a Dask cluster: each leg's batch of paths split among the workers.
+"""Monodromy on a Dask cluster: each round's batch of paths split among the workers.
 
-A monodromy loop (:func:`solvers.continuation.monodromy.monodromy_count`) tracks every known root along three
-segments; at 10^4-10^5 roots in 35-45 unknowns a leg takes minutes to an hour on one core. :class:`DaskTracks`
-is a drop-in for the loop's ``track(a, b, xs)``: it cuts xs into chunks of ``chunk`` paths, tracks each on a
-worker of a ``dask.distributed`` cluster (``address``: a scheduler, or ``"local"`` for a LocalCluster of
-``workers`` processes on this machine, default one per core) and returns the endpoints in xs's order. Every path is tracked on its
-own (the tracker's step control is per path), so the endpoints, and the count, are the same numbers as on
-one process; the client keeps the loop's bookkeeping (new-root test, checkpoints).
+A round of :func:`solvers.continuation.graph.graph_monodromy` tracks every pending (solution, edge) pair in one
+batch; at 10^4-10^5 solutions in 35-45 unknowns a round takes minutes on one core. :class:`DaskSystem` stands in
+for the graph's system (``track(q0, q1, x0, inst, options)``; ``newton`` and ``options`` stay with the local
+solver): it cuts the batch into chunks of ``chunk`` paths, tracks each on a worker of a ``dask.distributed``
+cluster (``address``: a scheduler, or ``"local"`` for a LocalCluster of ``workers`` processes on this machine,
+default one per core) and returns the endpoints and statistics in the batch's order. Every path is tracked on its
+own (the tracker's step control is per path), so the endpoints, and the count, are the same numbers as in one
+process; the client keeps the graph's bookkeeping (matching, checkpoints).
 
-The workers need the system: it travels as its formulation label (``from_formulation(label,
-saturate_det_h=saturate)``) and start pair (q0, x0); each worker builds its start solver once (compiling the
-tapes into its own cache directory) and keeps it for the loop's other legs. dask is imported only here,
-when a cluster is asked for (an optional dependency: ``pip install -e ".[dask]"``).
+The workers need the system: it travels as text (a formulation label, or a user's system file in the
+generator's format, read by the project's parser) with its start pair (q0, x0); each worker builds its start
+solver once (compiling the tapes into its own cache directory) and keeps it for the other rounds. dask is
+imported only here, when a cluster is asked for (an optional dependency: ``pip install -e ".[dask]"``).
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 
 import numpy as np
 
-from analysis.formulations.parametric import from_formulation
+from analysis.formulations.parametric import from_formulation, parse
 
 from .monodromy import start_solver
+from .tracker import TrackerOptions
+from .tracking import evaluator_for
 
-__all__ = ["DaskTracks", "track_chunk"]
+__all__ = ["DaskSystem", "track_chunk"]
 
-#: Start solvers built on this worker, by (label, saturate, q0, x0) bytes.
+#: Start solvers built on this worker, by (source, saturate, q0, x0) bytes.
 _SOLVERS: dict = {}
 
 
-def _solver(label: str, saturate: bool, q0: np.ndarray, x0: np.ndarray):
-    key = (label, saturate, q0.tobytes(), x0.tobytes())
+def _system(source: str, saturate: bool):
+    """A formulation label's system, or a system text's (the generator's format, the project's parser)."""
+    if "\n" in source:
+        return parse(source, "<dask>")
+    return from_formulation(source, saturate_det_h=saturate)
+
+
+def _solver(source: str, saturate: bool, q0: np.ndarray, x0: np.ndarray):
+    key = (source, saturate, q0.tobytes(), x0.tobytes())
     if key not in _SOLVERS:
-        _SOLVERS.clear()  # one system per loop: keep the memory of one solver
-        _SOLVERS[key] = start_solver(from_formulation(label, saturate_det_h=saturate), q0, x0)[0]
+        _SOLVERS.clear()  # one system per count: keep the memory of one solver
+        system = _system(source, saturate)
+        _SOLVERS[key] = start_solver(system, q0, x0, evaluator=evaluator_for(system.name))[0]
     return _SOLVERS[key]
 
 
-def track_chunk(label: str, saturate: bool, q0: np.ndarray, x0: np.ndarray, a: np.ndarray, b: np.ndarray,
-                xs: np.ndarray) -> np.ndarray:
-    """Endpoints of the paths xs (K, N) along a -> b (a worker's task): NaN rows for lost paths."""
-    return _solver(label, saturate, q0, x0).track(a[None], b[None], xs)[0]
+def track_chunk(source: str, saturate: bool, q0: np.ndarray, x0: np.ndarray, qa: np.ndarray, qb: np.ndarray,
+                xs: np.ndarray, inst: np.ndarray, options: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Endpoints and statistics of the paths xs (K, N), path k along qa[inst[k]] -> qb[inst[k]] (a worker's task)."""
+    return _solver(source, saturate, q0, x0).track(qa, qb, xs, inst, TrackerOptions(**options))
 
 
-class DaskTracks:
-    """``track(a, b, xs) -> endpoints`` on a Dask cluster (module docstring). ``address``: a scheduler address,
-    ``"local"``, or a ``dask.distributed.Client`` already connected (then not closed here). Use as a context
-    manager, or call :meth:`close`; a bad address raises ValueError in one line."""
+class DaskSystem:
+    """The graph's system with its tracking on a Dask cluster (module docstring). ``solver``: the local start
+    solver (Newton steps, options); ``source``: the system as text (a formulation label or a system file's text);
+    ``address``: a scheduler address, ``"local"``, or a ``dask.distributed.Client`` already connected (then not
+    closed here). Use as a context manager, or call :meth:`close`; a bad address raises ValueError in one line."""
 
-    def __init__(self, address, label: str, saturate: bool, q0: np.ndarray, x0: np.ndarray,
+    def __init__(self, address, solver, source: str, saturate: bool, q0: np.ndarray, x0: np.ndarray,
                  chunk: int = 2000, workers: int | None = None):
         workers = workers or os.cpu_count() or 1
         if chunk < 1 or workers < 1:
@@ -58,7 +71,8 @@ class DaskTracks:
         except ImportError as e:
             raise ValueError("--dask needs dask.distributed: pip install -e \".[dask]\" "
                              f"(or pip install 'dask[distributed]'); import failed: {e}") from None
-        self.label, self.saturate, self.chunk = label, saturate, chunk
+        self.solver, self.source, self.saturate, self.chunk = solver, source, saturate, chunk
+        self.options = solver.options
         self.q0, self.x0 = np.asarray(q0, dtype=complex), np.atleast_2d(np.asarray(x0, dtype=complex))
         self.cluster, self.owned = None, True
         if not isinstance(address, str):
@@ -73,13 +87,25 @@ class DaskTracks:
             except (OSError, TimeoutError, ValueError) as e:
                 raise ValueError(f"--dask {address}: cannot reach a Dask scheduler there ({e})") from None
 
-    def __call__(self, a: np.ndarray, b: np.ndarray, xs: np.ndarray) -> np.ndarray:
-        if not len(xs):
-            return xs
-        pieces = [xs[i:i + self.chunk] for i in range(0, len(xs), self.chunk)]
-        futures = [self.client.submit(track_chunk, self.label, self.saturate, self.q0, self.x0, a, b, piece,
-                                      pure=False) for piece in pieces]
-        return np.concatenate(self.client.gather(futures))
+    def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
+        return self.solver.newton(x, q, steps, inst)
+
+    def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
+              options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
+        if not len(x0):
+            return x0, np.zeros((0, 4))
+        qa, qb = np.atleast_2d(q0), np.atleast_2d(q1)
+        inst = np.zeros(len(x0), dtype=np.int64) if inst is None else np.asarray(inst, dtype=np.int64)
+        if len(qa) == 1 and len(qb) > 1:
+            qa = np.repeat(qa, len(qb), axis=0)
+        if len(qb) == 1 and len(qa) > 1:
+            qb = np.repeat(qb, len(qa), axis=0)
+        opts = dataclasses.asdict(options or self.options)
+        futures = [self.client.submit(track_chunk, self.source, self.saturate, self.q0, self.x0, qa, qb,
+                                      x0[i:i + self.chunk], inst[i:i + self.chunk], opts, pure=False)
+                   for i in range(0, len(x0), self.chunk)]
+        parts = self.client.gather(futures)
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
     def close(self) -> None:
         if self.owned:
@@ -87,7 +113,7 @@ class DaskTracks:
         if self.cluster is not None:
             self.cluster.close()
 
-    def __enter__(self) -> "DaskTracks":
+    def __enter__(self) -> "DaskSystem":
         return self
 
     def __exit__(self, *exc) -> None:
