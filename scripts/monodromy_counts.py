@@ -118,9 +118,8 @@ def main(argv: list[str] | None = None) -> int:
         tape_kernel.set_threads(args.threads)
     except ValueError:
         parser.error(f"--threads must be a positive integer, not {args.threads}")
-    csv_path = os.path.join(TABLES, "monodromy3d.csv")
+    kept = {r["cell"]: r for r in _read(os.path.join(TABLES, "monodromy3d.csv"))}
     meta_path = os.path.join(TABLES, "monodromy3d.meta.json")
-    kept = {r["cell"]: r for r in _read(csv_path)}
     meta = json.load(open(meta_path, encoding="utf-8")) if os.path.exists(meta_path) else {}
     runs = meta.get("runs", {}) if isinstance(meta.get("runs"), dict) else {}
     for cell in args.cells or list(CELLS):
@@ -139,6 +138,15 @@ def main(argv: list[str] | None = None) -> int:
                       "trace_seconds": (result.trace or {}).get("seconds"), "threads": args.threads,
                       "date": time.strftime("%Y-%m-%d"), "commit": _commit(), "cores": os.cpu_count(),
                       "machine": platform.machine()}
+        write(kept, runs)  # after every cell: a long run keeps what it finished
+    write(kept, runs)
+    return 0
+
+
+def write(kept: dict, runs: dict) -> None:
+    """tables/monodromy3d.{csv,md} from the rows, in CELLS' order, and the run record."""
+    csv_path = os.path.join(TABLES, "monodromy3d.csv")
+    meta_path = os.path.join(TABLES, "monodromy3d.meta.json")
     rows = [kept[c] for c in CELLS if c in kept]
     with open(csv_path, "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
@@ -150,7 +158,6 @@ def main(argv: list[str] | None = None) -> int:
         json.dump({"script": "scripts/monodromy_counts.py", "runs": {c: runs[c] for c in CELLS if c in runs}}, fh,
                   indent=1)
         fh.write("\n")
-    return 0
 
 
 if __name__ == "__main__":
