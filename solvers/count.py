@@ -38,7 +38,7 @@ from analysis.formulations.parametric import ParametricSystem
 from analysis.formulations.tdoa import Formulation
 
 from .continuation import certify as certify_mod
-from .continuation import graph, monodromy, tracker
+from .continuation import graph, monodromy, tape_kernel, tracker
 from .continuation import trace as trace_mod
 from .continuation.tracking import (HomotopyError, _duplicated, coefficient_source, evaluator_for,
                                     load_coefficients, structure)
@@ -390,7 +390,7 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
             known[k] = np.vstack([results[k].roots, ends[ok]])
     proven, cert_seconds = 0, 0.0
     if options.certify:
-        cert = certify_mod.certify(system, q0, roots, progress=say)
+        cert = certify_mod.certify(system, q0, roots, progress=say, processes=tape_kernel.threads())
         meets = certify_mod.disjoint(cert.centres, np.where(cert.proven, cert.radii, 0.0), group)
         proven = int((cert.proven & ~meets).sum())
         cert_seconds = cert.seconds

@@ -23,7 +23,9 @@ Ill-conditioned solutions (norm 10^3-10^6, where double precision leaves Newton'
 """
 from __future__ import annotations
 
+import multiprocessing
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
@@ -236,30 +238,60 @@ def _prove(ball: BallSystem, x: np.ndarray, Y: np.ndarray | None) -> tuple[bool,
     return False, np.asarray(x, dtype=complex), float("inf"), 0
 
 
-def certify(system, q: np.ndarray, roots: np.ndarray, progress: Callable[[str], None] | None = None) -> Certificate:
-    """Krawczyk's test on every approximate solution (K, N) of ``system`` at parameters q."""
+def certify(system, q: np.ndarray, roots: np.ndarray, progress: Callable[[str], None] | None = None,
+            processes: int = 1) -> Certificate:
+    """Krawczyk's test on every approximate solution (K, N) of ``system`` at parameters q; ``processes``: the
+    solutions shared among that many forked processes (the tests are independent; arb holds the GIL)."""
     t0 = time.perf_counter()
     ball = BallSystem(system, q)
     roots = np.atleast_2d(np.asarray(roots, dtype=complex))
     K = len(roots)
-    proven = np.zeros(K, dtype=bool)
-    centres = roots.copy()
-    radii = np.full(K, np.inf)
-    bits = np.zeros(K, dtype=np.int64)
-    last = t0
     finite = np.all(np.isfinite(roots), axis=1)
     Y = np.full((K, ball.N, ball.N), np.nan, dtype=complex)
     with np.errstate(all="ignore"):
         J = ball.jacobians(np.where(finite[:, None], roots, 0.0))
         good = finite & (np.linalg.cond(J) < 1e14)
         Y[good] = np.linalg.inv(J[good])
-    for k, x in enumerate(roots):
-        if finite[k]:
-            proven[k], centres[k], radii[k], bits[k] = _prove(ball, x, Y[k] if good[k] else None)
-        if progress and time.perf_counter() - last > 10.0:
-            last = time.perf_counter()
-            progress(f"certify: {k + 1} of {K} solutions tested, {int(proven.sum())} proven, {last - t0:.0f} s")
+    chunks = [np.arange(K)[i:i + CHUNK] for i in range(0, K, CHUNK)]
+    _WORK.update(ball=ball, roots=roots, Y=Y, good=good, finite=finite)
+    proven = np.zeros(K, dtype=bool)
+    centres = roots.copy()
+    radii = np.full(K, np.inf)
+    bits = np.zeros(K, dtype=np.int64)
+    last = t0
+    pool = None
+    if processes > 1 and len(chunks) > 1 and "fork" in multiprocessing.get_all_start_methods():
+        pool = ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("fork"))
+    try:
+        results = pool.map(_prove_chunk, chunks) if pool else map(_prove_chunk, chunks)
+        done = 0
+        for idx, (p_, c_, r_, b_) in zip(chunks, results):
+            proven[idx], centres[idx], radii[idx], bits[idx] = p_, c_, r_, b_
+            done += len(idx)
+            if progress and time.perf_counter() - last > 10.0:
+                last = time.perf_counter()
+                progress(f"certify: {done} of {K} solutions tested, {int(proven.sum())} proven, {last - t0:.0f} s")
+    finally:
+        if pool is not None:
+            pool.shutdown()
+        _WORK.clear()
     return Certificate(proven, centres, radii, bits, time.perf_counter() - t0)
+
+
+#: Solutions per task of :func:`certify` (forked processes share the work by chunks).
+CHUNK = 64
+
+#: What :func:`certify`'s chunks read (set before the processes fork, so that they inherit it).
+_WORK: dict = {}
+
+
+def _prove_chunk(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ball, roots, Y, good, finite = (_WORK[k] for k in ("ball", "roots", "Y", "good", "finite"))
+    out = [np.zeros(len(idx), dtype=bool), roots[idx].copy(), np.full(len(idx), np.inf), np.zeros(len(idx), dtype=np.int64)]
+    for j, k in enumerate(idx):
+        if finite[k]:
+            out[0][j], out[1][j], out[2][j], out[3][j] = _prove(ball, roots[k], Y[k] if good[k] else None)
+    return tuple(out)
 
 
 def disjoint(centres: np.ndarray, radii: np.ndarray, group: np.ndarray | None = None) -> np.ndarray:
