@@ -11,7 +11,8 @@ compaction unknowns are invariant under the Euclidean group and the direct count
 networks up to rotation, reflection and translation.
 
 Usage: python scripts/monodromy_counts.py [10r4s 7r5s 6r6s 5r9s] [--threads 2] [--trace CELL ...] [--no-trace]
-       [--checkpoint DIR]
+       [--checkpoint DIR] [--out DIR]
+       python scripts/monodromy_counts.py --reuse [--merge OTHER/monodromy3d.csv]   (the tables again, no run)
 Cells not named keep their committed rows. Rows hold what code and seeds determine; times go to the meta file.
 """
 from __future__ import annotations
@@ -110,6 +111,10 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"cells whose trace test runs (default: {', '.join(TRACE)})")
     parser.add_argument("--no-trace", action="store_true", help="no trace test")
     parser.add_argument("--checkpoint", metavar="DIR", help="resumable graph files (default: none, from scratch)")
+    parser.add_argument("--out", metavar="DIR", default=TABLES, help="where the tables are read and written (default tables/)")
+    parser.add_argument("--reuse", action="store_true", help="run nothing: write the tables again from the CSV's rows "
+                        "(and --merge's)")
+    parser.add_argument("--merge", metavar="CSV", help="with --reuse: take the rows of this monodromy3d.csv for its cells")
     args = parser.parse_args(argv)
     unknown = [c for c in args.cells + ([] if args.no_trace else args.trace) if c not in CELLS]
     if unknown:
@@ -118,11 +123,14 @@ def main(argv: list[str] | None = None) -> int:
         tape_kernel.set_threads(args.threads)
     except ValueError:
         parser.error(f"--threads must be a positive integer, not {args.threads}")
-    kept = {r["cell"]: r for r in _read(os.path.join(TABLES, "monodromy3d.csv"))}
-    meta_path = os.path.join(TABLES, "monodromy3d.meta.json")
-    meta = json.load(open(meta_path, encoding="utf-8")) if os.path.exists(meta_path) else {}
-    runs = meta.get("runs", {}) if isinstance(meta.get("runs"), dict) else {}
-    for cell in args.cells or list(CELLS):
+    kept = {r["cell"]: r for r in _read(os.path.join(args.out, "monodromy3d.csv"))}
+    runs = _runs(os.path.join(args.out, "monodromy3d.meta.json"))
+    if args.merge:
+        merged = {r["cell"]: r for r in _read(args.merge)}
+        kept.update(merged)
+        other = _runs(os.path.join(os.path.dirname(os.path.abspath(args.merge)), "monodromy3d.meta.json"))
+        runs.update({c: v for c, v in other.items() if c in merged})
+    for cell in [] if args.reuse else (args.cells or list(CELLS)):
         traced = not args.no_trace and cell in args.trace
         options = counting.CountOptions(seeds=SEEDS, trace=traced,
                                         trace_step=TRACE_STEP.get(cell, trace.TraceOptions.step),
@@ -138,21 +146,27 @@ def main(argv: list[str] | None = None) -> int:
                       "trace_seconds": (result.trace or {}).get("seconds"), "threads": args.threads,
                       "date": time.strftime("%Y-%m-%d"), "commit": _commit(), "cores": os.cpu_count(),
                       "machine": platform.machine()}
-        write(kept, runs)  # after every cell: a long run keeps what it finished
-    write(kept, runs)
+        write(args.out, kept, runs)  # after every cell: a long run keeps what it finished
+    write(args.out, kept, runs)
     return 0
 
 
-def write(kept: dict, runs: dict) -> None:
-    """tables/monodromy3d.{csv,md} from the rows, in CELLS' order, and the run record."""
-    csv_path = os.path.join(TABLES, "monodromy3d.csv")
-    meta_path = os.path.join(TABLES, "monodromy3d.meta.json")
+def _runs(path: str) -> dict:
+    meta = json.load(open(path, encoding="utf-8")) if os.path.exists(path) else {}
+    return meta.get("runs", {}) if isinstance(meta.get("runs"), dict) else {}
+
+
+def write(out: str, kept: dict, runs: dict) -> None:
+    """monodromy3d.{csv,md} in ``out`` from the rows, in CELLS' order, and the run record."""
+    os.makedirs(out, exist_ok=True)
+    csv_path = os.path.join(out, "monodromy3d.csv")
+    meta_path = os.path.join(out, "monodromy3d.meta.json")
     rows = [kept[c] for c in CELLS if c in kept]
     with open(csv_path, "w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
-    with open(os.path.join(TABLES, "monodromy3d.md"), "w", encoding="utf-8", newline="\n") as fh:
+    with open(os.path.join(out, "monodromy3d.md"), "w", encoding="utf-8", newline="\n") as fh:
         fh.write(markdown(rows))
     with open(meta_path, "w", encoding="utf-8", newline="\n") as fh:
         json.dump({"script": "scripts/monodromy_counts.py", "runs": {c: runs[c] for c in CELLS if c in runs}}, fh,
