@@ -206,15 +206,33 @@ def _start(target, seed: int, start: tuple[np.ndarray, np.ndarray] | None = None
     return system, np.asarray(q0, dtype=complex), np.asarray(x0, dtype=complex), group
 
 
+class _Refiner:
+    """``refine(points, q_rows)`` for :func:`graph.graph_monodromy`: Newton's method in ball arithmetic at
+    certify.HIGH_PRECISION bits, one :class:`certify.BallSystem` per parameter point (the graph's nodes)."""
+
+    def __init__(self, system: ParametricSystem):
+        self.system = system
+        self.balls: dict[bytes, certify_mod.BallSystem] = {}
+
+    def __call__(self, points: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out, ok = points.copy(), np.zeros(len(points), dtype=bool)
+        for k, (x, qk) in enumerate(zip(points, q)):
+            key = np.asarray(qk, dtype=complex).tobytes()
+            if key not in self.balls:
+                self.balls[key] = certify_mod.BallSystem(self.system, qk)
+            out[k], ok[k] = certify_mod.refine(self.balls[key], x)
+        return out, ok
+
+
 def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, excluded, options,
-           group: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+           group: np.ndarray | None = None, refine=None) -> tuple[np.ndarray, np.ndarray]:
     """Track xs (K, N) from qa to qb: endpoints and the mask of those accepted as solutions at qb. A path that
     fails, or lands where another lands (with ``group``: on an image of another's endpoint; path jumping), is
     retracked with tight steps (:data:`graph.STRAIGHT`), then around its stall point (:data:`graph.DETOURS`); a retracked endpoint is
     kept only where it lands on no other endpoint."""
     inst = np.zeros(len(xs), dtype=np.int64)
     ends, _ = solver.track(qa[None], qb[None], xs, inst, options)
-    ends, ok = graph._accept(solver, ends, qb[None], inst, 1e-6, excluded)
+    ends, ok = graph._accept(solver, ends, qb[None], inst, 1e-6, excluded, refine)
     ok &= ~_clashes(ends, ok, group)
     for detour in list(graph.STRAIGHT) + list(graph.DETOURS):
         bad = np.flatnonzero(~ok)
@@ -224,7 +242,7 @@ def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, excluded, opt
             e, _ = solver.track(qa[None], qb[None], xs[bad], inst[bad], detour)
         else:
             e, _ = graph._local_detours(solver, [(qa, qb)], xs[bad], inst[bad], *detour)
-        e, good = graph._accept(solver, e, qb[None], inst[bad], 1e-6, excluded)
+        e, good = graph._accept(solver, e, qb[None], inst[bad], 1e-6, excluded, refine)
         for k, y, g in zip(bad, e, good):  # kept only where it lands on no endpoint kept so far
             if g and graph._match(ends[ok], y[None], group)[0] < 0:
                 ends[k] = y
@@ -261,7 +279,7 @@ def _compare(known: np.ndarray, carried: np.ndarray, ok: np.ndarray, group) -> t
 
 
 def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Generator, loops: int, group, excluded,
-                options) -> tuple[str, int, np.ndarray]:
+                options, refine=None) -> tuple[str, int, np.ndarray]:
     """Carry VERIFY_SAMPLE random known solutions around ``loops`` fresh random triangles: (words, the number that
     landed outside the set, those endpoints)."""
     if loops <= 0 or not len(roots):
@@ -275,10 +293,10 @@ def _loop_check(solver, q0: np.ndarray, roots: np.ndarray, rng: np.random.Genera
         ok = np.ones(len(xs), dtype=bool)
         for _leg in range(2):
             qn = q0 + scale * (rng.normal(size=len(q0)) + 1j * rng.normal(size=len(q0)))
-            xs, good = _carry(solver, q, xs, qn, excluded, options, group)
+            xs, good = _carry(solver, q, xs, qn, excluded, options, group, refine)
             ok &= good
             q = qn
-        xs, good = _carry(solver, q, np.where(ok[:, None], xs, 0.0), q0, excluded, options, group)
+        xs, good = _carry(solver, q, np.where(ok[:, None], xs, 0.0), q0, excluded, options, group, refine)
         ok &= good
         m = graph._match(roots, xs[ok], group)
         landed += int((m >= 0).sum())
@@ -344,6 +362,7 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
     """:func:`count` once its start pairs and solvers are drawn."""
     system, q0, group, solver0, excluded0 = runs[0]
     track0 = options.tracker or solver0.options
+    refiners = [_Refiner(run[0]) for run in runs]
     rng = np.random.default_rng([options.seeds[0], 7])
     for attempt in range(AUGMENT + 1):
         seeds: list[SeedCount] = []
@@ -357,11 +376,11 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
                 solver_k, q0_k, known[k], graph.GraphOptions(nodes=nodes, seed=seed + 1000 * attempt,
                                                              seconds=options.seconds, tracker=options.tracker),
                 group=group, excluded=excluded_k, checkpoint=_checkpoint(options, system_k, seed, f"graph{attempt}"),
-                progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"))
+                progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"), refine=refiners[k])
             results.append(result)
             carried = ""
             if k:
-                ends, ok = _carry(solver0, q0_k, result.roots, q0, excluded0, track0, group)
+                ends, ok = _carry(solver0, q0_k, result.roots, q0, excluded0, track0, group, refiners[0])
                 carried, _ = _compare(results[0].roots, ends, ok, group)
             seeds.append(SeedCount(seed, len(result.roots), result.closed, result.open_edges, result.paths,
                                    result.rounds, round(result.seconds, 1), carried))
@@ -369,12 +388,12 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
                 + (f", {carried}" if carried else "") + f" ({result.seconds:.0f} s)")
         roots = results[0].roots
         loops_checked, outside, landed = _loop_check(solver0, q0, roots, rng, options.verify_loops, group, excluded0,
-                                                     track0)
+                                                     track0, refiners[0])
         say(f"loops: {loops_checked}")
         # the union at the first seed's q0: every other seed's set carried there and the loops' endpoints
         union = np.vstack([roots, landed])
         for k in range(1, len(runs)):
-            ends, ok = _carry(solver0, runs[k][1], results[k].roots, q0, excluded0, track0, group)
+            ends, ok = _carry(solver0, runs[k][1], results[k].roots, q0, excluded0, track0, group, refiners[0])
             union = np.vstack([union, ends[ok]])
         fresh = graph._match(roots, union[len(roots):], group) < 0
         if not fresh.any() or attempt == AUGMENT:
@@ -386,7 +405,7 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
         say(notes[-1])
         known[0] = np.vstack([roots, extra])
         for k in range(1, len(runs)):  # the union carried to every other seed's q0
-            ends, ok = _carry(runs[k][3], q0, known[0], runs[k][1], runs[k][4], track0, group)
+            ends, ok = _carry(runs[k][3], q0, known[0], runs[k][1], runs[k][4], track0, group, refiners[k])
             known[k] = np.vstack([results[k].roots, ends[ok]])
     proven, cert_seconds = 0, 0.0
     if options.certify:

@@ -33,7 +33,7 @@ import numpy as np
 import sympy
 from flint import acb, acb_mat, arb, ctx
 
-__all__ = ["BallSystem", "Certificate", "certify", "disjoint", "HIGH_PRECISION"]
+__all__ = ["BallSystem", "Certificate", "certify", "disjoint", "refine", "HIGH_PRECISION"]
 
 #: Precision (bits) of the second attempt on a solution that double precision cannot prove.
 HIGH_PRECISION = 160
@@ -201,6 +201,24 @@ def _newton(ball: BallSystem, x: list, steps: int) -> list:
             return x
         x = [(x[k] - dx[k, 0]).mid() for k in range(ball.N)]
     return x
+
+
+def refine(ball: BallSystem, x: np.ndarray, bits: int = HIGH_PRECISION) -> tuple[np.ndarray, bool]:
+    """Newton's method on x (N,) at ``bits`` bits: (the point rounded to double, whether it converged there to a
+    relative step below 2^-(bits/2) within 1e-3 (relative) of x). For an endpoint whose double-precision Newton
+    step stalls above a tolerance (ill-conditioned, large norm: 3D TDOA 6r/6s, norm ~3000, step 1e-5)."""
+    size = 1.0 + float(np.max(np.abs(x)))
+    with _Precision(bits):
+        xm = _newton(ball, [_exact(v) for v in x], 30)
+        try:
+            F = acb_mat([[v] for v in ball.values(xm)]).mid()
+            step = ball.jacobian(xm).mid().solve(F)
+        except (ZeroDivisionError, ValueError):
+            return np.asarray(x, dtype=complex), False
+        last = max(float(abs(step[k, 0]).mid()) for k in range(ball.N))
+    y = np.array([complex(float(v.real.mid()), float(v.imag.mid())) for v in xm])
+    ok = bool(np.all(np.isfinite(y)) and last <= 2.0 ** (-bits // 2) * size and np.max(np.abs(y - x)) <= 1e-3 * size)
+    return y, ok
 
 
 def _exact_matrix(Y: np.ndarray) -> acb_mat:

@@ -56,6 +56,10 @@ RETRIES = len(STRAIGHT) + len(DETOURS)
 #: Independent loops the graph keeps when edges with failed tracks leave it (the complete graph on 4 nodes has 3).
 MIN_LOOPS = 2
 
+#: Endpoints whose Newton step stalls between the acceptance tolerance and this get a refinement in higher
+#: precision (``refine`` of :func:`graph_monodromy`) before they are rejected.
+BORDER = 1e-2
+
 #: Relative distance under which two endpoints are one solution (as :func:`monodromy.add_new`).
 SAME = 1e-6
 
@@ -164,9 +168,11 @@ def _distinct_new(xs: np.ndarray, group: np.ndarray | None) -> np.ndarray:
 
 
 def _accept(system, xs: np.ndarray, q: np.ndarray, inst: np.ndarray, tol: float,
-            excluded: Callable | None) -> tuple[np.ndarray, np.ndarray]:
+            excluded: Callable | None, refine: Callable | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The endpoints xs (M, N) at parameters q[inst] polished by three Newton steps, and the mask of those that
-    are solutions: finite, the next Newton step below ``tol`` relative to 1 + |x|, off the excluded locus."""
+    are solutions: finite, the next Newton step below ``tol`` relative to 1 + |x|, off the excluded locus.
+    ``refine(points, q_rows) -> (points, mask)``: a second chance for endpoints whose step stalls between tol
+    and :data:`BORDER` (Newton's method in higher precision, :func:`.certify.refine`)."""
     ok = np.all(np.isfinite(xs), axis=1)
     out = xs.copy()
     if ok.any():
@@ -174,6 +180,9 @@ def _accept(system, xs: np.ndarray, q: np.ndarray, inst: np.ndarray, tol: float,
             y = system.newton(xs[ok], q, steps=3, inst=inst[ok])
             step = np.linalg.norm(system.newton(y, q, steps=1, inst=inst[ok]) - y, axis=1) / (1.0 + np.linalg.norm(y, axis=1))
         good = np.isfinite(step) & (step < tol) & np.all(np.isfinite(y), axis=1)
+        border = np.flatnonzero(np.isfinite(step) & (step >= tol) & (step < BORDER) & np.all(np.isfinite(y), axis=1))
+        if refine is not None and len(border):
+            y[border], good[border] = refine(y[border], q[inst[ok][border]])
         if excluded is not None and good.any():
             sub = np.flatnonzero(good)
             good[sub] &= ~excluded(y[sub], q[inst[ok][sub]])
@@ -242,7 +251,7 @@ def _complex(rows) -> np.ndarray:
 def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOptions = GraphOptions(), *,
                     group: np.ndarray | None = None, excluded: Callable | None = None,
                     free: np.ndarray | None = None, checkpoint: str | None = None,
-                    progress: Callable[[str], None] | None = None) -> GraphCount:
+                    progress: Callable[[str], None] | None = None, refine: Callable | None = None) -> GraphCount:
     """Solutions of ``system`` at q0 (P,) from the one solution x0 (N,) (or several, (R, N)) by monodromy on a
     complete graph of ``options.nodes`` parameter nodes (module docstring).
 
@@ -251,6 +260,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
     of points on the locus of the non-vanishing conditions (never kept). free: mask of the parameters the
     random nodes move (the trace test's witnesses keep its pencil parameter at 0). checkpoint: a JSON file
     written every minute and at the end, resumed from when it exists for the same q0, options and group.
+    refine: a second chance for endpoints whose Newton step stalls (:func:`_accept`).
     Each round tracks, in one batch, every (solution, edge) whose image is not known yet.
     """
     t0 = time.perf_counter()
@@ -319,7 +329,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
                 ends, tracked = _local_detours(system, [(nodes[i].q, nodes[j].q) for i, j, _ in part], xs, inst,
                                                *DETOURS[attempt - 1 - len(STRAIGHT)])
             paths += tracked
-            ends, ok = _accept(system, ends, qb, inst, options.accept_tol, excluded)
+            ends, ok = _accept(system, ends, qb, inst, options.accept_tol, excluded, refine)
             start = 0
             for e, (i, j, idx) in enumerate(part):
                 sl = slice(start, start + len(idx))
