@@ -27,7 +27,6 @@ import dataclasses
 import json
 import os
 import re
-import sys
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -42,7 +41,7 @@ from .continuation import graph, monodromy, tape_kernel, tracker
 from .continuation import trace as trace_mod
 from .continuation.tracking import (HomotopyError, _duplicated, coefficient_source, evaluator_for,
                                     load_coefficients, structure)
-from .generate import GenerationError, SOLVERS, _job, complex_instance
+from .generate import GenerationError, SOLVERS, _job
 
 __all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "CELLS"]
 
@@ -329,8 +328,6 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
         solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=evaluator_for(system.name))
         runs.append((system, q0, group, solver, monodromy._excluded(system, q0)))
         known.append(x0)
-    system, q0, group, solver0, excluded0 = runs[0]
-    track0 = options.tracker or solver0.options
     clusters = [_cluster(options, *run) for run in runs]
     try:
         return _count(target, options, say, notes, runs, known, clusters, t0)
@@ -461,10 +458,6 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
                                                               coordinates=b or None),
                                        checkpoint=_checkpoint(options, system, options.seeds[0], "witnesses"), progress=say)
     return test.record()
-
-
-def main_progress(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def write_record(result: CountResult, path: str) -> None:
