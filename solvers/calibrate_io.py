@@ -44,8 +44,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "parse_measurements",
-           "plot_calibration", "plot_formats", "read_measurements", "report_dict", "write_json"]
+__all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "format_matrix",
+           "parse_measurements", "plot_calibration", "plot_formats", "read_input", "read_measurements", "report_dict",
+           "write_json"]
 
 #: Delimiters by name (``--delimiter``); the characters themselves are accepted too.
 DELIMITERS = {"comma": ",", "semicolon": ";", "tab": "\t", "space": " "}
@@ -307,6 +308,53 @@ def read_measurements(path: str, *, delimiter: str | None = None, header: str = 
     except OSError as exc:
         raise MeasurementFileError(f"cannot read {source}: {exc.strerror or exc}") from None
     return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
+
+
+def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdoa_options=None,
+               progress=None) -> Measurements:
+    """The one reader of every verb that takes measurements: a measurement CSV (one path, ``-`` for
+    standard input), or a recording (one multichannel audio file, or one file per channel: recognised
+    by their first bytes, solvers.audio.is_recording), turned into the matrix by
+    solvers.audio.tdoa_matrix with `tdoa_options` (a solvers.audio.TdoaOptions; None: the defaults).
+
+    Raises MeasurementFileError or solvers.audio.RecordingError (one line) for what cannot be read.
+    """
+    paths = [paths] if isinstance(paths, str) else list(paths)
+    audio = [p for p in paths if p != _STDIN and _is_audio(p)]
+    if audio:
+        if len(audio) < len(paths):
+            other = next(p for p in paths if p not in audio)
+            raise MeasurementFileError(f"{other} is not a recording, but {audio[0]} is: give recordings only (one "
+                                       "multichannel file or one file per channel), or one measurement CSV")
+        from .audio import TdoaOptions, read_recording, tdoa_matrix
+
+        recording = read_recording(paths)
+        return tdoa_matrix(recording, tdoa_options or TdoaOptions(), progress=progress).measurements()
+    if len(paths) != 1:
+        raise MeasurementFileError(f"{len(paths)} files given: a measurement CSV is one file (several files are read "
+                                   "only as recordings, one per channel)")
+    return read_measurements(paths[0], delimiter=delimiter, header=header)
+
+
+def _is_audio(path: str) -> bool:
+    from .audio import is_recording
+
+    return is_recording(path)
+
+
+def format_matrix(meas: Measurements, comments: tuple[str, ...] = ()) -> str:
+    """The CSV text of a measurement matrix, as `read_measurements` reads it back: `comments` as # lines,
+    a header row (an empty corner, then the transmitter names), one row per receiver (its name, then
+    its values to 9 significant digits; an empty cell where missing)."""
+    def cell(name: str) -> str:
+        quote = any(c in name for c in ',;"#\t') or name != name.strip()
+        return '"' + name.replace('"', '""') + '"' if quote else name
+
+    lines = [f"# {c}" for c in comments]
+    lines.append(",".join([""] + [cell(t) for t in meas.transmitters]))
+    for name, row in zip(meas.receivers, meas.F):
+        lines.append(",".join([cell(name)] + [f"{v:.9g}" if math.isfinite(v) else "" for v in row]))
+    return "\n".join(lines) + "\n"
 
 
 def plot_formats() -> tuple[str, ...]:
