@@ -16,7 +16,7 @@ what `tdoa` measured against the simulator's truth, over the entries other than 
 (whose delay is 0 by definition): `within_2_samples` (share within 2 samples of the true time difference,
 missing entries counting as misses), `missing` (share left missing), `gross` (measured entries more than
 2 samples off), `entry_noise_m` (rms error in metres of the entries within 2 samples); and what
-`calibrate` made of it: `status`, `unplaced`, `kept` (inliers / measured), `rms_position_err_m` (after the
+`calibrate` made of it: `status` and `reason` (what decided it, from the result's message), `unplaced`, `kept` (inliers / measured), `rms_position_err_m` (after the
 best rigid alignment, reflections allowed, over the placed nodes), `crb_position_rms_m` (the Cramer-Rao
 bound of that rms from the entries the calibration kept at `entry_noise_m`,
 solvers.metrics.cramer_rao_position_rms), `rms_over_crb`, `max_err_over_std` (the largest node error over
@@ -122,7 +122,7 @@ def run(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[f
     row = {"seed": seed, "mics": m, "events": n, "rt60_s": rt60_s, "snr_db": snr_db,
            "signals": "/".join(str(kinds.count(k)) for k in KINDS), "detected": len(tm.events)}
     if len(tm.events) != n:  # a split or merged event: no entry can be matched to the truth
-        row.update(dict.fromkeys(("within_2_samples", "missing", "gross", "entry_noise_m", "status", "unplaced",
+        row.update(dict.fromkeys(("within_2_samples", "missing", "gross", "entry_noise_m", "status", "reason", "unplaced",
                                   "kept", "rms_position_err_m", "crb_position_rms_m", "rms_over_crb",
                                   "max_err_over_std"), ""))
         return row
@@ -144,7 +144,8 @@ def run(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[f
     X = np.vstack([res.receivers, res.transmitters])
     Y = np.vstack([net.receivers, net.transmitters])
     placed = np.isfinite(X[:, 0])
-    row.update({"status": res.status, "unplaced": int((~placed).sum()),
+    row.update({"status": res.status, "reason": res.message.split(" - ", 1)[-1].replace("|", "/")[:120],
+                "unplaced": int((~placed).sum()),
                 "kept": f"{int(res.inliers.sum())}/{int(measured.sum())}"})
     if res.status == "failed" or placed.sum() < 4:
         row.update(dict.fromkeys(("rms_position_err_m", "crb_position_rms_m", "rms_over_crb", "max_err_over_std"), ""))

@@ -239,6 +239,7 @@ class TdoaOptions:
     tolerance: float = 1.0
     min_support: int = 2
     early: float = 0.5
+    taper: float = 0.05
     frame: float = 0.005
 
     def __post_init__(self) -> None:
@@ -426,6 +427,9 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     for j, (start, _end) in enumerate(events):
         a, b = max(0, start - max_lag), min(x.shape[1], start + length + max_lag)
         seg = x[:, a:b] - x[:, a:b].mean(axis=1, keepdims=True)
+        if options.taper > 0:  # the early sound (direct paths) weighs more than the reverberant tail
+            after = np.maximum(np.arange(a, b) - start, 0) / rate
+            seg = seg * np.exp(-after / options.taper)
         r = int(np.argmax(np.sum(seg**2, axis=1)))
         ref[j] = r
         t, support = _consensus(m, r, *_pair_candidates(seg, max_lag, options.peaks), options.tolerance,

@@ -1254,6 +1254,13 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="FILE.json", help="also write the JSON result to FILE.json")
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red; 3D: three "
                    "projections) to FILE.png (or .pdf, .svg, ...)")
+    p.add_argument("--anchors", metavar="FILE.csv", help="known positions of some nodes with their std (a header "
+                   "node,x,y[,z],std, then one row per node: a receiver or transmitter name, r:NAME or s:NAME when both "
+                   "have it): the result is given in their frame, its uncertainty carried (solvers.calibration.frame)")
+    p.add_argument("--anchor-fit", choices=("rigid", "similarity"), default="rigid", help="with --anchors: the "
+                   "transform fitted to them, rigid (default) or similarity (also a scale: a wrong speed or unit)")
+    p.add_argument("--csv", metavar="FILE.csv", help="also write the nodes (coordinates, offsets, standard deviations "
+                   "per coordinate) to FILE.csv")
     _add_recording_options(p)
     p.set_defaults(func=cmd_calibrate)
 
@@ -1265,15 +1272,17 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from solvers.audio import is_recording
     from solvers.calibration import calibrate
     from solvers.calibration.adjustment import enough_data
-    from solvers.calibrate_io import MeasurementFileError, plot_calibration, plot_formats, read_input, report_dict, write_json
+    from solvers.calibrate_io import (MeasurementFileError, plot_calibration, plot_formats, read_input, report_dict,
+                                      write_json, write_nodes_csv)
+    from solvers.calibration.frame import anchor_frame, read_anchors
 
     if args.sigma is not None and not (args.sigma > 0 and math.isfinite(args.sigma)):
         why = "the noise of real measurements is never zero" if args.sigma == 0 else "it is a standard deviation"
         raise UserError(f"--sigma must be a finite number > 0, got {args.sigma:g}: {why}; omit --sigma to estimate it")
     if args.units is not None and (not args.units.strip() or not args.units.isprintable()):
         raise UserError(f"--units {args.units!r}: give a printable name such as m or mm")
-    _check_outputs({"--out": (args.out, None), "--plot": (args.plot, plot_formats() if args.plot else None)},
-                   args.file)
+    _check_outputs({"--out": (args.out, None), "--plot": (args.plot, plot_formats() if args.plot else None),
+                    "--csv": (args.csv, None)}, args.file + ([args.anchors] if args.anchors else []))
     try:
         meas = read_input(args.file, delimiter=args.delimiter, header=args.header, tdoa_options=_tdoa_options(args),
                           progress=_progress)
@@ -1301,8 +1310,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   else "drop --transpose if the file's rows are receivers")
         raise UserError(f"{meas.source}: {layout} cannot be calibrated (too few receivers or transmitters for every "
                         f"solver), but {n} receivers x {m} transmitters can: {advice}")
+    anchors = read_anchors(args.anchors, meas.receivers, meas.transmitters, args.dim) if args.anchors else None
     result = calibrate(meas.F, sigma=args.sigma, dim=args.dim, seed=args.seed)
+    if anchors is not None and result.status != "failed":
+        result = anchor_frame(result, anchors, args.anchor_fit)
     report = report_dict(result, meas, args.units)
+    if args.csv and result.status != "failed":
+        try:
+            write_nodes_csv(result, args.csv, meas, args.units)
+        except OSError as e:
+            raise UserError(f"cannot write {args.csv}: {e.strerror}") from None
     if args.out:
         try:
             write_json(report, args.out)
@@ -1326,6 +1343,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def _print_calibration(result, meas, units: str | None = None) -> None:
     print(result.message)
     unit = f" {units}" if units else ""
+    if result.frame is not None:
+        fr = result.frame
+        test = ("not tested (no redundancy)" if fr["critical"] is None else
+                f"{fr['statistic']:.4g} vs {fr['critical']:.4g} ({fr['dof']} degrees of freedom): "
+                f"{'passed' if fr['passed'] else 'FAILED'}")
+        worst = max(fr["anchors"], key=lambda a: a["residual_std"])
+        print(f"frame: {len(fr['anchors'])} anchors of {fr['source']}, {fr['fit']} fit (scale {fr['scale']:.6g}); test "
+              f"{test}; largest anchor residual {worst['name']} {worst['residual_std']:.2g} std")
     if result.status != "failed":
         print(f"sigma {result.sigma:.3g}{unit} ({'estimated' if result.sigma_estimated else 'given'}); "
               f"hypotheses from {result.solver}: {result.samples} samples, {result.hypotheses} hypotheses, "
