@@ -12,9 +12,12 @@ i's sound behind the event's reference channel (the loudest), estimated without 
 signal. The reference's own entry is its onset (tau = 0). Whatever the true emission time is, it is
 a per-event constant and goes into the event's offset o_j (docs/calibrate.md, what F is).
 
-Each entry carries a confidence, the peak-to-sidelobe ratio of its correlation (the peak over the
-highest correlation outside +-`guard` samples of it, >= 1): an entry below `min_confidence`, or whose
-peak sits at the edge of the lag range, is left missing (NaN) rather than guessed.
+The arrivals come from every pair of channels, not from one reference: between two microphones'
+recordings the correlation also peaks where one channel's reflection meets the other's direct sound,
+so each channel's arrival is the time most other channels agree with (:func:`tdoa_matrix` says how).
+Each entry carries a confidence, its support: the number of other channels whose pair correlation has
+a peak at the difference of the two arrivals; an entry with less than `min_support` is left missing
+(NaN) rather than guessed.
 
 GCC-PHAT: the cross-spectrum normalised to unit magnitude, so that every frequency votes equally for
 the delay (robust to the colouring of reverberation; Knapp & Carter 1976). scipy.signal has no PHAT
@@ -168,6 +171,20 @@ class GccPeak:
         return self.height / self.sidelobe if self.sidelobe > 0 else float("inf")
 
 
+def _phat(cross: np.ndarray, n: int, lo: int, hi: int) -> np.ndarray:
+    """The GCC-PHAT correlation at lags lo..hi (last axis) of cross-spectra of FFT length n: each
+    frequency's cross-spectrum normalised to unit magnitude."""
+    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12), n, axis=-1)
+    return cc[..., np.arange(lo, hi + 1) % n]
+
+
+def _parabola(a, b, c):
+    """The offset (in samples, |.| <= 0.5 at a local maximum) of the vertex of the parabola through
+    (-1, a), (0, b), (1, c); 0 where they are collinear."""
+    curv = np.asarray(a - 2 * b + c)
+    return np.where(curv != 0, 0.5 * (a - c) / np.where(curv != 0, curv, 1.0), 0.0)
+
+
 def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None = None, search_back: int = 0,
              guard: int = 2) -> GccPeak:
     """The delay of `y` within `x` by GCC-PHAT, searched over lags min_lag..max_lag samples.
@@ -186,11 +203,7 @@ def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None 
     """
     lo = -max_lag if min_lag is None else min_lag
     n = len(x) + len(y)
-    X = np.fft.rfft(x, n)
-    Y = np.fft.rfft(y, n)
-    cross = X * np.conj(Y)
-    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12), n)
-    window = cc[np.arange(lo, max_lag + 1) % n]
+    window = _phat(np.fft.rfft(x, n) * np.conj(np.fft.rfft(y, n)), n, lo, max_lag)
     last = len(window) - 1
     k = top = int(np.argmax(window))
     if search_back > 0 and k > 1:
@@ -198,11 +211,7 @@ def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None 
         earlier = before[(window[before] >= window[before - 1]) & (window[before] >= window[before + 1])
                          & (window[before] >= 0.5 * window[top])]
         k = int(earlier[0]) if len(earlier) else k
-    if 0 < k < last:
-        a, b, c = window[k - 1], window[k], window[k + 1]
-        shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else 0.0
-    else:
-        shift = 0.0
+    shift = float(_parabola(window[k - 1], window[k], window[k + 1])) if 0 < k < last else 0.0
     outside = np.abs(np.arange(len(window)) - k) > guard
     sidelobe = float(window[outside].max()) if outside.any() else 0.0
     return GccPeak(lo + k + shift, float(window[k]), float(window[top]), float(np.sqrt(np.mean(window**2))),
@@ -224,9 +233,15 @@ class TdoaOptions:
     threshold_db : an event starts where the recording's power (all channels) rises this many dB above
         its background (the 10th percentile of 5 ms frames)
     min_gap : seconds of quiet (power below threshold_db - 3 dB) that separate two events
-    window : seconds of each event analysed after its onset (plus the lag range either side); a short
-        window keeps the reverberant tail out of the correlation
-    min_confidence : entries whose peak-to-sidelobe ratio is below this are left missing
+    window : seconds of each event analysed after its onset (plus the lag range either side)
+    peaks : the highest peaks of each pair's correlation kept as candidates
+    tolerance : samples within which a pair's candidate agrees with two arrivals' difference
+    min_support : entries that fewer other channels agree with are left missing
+    early : of the arrival times with at least this share of the best support, the earliest is taken
+        (reflections arrive after the direct sound)
+    taper : seconds of the exponential weight exp(-t / taper) after the onset: the direct sound weighs
+        more than the reverberant tail (measured on the simulated rooms: 0.05 s recovers 0.98 of the
+        entries where no taper recovers 0.91, RT60 0.4-0.6 s)
     frame : seconds per power frame of the event detection
     """
 
@@ -243,12 +258,14 @@ class TdoaOptions:
     frame: float = 0.005
 
     def __post_init__(self) -> None:
-        for name in ("speed", "max_distance", "window", "frame", "min_gap", "threshold_db"):
+        for name in ("speed", "max_distance", "window", "frame", "min_gap", "threshold_db", "taper"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {value}")
         if self.peaks < 1 or self.min_support < 1 or not (np.isfinite(self.tolerance) and self.tolerance > 0):
             raise ValueError("peaks and min_support must be >= 1 and tolerance > 0")
+        if not 0.0 < self.early <= 1.0:
+            raise ValueError(f"early must be in (0, 1], got {self.early}")
 
 
 def detect_events(samples: np.ndarray, rate: int, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
@@ -311,7 +328,7 @@ class TdoaMatrix:
         return Measurements(self.F.copy(), self.channels, self.events, self.source, ",")
 
 
-def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int, beta: float = 1.0):
+def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int):
     """GCC-PHAT of every channel pair (i < k) of an event's segments: (i, k, lags (pairs, peaks),
     heights (pairs, peaks)), the `peaks` highest local maxima of each correlation over +-max_lag,
     parabolically refined (lag of channel i's sound behind channel k's, in samples)."""
@@ -319,16 +336,13 @@ def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int, beta: float = 1.
     n = 2 * length
     X = np.fft.rfft(seg, n, axis=1)
     i, k = np.triu_indices(m, 1)
-    cross = X[i] * np.conj(X[k])
-    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12) ** beta, n, axis=1)
-    window = cc[:, np.arange(-max_lag, max_lag + 1) % n]
+    window = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag)
     inner = np.zeros_like(window, dtype=bool)
     inner[:, 1:-1] = (window[:, 1:-1] >= window[:, :-2]) & (window[:, 1:-1] > window[:, 2:])
     ranked = np.argsort(np.where(inner, window, -np.inf), axis=1)[:, ::-1][:, :peaks]
     rows = np.arange(len(i))[:, None]
-    a, b, c = window[rows, ranked - 1], window[rows, ranked], window[rows, ranked + 1]
-    curv = a - 2 * b + c
-    shift = np.where(curv != 0, 0.5 * (a - c) / np.where(curv != 0, curv, 1.0), 0.0)
+    b = window[rows, ranked]
+    shift = _parabola(window[rows, ranked - 1], b, window[rows, ranked + 1])
     heights = np.where(inner[rows, ranked], b, 0.0)
     return i, k, ranked - max_lag + shift, heights
 
@@ -427,9 +441,8 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     for j, (start, _end) in enumerate(events):
         a, b = max(0, start - max_lag), min(x.shape[1], start + length + max_lag)
         seg = x[:, a:b] - x[:, a:b].mean(axis=1, keepdims=True)
-        if options.taper > 0:  # the early sound (direct paths) weighs more than the reverberant tail
-            after = np.maximum(np.arange(a, b) - start, 0) / rate
-            seg = seg * np.exp(-after / options.taper)
+        after = np.maximum(np.arange(a, b) - start, 0) / rate  # the direct sound weighs more than the tail
+        seg = seg * np.exp(-after / options.taper)
         r = int(np.argmax(np.sum(seg**2, axis=1)))
         ref[j] = r
         t, support = _consensus(m, r, *_pair_candidates(seg, max_lag, options.peaks), options.tolerance,
