@@ -351,12 +351,12 @@ def format_matrix_cell(name: str) -> str:
 def format_matrix(meas: Measurements, comments: tuple[str, ...] = ()) -> str:
     """The CSV text of a measurement matrix, as `read_measurements` reads it back: `comments` as # lines,
     a header row (an empty corner, then the transmitter names), one row per receiver (its name, then
-    its values to 9 significant digits; an empty cell where missing)."""
+    its values to 10 significant digits: 0.1 mm at an hour of sound travel; an empty cell where missing)."""
     cell = format_matrix_cell
     lines = [f"# {c}" for c in comments]
     lines.append(",".join([""] + [cell(t) for t in meas.transmitters]))
     for name, row in zip(meas.receivers, meas.F):
-        lines.append(",".join([cell(name)] + [f"{v:.9g}" if math.isfinite(v) else "" for v in row]))
+        lines.append(",".join([cell(name)] + [f"{v:.10g}" if math.isfinite(v) else "" for v in row]))
     return "\n".join(lines) + "\n"
 
 
