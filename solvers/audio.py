@@ -378,7 +378,7 @@ def _consensus(m: int, ref: int, i, k, lags, heights, tol: float, early: float =
     for start in (range(m) if starts is None else starts):
         t = _sweep(P, H, np.where(np.arange(m) == start, 0.0, P[:, start, 0]), tol, early, sweeps)
         ok, val = _supported(P, t, tol)
-        score = (int(ok.sum()), float(np.where(ok, 1.0, 0.0).sum()))
+        score = int(ok.sum())  # agreeing pairs; the first start of the most wins
         if best is None or score > best[0]:
             best = (score, t, ok, val)
     _, t, ok, val = best

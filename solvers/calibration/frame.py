@@ -185,7 +185,9 @@ def anchor_frame(result, anchors: Anchors, fit: AnchorFit = "rigid", alpha: floa
 
     With "similarity", positions, offsets and their covariances are multiplied by s (a wrong speed of
     sound or unit); sigma, residuals and the tests stay in the measurement's unit.
-    Returns a new CalibrationResult with `frame` describing the transform and the anchors' residuals.
+    Returns a new CalibrationResult with `frame` describing the transform and the anchors' residuals;
+    the reliabilities (shift lengths, scaled by s) and an ambiguous result's `alternative` stay in the
+    solver's gauge.
     """
     from .result import STATUSES
 
