@@ -316,6 +316,7 @@ def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdo
     standard input), or a recording (one multichannel audio file, or one file per channel: recognised
     by their first bytes, solvers.audio.is_recording), turned into the matrix by
     solvers.audio.tdoa_matrix with `tdoa_options` (a solvers.audio.TdoaOptions; None: the defaults).
+    progress: None, or a callable taking one line (the analysis's progress and notes).
 
     Raises MeasurementFileError or solvers.audio.RecordingError (one line) for what cannot be read.
     """
@@ -328,8 +329,10 @@ def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdo
                                        "multichannel file or one file per channel), or one measurement CSV")
         from .audio import TdoaOptions, read_recording, tdoa_matrix
 
-        recording = read_recording(paths)
-        return tdoa_matrix(recording, tdoa_options or TdoaOptions(), progress=progress).measurements()
+        tm = tdoa_matrix(read_recording(paths), tdoa_options or TdoaOptions(), progress=progress)
+        for note in tm.notes if progress is not None else ():
+            progress(f"tdoa: {note}")
+        return tm.measurements()
     if len(paths) != 1:
         raise MeasurementFileError(f"{len(paths)} files given: a measurement CSV is one file (several files are read "
                                    "only as recordings, one per channel)")

@@ -1196,14 +1196,15 @@ def cmd_tdoa(args: argparse.Namespace) -> int:
 
     _check_outputs({"--out": (args.out, None), "--confidence": (args.confidence, None)}, args.recording)
     recording = read_recording(args.recording)
-    for note in recording.notes:
-        _progress(f"tdoa: {note}")
     tm = tdoa_matrix(recording, _tdoa_options(args), progress=_progress)
+    for note in tm.notes:  # the reader's and the analysis's
+        _progress(f"tdoa: {note}")
     meas = tm.measurements()
     kept = int(np.isfinite(tm.F).sum())
     about = (f"tdoa-workbench tdoa {recording.source}: {len(tm.channels)} channels at {tm.rate} Hz, "
              f"{recording.seconds:.1f} s, {len(tm.events)} events, speed of sound {tm.speed:g} m/s; values in m")
-    summary = f"{kept}/{tm.F.size} entries, {tm.F.size - kept} left missing (support < {args.min_support})"
+    summary = (f"{kept}/{tm.F.size} entries, {tm.F.size - kept} left missing (support < {args.min_support}, or an "
+               "event whose channels disagree)")
     text = format_matrix(meas, (about, summary))
     try:
         if args.out:
