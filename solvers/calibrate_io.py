@@ -467,7 +467,7 @@ def ellipse_magnification(extent: float, stds) -> int:
     stds = stds[np.isfinite(stds) & (stds > 0)]
     if not stds.size or not np.isfinite(extent) or extent <= 0:
         return 1
-    limit = CIRCLE_SHARE * extent / stds.max()
+    limit = ELLIPSE_SHARE * extent / stds.max()
     factor = 1
     for step in itertools.cycle((2, 2.5, 2)):  # 1, 2, 5, 10, 20, 50, ...
         if factor * step > limit:
