@@ -32,10 +32,8 @@ correctly too rarely for any estimator to place it). The md ends with the count 
 every node within 2 x their bound.
 Writes tables/NAME.csv and .md (one row per room; NAME defaults to room_simulation, room_simulation3d).
 
-GCC-PHAT is written here (15 lines) rather than taken from pyroomacoustics or scipy: scipy.signal has
-no PHAT weighting, and pyroomacoustics.experimental.localization.tdoa returns only the lag (no peak
-strength, which decides a missed detection), searches negative lags too, works in float32 and refines
-by FFT upsampling instead of interpolating the peak.
+GCC-PHAT is the library's (solvers.audio.gcc_phat; why not scipy's or pyroomacoustics': its docstring),
+here against the emitted waveform; `tdoa-workbench tdoa` measures without it (scripts/audio_room.py).
 
 Needs the optional extra: pip install -e ".[audio]"  (pyroomacoustics).
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/room_simulation.py [--dim 2|3] [--rooms 5] [--seed 0]
@@ -57,6 +55,7 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
+from solvers.audio import gcc_phat  # noqa: E402
 from solvers.calibration import calibrate  # noqa: E402
 from solvers.metrics import align_rigid, cramer_rao_position_rms, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
@@ -114,31 +113,13 @@ def gcc_phat_delay(recording: np.ndarray, reference: np.ndarray, fs: int, max_de
                    search_back: float = 0.0) -> tuple[float, float]:
     """(delay in seconds of `reference` within `recording`, peak / RMS of the correlation).
 
-    GCC-PHAT: the cross-spectrum normalised to unit magnitude, so that every frequency votes equally
-    for the delay (robust to the colouring of reverberation); parabolic interpolation of the peak.
+    solvers.audio.gcc_phat over the lags 0..max_delay (the emitted burst cannot arrive early);
     search_back > 0: the earliest local maximum of at least half the highest peak's height within
     search_back seconds before it is taken instead (a reflection can beat the direct sound, never
     precede it); the peak / RMS is that of the highest peak.
     """
-    n = len(recording) + len(reference)
-    X = np.fft.rfft(recording, n)
-    Y = np.fft.rfft(reference, n)
-    cross = X * np.conj(Y)
-    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12), n)
-    lags = int(max_delay * fs)
-    window = cc[: lags + 1]
-    k = top = int(np.argmax(window))
-    if search_back > 0 and k > 1:
-        before = np.arange(max(1, k - int(search_back * fs)), k)
-        earlier = before[(window[before] >= window[before - 1]) & (window[before] >= window[before + 1])
-                         & (window[before] >= 0.5 * window[top])]
-        k = int(earlier[0]) if len(earlier) else k
-    if 0 < k < lags:
-        a, b, c = window[k - 1], window[k], window[k + 1]
-        shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else 0.0
-    else:
-        shift = 0.0
-    return (k + shift) / fs, float(window[top] / np.sqrt(np.mean(window**2)))
+    peak = gcc_phat(recording, reference, max_lag=int(max_delay * fs), min_lag=0, search_back=int(search_back * fs))
+    return peak.lag / fs, peak.top / peak.rms
 
 
 def simulate_room(rng: np.random.Generator, mics: int, sources: int, rt60: float, snr_db: float,

@@ -44,8 +44,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "parse_measurements",
-           "plot_calibration", "plot_formats", "read_measurements", "report_dict", "write_json"]
+__all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "format_matrix",
+           "parse_measurements", "plot_calibration", "plot_formats", "read_input", "read_measurements", "report_dict",
+           "write_json", "write_nodes_csv"]
 
 #: Delimiters by name (``--delimiter``); the characters themselves are accepted too.
 DELIMITERS = {"comma": ",", "semicolon": ";", "tab": "\t", "space": " "}
@@ -309,6 +310,59 @@ def read_measurements(path: str, *, delimiter: str | None = None, header: str = 
     return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
 
 
+def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdoa_options=None,
+               progress=None) -> Measurements:
+    """The one reader of every verb that takes measurements: a measurement CSV (one path, ``-`` for
+    standard input), or a recording (one multichannel audio file, or one file per channel: recognised
+    by their first bytes, solvers.audio.is_recording), turned into the matrix by
+    solvers.audio.tdoa_matrix with `tdoa_options` (a solvers.audio.TdoaOptions; None: the defaults).
+    progress: None, or a callable taking one line (the analysis's progress and notes).
+
+    Raises MeasurementFileError or solvers.audio.RecordingError (one line) for what cannot be read.
+    """
+    paths = [paths] if isinstance(paths, str) else list(paths)
+    audio = [p for p in paths if p != _STDIN and _is_audio(p)]
+    if audio:
+        if len(audio) < len(paths):
+            other = next(p for p in paths if p not in audio)
+            raise MeasurementFileError(f"{other} is not a recording, but {audio[0]} is: give recordings only (one "
+                                       "multichannel file or one file per channel), or one measurement CSV")
+        from .audio import TdoaOptions, read_recording, tdoa_matrix
+
+        tm = tdoa_matrix(read_recording(paths), tdoa_options or TdoaOptions(), progress=progress)
+        for note in tm.notes if progress is not None else ():
+            progress(f"tdoa: {note}")
+        return tm.measurements()
+    if len(paths) != 1:
+        raise MeasurementFileError(f"{len(paths)} files given: a measurement CSV is one file (several files are read "
+                                   "only as recordings, one per channel)")
+    return read_measurements(paths[0], delimiter=delimiter, header=header)
+
+
+def _is_audio(path: str) -> bool:
+    from .audio import is_recording
+
+    return is_recording(path)
+
+
+def format_matrix_cell(name: str) -> str:
+    """A name as a CSV cell: double-quoted (quotes doubled) when it holds a delimiter, a quote or a #."""
+    quote = any(c in name for c in ',;"#\t') or name != name.strip()
+    return '"' + name.replace('"', '""') + '"' if quote else name
+
+
+def format_matrix(meas: Measurements, comments: tuple[str, ...] = ()) -> str:
+    """The CSV text of a measurement matrix, as `read_measurements` reads it back: `comments` as # lines,
+    a header row (an empty corner, then the transmitter names), one row per receiver (its name, then
+    its values to 10 significant digits: 0.1 mm at an hour of sound travel; an empty cell where missing)."""
+    cell = format_matrix_cell
+    lines = [f"# {c}" for c in comments]
+    lines.append(",".join([""] + [cell(t) for t in meas.transmitters]))
+    for name, row in zip(meas.receivers, meas.F):
+        lines.append(",".join([cell(name)] + [f"{v:.10g}" if math.isfinite(v) else "" for v in row]))
+    return "\n".join(lines) + "\n"
+
+
 def plot_formats() -> tuple[str, ...]:
     """File extensions matplotlib can write (png, pdf, svg, ...)."""
     import matplotlib
@@ -359,19 +413,61 @@ def write_json(report: dict, path: str) -> None:
         handle.write("\n")
 
 
-CIRCLE_SHARE = 0.03
-"""The largest 1-sigma circle of a map is magnified to about this share of the map's extent (a centimetre
-standard deviation on a map of metres is otherwise thinner than the line that draws it)."""
+def write_nodes_csv(result, path: str, measurements: Measurements | None = None, units: str | None = None) -> None:
+    """The nodes as CSV (``--csv``): one row per receiver, then per transmitter, with the columns kind
+    (receiver / transmitter), name, the coordinates x, y (z), offset (transmitters), the standard
+    deviation of each coordinate and of the offset, and std (the root of the sum of the coordinates'
+    variances, as printed); an empty cell for what is not placed or not determined. Comment lines first:
+    the status line and the frame (the solver's gauge, or the anchors'). OSError propagates."""
+    dim = result.dim
+    axes = "xyz"[:dim]
+    names_r = measurements.receivers if measurements else [str(i + 1) for i in range(result.m)]
+    names_t = measurements.transmitters if measurements else [str(j + 1) for j in range(result.n)]
+
+    def number(v) -> str:
+        return f"{float(v):.9g}" if np.isfinite(v) else ""
+
+    def axis_std(cov, k) -> list:
+        if cov is None:
+            return [math.nan] * dim
+        with np.errstate(invalid="ignore"):
+            return list(np.sqrt(np.diagonal(cov[k])[:dim]))
+
+    unit = f" [{units}]" if units else ""
+    if result.frame is not None:
+        where = f"the frame of the anchors in {result.frame['source']} ({result.frame['fit']} fit)"
+    elif result.gauge is not None:
+        where = "the solver's gauge: receiver " + ", ".join(
+            f"{names_r[g]} {role}" for g, role in zip(result.gauge, ("at the origin", "on +x", "in the xy half-plane y > 0")))
+    else:
+        where = "no frame (not placed)"
+    lines = [f"# {result.message}", f"# coordinates{unit} in {where}",
+             ",".join(["kind", "name", *axes, "offset", *(f"std_{a}" for a in axes), "std_offset", "std"])]
+    for k, name in enumerate(names_r):
+        lines.append(",".join(["receiver", format_matrix_cell(name), *map(number, result.receivers[k]), "",
+                               *map(number, axis_std(result.receiver_cov, k)), "", number(result.receiver_std[k])]))
+    for k, name in enumerate(names_t):
+        lines.append(",".join(["transmitter", format_matrix_cell(name), *map(number, result.transmitters[k]),
+                               number(result.offsets[k]), *map(number, axis_std(result.transmitter_cov, k)),
+                               number(result.offset_std[k]), number(result.transmitter_std[k])]))
+    with open(path, "w", encoding="utf-8") as handle:
+        handle.write("\n".join(lines) + "\n")
 
 
-def circle_magnification(extent: float, stds) -> int:
-    """The factor (1, 2, 5, 10, 20, 50, ...) by which a map's 1-sigma circles are magnified: the largest one
-    that keeps the largest circle within :data:`CIRCLE_SHARE` of the extent, at least 1."""
+ELLIPSE_SHARE = 0.03
+"""The largest 1-sigma error ellipse of a map is magnified to about this share of the map's extent (a
+centimetre standard deviation on a map of metres is otherwise thinner than the line that draws it)."""
+
+
+def ellipse_magnification(extent: float, stds) -> int:
+    """The factor (1, 2, 5, 10, 20, 50, ...) by which a map's 1-sigma error ellipses are magnified: the
+    largest one that keeps the largest node std (the root of the summed variances, at least the largest
+    semi-axis) within :data:`ELLIPSE_SHARE` of the extent, at least 1."""
     stds = np.asarray(stds, dtype=float)
     stds = stds[np.isfinite(stds) & (stds > 0)]
     if not stds.size or not np.isfinite(extent) or extent <= 0:
         return 1
-    limit = CIRCLE_SHARE * extent / stds.max()
+    limit = ELLIPSE_SHARE * extent / stds.max()
     factor = 1
     for step in itertools.cycle((2, 2.5, 2)):  # 1, 2, 5, 10, 20, 50, ...
         if factor * step > limit:
@@ -380,15 +476,16 @@ def circle_magnification(extent: float, stds) -> int:
 
 
 def plot_calibration(result, path: str, measurements: Measurements | None = None, units: str | None = None) -> None:
-    """Map of the calibration: receivers (triangles), transmitters (circles), 1-sigma circles (magnified
-    by :func:`circle_magnification`, the factor in the legend), and every rejected measurement as a
-    dashed red line between its receiver and transmitter; `units` labels the axes. A 3D calibration is
-    drawn as its three projections (xy, xz, yz)."""
+    """Map of the calibration: receivers (triangles), transmitters (circles), each node's 1-sigma error
+    ellipse (its covariance projected on the view), enlarged by one factor so that they can be seen on
+    the map (:func:`ellipse_magnification`; the legend says the factor), and every rejected measurement as a dashed red
+    line between its receiver and transmitter; `units` labels the axes. A 3D calibration is drawn as its
+    three projections (xy, xz, yz)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
+    from matplotlib.patches import Ellipse
 
     names_r = measurements.receivers if measurements else [str(i + 1) for i in range(result.m)]
     names_t = measurements.transmitters if measurements else [str(j + 1) for j in range(result.n)]
@@ -399,7 +496,7 @@ def plot_calibration(result, path: str, measurements: Measurements | None = None
     placed = np.vstack([R, S])
     placed = placed[np.all(np.isfinite(placed), axis=1)]
     extent = float(np.ptp(placed, axis=0).max()) if len(placed) else 0.0
-    magnify = circle_magnification(extent, np.concatenate([result.receiver_std, result.transmitter_std]))
+    magnify = ellipse_magnification(extent, np.concatenate([result.receiver_std, result.transmitter_std]))
     for ax, (a, b) in zip(axs[0], views):
         first = True
         for i, j in zip(*np.nonzero(rejected)):
@@ -408,15 +505,22 @@ def plot_calibration(result, path: str, measurements: Measurements | None = None
             first = False
         ax.plot(R[:, a], R[:, b], "^", color="tab:blue", ms=8, label="receivers")
         ax.plot(S[:, a], S[:, b], "o", color="tab:orange", ms=7, label="transmitters")
-        for P, std, names in ((R, result.receiver_std, names_r), (S, result.transmitter_std, names_t)):
+        ellipses = []
+        for P, std, cov, names in ((R, result.receiver_std, result.receiver_cov, names_r),
+                                   (S, result.transmitter_std, result.transmitter_cov, names_t)):
             for k, name in enumerate(names):
                 if not np.all(np.isfinite(P[k])):
                     continue
                 ax.annotate(name, P[k, [a, b]], textcoords="offset points", xytext=(4, 4), fontsize=8)
-                if np.isfinite(std[k]) and std[k] > 0:
-                    ax.add_patch(plt.Circle(P[k, [a, b]], magnify * std[k], fill=False, color="gray", lw=0.5))
-        ax.add_line(Line2D([], [], ls="", marker="o", mfc="none", color="gray", lw=0.5,
-                           label="1-sigma circles" + (f" x {magnify}" if magnify > 1 else "")))
+                block = cov[k][np.ix_([a, b], [a, b])] if cov is not None else np.eye(2) * std[k] ** 2 / result.dim
+                if np.all(np.isfinite(block)) and np.trace(block) > 0:
+                    lam, vec = np.linalg.eigh(block)
+                    ellipses.append((P[k, [a, b]], np.sqrt(np.maximum(lam, 0.0)), vec))
+        for k, (centre, semi, vec) in enumerate(ellipses):
+            angle = math.degrees(math.atan2(vec[1, 1], vec[0, 1]))
+            ax.add_patch(Ellipse(centre, 2 * magnify * semi[1], 2 * magnify * semi[0], angle=angle, fill=False,
+                                 color="gray", lw=0.7, label=None if k else
+                                 "1-sigma ellipses" + (f" x {magnify}" if magnify > 1 else "")))
         ax.set_aspect("equal")
         unit = f" [{units}]" if units else ""
         ax.set_xlabel("xyz"[a] + unit)

@@ -12,7 +12,8 @@ count      number of solutions of a parametric system beyond F4 (graph monodromy
 template-check  how many action-matrix relations single elimination templates of a formulation or of
            a system file reach over GF(p), per multiplier family and degree (solvers.feasibility)
 reproduce  the main job: Tables 2, 3 and 4 and Figures 1 and 2, with a comparison to the paper
-calibrate  calibrate a network from a CSV of measurements (gaps, outliers; solvers.calibration)
+calibrate  calibrate a network from a CSV of measurements or a recording (gaps, outliers; solvers.calibration)
+tdoa       the measurement matrix of a recording: sound events, GCC-PHAT time differences (solvers.audio)
 
 Every error a user can cause (bad file, bad prime, unknown equation...) is reported as one line on
 stderr with exit status 2; a disagreement between primes exits with status 3.
@@ -1113,6 +1114,114 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+def _positive_float(option: str):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} takes a number, got {text!r}") from None
+        if not (value > 0 and value < float("inf")):
+            raise argparse.ArgumentTypeError(f"{option} must be a finite number > 0, got {text}")
+        return value
+    return parse
+
+
+def _add_recording_options(p: argparse.ArgumentParser) -> None:
+    """The options of a recording's analysis (solvers.audio.TdoaOptions), the same for every verb."""
+    from solvers.audio import TdoaOptions
+
+    d = TdoaOptions()
+    g = p.add_argument_group("recordings (WAV, FLAC, ...: solvers.audio)")
+    g.add_argument("--speed", type=_positive_float("--speed"), default=d.speed, metavar="M/S",
+                   help=f"speed of sound in m/s; the matrix is in metres (default {d.speed:g})")
+    g.add_argument("--max-distance", type=_positive_float("--max-distance"), default=d.max_distance, metavar="M",
+                   help=f"largest distance between two microphones in m: the lags searched (default {d.max_distance:g})")
+    g.add_argument("--threshold", type=_positive_float("--threshold"), default=d.threshold_db, metavar="DB",
+                   help=f"an event starts this many dB above the background (default {d.threshold_db:g})")
+    g.add_argument("--min-support", type=_integer_at_least("--min-support", 1), default=d.min_support, metavar="N",
+                   help="an entry is kept when at least N other channels agree with its arrival time "
+                   f"(default {d.min_support})")
+
+
+def _tdoa_options(args: argparse.Namespace):
+    from solvers.audio import TdoaOptions
+
+    return TdoaOptions(speed=args.speed, max_distance=args.max_distance, threshold_db=args.threshold,
+                       min_support=args.min_support)
+
+
+def _progress(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _check_outputs(outputs: dict, readings) -> None:
+    """Refuse, before any computing, output paths that cannot be written (check_output_path, against
+    every input file) or that name the same file. outputs: {option: (path or None, formats or None)}."""
+    from solvers.calibrate_io import MeasurementFileError, check_output_path
+
+    given = [(option, path, formats) for option, (path, formats) in outputs.items() if path]
+    try:
+        for option, path, formats in given:
+            for reading in readings:
+                check_output_path(path, option, reading=reading, formats=formats)
+        for a, (option, path, _) in enumerate(given):
+            for other, path2, _ in given[a + 1:]:
+                if os.path.abspath(path) == os.path.abspath(path2):
+                    raise MeasurementFileError(f"{option} and {other} name the same file {path}")
+    except MeasurementFileError as e:
+        raise UserError(str(e)) from None
+
+
+def _add_tdoa(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "tdoa", help="the measurement matrix of a recording: sound events, GCC-PHAT time differences",
+        description="Detect the sound events of RECORDING (one multichannel WAV/FLAC file, or one file per "
+        "microphone) by their energy onsets and measure each channel's arrival time against the event's loudest "
+        "channel by GCC-PHAT of every channel pair (sub-sample), without knowing the emitted sound; an arrival "
+        "fewer than --min-support other channels agree with is left missing. Writes the matrix calibrate reads: "
+        "one row per channel, one column per event, arrival time x speed of sound in metres (solvers.audio).")
+    p.add_argument("recording", nargs="+", metavar="RECORDING", help="a multichannel audio file, or one file per channel")
+    p.add_argument("--out", metavar="FILE.csv", help="write the matrix to FILE.csv (default: standard output)")
+    p.add_argument("--confidence", metavar="FILE.csv", help="also write each entry's support (how many other channels "
+                   "agree with it) in the same layout")
+    _add_recording_options(p)
+    p.set_defaults(func=cmd_tdoa)
+
+
+def cmd_tdoa(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from solvers.audio import read_recording, tdoa_matrix
+    from solvers.calibrate_io import Measurements, format_matrix
+
+    _check_outputs({"--out": (args.out, None), "--confidence": (args.confidence, None)}, args.recording)
+    recording = read_recording(args.recording)
+    tm = tdoa_matrix(recording, _tdoa_options(args), progress=_progress)
+    for note in tm.notes:  # the reader's and the analysis's
+        _progress(f"tdoa: {note}")
+    meas = tm.measurements()
+    kept = int(np.isfinite(tm.F).sum())
+    about = (f"tdoa-workbench tdoa {recording.source}: {len(tm.channels)} channels at {tm.rate} Hz, "
+             f"{recording.seconds:.1f} s, {len(tm.events)} events, speed of sound {tm.speed:g} m/s; values in m")
+    summary = (f"{kept}/{tm.F.size} entries, {tm.F.size - kept} left missing (support < {args.min_support}, or an "
+               "event whose channels disagree)")
+    text = format_matrix(meas, (about, summary))
+    try:
+        if args.out:
+            with open(args.out, "w", encoding="utf-8") as handle:
+                handle.write(text)
+        else:
+            sys.stdout.write(text)
+        if args.confidence:
+            with open(args.confidence, "w", encoding="utf-8") as handle:
+                handle.write(format_matrix(Measurements(tm.confidence, tm.channels, tm.events, tm.source),
+                                           (about, "support: how many other channels agree with each arrival")))
+    except OSError as e:
+        raise UserError(f"cannot write {e.filename}: {e.strerror}") from None
+    _progress(f"tdoa: {len(tm.events)} events, {summary}" + (f"; wrote {args.out}" if args.out else ""))
+    return 0
+
+
 def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     from solvers.calibrate_io import DELIMITERS, HEADERS
 
@@ -1127,7 +1236,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
         "LO-RANSAC over the minimal solvers, extension and robust refinement, a least-squares adjustment with its tests (solvers.calibration). Exit status 0 "
         "when the status is ok (every check passed), 1 for any other status (partial, uncontrolled, inconsistent, "
         "ambiguous, unconverged, failed: the first line says why), 2 for a malformed file or option.")
-    p.add_argument("file", metavar="MEAS.csv", help="measurement matrix (CSV); - reads standard input")
+    p.add_argument("file", nargs="+", metavar="MEAS.csv", help="measurement matrix (CSV; - reads standard input), or a "
+                   "recording: one multichannel audio file or one file per channel, analysed as tdoa does")
     p.add_argument("--sigma", type=float, help="noise standard deviation of the measurements, > 0, in the unit of "
                    "the file (default: estimated)")
     p.add_argument("--units", metavar="NAME", help="name of the file's distance unit (m, mm, ...), printed with the "
@@ -1145,6 +1255,14 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="FILE.json", help="also write the JSON result to FILE.json")
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (rejected measurements dashed red; 3D: three "
                    "projections) to FILE.png (or .pdf, .svg, ...)")
+    p.add_argument("--anchors", metavar="FILE.csv", help="known positions of some nodes with their std (a header "
+                   "node,x,y[,z],std, then one row per node: a receiver or transmitter name, r:NAME or s:NAME when both "
+                   "have it): the result is given in their frame, its uncertainty carried (solvers.calibration.frame)")
+    p.add_argument("--anchor-fit", choices=("rigid", "similarity"), default="rigid", help="with --anchors: the "
+                   "transform fitted to them, rigid (default) or similarity (also a scale: a wrong speed or unit)")
+    p.add_argument("--csv", metavar="FILE.csv", help="also write the nodes (coordinates, offsets, standard deviations "
+                   "per coordinate) to FILE.csv")
+    _add_recording_options(p)
     p.set_defaults(func=cmd_calibrate)
 
 
@@ -1152,28 +1270,29 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     import math
 
     from solvers.api import select_solver
+    from solvers.audio import is_recording
     from solvers.calibration import calibrate
     from solvers.calibration.adjustment import enough_data
-    from solvers.calibrate_io import (MeasurementFileError, check_output_path, plot_calibration, plot_formats,
-                                      read_measurements, report_dict, write_json)
+    from solvers.calibrate_io import (MeasurementFileError, plot_calibration, plot_formats, read_input, report_dict,
+                                      write_json, write_nodes_csv)
+    from solvers.calibration.frame import anchor_frame, read_anchors
 
     if args.sigma is not None and not (args.sigma > 0 and math.isfinite(args.sigma)):
         why = "the noise of real measurements is never zero" if args.sigma == 0 else "it is a standard deviation"
         raise UserError(f"--sigma must be a finite number > 0, got {args.sigma:g}: {why}; omit --sigma to estimate it")
     if args.units is not None and (not args.units.strip() or not args.units.isprintable()):
         raise UserError(f"--units {args.units!r}: give a printable name such as m or mm")
+    _check_outputs({"--out": (args.out, None), "--plot": (args.plot, plot_formats() if args.plot else None),
+                    "--csv": (args.csv, None)}, args.file + ([args.anchors] if args.anchors else []))
     try:
-        if args.out:
-            check_output_path(args.out, "--out", reading=args.file)
-        if args.plot:
-            check_output_path(args.plot, "--plot", reading=args.file, formats=plot_formats())
-        if args.out and args.plot and os.path.abspath(args.out) == os.path.abspath(args.plot):
-            raise MeasurementFileError(f"--out and --plot name the same file {args.out}")
-        meas = read_measurements(args.file, delimiter=args.delimiter, header=args.header)
+        meas = read_input(args.file, delimiter=args.delimiter, header=args.header, tdoa_options=_tdoa_options(args),
+                          progress=_progress)
     except MeasurementFileError as e:
         raise UserError(str(e)) from None
     if args.transpose:
         meas = meas.transposed()
+    if args.units is None and is_recording(args.file[0]):
+        args.units = "m"  # tdoa_matrix's unit
     m, n = meas.F.shape
 
     def solvable(rows: int, cols: int) -> bool:
@@ -1192,8 +1311,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   else "drop --transpose if the file's rows are receivers")
         raise UserError(f"{meas.source}: {layout} cannot be calibrated (too few receivers or transmitters for every "
                         f"solver), but {n} receivers x {m} transmitters can: {advice}")
+    anchors = read_anchors(args.anchors, meas.receivers, meas.transmitters, args.dim) if args.anchors else None
     result = calibrate(meas.F, sigma=args.sigma, dim=args.dim, seed=args.seed)
+    if anchors is not None and result.status != "failed":
+        result = anchor_frame(result, anchors, args.anchor_fit)
     report = report_dict(result, meas, args.units)
+    if args.csv and result.status != "failed":
+        try:
+            write_nodes_csv(result, args.csv, meas, args.units)
+        except OSError as e:
+            raise UserError(f"cannot write {args.csv}: {e.strerror}") from None
     if args.out:
         try:
             write_json(report, args.out)
@@ -1217,6 +1344,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def _print_calibration(result, meas, units: str | None = None) -> None:
     print(result.message)
     unit = f" {units}" if units else ""
+    if result.frame is not None:
+        fr = result.frame
+        test = ("not tested (no redundancy)" if fr["critical"] is None else
+                f"{fr['statistic']:.4g} vs {fr['critical']:.4g} ({fr['dof']} degrees of freedom): "
+                f"{'passed' if fr['passed'] else 'FAILED'}")
+        worst = max(fr["anchors"], key=lambda a: a["residual_std"])
+        print(f"frame: {len(fr['anchors'])} anchors of {fr['source']}, {fr['fit']} fit (scale {fr['scale']:.6g}); test "
+              f"{test}; largest anchor residual {worst['name']} {worst['residual_std']:.2g} std")
     if result.status != "failed":
         print(f"sigma {result.sigma:.3g}{unit} ({'estimated' if result.sigma_estimated else 'given'}); "
               f"hypotheses from {result.solver}: {result.samples} samples, {result.hypotheses} hypotheses, "
@@ -1260,6 +1395,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_template_check(sub)
     _add_reproduce(sub)
     _add_calibrate(sub)
+    _add_tdoa(sub)
     return parser
 
 

@@ -26,12 +26,17 @@ self-calibration" (EUSIPCO 2021), and geodetic network adjustment (Baarda 1968):
    status that names what was not checked ("ok" only when every node is placed, the model test
    passes and every measurement is controlled); a second search with another seed when entries
    were rejected, and "ambiguous" with both answers when it disagrees.
+5. **In the user's frame** (`frame`): each node's full covariance (`node_covariances`, in the result
+   as receiver_cov / transmitter_cov); `anchor_frame` moves a result into the frame of known positions
+   of some nodes (a weighted rigid or similarity fit, tested by chi^2), the covariance carried.
 
 Gauge of the result: receiver 1 at the origin and receiver 2 on the positive x axis (paper Sec. 3),
 or, when one of them has fewer than 3 inlier measurements, the first two receivers that have them;
-the remaining reflection is arbitrary. Standard deviations refer to the same gauge.
+the remaining reflection is arbitrary. Standard deviations refer to the same gauge (or, after
+`frame.anchor_frame`, to the anchors' frame).
 """
 from .adjustment import AdjustmentStatistics, adjustment_statistics, estimate_covariance, robust_refine
+from .frame import Anchors, anchor_frame, node_covariances, read_anchors
 from .pipeline import calibrate
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .sampling import MinimalSolver, available_solvers
@@ -39,12 +44,16 @@ from .sampling import MinimalSolver, available_solvers
 __all__ = [
     "STATUSES",
     "AdjustmentStatistics",
+    "Anchors",
     "CalibrationOptions",
     "CalibrationResult",
     "MinimalSolver",
     "adjustment_statistics",
+    "anchor_frame",
     "available_solvers",
     "calibrate",
     "estimate_covariance",
+    "node_covariances",
+    "read_anchors",
     "robust_refine",
 ]

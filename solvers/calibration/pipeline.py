@@ -20,6 +20,7 @@ from .adjustment import (
     robust_refine,
 )
 from .flags import _beyond_std, _flags, _principal_ratio, _probe_basins, _repair_flips
+from .frame import node_covariances
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
@@ -630,6 +631,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         sig_cov = max(sig, floor / opts.threshold_sigmas)
         st_cov = st if sig == sig_cov else replace(st, sigma=sig_cov)
         rstd, tstd, ostd = st_cov.node_std(m, n)
+        rcov, tcov = node_covariances(st_cov, m, n, dim)
         rrel, trel = st_cov.external_reliability(m, n)
         dof_t = None if sigma is not None else st.dof - 1
         crit = critical_value(opts.alpha, dof_t) if dof_t is None or dof_t >= 1 else math.inf
@@ -649,6 +651,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         sig_cov = sig if np.isfinite(sig) else floor
         rstd, tstd, ostd = (st.node_std(m, n) if st is not None and np.isfinite(sig) else
                             (np.full(m, np.inf), np.full(n, np.inf), np.full(n, np.inf)))
+        rcov, tcov = node_covariances(st if np.isfinite(sig) else None, m, n, dim)
         rrel, trel = np.full(m, np.nan), np.full(n, np.nan)
         crit = math.inf
         redundancy, w_test, mdb = nan_mn.copy(), nan_mn.copy(), nan_mn.copy()
@@ -738,6 +741,8 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         redundancy=redundancy, w_test=w_test, critical_value=float(crit), mdb=mdb,
         receiver_reliability=rrel, transmitter_reliability=trel, uncontrolled=uncontrolled, measured=mask,
         gauge=tuple(int(g) for g in order[:dim]) if gauged is not None else None,
+        receiver_cov=np.where(placed_r[:, None, None], rcov, np.nan),
+        transmitter_cov=np.where(placed_t[:, None, None], tcov, np.nan),
     )
     return replace(res, message=_message(status, res, found[0][1] if found else route_note(route)))
 

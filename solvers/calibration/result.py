@@ -176,7 +176,12 @@ class CalibrationResult:
     uncontrolled : (m, n) inlier entries with redundancy number below the bound (not testable)
     alternative : when status is "ambiguous", the other answer (a dict as `to_dict` gives), else None
     gauge : (i, k) (3D: (i, k, l)), the receivers (0-based) fixed at the origin, on the positive x
-        axis (and in the xy half-plane y > 0)
+        axis (and in the xy half-plane y > 0); None in an anchors' frame (`frame`)
+    receiver_cov, transmitter_cov : (m, dim, dim), (n, dim + 1, dim + 1) covariance of each node's
+        coordinates (a transmitter's offset last), sigma^2 N^-1 in the result's gauge or frame; inf where
+        not determined, NaN for a node not placed (solvers.calibration.frame.node_covariances)
+    frame : None in the solver's gauge; after solvers.calibration.frame.anchor_frame, the transform into
+        the anchors' frame (fit, rotation, translation, scale), its test and each anchor's residual
     dim : 2 or 3, the dimension of the positions
     measured : (m, n) bool, the entries of F that hold a measurement
     """
@@ -212,6 +217,9 @@ class CalibrationResult:
     alternative: dict | None = None
     gauge: tuple[int, ...] | None = None
     measured: np.ndarray | None = None
+    receiver_cov: np.ndarray | None = None
+    transmitter_cov: np.ndarray | None = None
+    frame: dict | None = None
 
     @property
     def dim(self) -> int:
@@ -274,5 +282,8 @@ class CalibrationResult:
             "alternative": self.alternative,
             "gauge": None if self.gauge is None else [int(g) for g in self.gauge],
             "dim": self.dim,
+            "receiver_cov": clean(self.receiver_cov),
+            "transmitter_cov": clean(self.transmitter_cov),
+            "frame": self.frame,
         }
 

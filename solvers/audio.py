@@ -1,0 +1,482 @@
+"""From recordings to a measurement matrix: audio files -> sound events -> GCC-PHAT delays -> F.
+
+Owns the way in from audio (issue 45): the recording reader (:func:`read_recording`, soundfile), the
+detection of sound events by their energy onsets (:func:`detect_events`), generalized cross-correlation
+with the phase transform (:func:`gcc_phat`, sub-sample by parabolic interpolation) and the matrix that
+`calibrate` reads (:func:`tdoa_matrix`): one row per microphone (channel), one column per event,
+
+    f_ij = c * (onset_j + tau_ij),
+
+c the speed of sound, onset_j the start of event j's analysis window and tau_ij the delay of channel
+i's sound behind the event's reference channel (the loudest), estimated without knowing the emitted
+signal. The reference's own entry is its onset (tau = 0). Whatever the true emission time is, it is
+a per-event constant and goes into the event's offset o_j (docs/calibrate.md, what F is).
+
+The arrivals come from every pair of channels, not from one reference: between two microphones'
+recordings the correlation also peaks where one channel's reflection meets the other's direct sound,
+so each channel's arrival is the time most other channels agree with (:func:`tdoa_matrix` says how).
+Each entry carries a confidence, its support: the number of other channels whose pair correlation has
+a peak at the difference of the two arrivals; an entry with less than `min_support` is left missing
+(NaN) rather than guessed.
+
+GCC-PHAT: the cross-spectrum normalised to unit magnitude, so that every frequency votes equally for
+the delay (robust to the colouring of reverberation; Knapp & Carter 1976). scipy.signal has no PHAT
+weighting; pyroomacoustics' version returns only the lag (no peak strength) and refines by FFT
+upsampling, so it is written here (scripts/room_simulation.py uses it against the emitted waveform).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["AUDIO_MAGIC", "GccPeak", "Recording", "RecordingError", "TdoaMatrix", "TdoaOptions", "detect_events",
+           "gcc_phat", "is_recording", "read_recording", "tdoa_matrix"]
+
+#: The first bytes of the audio containers soundfile reads that `calibrate` recognises as a recording.
+AUDIO_MAGIC = (b"RIFF", b"RIFX", b"RF64", b"fLaC", b"FORM", b"OggS", b"caff", b"\x2enb")
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be read or analysed; the message is one line naming the file."""
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Samples of every channel on one clock.
+
+    samples : (channels, frames) float64
+    rate : sample rate in Hz
+    channels : one name per channel (the file's stem per file, or 1, 2, ... within one file)
+    source : the file name(s), for messages
+    notes : what the reader did that a user should know (channels trimmed to the shortest file)
+    """
+
+    samples: np.ndarray
+    rate: int
+    channels: tuple[str, ...]
+    source: str
+    notes: tuple[str, ...] = ()
+
+    @property
+    def seconds(self) -> float:
+        return self.samples.shape[1] / self.rate
+
+
+def is_recording(path: str) -> bool:
+    """Whether `path` is an audio file (by its first bytes, not its name); False for '-' and unreadable paths."""
+    if path == "-":
+        return False
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4)
+    except OSError:
+        return False
+    return head in AUDIO_MAGIC
+
+
+def _read_one(path: str):
+    try:
+        import soundfile
+    except ImportError:
+        raise RecordingError("reading audio needs soundfile: pip install soundfile (a dependency of tdoa-workbench)") from None
+    if not os.path.exists(path):
+        raise RecordingError(f"cannot read {path}: no such file")
+    if os.path.isdir(path):
+        raise RecordingError(f"cannot read {path}: it is a directory")
+    try:
+        data, rate = soundfile.read(path, dtype="float64", always_2d=True)
+    except FileNotFoundError:
+        raise RecordingError(f"cannot read {path}: no such file") from None
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from None
+    except (RuntimeError, soundfile.SoundFileError) as exc:  # libsndfile: not an audio file it knows
+        raise RecordingError(f"cannot read {path} as audio: {' '.join(str(exc).split())}") from None
+    if data.shape[0] == 0:
+        raise RecordingError(f"{path}: no samples")
+    if not np.all(np.isfinite(data)):
+        raise RecordingError(f"{path}: non-finite samples")
+    return data.T, int(rate)
+
+
+def read_recording(paths) -> Recording:
+    """Read one multichannel file, or one file per channel (every channel of each file, in order).
+
+    Parameters
+    ----------
+    paths : a path or a sequence of paths (WAV, FLAC, or anything libsndfile reads)
+
+    The files must share a sample rate; files of different lengths are trimmed to the shortest (a note
+    says so). Raises RecordingError (one line) for a missing or unreadable file, a rate mismatch, or
+    fewer than two channels in all.
+    """
+    paths = [paths] if isinstance(paths, str) else list(paths)
+    if not paths:
+        raise RecordingError("no recording given")
+    parts = [(p, *_read_one(p)) for p in paths]
+    rates = {rate for _, _, rate in parts}
+    if len(rates) > 1:
+        listed = ", ".join(f"{p}: {rate} Hz" for p, _, rate in parts)
+        raise RecordingError(f"the files have different sample rates ({listed}); resample them to one")
+    rate = rates.pop()
+    lengths = [x.shape[1] for _, x, _ in parts]
+    frames = min(lengths)
+    notes = ()
+    if len(set(lengths)) > 1:
+        notes = (f"files of {min(lengths)} to {max(lengths)} frames: trimmed to the shortest",)
+    samples = np.vstack([x[:, :frames] for _, x, _ in parts])
+    if len(parts) == 1:
+        names = tuple(str(k + 1) for k in range(samples.shape[0]))
+    else:
+        stems = [os.path.splitext(os.path.basename(p))[0] for p, _, _ in parts]
+        names = tuple(f"{stem}.{c + 1}" if x.shape[0] > 1 else stem for stem, (_, x, _) in zip(stems, parts)
+                      for c in range(x.shape[0]))
+        if len(set(names)) < len(names):
+            names = tuple(str(k + 1) for k in range(len(names)))
+    source = paths[0] if len(paths) == 1 else f"{paths[0]} (+{len(paths) - 1} files)"
+    if samples.shape[0] < 2:
+        raise RecordingError(f"{source}: one channel; a time difference needs two or more (a multichannel file, "
+                             "or one file per microphone)")
+    return Recording(samples, rate, names, source, notes)
+
+
+# --------------------------------------------------------------------------------------------------
+# GCC-PHAT
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GccPeak:
+    """The peak of a GCC-PHAT correlation.
+
+    lag : delay of y within x in samples, sub-sample (x[t] ~ y[t - lag])
+    height : the correlation at the integer peak taken
+    top : the highest correlation in the lag range (= height unless search_back took an earlier peak)
+    rms : root mean square of the correlation over the lag range
+    sidelobe : the highest correlation outside +-guard samples of the peak taken (0 if none)
+    edge : the peak taken lies on the first or last lag searched (its true position may lie beyond)
+    """
+
+    lag: float
+    height: float
+    top: float
+    rms: float
+    sidelobe: float
+    edge: bool
+
+    @property
+    def psr(self) -> float:
+        """Peak-to-sidelobe ratio (inf when nothing lies outside the guard)."""
+        return self.height / self.sidelobe if self.sidelobe > 0 else float("inf")
+
+
+def _phat(cross: np.ndarray, n: int, lo: int, hi: int) -> np.ndarray:
+    """The GCC-PHAT correlation at lags lo..hi (last axis) of cross-spectra of FFT length n: each
+    frequency's cross-spectrum normalised to unit magnitude."""
+    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12), n, axis=-1)
+    return cc[..., np.arange(lo, hi + 1) % n]
+
+
+def _parabola(a, b, c):
+    """The offset (in samples, |.| <= 0.5 at a local maximum) of the vertex of the parabola through
+    (-1, a), (0, b), (1, c); 0 where they are collinear."""
+    curv = np.asarray(a - 2 * b + c)
+    return np.where(curv != 0, 0.5 * (a - c) / np.where(curv != 0, curv, 1.0), 0.0)
+
+
+def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None = None, search_back: int = 0,
+             guard: int = 2) -> GccPeak:
+    """The delay of `y` within `x` by GCC-PHAT, searched over lags min_lag..max_lag samples.
+
+    Parameters
+    ----------
+    x, y : 1-D signals (any lengths)
+    max_lag : the largest lag searched (samples)
+    min_lag : the smallest (default -max_lag; 0 when y is the emitted signal, which cannot arrive early)
+    search_back : > 0: the earliest local maximum of at least half the highest peak within this many
+        samples before it is taken instead (a reflection can beat the direct sound, never precede it)
+    guard : samples either side of the peak left out of the sidelobe
+
+    The peak is refined by a parabola through it and its neighbours (not at the range's ends).
+    Reference: Knapp & Carter, The generalized correlation method for estimation of time delay, 1976.
+    """
+    lo = -max_lag if min_lag is None else min_lag
+    n = len(x) + len(y)
+    window = _phat(np.fft.rfft(x, n) * np.conj(np.fft.rfft(y, n)), n, lo, max_lag)
+    last = len(window) - 1
+    k = top = int(np.argmax(window))
+    if search_back > 0 and k > 1:
+        before = np.arange(max(1, k - search_back), k)
+        earlier = before[(window[before] >= window[before - 1]) & (window[before] >= window[before + 1])
+                         & (window[before] >= 0.5 * window[top])]
+        k = int(earlier[0]) if len(earlier) else k
+    shift = float(_parabola(window[k - 1], window[k], window[k + 1])) if 0 < k < last else 0.0
+    outside = np.abs(np.arange(len(window)) - k) > guard
+    sidelobe = float(window[outside].max()) if outside.any() else 0.0
+    return GccPeak(lo + k + shift, float(window[k]), float(window[top]), float(np.sqrt(np.mean(window**2))),
+                   max(sidelobe, 0.0), k in (0, last))
+
+
+# --------------------------------------------------------------------------------------------------
+# Events and the matrix
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TdoaOptions:
+    """How a recording becomes a matrix (the defaults are those measured in tables/audio3d.md).
+
+    speed : speed of sound in m/s (the matrix is in metres)
+    max_distance : the largest distance between two microphones in metres; the lag range is +- its
+        travel time (default 20 m: a room)
+    threshold_db : an event starts where the recording's power (all channels) rises this many dB above
+        its background (the 10th percentile of 5 ms frames); at 12 dB the simulated rooms at 10 dB SNR
+        lost 30-95 % of their events, at 5 dB 0-10 %
+    min_gap : seconds of quiet (power below threshold_db - 3 dB) that separate two events
+    window : seconds of each event analysed after its onset (plus the lag range either side)
+    peaks : the highest peaks of each pair's correlation kept as candidates
+    tolerance : samples within which a pair's candidate agrees with two arrivals' difference
+    min_support : entries that fewer other channels agree with are left missing
+    min_agreement : an event whose channels agree on less than this share of the channel pairs is left
+        missing whole (its arrivals may all belong to a reflection; measured: below 0.5, most entries of
+        such an event were wrong)
+    early : of the arrival times with at least this share of the best support, the earliest is taken
+        (reflections arrive after the direct sound)
+    taper : seconds of the exponential weight exp(-t / taper) after the onset: the direct sound weighs
+        more than the reverberant tail (measured on the simulated rooms: 0.05 s recovers 0.98 of the
+        entries where no taper recovers 0.91, RT60 0.4-0.6 s)
+    starts : the consensus starts from the highest peaks against each of this many channels, the
+        loudest first (a start costs about m^3 x peaks^2 operations; on the simulated rooms 2 or 4
+        starts gave the matrices all 14-16 gave; 48 channels: 1.1 s per event with 4, 5.8 s with 16)
+    frame : seconds per power frame of the event detection
+    """
+
+    speed: float = 343.0
+    max_distance: float = 20.0
+    threshold_db: float = 5.0
+    min_gap: float = 0.15
+    window: float = 0.1
+    peaks: int = 8
+    tolerance: float = 1.0
+    min_support: int = 2
+    min_agreement: float = 0.5
+    early: float = 0.5
+    taper: float = 0.05
+    starts: int = 4
+    frame: float = 0.005
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "max_distance", "window", "frame", "min_gap", "threshold_db", "taper"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {value}")
+        if self.peaks < 1 or self.min_support < 1 or self.starts < 1 or not (np.isfinite(self.tolerance) and self.tolerance > 0):
+            raise ValueError("peaks, min_support and starts must be >= 1 and tolerance > 0")
+        if not 0.0 <= self.min_agreement <= 1.0:
+            raise ValueError(f"min_agreement must be in [0, 1], got {self.min_agreement}")
+        if not 0.0 < self.early <= 1.0:
+            raise ValueError(f"early must be in (0, 1], got {self.early}")
+
+
+def detect_events(samples: np.ndarray, rate: int, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
+    """(events, 2) sample ranges [start, end) of the sound events: runs of frames whose power (mean
+    over channels) is more than threshold_db above the background, closed by min_gap of quiet
+    (threshold_db - 3 dB: hysteresis), in time order."""
+    hop = max(1, int(round(options.frame * rate)))
+    frames = samples.shape[1] // hop
+    if frames < 2:
+        return np.zeros((0, 2), int)
+    power = np.mean(samples[:, : frames * hop].reshape(samples.shape[0], frames, hop) ** 2, axis=(0, 2))
+    floor = max(float(np.percentile(power, 10)), 1e-30)
+    level = 10 * np.log10(np.maximum(power, 1e-30) / floor)
+    loud, quiet = level > options.threshold_db, level < options.threshold_db - 3.0
+    gap = max(1, int(round(options.min_gap / options.frame)))
+    events, start, quiet_run = [], None, 0
+    for f in range(frames):
+        if start is None:
+            if loud[f]:
+                start, quiet_run = f, 0
+            continue
+        quiet_run = quiet_run + 1 if quiet[f] else 0
+        if quiet_run >= gap:
+            events.append((start * hop, (f - quiet_run + 1) * hop))
+            start = None
+    if start is not None:
+        events.append((start * hop, frames * hop))
+    return np.array(events, dtype=int).reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class TdoaMatrix:
+    """The measurement matrix of a recording (see the module docstring).
+
+    F : (channels, events) metres, NaN where missing (unreliable)
+    confidence : (channels, events) peak-to-sidelobe ratio of each entry (inf for the reference's own)
+    reference : (events,) the reference channel of each event (0-based)
+    onsets : (events,) seconds from the start of the recording
+    rate, speed : sample rate (Hz), speed of sound (m/s)
+    channels, events : names of the rows and columns
+    source : the recording's file name(s)
+    notes : what the reader or the analysis did that a user should know
+    """
+
+    F: np.ndarray
+    confidence: np.ndarray
+    reference: np.ndarray
+    onsets: np.ndarray
+    rate: int
+    speed: float
+    channels: tuple[str, ...]
+    events: tuple[str, ...]
+    source: str
+    notes: tuple[str, ...] = field(default=())
+
+    def measurements(self):
+        """The matrix as `solvers.calibrate_io.Measurements` (what every verb reads)."""
+        from .calibrate_io import Measurements
+
+        return Measurements(self.F.copy(), self.channels, self.events, self.source, ",")
+
+
+def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int):
+    """GCC-PHAT of every channel pair (i < k) of an event's segments: (i, k, lags (pairs, peaks),
+    heights (pairs, peaks)), the `peaks` highest local maxima of each correlation over +-max_lag,
+    parabolically refined (lag of channel i's sound behind channel k's, in samples)."""
+    m, length = seg.shape
+    n = 2 * length
+    X = np.fft.rfft(seg, n, axis=1)
+    i, k = np.triu_indices(m, 1)
+    window = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag)
+    inner = np.zeros_like(window, dtype=bool)
+    inner[:, 1:-1] = (window[:, 1:-1] >= window[:, :-2]) & (window[:, 1:-1] > window[:, 2:])
+    ranked = np.argsort(np.where(inner, window, -np.inf), axis=1)[:, ::-1][:, :peaks]
+    rows = np.arange(len(i))[:, None]
+    b = window[rows, ranked]
+    shift = _parabola(window[rows, ranked - 1], b, window[rows, ranked + 1])
+    heights = np.where(inner[rows, ranked], b, 0.0)
+    return i, k, ranked - max_lag + shift, heights
+
+
+def _consensus(m: int, ref: int, i, k, lags, heights, tol: float, early: float = 0.5, sweeps: int = 4,
+               starts=None):
+    """Arrival times t (m,) of an event's channels relative to channel `ref` (t_ref = 0) from the
+    candidate pair delays (t_i - t_k ~ one of lags[pair]), and each channel's support: how many other
+    channels have a candidate within `tol` samples of the times' difference.
+
+    From each channel's highest peaks against one channel (each of `starts`, default every channel), sweeps
+    that move each channel to the time best supported by the others (one vote per other channel, its
+    candidates weighted by height; of the times with at least `early` x the best support the earliest,
+    since a channel's reflections arrive after its direct sound), and the mean of the supporting votes;
+    the start whose end supports the most pairs wins, and a least-squares fit of its supported pairs
+    gives the times (the graph Laplacian with t_ref = 0)."""
+    P = np.full((m, m, lags.shape[1]), np.nan)
+    H = np.zeros((m, m, lags.shape[1]))
+    P[i, k], P[k, i] = lags, -lags
+    H[i, k], H[k, i] = heights, heights
+    best = None
+    for start in (range(m) if starts is None else starts):
+        t = _sweep(P, H, np.where(np.arange(m) == start, 0.0, P[:, start, 0]), tol, early, sweeps)
+        ok, val = _supported(P, t, tol)
+        score = int(ok.sum())  # agreeing pairs; the first start of the most wins
+        if best is None or score > best[0]:
+            best = (score, t, ok, val)
+    _, t, ok, val = best
+    support = ok.sum(axis=1)
+    L = np.diag(support.astype(float)) - ok.astype(float)
+    rhs = np.where(ok, val, 0.0).sum(axis=1)
+    free = np.flatnonzero(np.arange(m) != ref)
+    t = t - t[ref]
+    if ok.any():
+        t[free] = np.linalg.lstsq(L[np.ix_(free, free)], rhs[free], rcond=None)[0]
+    return t, support
+
+
+def _sweep(P, H, t, tol: float, early: float, sweeps: int) -> np.ndarray:
+    """`sweeps` passes of _consensus's channel-by-channel update from times t."""
+    m = len(t)
+    rows = np.arange(m)
+    for _ in range(sweeps):
+        before = t.copy()
+        for a in range(m):
+            votes = P[a] + t[:, None]  # (m, peaks): candidate times of channel a by each other channel
+            votes[a] = np.nan
+            flat = votes[np.isfinite(votes)]
+            if not len(flat):
+                continue
+            near = np.abs(votes[None, :, :] - flat[:, None, None]) <= tol  # (candidates, m, peaks)
+            score = np.max(np.where(near, H[a][None], 0.0), axis=2).sum(axis=1)
+            pick = float(np.min(flat[score >= early * score.max()]))
+            hit = np.abs(votes - pick) <= tol
+            chosen = np.where(hit, np.abs(votes - pick), np.inf).argmin(axis=1)
+            sel = hit[rows, chosen]
+            t[a] = float(np.mean(votes[rows, chosen][sel]))
+        if np.array_equal(t, before):
+            break
+    return t
+
+
+def _supported(P, t, tol: float):
+    """(ok (m, m): pairs with a candidate within tol of t_i - t_k, that candidate (m, m))."""
+    diff = P - (t[:, None] - t[None, :])[:, :, None]
+    hit = np.abs(diff) <= tol
+    pick = np.where(hit, np.abs(diff), np.inf).argmin(axis=2)
+    ok = np.take_along_axis(hit, pick[:, :, None], axis=2)[:, :, 0]
+    np.fill_diagonal(ok, False)
+    return ok, np.take_along_axis(P, pick[:, :, None], axis=2)[:, :, 0]
+
+
+def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), progress=None) -> TdoaMatrix:
+    """Detect the events of a recording and measure every channel's arrival time in each event, relative
+    to the event's reference channel (the one with the most energy in the event's window), by GCC-PHAT
+    of every channel pair and their consensus.
+
+    The correlation of two microphones' recordings peaks at the difference of their direct sounds,
+    but reverberation adds peaks, and a pair of distant microphones can see a reflection's peak above
+    the direct one. Every pair's `options.peaks` highest peaks are candidates; each channel's time is
+    the one most other channels agree with (within `options.tolerance` samples, weighted by peak
+    height), then one least-squares fit over the agreeing pairs. An entry's confidence is the number
+    of other channels that agree with it; below `options.min_support` it is left missing.
+
+    progress : None, or a callable taking one line (called every 10 events)
+    Raises RecordingError when no event is found.
+    """
+    x, rate = recording.samples, recording.rate
+    events = detect_events(x, rate, options)
+    if len(events) == 0:
+        raise RecordingError(f"{recording.source}: no sound event found (nothing {options.threshold_db:g} dB above the "
+                             "background; lower the threshold, or check the recording)")
+    max_lag = max(1, int(np.ceil(options.max_distance / options.speed * rate)))
+    length = int(round(options.window * rate))
+    m, n = x.shape[0], len(events)
+    F = np.full((m, n), np.nan)
+    conf = np.zeros((m, n))
+    ref = np.zeros(n, int)
+    onsets = events[:, 0] / rate
+    dropped: list[int] = []
+    for j, (start, _end) in enumerate(events):
+        a, b = max(0, start - max_lag), min(x.shape[1], start + length + max_lag)
+        seg = x[:, a:b] - x[:, a:b].mean(axis=1, keepdims=True)
+        after = np.maximum(np.arange(a, b) - start, 0) / rate  # the direct sound weighs more than the tail
+        seg = seg * np.exp(-after / options.taper)
+        energy = np.sum(seg**2, axis=1)
+        r = int(np.argmax(energy))
+        ref[j] = r
+        t, support = _consensus(m, r, *_pair_candidates(seg, max_lag, options.peaks), options.tolerance,
+                                options.early, starts=None if options.starts >= m else
+                                np.argsort(energy)[::-1][: options.starts])
+        conf[:, j] = support
+        keep = support >= options.min_support
+        keep[r] = support[r] >= 1
+        if support.sum() < options.min_agreement * m * (m - 1):
+            keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
+            dropped.append(j)
+        F[keep, j] = options.speed * (onsets[j] + t[keep] / rate)
+        if progress is not None and (j + 1) % 10 == 0:
+            progress(f"tdoa: {j + 1}/{n} events")
+    names = tuple(f"e{j + 1}" for j in range(n))
+    notes = recording.notes
+    if dropped:
+        notes += (f"{len(dropped)} event(s) left missing, their channels agreeing on fewer than "
+                  f"{100 * options.min_agreement:g} % of the pairs: {', '.join(names[j] for j in dropped)}",)
+    return TdoaMatrix(F, conf, ref, onsets, rate, options.speed, recording.channels, names, recording.source, notes)
