@@ -110,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trace", nargs="+", default=list(TRACE), metavar="CELL",
                         help=f"cells whose trace test runs (default: {', '.join(TRACE)})")
     parser.add_argument("--no-trace", action="store_true", help="no trace test")
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), metavar="K",
+                        help="seeds of every cell (default 0 1; one seed gives a proven lower bound at most)")
     parser.add_argument("--checkpoint", metavar="DIR", help="resumable graph files (default: none, from scratch)")
     parser.add_argument("--out", metavar="DIR", default=TABLES, help="where the tables are read and written (default tables/)")
     parser.add_argument("--reuse", action="store_true", help="run nothing: write the tables again from the CSV's rows "
@@ -132,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         runs.update({c: v for c, v in other.items() if c in merged})
     for cell in [] if args.reuse else (args.cells or list(CELLS)):
         traced = not args.no_trace and cell in args.trace
-        options = counting.CountOptions(seeds=SEEDS, trace=traced,
+        options = counting.CountOptions(seeds=tuple(args.seeds), trace=traced,
                                         trace_step=TRACE_STEP.get(cell, trace.TraceOptions.step),
                                         checkpoints=args.checkpoint)
         t0 = time.perf_counter()

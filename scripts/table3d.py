@@ -104,7 +104,7 @@ def count_text(row: dict) -> str:
     "N (proven; complete by trace test, residual r)": every solution proven, the trace test passed;
     "N (proven; k seeds equal as sets)": every solution proven, every seed's graph closed and their sets equal,
     no trace test passed (N is then a proven lower bound that two seeds reach);
-    ">=N (proven lower bound; ...)": every solution proven, but a graph did not close or the sets differ;
+    ">=N (proven lower bound; ...)": every solution proven, but a graph did not close, the sets differ or one seed ran;
     ">=N (lower bound, numerical)": not every solution proven."""
     n, proven = int(row["solutions"]), int(row["proven"])
     seeds = len(row["seeds"].split())
@@ -116,7 +116,8 @@ def count_text(row: dict) -> str:
         return f"{n} (proven; complete by trace test, residual {row['trace_residual']})"
     if closed and equal:
         return f"{n} (proven; {seeds} seeds equal as sets)"
-    return f">={n} (proven lower bound; " + ("graphs not all closed)" if not closed else "the seeds' sets differ)")
+    why = "graphs not all closed" if not closed else "one seed" if seeds == 1 else "the seeds' sets differ"
+    return f">={n} (proven lower bound; {why})"
 
 
 def cells() -> list[TDOAConfig]:

@@ -416,6 +416,7 @@ def test_table3d_count_evidence_rules():
     assert text(row(3920, graphs="closed; not closed (2 tracks open)")) == ">=3920 (proven lower bound; graphs not all closed)"
     assert text(row(3920, sets="not equal: 1 land outside the set")) == ">=3920 (proven lower bound; the seeds' sets differ)"
     assert text(row(12965, proven=12960, trace="passed")) == ">=12965 (lower bound, numerical)"
+    assert text({**row(20000, sets=""), "seeds": "0"}) == ">=20000 (proven lower bound; one seed)"
     gf = _script("table3d").with_gf_counts
     counted = {("tdoa", 3, 10, 4): "6148 (proven; 2 seeds equal as sets)",
                ("tdoa", 3, 7, 5): "2321 (proven; 2 seeds equal as sets)"}
