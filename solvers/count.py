@@ -364,6 +364,7 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
     for attempt in range(AUGMENT + 1):
         seeds: list[SeedCount] = []
         results = []
+        carried_sets = []  # every other seed's set carried to the first seed's q0: (endpoints, accepted)
         nodes = options.nodes + NODES_PER_AUGMENT * attempt
         for k, seed in enumerate(options.seeds):
             system_k, q0_k, _, solver_k, excluded_k = runs[k]
@@ -377,8 +378,8 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
             results.append(result)
             carried = ""
             if k:
-                ends, ok = _carry(solver0, q0_k, result.roots, q0, excluded0, track0, group, refiners[0])
-                carried, _ = _compare(results[0].roots, ends, ok, group)
+                carried_sets.append(_carry(solver0, q0_k, result.roots, q0, excluded0, track0, group, refiners[0]))
+                carried, _ = _compare(results[0].roots, *carried_sets[-1], group)
             seeds.append(SeedCount(seed, len(result.roots), result.closed, result.open_edges, result.paths,
                                    result.rounds, round(result.seconds, 1), carried))
             say(f"seed {seed}: {len(result.roots)} solutions, graph {'closed' if result.closed else 'not closed'}"
@@ -388,10 +389,7 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
                                                      track0, refiners[0])
         say(f"loops: {loops_checked}")
         # the union at the first seed's q0: every other seed's set carried there and the loops' endpoints
-        union = np.vstack([roots, landed])
-        for k in range(1, len(runs)):
-            ends, ok = _carry(solver0, runs[k][1], results[k].roots, q0, excluded0, track0, group, refiners[0])
-            union = np.vstack([union, ends[ok]])
+        union = np.vstack([roots, landed] + [ends[ok] for ends, ok in carried_sets])
         fresh = graph._match(roots, union[len(roots):], group) < 0
         if not fresh.any() or attempt == AUGMENT:
             break
