@@ -2,6 +2,7 @@
 TDOA homotopy tapes against the tracker's monomial kernel and finite differences."""
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import os
 
@@ -112,13 +113,15 @@ def test_batched_tracker_matches_tracker():
     assert solver.tapes is not None
     F = random_network(9, 3, np.random.default_rng(3)).measurements().reshape(1, -1)
     q = F / np.sqrt(np.mean(F ** 2))
-    x_old, s_old = tracker.track(solver.structure, solver.segment(solver.q0[None], q), solver.x0, None, solver.options)
-    x_new, s_new = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options)
+    rk4 = dataclasses.replace(solver.options, predictor="rk4")  # the monomial tracker's predictor
+    x_old, s_old = tracker.track(solver.structure, solver.segment(solver.q0[None], q), solver.x0, None, rk4)
+    x_new, s_new = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, rk4)
     np.testing.assert_array_equal(s_new[:, 0], s_old[:, 0])
     assert np.mean(s_new[:, 1] == s_old[:, 1]) > 0.9
     ok = s_old[:, 0] == 0
     np.testing.assert_allclose(x_new[ok], x_old[ok], rtol=1e-7, atol=1e-7 * np.abs(x_old[ok]).max())
-    x_chord, s_chord = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options, corrector="chord")
+    x_chord, s_chord = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None,
+                                           dataclasses.replace(rk4, corrector="chord"))
     np.testing.assert_array_equal(s_chord[:, 0], s_old[:, 0])
     np.testing.assert_allclose(x_chord[ok], x_old[ok], rtol=1e-7, atol=1e-7 * np.abs(x_old[ok]).max())
     # Newton on the tape (batched LU) = Newton on the monomials (numpy solve)
@@ -221,15 +224,14 @@ def test_pade_is_exact_on_a_pole():
 def test_pade_tracker_reaches_the_same_roots():
     """The tape tracker with the Pade predictor (plain and with the retracking's tight step control)
     ends every path where RK4 does (9r/3s, one seeded network)."""
-    import dataclasses
-
     from solvers.generated import tdoa_9r3s_homotopy75 as module
     from solvers.synthetic import random_network
 
     solver = module.solver()
     F = random_network(9, 3, np.random.default_rng(3)).measurements().reshape(1, -1)
     q = F / np.sqrt(np.mean(F ** 2))
-    x_rk4, s_rk4 = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options)
+    x_rk4, s_rk4 = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None,
+                                     dataclasses.replace(solver.options, predictor="rk4"))
     ok = s_rk4[:, 0] == 0
     for options in (dataclasses.replace(solver.options, predictor="pade"), tracker.TIGHT):
         x, st = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, options)

@@ -145,9 +145,9 @@ def test_compiled_tracker_equals_numba_tracker(predictor, corrector):
     q /= np.sqrt(np.mean(q ** 2, axis=1, keepdims=True))
     K = len(solver.x0)
     x0, inst = np.tile(solver.x0, (3, 1)), np.repeat(np.arange(3), K)
-    for options in (dataclasses.replace(solver.options, predictor=predictor),
-                    dataclasses.replace(tracker.TIGHT, predictor=predictor)):
-        ends = [tape_kernel.track(solver.tapes, solver.q0, q, x0, inst, options, corrector=corrector, native=n)
+    for options in (dataclasses.replace(solver.options, predictor=predictor, corrector=corrector),
+                    dataclasses.replace(tracker.TIGHT, predictor=predictor, corrector=corrector)):
+        ends = [tape_kernel.track(solver.tapes, solver.q0, q, x0, inst, options, native=n)
                 for n in (numba_tracker, native)]
         np.testing.assert_array_equal(ends[0][1], ends[1][1])
         np.testing.assert_array_equal(ends[0][0], ends[1][0])

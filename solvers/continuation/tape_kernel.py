@@ -1021,24 +1021,16 @@ def _each_chunk(M: int, native: np.ndarray, run) -> None:
 #: Predictors of :func:`track` (:data:`tracker.PREDICTORS` it implements).
 PREDICTORS = ("rk4", "pade")
 
-#: Correctors of :func:`track`: "newton" (every step factors the Jacobian at its point: the corrector of
-#: tracker._track_one) or "chord" (the steps after the first reuse its factorisation and evaluate H
-#: alone; the next tangent comes from the Jacobian at the predicted point).
-CORRECTORS = ("newton", "chord")
-
-
 def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
-          options: TrackerOptions = TrackerOptions(), corrector: str = "newton",
-          near_end: float = 0.0, native: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+          options: TrackerOptions = TrackerOptions(), near_end: float = 0.0, native: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Track x0 (P, N) along q0 -> q1 ((B, Q) or (Q,), broadcast); path p on segment inst[p].
 
     Returns endpoints (P, N) (NaN unless the path reached s = 1, or, with ``near_end`` > 0, stalled at
     s >= 1 - near_end: then its last point, for Newton's method on the target) and stats (P, 4), as
-    :func:`tracker.track`. ``native``: the tapes' compiled code (:func:`tape_native.addresses`; None or
+    :func:`tracker.track`. ``options``: step control, predictor (rk4 or pade) and corrector (newton or chord,
+    :data:`tracker.CORRECTORS`). ``native``: the tapes' compiled code (:func:`tape_native.addresses`; None or
     zeros: the interpreter, with the same results).
     """
-    if corrector not in CORRECTORS:
-        raise ValueError(f"unknown corrector {corrector!r}; valid: {', '.join(CORRECTORS)}")
     if options.predictor not in PREDICTORS:
         raise ValueError(f"the batched tracker predicts by {' or '.join(PREDICTORS)}, not {options.predictor!r}")
     x0 = np.array(np.atleast_2d(x0), dtype=np.complex128)  # a writable copy (see _segments)
@@ -1050,7 +1042,7 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
     stats = np.zeros((M, 4))
     native = _native(native)
     opts = options.as_array()
-    _each_chunk(M, native, lambda a, b: _batch(tapes, native, corrector == "chord", x0[a:b], q0, dq, inst[a:b], opts,
+    _each_chunk(M, native, lambda a, b: _batch(tapes, native, options.corrector == "chord", x0[a:b], q0, dq, inst[a:b], opts,
                                                x[a:b], stats[a:b]))
     x[(stats[:, 0] != 0) & ~((stats[:, 0] == 1) & (stats[:, 3] >= 1.0 - near_end))] = np.nan
     return x, stats

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["SystemStructure", "TrackerOptions", "evaluate", "segment_coefficients", "track", "warm_up"]
+__all__ = ["CORRECTORS", "PREDICTORS", "SystemStructure", "TrackerOptions", "evaluate", "segment_coefficients", "track", "warm_up"]
 
 
 #: Predictors: classical Runge-Kutta on the tangent field (three extra factorisations per step), or cubic
@@ -37,13 +37,19 @@ __all__ = ["SystemStructure", "TrackerOptions", "evaluate", "segment_coefficient
 #: the path's Taylor coefficients (no factorisation in the predictor).
 PREDICTORS = ("rk4", "hermite", "pade")
 
+#: Correctors: "newton" (every corrector step factors the Jacobian at its point) or, the batched tape tracker
+#: only, "chord" (the steps after the first reuse the first one's factorisation and evaluate H alone; the next
+#: tangent comes from the Jacobian at the predicted point).
+CORRECTORS = ("newton", "chord")
+
 
 @dataclass(frozen=True)
 class TrackerOptions:
     """Step control. ``target``: wanted size of the first Newton correction relative to 1 + |x| (the
     step grows or shrinks to meet it); ``accept``: largest first correction accepted; ``tol``:
     convergence of the corrector; ``newton``: corrector iterations per step; ``final_newton``: Newton
-    iterations on the target system at s = 1."""
+    iterations on the target system at s = 1; ``predictor`` (:data:`PREDICTORS`) and ``corrector``
+    (:data:`CORRECTORS`)."""
 
     h0: float = 0.05
     hmin: float = 1e-9
@@ -57,10 +63,13 @@ class TrackerOptions:
     big: float = 1e8
     contract: float = 0.1
     predictor: str = "rk4"
+    corrector: str = "newton"
 
     def __post_init__(self) -> None:
         if self.predictor not in PREDICTORS:
             raise ValueError(f"unknown predictor {self.predictor!r}; valid: {', '.join(PREDICTORS)}")
+        if self.corrector not in CORRECTORS:
+            raise ValueError(f"unknown corrector {self.corrector!r}; valid: {', '.join(CORRECTORS)}")
 
     def as_array(self) -> np.ndarray:
         return np.array([self.h0, self.hmin, self.hmax, self.target, self.accept, self.tol, self.newton,
@@ -471,6 +480,8 @@ def track(structure: SystemStructure, G: np.ndarray, x0: np.ndarray, inst: np.nd
     """
     if options.predictor == "pade":
         raise ValueError("the monomial tracker predicts by rk4 or hermite; pade is the tape tracker's")
+    if options.corrector != "newton":
+        raise ValueError(f"the monomial tracker corrects by newton; {options.corrector} is the tape tracker's")
     x0 = np.ascontiguousarray(x0, dtype=np.complex128)
     P, N = x0.shape
     if N != structure.nvars:

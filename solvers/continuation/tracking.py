@@ -337,8 +337,8 @@ class HomotopySolver:
         if self.tapes is not None and options.predictor in tape_kernel.PREDICTORS:
             return tape_kernel.track(self.tapes, q0, q1, x0, inst, options, near_end=near_end,
                                      native=tape_native.addresses(self.tapes))
-        if options.predictor == "pade":  # Taylor coefficients of the path come from the tapes only
-            options = dataclasses.replace(options, predictor="rk4")
+        if options.predictor == "pade" or options.corrector == "chord":  # the tape tracker's only
+            options = dataclasses.replace(options, predictor="rk4", corrector="newton")
         G = self.segment(q0, q1)
         return tracker.track(self.structure, G, x0, inst, options)
 
