@@ -4,7 +4,9 @@ Usage: python scripts/generate_solvers.py [6r4s 9r3s 8r3s 7r3s 6r3s 5r4s 5r5s 4r
   CONFIG         build the configuration's solver again (solvers.generate.generate; the 6r4s eigenvalue
                  pencil, the others parameter homotopies whose start roots monodromy recomputes).
   --emit-only    re-emit the modules of the given (default: all) committed solvers from their committed
-                 JSON specs (no construction, numerics unchanged).
+                 JSON specs (no construction, numerics unchanged); a homotopy spec first takes its
+                 configuration's current step control (solvers.generate.STEP_CONTROL: its "tracker" and
+                 "retrack" fields; solvers.generate.committed_spec_text).
   --method M     build with method M instead (3r3stoa --method action-matrix: the elimination-template
                  solver, written beside the homotopy one).
   --from-monodromy PATH
@@ -44,6 +46,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.emit_only:
         for json_path in gen.committed_specs():
             if os.path.basename(json_path).split("_")[1] in args.configs:
+                spec_text = gen.committed_spec_text(json_path)
+                with open(json_path, encoding="utf-8") as fh:
+                    stale = fh.read() != spec_text
+                if stale:
+                    with open(json_path, "w", encoding="utf-8", newline="\n") as fh:
+                        fh.write(spec_text)
+                    print(f"step control written into {json_path}")
                 py_path, text = gen.emit_committed(json_path)
                 with open(py_path, "w", encoding="utf-8", newline="\n") as fh:
                     fh.write(text)

@@ -34,6 +34,7 @@ The committed solvers (solvers/generated/) are written by ``scripts/generate_sol
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import re
 import shlex
@@ -127,7 +128,49 @@ SQUARE_MINORS = {"5r5s": ("M123_123", "M124_124", "M134_134", "M234_234")}
 #: "starts": tracked from this many start systems (the spec's and seeded others, :func:`homotopy.extra_starts`),
 #: endpoints pooled, nothing retracked: 4r/5s's stalled paths are cheaper to replace by two more plain tracks
 #: than to retrack (tables/NOTES.md, "Three start systems").
-STEP_CONTROL = {"4r5s": {"tracker": {"max_steps": 400}, "starts": 3}}
+#: "predictor": "pade" (the tape tracker's Pade predictor for the plain track, Newton corrector): on the 1000 seeded
+#: networks of tables/solvers.csv it missed the true root on the same networks as RK4 (9r/3s 49, 8r/3s 53, 6r/3s
+#: none, 4r/5s 665) and lost no more roots in all (9r/3s 23 against 24, 8r/3s 31 and 31, 6r/3s 168 against 243,
+#: 4r/5s: 616 instances short of their roots against 624), at 0.67-0.92 (9r/3s), 0.74-0.94 (8r/3s), 0.63-0.83
+#: (6r/3s) and 0.68 (4r/5s) of RK4's median solve in the same runs. Not for 7r/3s (0.8-0.94, but 28 roots lost
+#: against 21), the 3D TOA solvers (6r/4s 3x slower, 4r/6s Gram 1.2x) nor 5r/5s TOA (chord: as fast, other
+#: networks missed); squared systems already run Pade (tracker.FAMILY); the chord corrector lost more paths in
+#: nearly every solver (scripts/bench_tracker_variants.py; docs/findings/homotopy-speed.md, "Pade by default").
+STEP_CONTROL = {"9r3s": {"tracker": {"predictor": "pade"}},
+                "8r3s": {"tracker": {"predictor": "pade"}},
+                "6r3s": {"tracker": {"predictor": "pade"}},
+                "4r5s": {"tracker": {"max_steps": 400, "predictor": "pade"}, "starts": 3}}
+
+def step_control_fields(step_control: dict | None, squared: bool) -> dict:
+    """The spec's "tracker" and "retrack" fields of a homotopy solver: :data:`tracker.FAMILY` for a squared system
+    (a jump to another family is invisible to the duplicate test), under the configuration's ``step_control``
+    (:data:`STEP_CONTROL`; its "starts" count is not a spec field)."""
+    fields = {"tracker": dict(tracker.FAMILY) if squared else {}}
+    for key, values in (step_control or {}).items():
+        if key != "starts":
+            fields[key] = {**fields.get(key, {}), **values}
+    return fields
+
+
+def committed_spec_text(json_path: str) -> str:
+    """The committed homotopy spec at json_path with its configuration's current step control (the "tracker" and
+    "retrack" fields of :func:`step_control_fields`) written in, nothing else changed (no numerics recomputed;
+    other specs unchanged): what ``scripts/generate_solvers.py --emit-only`` writes back."""
+    with open(json_path, encoding="utf-8") as fh:
+        text = fh.read()
+    spec = json.loads(text)
+    if spec.get("kind") != "homotopy":
+        return text
+    label = os.path.basename(json_path).split("_")[1]
+    fields = step_control_fields(STEP_CONTROL.get(label), squared="full_system" in spec)
+    if "retrack" not in fields:
+        spec.pop("retrack", None)
+    starts = spec.pop("starts", None)  # a generation writes the further start systems last
+    spec.update(fields)
+    if starts is not None:
+        spec["starts"] = starts
+    return dump_spec(spec)
+
 
 #: A start pair: generic complex parameters q0 and one root x0 there, or a function rng -> such a pair.
 Start = Union[tuple[np.ndarray, np.ndarray], Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]]
@@ -441,11 +484,8 @@ class HomotopyMethod:
             spec["full_system"] = {"system": full.name, "equations": len(full.equations), "degree": full_report.degree,
                                    "primes": list(full_report.primes), "seeds": [0, 1], "tracked": tracked}
             spec["degree"] = spec["paths"] = full_report.degree
-            spec["tracker"] = dict(tracker.FAMILY)  # a jump to another family is invisible to the duplicate test
             build["tracked"] = f"{len(tracked)} of {len(spec['start_roots'])}"
-        for key, fields in (job.step_control or {}).items():  # "tracker", "retrack"; "starts": a count
-            if key != "starts":
-                spec[key] = {**spec.get(key, {}), **fields}
+        spec.update(step_control_fields(job.step_control, squared=full_report is not None))
         if (job.step_control or {}).get("starts", 1) > 1:
             if progress:
                 progress(f"{system.name}: solving {job.step_control['starts'] - 1} further start system(s)")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from analysis.formulations.tdoa import Formulation, real_equations
-from solvers.generate import committed_specs, emit_committed
+from solvers.generate import committed_spec_text, committed_specs, emit_committed
 from solvers.synthetic import random_network, true_root
 
 SPECS = committed_specs()
@@ -37,6 +37,31 @@ def test_generated_module_is_fresh_emission(json_path):
     with open(py_path, encoding="utf-8") as fh:
         committed = fh.read()
     assert committed == text, "generated module is stale: run python scripts/generate_solvers.py --emit-only"
+
+
+@pytest.mark.parametrize("json_path", SPECS, ids=[os.path.basename(p) for p in SPECS])
+def test_committed_spec_has_its_configurations_step_control(json_path):
+    # the "tracker" and "retrack" fields of every committed homotopy spec are those its configuration's
+    # step control (solvers.generate.STEP_CONTROL, tracker.FAMILY for squared systems) writes now
+    with open(json_path, encoding="utf-8") as fh:
+        committed = fh.read()
+    assert committed == committed_spec_text(json_path), "run python scripts/generate_solvers.py --emit-only"
+
+
+def test_committed_spec_text_writes_a_changed_step_control_only(monkeypatch):
+    # a configuration's new step control goes into its spec's "tracker"/"retrack" fields; every other field and
+    # the key order stay (the further start systems last, as a generation writes them)
+    from solvers import generate
+
+    path = next(p for p in SPECS if os.path.basename(p).startswith("tdoa_4r5s_homotopy"))
+    with open(path, encoding="utf-8") as fh:
+        before = json.load(fh)
+    monkeypatch.setitem(generate.STEP_CONTROL, "4r5s", {"tracker": {"corrector": "chord"}, "retrack": {"target": 1e-4},
+                                                      "starts": 3})
+    after = json.loads(committed_spec_text(path))
+    assert after["tracker"] == {"corrector": "chord"} and after["retrack"] == {"target": 1e-4}
+    assert list(after)[-2:] == ["retrack", "starts"]
+    assert {k: v for k, v in after.items() if k not in ("tracker", "retrack")} == {k: v for k, v in before.items() if k != "tracker"}
 
 
 @pytest.mark.parametrize("label", ["6r4s"])
