@@ -332,12 +332,6 @@ class TdoaMatrix:
     source: str
     notes: tuple[str, ...] = field(default=())
 
-    def measurements(self):
-        """The matrix as `solvers.calibrate_io.Measurements` (what every verb reads)."""
-        from .calibrate_io import Measurements
-
-        return Measurements(self.F.copy(), self.channels, self.events, self.source, ",")
-
 
 def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int):
     """GCC-PHAT of every channel pair (i < k) of an event's segments: (i, k, lags (pairs, peaks),

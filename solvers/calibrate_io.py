@@ -332,11 +332,17 @@ def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdo
         tm = tdoa_matrix(read_recording(paths), tdoa_options or TdoaOptions(), progress=progress)
         for note in tm.notes if progress is not None else ():
             progress(f"tdoa: {note}")
-        return tm.measurements()
+        return recording_measurements(tm)
     if len(paths) != 1:
         raise MeasurementFileError(f"{len(paths)} files given: a measurement CSV is one file (several files are read "
                                    "only as recordings, one per channel)")
     return read_measurements(paths[0], delimiter=delimiter, header=header)
+
+
+def recording_measurements(tm) -> "Measurements":
+    """The matrix of a solvers.audio.TdoaMatrix as Measurements (what every verb reads; the audio module does not
+    import this one, which reads recordings through it)."""
+    return Measurements(tm.F.copy(), tm.channels, tm.events, tm.source, ",")
 
 
 def _is_audio(path: str) -> bool:

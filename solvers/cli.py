@@ -1192,14 +1192,14 @@ def cmd_tdoa(args: argparse.Namespace) -> int:
     import numpy as np
 
     from solvers.audio import read_recording, tdoa_matrix
-    from solvers.calibrate_io import Measurements, format_matrix
+    from solvers.calibrate_io import Measurements, format_matrix, recording_measurements
 
     _check_outputs({"--out": (args.out, None), "--confidence": (args.confidence, None)}, args.recording)
     recording = read_recording(args.recording)
     tm = tdoa_matrix(recording, _tdoa_options(args), progress=_progress)
     for note in tm.notes:  # the reader's and the analysis's
         _progress(f"tdoa: {note}")
-    meas = tm.measurements()
+    meas = recording_measurements(tm)
     kept = int(np.isfinite(tm.F).sum())
     about = (f"tdoa-workbench tdoa {recording.source}: {len(tm.channels)} channels at {tm.rate} Hz, "
              f"{recording.seconds:.1f} s, {len(tm.events)} events, speed of sound {tm.speed:g} m/s; values in m")

@@ -51,6 +51,11 @@ __all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "
 #: 8 reflections).
 CELLS = {"10r4s3d": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "5r9s3d": "5r9s-tdoa3d-direct:all"}
 
+#: The tracking options of count's graphs: the Pade predictor (scripts/bench_tracker_variants.py: the same counts,
+#: closed graphs and equal seed sets as RK4 on 6r/3s, 3D TOA 6r/4s, 4r/5s and 7r/5s, at 0.7-0.8 of its time; the
+#: chord corrector, 0.68 on 7r/5s, loses more paths in the solvers and is not taken).
+COUNT_TRACKER = tracker.TrackerOptions(predictor="pade")
+
 #: Seeded random known solutions carried around each fresh verification loop.
 VERIFY_SAMPLE = 64
 
@@ -68,7 +73,7 @@ class CountOptions:
     certify: prove every solution (Krawczyk); trace: run the trace test on the first seed's set (TDOA/TOA
     formulations and systems with a program; slow for large sets); seconds: wall-time cap of each graph;
     checkpoints: a directory for the graphs' resumable files (None: none); tracker: the tracking options (None:
-    the solver's); dask: a Dask scheduler address (or "local") whose workers track the graphs' batches, in chunks
+    :data:`COUNT_TRACKER`); dask: a Dask scheduler address (or "local") whose workers track the graphs' batches, in chunks
     of dask_chunk paths (solvers.continuation.dask_tracks; the same numbers)."""
 
     seeds: tuple[int, ...] = (0, 1)
@@ -82,6 +87,10 @@ class CountOptions:
     tracker: tracker.TrackerOptions | None = None
     dask: str | None = None
     dask_chunk: int = 2000
+
+    def __post_init__(self) -> None:
+        if self.tracker is None:
+            object.__setattr__(self, "tracker", COUNT_TRACKER)
 
 
 @dataclass(frozen=True)
