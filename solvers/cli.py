@@ -1348,7 +1348,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                         f"solver), but {n} receivers x {m} transmitters can: {advice}")
     anchors = read_anchors(args.anchors, meas.receivers, meas.transmitters, args.dim) if args.anchors else None
     options = CalibrationOptions(orientation_given=bool(args.oriented or args.transpose))
-    with _progress_on_stderr("solvers.calibration", after=2.0):
+    # progress after 2 s on a terminal; into a pipe or a log only for a call that is long by any measure
+    with _progress_on_stderr("solvers.calibration", after=2.0 if sys.stderr.isatty() else 30.0):
         result = calibrate(meas.F, sigma=args.sigma, dim=args.dim, seed=args.seed, options=options)
     if anchors is not None and result.status != "failed":
         result = anchor_frame(result, anchors, args.anchor_fit)

@@ -75,3 +75,25 @@ def test_messages_never_print_nan():
     assert "nan" not in msg.lower() and "sigma not estimated" in msg and "no rms" in msg
     given = pipeline._message("ok", res)
     assert "sigma 0.01 given" in given
+
+
+def test_far_field_sources_are_determined_and_the_gauge_receiver_moves_like_a_typical_node():
+    # a far-field source's range/offset direction is weak against the network's largest eigenvalue,
+    # not against its own block's: it is not reported undetermined (std inf)
+    from solvers.calibration import adjustment_statistics
+    from solvers.calibration.flags import _beyond_std
+    from solvers.synthetic import Network
+
+    rng = np.random.default_rng(2)
+    R = rng.uniform(-0.125, 0.125, (12, 3))
+    u = rng.standard_normal((10, 3))
+    S = 30.0 * u / np.linalg.norm(u, axis=1)[:, None]
+    net = Network(R, S, rng.uniform(0, 1, 10))
+    F = net.measurements(1e-3, rng)
+    st = adjustment_statistics(F, np.isfinite(F), R, S, net.offsets, 1e-3)
+    rstd, tstd, _ = st.node_std(12, 10)
+    assert not st.deficient and np.isfinite(tstd).all() and tstd.min() > 1.0  # metres: the range is weak
+    # two fits 4e-7 apart everywhere: the gauge receiver (std 0) is not "beyond 3 std"
+    shift = np.full(3, 4e-7)
+    assert not _beyond_std(R + shift, S + shift, R, S, rstd, tstd, 1e-9)
+    assert _beyond_std(R + shift * 1e5, S, R, S, rstd, tstd, 1e-9)
