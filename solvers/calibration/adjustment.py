@@ -412,8 +412,7 @@ class AdjustmentStatistics:
         """(e, j^T N^-1 j) of the entries of another problem `p` on the same nodes (prediction)."""
         e, diff, dist = entry_residuals(self.x if x is None else x, p)
         v = jacobian_values(diff, dist)
-        h = np.einsum("ka,kab,kb->k", v, self.inverse.entries(p.slots[:, :, None], p.slots[:, None, :]), v)
-        return e, h
+        return e, self.inverse.quadratic(p.slots, v)
 
     def node_std(self, m: int, n: int):
         """(receiver_std (m,), transmitter_std (n,), offset_std (n,)): the square root of the sum of the
@@ -479,7 +478,7 @@ def adjustment_statistics(F, use, R, S, O, sigma_prior: float | None, *, alpha: 
     inverse = normal_equations(p, diff, dist, wk, e).inverse()
     null = inverse.null
     v = jacobian_values(diff, dist)
-    h = wk * np.einsum("ka,kab,kb->k", v, inverse.entries(p.slots[:, :, None], p.slots[:, None, :]), v)
+    h = wk * inverse.quadratic(p.slots, v)
     r = np.clip(1.0 - h, 0.0, 1.0)
     k = len(e)
     rank = p.n_params - int(null.sum())

@@ -286,6 +286,29 @@ class BlockInverse:
             out[cross] = np.einsum("kq,kq->q", Gf[:, pa[cross]], Yf[:, pb[cross]])
         return out
 
+    def quadratic(self, slots: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """v_k^T N^- v_k of every entry k, v_k (2 dim + 1) on its parameter columns `slots` (receiver
+        coordinates, then one transmitter's coordinates and offset; n_params: fixed), as the sum of two
+        positive semi-definite forms, w^T P w + v_t^T D_j^+ v_t with w = v_r - G_j v_t: never negative,
+        and no cancellation between the large entries of a nearly singular transmitter block (the
+        entry-wise N^-[a, b] sum gave -3 for a rejected entry of such a transmitter).
+        Reference: the block inverse of the module docstring, regrouped."""
+        lay = self.layout
+        dim, d1, k0 = lay.dim, lay.dim + 1, lay.k0
+        if len(slots) == 0:
+            return np.zeros(0)
+        jj = lay.to_block[slots[:, dim] - k0] // d1
+        vr, vt = v[:, :dim], v[:, dim:]
+        WT = np.zeros((k0, len(v)))  # w of every entry, one per column
+        for c in range(d1):
+            WT -= self.G[:, jj, c] * vt[:, c]
+        rs = slots[:, :dim]
+        free = rs < k0
+        cols = np.broadcast_to(np.arange(len(v))[:, None], rs.shape)
+        np.add.at(WT, (rs[free], cols[free]), vr[free])
+        h = np.einsum("kK,kK->K", self.P @ WT, WT)
+        return h + np.einsum("Kc,Kcd,Kd->K", vt, self.Dinv[jj], vt)
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """N^- rhs for rhs (n_params, c) in the pack layout."""
         lay = self.layout
