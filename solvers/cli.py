@@ -1248,6 +1248,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    "empty corner cell, distinct integers as transmitter names or a row index; docs/calibrate.md)")
     p.add_argument("--transpose", action="store_true", help="the file has one row per transmitter and one column "
                    "per receiver")
+    p.add_argument("--oriented", action="store_true", help="the rows are receivers as stated (with --transpose: "
+                   "the columns; --transpose implies it): a transposed matrix that fits about as well is a note, not "
+                   "status ambiguous")
     p.add_argument("--dim", type=int, choices=(2, 3), default=2, help="2: a network in the plane (default); 3: in "
                    "space (gauge r1 = 0, r2 on +x, r3 in the xy half-plane y > 0; the mirror z -> -z is undecidable)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random sampling (default 0)")
@@ -1266,12 +1269,44 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_calibrate)
 
 
+class _progress_on_stderr:
+    """Show a library logger's INFO records on stderr, with the elapsed time, once a call has run `after`
+    seconds (a quick call prints nothing); the handler is removed again on exit."""
+
+    def __init__(self, name: str, after: float = 2.0):
+        import logging
+        import time
+
+        self.logger, self.after, self.start = logging.getLogger(name), after, time.time()
+        start = self.start
+
+        class Elapsed(logging.Formatter):
+            def format(self, record) -> str:
+                return f"[{record.created - start:6.1f} s] {super().format(record)}"
+
+        self.handler = logging.StreamHandler(sys.stderr)
+        self.handler.setFormatter(Elapsed("%(message)s"))
+        self.handler.addFilter(lambda record: record.created - start >= after)
+
+    def __enter__(self):
+        import logging
+
+        self.level = self.logger.level
+        self.logger.setLevel(logging.INFO)
+        self.logger.addHandler(self.handler)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.logger.removeHandler(self.handler)
+        self.logger.setLevel(self.level)
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     import math
 
     from solvers.api import select_solver
     from solvers.audio import is_recording
-    from solvers.calibration import calibrate
+    from solvers.calibration import CalibrationOptions, calibrate
     from solvers.calibration.adjustment import enough_data
     from solvers.calibrate_io import (MeasurementFileError, plot_calibration, plot_formats, read_input, report_dict,
                                       write_json, write_nodes_csv)
@@ -1312,7 +1347,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise UserError(f"{meas.source}: {layout} cannot be calibrated (too few receivers or transmitters for every "
                         f"solver), but {n} receivers x {m} transmitters can: {advice}")
     anchors = read_anchors(args.anchors, meas.receivers, meas.transmitters, args.dim) if args.anchors else None
-    result = calibrate(meas.F, sigma=args.sigma, dim=args.dim, seed=args.seed)
+    options = CalibrationOptions(orientation_given=bool(args.oriented or args.transpose))
+    # progress after 2 s on a terminal; into a pipe or a log only for a call that is long by any measure
+    with _progress_on_stderr("solvers.calibration", after=2.0 if sys.stderr.isatty() else 30.0):
+        result = calibrate(meas.F, sigma=args.sigma, dim=args.dim, seed=args.seed, options=options)
     if anchors is not None and result.status != "failed":
         result = anchor_frame(result, anchors, args.anchor_fit)
     report = report_dict(result, meas, args.units)

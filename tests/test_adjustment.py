@@ -114,3 +114,66 @@ def test_a_rank_deficient_fit_reports_its_undetermined_coordinates():
     st = adjustment_statistics(F, use, ls.R, ls.S, ls.O, 1e-3)
     rstd, tstd, ostd = st.node_std(6, 4)
     assert st.deficient and np.isinf(tstd[3]) and np.isfinite(tstd[:3]).all()
+
+
+def _dense_reference(st, weights=None):
+    """Redundancy numbers and the covariance diagonal from the dense pseudo-inverse of J^T W J."""
+    from solvers.calibration.adjustment import _pseudo_inverse
+
+    e, diff, dist = entry_residuals(st.x, st.problem)
+    J = dense_jacobian(st.problem, diff, dist)
+    w = np.ones(len(e)) if weights is None else weights
+    Ninv, null = _pseudo_inverse(J.T @ (w[:, None] * J))
+    return 1.0 - w * np.einsum("ka,ab,kb->k", J, Ninv, J), np.diag(Ninv), null, J, Ninv
+
+
+@pytest.mark.parametrize("dim, m, n, missing", [(2, 9, 7, 0.1), (3, 10, 8, 0.15)])
+def test_block_schur_statistics_equal_the_dense_pseudo_inverse(dim, m, n, missing):
+    # the normal matrix kept by blocks (transmitters eliminated by their Schur complement) gives the
+    # redundancy numbers, w-tests, node stds and external reliability of the dense pseudo-inverse
+    from solvers.calibration.adjustment import normal_equations
+    from solvers.synthetic import room_network
+
+    rng = np.random.default_rng(20 + dim)
+    net = random_network(m, n, rng) if dim == 2 else room_network(m, n, rng)
+    F = net.measurements(1e-2, rng)
+    F[rng.random(F.shape) < missing] = np.nan
+    mask = np.isfinite(F)
+    R, S = to_gauge(net.receivers, net.transmitters)
+    ls = robust_refine(F, mask, R, S, net.offsets.copy(), loss="linear")
+    weights = rng.uniform(0.2, 1.0, F.shape)
+    for wmat in (None, weights):
+        st = adjustment_statistics(F, mask, ls.R, ls.S, ls.O, 1e-2, weights=wmat)
+        wk = None if wmat is None else wmat[st.entries[:, 0], st.entries[:, 1]]
+        r, diag, null, J, Ninv = _dense_reference(st, wk)
+        assert not null.any() and not st.deficient
+        assert np.abs(st.redundancy - r).max() < 1e-8
+        assert np.allclose(st.inverse.diagonal(), diag, rtol=1e-8, atol=1e-12)
+    # the block normal matrix and its solve are J^T J and its inverse
+    e, diff, dist = entry_residuals(st.x, st.problem)
+    N = normal_equations(st.problem, diff, dist, np.ones(len(e)), e)
+    assert np.allclose(N.dense(), J.T @ J, atol=1e-12) and np.allclose(N.g, J.T @ e, atol=1e-14)
+    b = rng.standard_normal(J.shape[1])
+    assert np.allclose(N.solve(b), np.linalg.solve(J.T @ J, b), rtol=1e-8, atol=1e-10)
+    assert np.allclose(N.matvec(b), J.T @ (J @ b))
+    # external reliability: the largest node shift of an MDB-sized error, N^-1 j_k mdb_k
+    rel_r, rel_t = st.external_reliability(m, n)
+    shifts = np.vstack([Ninv @ J.T * st.mdb, np.zeros(len(e))])
+    rs, ts = st.problem.slots_of(True), st.problem.slots_of(False)
+    expect_r = np.sqrt(sum(shifts[rs[:, a]] ** 2 for a in range(dim))).max(axis=1)
+    expect_t = np.sqrt(sum(shifts[ts[:, a]] ** 2 for a in range(dim))).max(axis=1)
+    assert np.allclose(rel_r[st.problem.rows], expect_r, rtol=1e-7, atol=1e-12)
+    assert np.allclose(rel_t[st.problem.cols], expect_t, rtol=1e-7, atol=1e-12)
+
+
+def test_block_inverse_of_a_rank_deficient_fit_marks_the_dense_null_space():
+    # transmitter 4 measured by 2 receivers: its block is singular; the redundancy numbers (estimable)
+    # and the undetermined coordinates are those of the dense pseudo-inverse
+    net, F, mask, ls = _fit(6, 4, seed=5, sigma=1e-3)
+    use = mask.copy()
+    use[2:, 3] = False
+    st = adjustment_statistics(F, use, ls.R, ls.S, ls.O, 1e-3)
+    r, diag, null, _, _ = _dense_reference(st)
+    assert np.array_equal(st.null, null) and null.any()
+    assert np.abs(st.redundancy - r).max() < 1e-8
+    assert np.allclose(st.inverse.diagonal()[~null], diag[~null], rtol=1e-8)

@@ -325,3 +325,22 @@ def test_dim_3_from_a_csv(capsys, tmp_path):
     with pytest.raises(SystemExit) as exc:
         main(["calibrate", str(path), "--dim", "4"])
     assert exc.value.code == 2
+
+
+@pytest.mark.parametrize("flags, given", [((), False), (("--oriented",), True), (("--transpose",), True)])
+def test_oriented_and_transpose_give_the_orientation(capsys, monkeypatch, one_result, flags, given):
+    path, result = one_result
+    seen = {}
+
+    def fake(F, **kwargs):
+        seen.update(kwargs)
+        return result
+
+    monkeypatch.setattr(calibrate_module(), "calibrate", fake)
+    if "--transpose" in flags:  # a file with transmitters as rows
+        F = read_measurements(path).F
+        text = "\n".join(",".join(repr(float(x)) if np.isfinite(x) else "" for x in row) for row in F.T)
+        path = str(Path(path).with_name("transposed.csv"))
+        Path(path).write_text(text + "\n")
+    run(capsys, "calibrate", path, *flags)
+    assert seen["options"].orientation_given is given

@@ -17,8 +17,10 @@ Teunissen, "Testing theory", 2006; open-source adjustment software such as JAG3D
   bias (internal reliability), its largest effect on a node (external reliability), and the
   gauge-fixed covariance sigma^2 N^-1 reduced to per-node standard deviations.
 
-The normal matrix is (2m + 3n - 3)^2 (3D: (3m + 4n - 6)^2) and is inverted once per fit; nothing here forms the dense
-Jacobian of all entries (a 200 x 150 network has 24,000 entries and 847 unknowns).
+The normal matrix is (2m + 3n - 3)^2 (3D: (3m + 4n - 6)^2); it is kept by blocks and solved and
+inverted by the Schur complement on the transmitters (solvers.calibration.normal), so that the cost
+grows linearly in the transmitters (48 receivers x 540 sources in 3D: 2,298 unknowns, a 138^2 reduced
+system); nothing here forms the dense Jacobian of all entries or a dense inverse.
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ import numpy as np
 from ..recovery import to_gauge
 from ..refine import _free_receiver_coordinates, pack, parameter_count
 from ..refine import unpack as _unpack
+from .normal import BlockInverse, BlockLayout, BlockNormal, pseudo_inverse
 
 __all__ = [
     "AdjustmentStatistics",
@@ -108,10 +111,10 @@ class Problem:
         return np.concatenate([rec, np.arange(len(free), u)])
 
     @cached_property
-    def normal_index(self) -> tuple[np.ndarray, np.ndarray]:
-        """(flat (n_params + 1)^2 index of each v_a v_b product, flat slots): normal_equations' bincounts."""
-        size = self.n_params + 1
-        return (self.slots[:, :, None] * size + self.slots[:, None, :]).ravel(), self.slots.ravel()
+    def layout(self) -> BlockLayout:
+        """The entries' places in the blocks of the normal matrix (receivers, one block per transmitter)."""
+        k0 = len(_free_receiver_coordinates(len(self.rows), self.dim))
+        return BlockLayout(self.slots, self.jj, k0, len(self.cols), self.dim)
 
     @cached_property
     def measured(self) -> np.ndarray:
@@ -180,14 +183,10 @@ def dense_jacobian(p: Problem, diff: np.ndarray, dist: np.ndarray) -> np.ndarray
     return J[:, :-1]
 
 
-def normal_equations(p: Problem, diff, dist, w, e) -> tuple[np.ndarray, np.ndarray]:
-    """J^T W J and J^T W e, accumulated from the 2 dim + 1 non-zeros per row (no sparse matrices)."""
-    v = jacobian_values(diff, dist)
-    size = p.n_params + 1
-    idx, flat = p.normal_index
-    A = np.bincount(idx, (w[:, None, None] * v[:, :, None] * v[:, None, :]).ravel(), minlength=size * size)
-    g = np.bincount(flat, ((w * e)[:, None] * v).ravel(), minlength=size)
-    return A.reshape(size, size)[:-1, :-1], g[:-1]
+def normal_equations(p: Problem, diff, dist, w, e) -> BlockNormal:
+    """J^T W J (by blocks: receivers, one block per transmitter) and J^T W e, accumulated from the
+    2 dim + 1 non-zeros per row (no dense or sparse Jacobian)."""
+    return BlockNormal.accumulate(p.layout, jacobian_values(diff, dist), w, e)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -217,19 +216,6 @@ def loss_rho(z: np.ndarray, loss: Loss) -> np.ndarray:
     return z
 
 
-def _cholesky_solve(M: np.ndarray, b: np.ndarray) -> np.ndarray | None:
-    """M^-1 b for a symmetric positive definite M (overwritten) by LAPACK's potrf/potrs (what
-    scipy.linalg.cho_factor/cho_solve call, without their checks: this runs thousands of times on
-    matrices of 20-100 unknowns), or None when M is not positive definite."""
-    from scipy.linalg import lapack
-
-    c, info = lapack.dpotrf(M, lower=0, clean=0, overwrite_a=1)
-    if info != 0:
-        return None
-    x, info = lapack.dpotrs(c, b, lower=0)
-    return x if info == 0 else None
-
-
 def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max_iter: int):
     """Iteratively reweighted Levenberg-Marquardt for sum rho((e/scale)^2); returns (x, converged, its).
 
@@ -237,7 +223,9 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
     robust loss converges linearly and gets looser tolerances (it only warm-starts least squares).
     Why not scipy.optimize.least_squares: its sparse trust-region path forms J (24,000 x 847 for a
     200 x 150 network) and factors it by LSMR each iteration; the normal matrix here is accumulated
-    from 5 non-zeros per row and factored densely (847^2), which is what these problems need.
+    from 5 non-zeros per row by blocks and solved by the Schur complement on the transmitters
+    (solvers.calibration.normal: a 297^2 reduced system for 200 x 150 in 2D, 138^2 for 48 receivers in
+    3D whatever the number of sources), which is what these problems need.
     """
 
     tol = 1e-12 if loss == "linear" else 1e-8
@@ -252,15 +240,14 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        A, g = normal_equations(p, diff, dist, loss_weights((e / scale) ** 2, loss), e)
-        diag = np.diag(A).copy()
+        N = normal_equations(p, diff, dist, loss_weights((e / scale) ** 2, loss), e)
+        g = N.g
+        diag = N.diagonal()
         floor = 1e-12 * max(diag.max(initial=0.0), 1e-300)
         damping = np.maximum(diag, floor)
         improved = False
         while lam < 1e12:
-            M = A.copy()
-            M.flat[:: len(diag) + 1] += lam * damping
-            step = _cholesky_solve(M, -g)
+            step = N.solve(-g, lam * damping)
             if step is None:
                 lam *= 10.0
                 continue
@@ -272,7 +259,7 @@ def levenberg_marquardt(x: np.ndarray, p: Problem, loss: Loss, scale: float, max
                 # Nielsen's damping update from the gain ratio (actual over predicted decrease of the
                 # quadratic model): a step the model predicted well lets lambda fall by up to 3x, a poor
                 # one keeps it; a long curved valley no longer costs a rejected step every iteration
-                predicted = -(2.0 * float(g @ step) + float(step @ (A @ step))) / (scale * scale)
+                predicted = -(2.0 * float(g @ step) + float(step @ N.matvec(step))) / (scale * scale)
                 rho = (cost - cost_new) / predicted if predicted > 0 else 0.0
                 x, e, diff, dist, cost = x_new, e_new, diff_new, dist_new, cost_new
                 lam = max(lam * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-12)
@@ -373,20 +360,8 @@ def critical_value(alpha: float, dof: float | None = None) -> float:
     return float(stats.t.isf(alpha / 2.0, max(dof, 1e-9)))
 
 
-def _pseudo_inverse(N: np.ndarray, rtol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
-    """(N^+, null) of a symmetric positive semi-definite N by its eigendecomposition; null marks the
-    parameters touched by an eigenvector of relative eigenvalue below rtol (not determined)."""
-    if N.size == 0:
-        return N.copy(), np.zeros(0, bool)
-    lam, V = np.linalg.eigh(N)
-    top = max(float(lam[-1]), 1e-300)
-    small = lam <= rtol * top
-    inv = np.where(small, 0.0, 1.0 / np.where(small, 1.0, lam))
-    Ninv = (V * inv) @ V.T
-    null = np.zeros(N.shape[0], bool)
-    if small.any():
-        null = np.linalg.norm(V[:, small], axis=1) > 1e-6
-    return Ninv, null
+#: The dense reference of the block inverse (tests compare the two).
+_pseudo_inverse = pseudo_inverse
 
 
 @dataclass(frozen=True, eq=False)
@@ -407,7 +382,7 @@ class AdjustmentStatistics:
         else the externally studentised residual (sigma from the fit without that entry, t(dof - 1))
     mdb : (k,) minimal detectable bias sigma delta0 / sqrt(r) (inf where r ~ 0)
     null : (n_params,) parameters not determined (rank-deficient fit)
-    Ninv : (n_params + 1)^2 pseudo-inverse of N, padded with a zero row/column for fixed coordinates
+    inverse : a generalised inverse of N kept by blocks (solvers.calibration.normal.BlockInverse)
     problem, x : the fit's problem and parameters
     """
 
@@ -425,7 +400,7 @@ class AdjustmentStatistics:
     w: np.ndarray
     mdb: np.ndarray
     null: np.ndarray
-    Ninv: np.ndarray
+    inverse: BlockInverse
     problem: Problem
     x: np.ndarray
 
@@ -437,14 +412,13 @@ class AdjustmentStatistics:
         """(e, j^T N^-1 j) of the entries of another problem `p` on the same nodes (prediction)."""
         e, diff, dist = entry_residuals(self.x if x is None else x, p)
         v = jacobian_values(diff, dist)
-        h = np.einsum("ka,kab,kb->k", v, self.Ninv[p.slots[:, :, None], p.slots[:, None, :]], v)
-        return e, h
+        return e, self.inverse.quadratic(p.slots, v)
 
     def node_std(self, m: int, n: int):
         """(receiver_std (m,), transmitter_std (n,), offset_std (n,)): the square root of the sum of the
         coordinates' variances, the offset's std; inf for a coordinate in the null space, NaN for a node
         not in the fit."""
-        var = self.sigma**2 * np.diag(self.Ninv)[:-1].copy()
+        var = self.sigma**2 * self.inverse.diagonal()
         var[self.null] = np.inf
         var = np.append(var, 0.0)  # fixed gauge coordinates
         p = self.problem
@@ -468,8 +442,11 @@ class AdjustmentStatistics:
         finite = np.flatnonzero(np.isfinite(self.mdb))
         for start in range(0, len(finite), chunk):
             k = finite[start : start + chunk]
-            # shift of every parameter: N^-1[:, slots_k] v_k mdb_k  -> (n_params + 1, len(k))
-            shift = np.einsum("pkc,kc->pk", self.Ninv[:, p.slots[k]], v[k] * self.mdb[k, None])
+            # shift of every parameter: N^-1 j_k mdb_k  -> (n_params + 1, len(k)), the fixed row 0
+            rhs = np.zeros((p.n_params + 1, len(k)))
+            rhs[p.slots[k].T, np.arange(len(k))[None, :]] = (v[k] * self.mdb[k, None]).T
+            shift = np.zeros_like(rhs)
+            shift[:-1] = self.inverse.solve(rhs[:-1])
             disp = np.sqrt(np.sum(shift[node_slots] ** 2, axis=1))  # (nodes, len(k))
             best = np.maximum(best, disp.max(axis=1))
         rel_r, rel_t = np.full(m, np.nan), np.full(n, np.nan)
@@ -498,12 +475,10 @@ def adjustment_statistics(F, use, R, S, O, sigma_prior: float | None, *, alpha: 
     p, x = gp
     e, diff, dist = entry_residuals(x, p)
     wk = np.ones(len(e)) if weights is None else weights[p.rows[p.ii], p.cols[p.jj]]
-    N, _ = normal_equations(p, diff, dist, wk, e)
-    Ninv, null = _pseudo_inverse(N)
-    Ninv_p = np.zeros((p.n_params + 1, p.n_params + 1))
-    Ninv_p[:-1, :-1] = Ninv
+    inverse = normal_equations(p, diff, dist, wk, e).inverse()
+    null = inverse.null
     v = jacobian_values(diff, dist)
-    h = wk * np.einsum("ka,kab,kb->k", v, Ninv_p[p.slots[:, :, None], p.slots[:, None, :]], v)
+    h = wk * inverse.quadratic(p.slots, v)
     r = np.clip(1.0 - h, 0.0, 1.0)
     k = len(e)
     rank = p.n_params - int(null.sum())
@@ -527,7 +502,7 @@ def adjustment_statistics(F, use, R, S, O, sigma_prior: float | None, *, alpha: 
         mdb = np.where(r > tiny, sigma * delta0 / np.sqrt(r), np.inf) if np.isfinite(sigma) else np.full(k, np.inf)
     entries = np.column_stack([p.rows[p.ii], p.cols[p.jj]])
     return AdjustmentStatistics(entries, e, r, int(dof), ssr, sigma_prior, sigma_post, float(sigma), g_stat, g_crit,
-                                g_pass, w, mdb, null, Ninv_p, p, x)
+                                g_pass, w, mdb, null, inverse, p, x)
 
 
 def estimate_covariance(F, use, R, S, O, sigma: float):

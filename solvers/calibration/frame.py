@@ -49,11 +49,12 @@ def node_covariances(st, m: int, n: int, dim: int):
         rcov[:], tcov[:] = np.inf, np.inf
         return rcov, tcov
     p = st.problem
-    cov = st.sigma**2 * st.Ninv  # padded: the last row / column (the fixed coordinates) is 0
     bad = np.append(st.null, False)
     rs, ts = p.slots_of(True), p.slots_of(False)
     for slots, out, nodes in ((rs, rcov, p.rows), (ts, tcov, p.cols)):
-        block = cov[slots[:, :, None], slots[:, None, :]]
+        # the blocks of N^-1 (kept by blocks: adjustment.AdjustmentStatistics.inverse); a fixed
+        # coordinate (slot n_params) reads 0
+        block = st.sigma**2 * st.inverse.entries(slots[:, :, None], slots[:, None, :])
         undetermined = bad[slots]
         block[undetermined[:, :, None] | undetermined[:, None, :]] = np.inf
         out[nodes] = block

@@ -1,6 +1,7 @@
 """`calibrate`: from a TDOA matrix to one honest answer (the steps are described in the package docstring)."""
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import replace
@@ -24,8 +25,11 @@ from .frame import node_covariances
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
-from .sampling import _ransac, available_solvers
+from .sampling import _needed, _ransac, available_solvers
 from .scoring import MAD_TO_SIGMA, _Model, _prune, _residual_matrix, _score, _Search
+
+#: Progress of long calls (stage by stage, each snooping round), at INFO; the CLI shows it on stderr.
+log = logging.getLogger("solvers.calibration")
 
 
 def _failed(F, message, t0, seed, search: _Search | None = None, warnings=(), dim: int = 2) -> CalibrationResult:
@@ -108,6 +112,7 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
     # find it with another; 16r/10s, 1 cm, 5 % gross, sigma estimated: 1 of 20 networks)
     if opts.stability_check and rejected and result.status != "failed":
         seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
+        log.info("stability check: a second search with seed %d", seed2)
         other = _calibrate_once(F, sigma, seed2, opts, t0, dim)
         if other.status != "failed" and _differs(result, other):
             cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, _floor(F))
@@ -155,6 +160,7 @@ def _check_sigma(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result:
     searched = result.status == "failed" and enough_data(*F.shape, int(np.isfinite(F).sum()), dim)
     if not (searched or (result.status != "failed" and (rejected or failed_test))):
         return result
+    log.info("check of the given sigma: the calibration with sigma estimated")
     est = _calibrate_once(F, None, seed, replace(opts, stability_check=False), t0, dim)
     if est.status in ("failed", "unconverged", "inconsistent") or est.dof < opts.min_dof_for_sigma:
         return result
@@ -195,6 +201,8 @@ def _restart_from(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result
 
 #: The transposed matrix's sigma estimate below this fraction of the answer's: the file is transposed.
 TRANSPOSED_SIGMA_RATIO = 1.0 / 3.0
+#: With the orientation given, a transposed matrix with more rows than this and than the given one is not fitted.
+ORIENTATION_CHECK_ROWS = 100
 
 
 def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: CalibrationResult) -> CalibrationResult:
@@ -203,13 +211,22 @@ def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: 
     budget (a matrix in the right orientation is found quickly: clean data fit at once); when its sigma
     estimate is below TRANSPOSED_SIGMA_RATIO x this one's and it passes its checks, the data are
     transposed: status "inconsistent", and the message says so. A fit of the transposed matrix that is
-    merely as good makes the orientation undecided: status "ambiguous"."""
+    merely as good makes the orientation undecided: status "ambiguous", unless the caller gave the
+    orientation (CalibrationOptions.orientation_given): then it is a note among the warnings.
+    With the orientation given and more transmitters than max(receivers, ORIENTATION_CHECK_ROWS), the
+    transposed matrix is not fitted (its receivers' reduced system would be the large one: 540
+    receivers x 48 in 3D, 1,614 unknowns, minutes) and a note says so."""
     m, n = F.shape
     if not enough_data(n, m, int(np.isfinite(F).sum()), dim):
         return result
+    if opts.orientation_given and n > max(m, ORIENTATION_CHECK_ROWS):
+        note = (f"the orientation was given: the transposed matrix ({n} receivers x {m} transmitters) was not fitted "
+                "to compare")
+        return replace(result, warnings=result.warnings + (note,))
     # blocks only (no sub-networks, no basin probing): a clean transposed file fits at once
     quick = replace(opts, stability_check=False, max_samples=min(opts.max_samples, 20), subnetwork_samples=0,
                     max_confirm_samples=5, probe_nodes=0)
+    log.info("orientation check: the transposed matrix")
     other = _calibrate_once(np.ascontiguousarray(F.T), None, seed, quick, t0, dim)
     if other.status not in ("ok", "uncontrolled", "ambiguous") or not np.isfinite(other.sigma):
         return result
@@ -220,8 +237,12 @@ def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: 
                        message=_message(_worst(result.status, "inconsistent"), result, note))
     if result.sigma < TRANSPOSED_SIGMA_RATIO * other.sigma:
         return result
+    if opts.orientation_given:
+        note = (f"the transposed matrix fits about as well (sigma {other.sigma:.3g} against {result.sigma:.3g}): the "
+                "data alone do not decide whether rows are receivers or transmitters; the given orientation is used")
+        return replace(result, warnings=result.warnings + (note,))
     note = (f"the transposed matrix fits about as well (sigma {other.sigma:.3g} against {result.sigma:.3g}): the data do "
-            "not decide whether rows are receivers or transmitters")
+            "not decide whether rows are receivers or transmitters (give the orientation: --oriented)")
     return replace(result, status=_worst(result.status, "ambiguous"), warnings=(note,) + result.warnings,
                    message=_message(_worst(result.status, "ambiguous"), result, note))
 
@@ -280,10 +301,12 @@ def _message(status, res: CalibrationResult, why: str = "") -> str:
     placed_r, placed_t = np.isfinite(res.receivers[:, 0]), np.isfinite(res.transmitters[:, 0])
     measured = res.measured
     n_missing = m * n - int(measured.sum())
-    sig = f"sigma {res.sigma:.3g} {'estimated' if res.sigma_estimated else 'given'}"
+    sig = (f"sigma {res.sigma:.3g} {'estimated' if res.sigma_estimated else 'given'}" if np.isfinite(res.sigma) else
+           "sigma not estimated (no redundancy)")
+    rms = f"rms {res.rms:.3g}" if np.isfinite(res.rms) else "no rms (no inlier)"
     head = (f"{status}: {int(placed_r.sum())}/{m} receivers, {int(placed_t.sum())}/{n} transmitters placed; "
             f"{int(res.inliers.sum())} inliers, {int(measured.sum() - res.inliers.sum())} rejected, {n_missing} "
-            f"missing; rms {res.rms:.3g}; {sig}")
+            f"missing; {rms}; {sig}")
     return head + (f" - {why}" if why else "")
 
 
@@ -341,7 +364,11 @@ def _snoop(F, work, R, S, O, inl, sigma, opts: CalibrationOptions):
     inl = inl.copy()
     converged = True
     seen = set()
-    for _ in range(opts.max_snooping_rounds):
+    t0 = time.perf_counter()
+    for round_ in range(opts.max_snooping_rounds):
+        if round_:
+            log.info("  data snooping round %d: %d measurements kept (%.1f s)", round_, int(inl.sum()),
+                     time.perf_counter() - t0)
         ls = robust_refine(F, work, R, S, O, loss="linear", max_iter=opts.max_iterations, use=inl)
         R, S, O, converged = ls.R, ls.S, ls.O, ls.converged
         st = adjustment_statistics(F, inl, R, S, O, sigma, alpha=opts.alpha, power=opts.power,
@@ -590,20 +617,27 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng, memo)
         return fits[id(model)][-1]
 
+    log.info("calibrate %dD, %d x %d, %d measured, seed %s, sigma %s: hypothesis search", dim, m, n, int(mask.sum()),
+             seed, "estimated" if sigma is None else f"{sigma:g} given")
     best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(dim), accept,
                            0.0 if sigma is not None else opts.confirm_outliers, dim=dim, hint=hint)
+    log.info("  search: %d samples, %d hypotheses (%.1f s)", search.samples, search.hypotheses,
+             time.perf_counter() - t0)
     if best is None:
         return _failed(F, "no hypothesis: every minimal-solver sample and sub-network fit failed (degenerate geometry?)",
                        t0, seed, search, warnings, dim=dim)
 
     notes: list[str] = []
     R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)), notes)
+    log.info("  adjustment (%s): %d of %d measurements kept (%.1f s)", route, int(inl.sum()), int(work.sum()),
+             time.perf_counter() - t0)
     warnings += notes
     R, S, O, inl, dropped, ls = _drop_undetermined(F, work, R, S, O, inl, opts.max_iterations)
     warnings += dropped
     if ls is not None:
         converged = ls.converged
     R, S, O, moved, other_minimum = _probe_basins(F, work, inl, R, S, O, sigma, opts)
+    log.info("  basins probed (%.1f s)", time.perf_counter() - t0)
     if moved:
         warnings.append("a better least-squares minimum was found by moving a node with rejected measurements")
     E = _residual_matrix(F, R, S, O)
@@ -647,7 +681,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         uncontrolled[i, j] = st.redundancy < opts.min_redundancy
         deficient = st.deficient
     else:
-        sig = float("nan") if st is None or sigma is None else sigma
+        sig = float("nan") if sigma is None else sigma
         sig_cov = sig if np.isfinite(sig) else floor
         rstd, tstd, ostd = (st.node_std(m, n) if st is not None and np.isfinite(sig) else
                             (np.full(m, np.inf), np.full(n, np.inf), np.full(n, np.inf)))
@@ -706,9 +740,21 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
     unplaced = int((~placed_r & mask.any(axis=1)).sum() + (~placed_t & mask.any(axis=0)).sum())
     if unplaced:
         found.append(("partial", f"{unplaced} node(s) with measurements could not be placed"))
-    if search.short_of > 0:
+    short_of = search.short_of
+    if short_of > 0 and sigma is None and st is not None and st.dof >= opts.min_dof_for_sigma and search.block:
+        # The count assumed unknown_sigma_outliers of gross errors (a hypothesis's own scale is not to be
+        # trusted); the adjustment's inlier share, at a sigma estimated from its inliers with enough
+        # redundancy and every rejection tested, is: the count it needs may have been met.
+        share = float(inl.sum()) / max(int(work.sum()), 1)
+        need = _needed(share, search.block[0], opts.confidence, tolerated=search.block[1])
+        if search.samples >= need:
+            short_of = 0
+            warnings.append(f"the hypothesis search drew {search.samples} samples: enough for a sample without gross "
+                            f"errors at the adjustment's inlier share ({100 * share:.1f} %, {math.ceil(need)} needed), "
+                            f"not at the {100 * opts.unknown_sigma_outliers:g} % of gross errors assumed while searching")
+    if short_of > 0:
         found.append(("uncontrolled", f"the hypothesis search stopped at its budget of {opts.max_samples} samples, "
-                      f"{search.short_of} short of the {opts.confidence:g} confidence of a sample without gross "
+                      f"{short_of} short of the {opts.confidence:g} confidence of a sample without gross "
                       "errors: a better calibration may exist (give sigma, or raise max_samples)"))
     if sigma is None and (st is None or st.dof < opts.min_dof_for_sigma):
         dof = st.dof if st is not None else 0

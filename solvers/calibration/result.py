@@ -67,7 +67,10 @@ class CalibrationOptions:
     loo_candidates : with sigma unknown and little redundancy (below min_dof_for_sigma), the entries
         (largest linearised test statistic first) refitted without themselves to test them exactly
     unknown_sigma_outliers : with sigma unknown, the RANSAC sample count assumes at least this share of
-        gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted)
+        gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted), unless the
+        network has trusted_ratio_redundancy measured entries per unknown or more and the hypothesis
+        was refined robustly (its median-based scale is then trusted, and the search goes on until it
+        stayed the best for max_confirm_samples samples)
     confirm_outliers : with sigma unknown, a model that passes the all-data test ends the search only
         after as many more samples as an all-inlier sample needs at this share of gross errors (14
         for a 6 x 4 block) without a better one: a fit distorted by gross errors can pass the test
@@ -77,6 +80,9 @@ class CalibrationOptions:
         nothing better in the 3D benchmark (tables/calibration3d.md)
     stability_check : when entries were rejected, repeat the search with a second seed and report the
         result as "ambiguous" (with the other answer) if it differs
+    orientation_given : the caller says the rows are receivers (the CLI: --oriented or --transpose); a
+        transposed matrix that fits about as well is then a note, not "ambiguous" (one that fits far
+        better still makes the answer "inconsistent": the data contradict the given orientation)
     """
 
     threshold_sigmas: float = 3.0
@@ -109,8 +115,10 @@ class CalibrationOptions:
     probe_radii: tuple = (0.02, 0.05)
     stability_check: bool = True
     unknown_sigma_outliers: float = 0.1
+    trusted_ratio_redundancy: float = 6.0
     confirm_outliers: float = 0.05
     max_confirm_samples: int = 30
+    orientation_given: bool = False
 
     def __post_init__(self) -> None:
         if self.loss not in _LOSSES:

@@ -430,11 +430,20 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     pending: list = [None, 0]
     k_now = [1, 0]  # entries of the sample being offered, gross errors it tolerates
 
+    # entries per unknown: with many, a locally optimised (robust) model's own scale is a trusted one
+    redundant = mask.sum() >= opts.trusted_ratio_redundancy * max(_n_params_mask(mask, dim), 1)
+
     def ratio_of(model: _Model) -> float:
         # With sigma unknown the inlier ratio is measured on the model's own scale, which gross errors
         # inflate: a distorted model "explains" almost everything. Until the all-data test accepts a
-        # model, the sample count assumes at least `unknown_sigma_outliers` of gross errors.
-        return model.inlier_ratio if thr is not None else min(model.inlier_ratio, 1.0 - opts.unknown_sigma_outliers)
+        # model, the sample count assumes at least `unknown_sigma_outliers` of gross errors - unless the
+        # model was refined robustly (redescending loss: a gross error stops pulling) in a network with
+        # many entries per unknown, where its median-based scale cannot be inflated by the few gross
+        # errors a count of samples guards against (48 x 540 far field: 200 samples, the budget, for
+        # 8 gross errors among 25,920 entries); it must then stay the best for max_confirm_samples
+        if thr is not None or (redundant and model.refined):
+            return model.inlier_ratio
+        return min(model.inlier_ratio, 1.0 - opts.unknown_sigma_outliers)
 
     def confirmed() -> bool:
         # counted in samples that gave a hypothesis: a block refused as coplanar or failed says nothing
@@ -484,6 +493,12 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
         if offer(_hypotheses_from_block(F, mask, solver, rows, cols, thr, floor, opts, rng, search,
                                         best.inlier_ratio if best is not None else None)):
             needed = _needed(ratio_of(best), solver.m * solver.n, opts.confidence, tolerated=solver.tolerates)
+            search.block = (solver.m * solver.n, solver.tolerates)
+            if thr is None and redundant and best.refined:
+                # its own ratio trusted (ratio_of), the model still has to stay the best for as many
+                # samples as confirm an accepted one (far field: block hypotheses are rough, and the
+                # first refined one can sit in another basin at 20 x the noise)
+                needed = max(needed, search.samples + opts.max_confirm_samples)
             needed_own = _needed(best.inlier_ratio, solver.m * solver.n, opts.confidence, tolerated=solver.tolerates)
 
     if search.accepted or pending[0] is not None:

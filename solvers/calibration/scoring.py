@@ -136,3 +136,4 @@ class _Search:
     accepted: bool = False  # the search ended because the best model passed the all-data test
     short_of: int = 0  # samples the confidence still needed when the budget (max_samples) stopped the search
     unconfirmed: int = 0  # confirming samples still needed when the distinct blocks ran out (sigma unknown)
+    block: tuple = ()  # (entries, gross errors tolerated) of the sample that set the count needed
