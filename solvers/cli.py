@@ -952,7 +952,7 @@ def cmd_count(args: argparse.Namespace) -> int:
                                         trace=args.trace, seconds=args.seconds, checkpoints=args.checkpoint,
                                         dask=args.dask, dask_chunk=args.dask_chunk)
         start = _read_start(args.start, target) if args.start else None
-        result = counting.count(target, options, progress=lambda msg: print(msg, file=sys.stderr, flush=True), start=start)
+        result = counting.count(target, options, progress=_delayed_progress(), start=start)
     except (ParametricError, HomotopyError, GenerationError, ValueError) as exc:
         raise UserError(" ".join(str(exc).split())) from None
     print(result.summary())
@@ -1152,6 +1152,22 @@ def _tdoa_options(args: argparse.Namespace):
 
 def _progress(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
+
+
+def _delayed_progress(after: float | None = None):
+    """A progress callback that prints to stderr, with the elapsed time, once the call has run ``after`` seconds
+    (default: 2 s on a terminal, 30 s into a pipe, as calibrate's): a quick call prints nothing."""
+    import time
+
+    start = time.time()
+    after = (2.0 if sys.stderr.isatty() else 30.0) if after is None else after
+
+    def say(line: str) -> None:
+        elapsed = time.time() - start
+        if elapsed >= after:
+            print(f"[{elapsed:6.1f} s] {line}", file=sys.stderr, flush=True)
+
+    return say
 
 
 def _check_outputs(outputs: dict, readings) -> None:
