@@ -41,8 +41,10 @@ from . import tracker
 __all__ = ["GraphOptions", "GraphCount", "graph_monodromy", "RETRIES"]
 
 #: Local detours (half-width d in the segment's parameter, side) tried in turn for a (solution, edge) whose
-#: straight track failed, plain and tight (:func:`_local_detours`).
-DETOURS = ((0.005, 1.0), (0.005, -1.0), (0.02, 1.0), (0.02, -1.0))
+#: straight track failed, plain and tight (:func:`_local_detours`); the wider ones for a stall where several
+#: solutions meet (3D TOA 4r/6s seed 1: four paths stalling at one s, recovered at d = 0.05).
+DETOURS = ((0.005, 1.0), (0.005, -1.0), (0.02, 1.0), (0.02, -1.0), (0.05, 1.0), (0.05, -1.0), (0.1, 1.0),
+           (0.1, -1.0))
 
 #: Step control of the straight retracks of a (solution, edge) whose plain track failed, in turn: tight steps,
 #: then tight steps with no practical limit on their number (4r/5s: a path crawls through an ill-conditioned
