@@ -51,10 +51,12 @@ __all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "
 #: 8 reflections).
 CELLS = {"10r4s3d": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "5r9s3d": "5r9s-tdoa3d-direct:all"}
 
-#: The tracking options of count's graphs: the Pade predictor (scripts/bench_tracker_variants.py: the same counts,
-#: closed graphs and equal seed sets as RK4 on 6r/3s, 3D TOA 6r/4s, 4r/5s and 7r/5s, at 0.7-0.8 of its time; the
-#: chord corrector, 0.68 on 7r/5s, loses more paths in the solvers and is not taken).
-COUNT_TRACKER = tracker.TrackerOptions(predictor="pade")
+#: The tracking options of count's graphs: RK4 with Newton's corrector. The Pade predictor took 0.7-0.8 of its time
+#: with the same counts, closed graphs and equal seed sets on 6r/3s, 3D TOA 6r/4s, 4r/5s and 7r/5s
+#: (scripts/bench_tracker_variants.py), but it is not as safe on 3D 10r/4s: seed 0's graph left 11 tracks open
+#: and 2 of seed 1's solutions were lost carrying them to seed 0 (twice, 2026-11-29), where RK4 closed seed 0's
+#: graph and carried every solution.
+COUNT_TRACKER = tracker.TrackerOptions()
 
 #: Seeded random known solutions carried around each fresh verification loop.
 VERIFY_SAMPLE = 64
