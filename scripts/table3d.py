@@ -104,7 +104,8 @@ def count_text(row: dict) -> str:
     "N (proven; complete by trace test, residual r)": every solution proven, the trace test passed;
     "N (proven; k seeds equal as sets)": every solution proven, every seed's graph closed and their sets equal,
     no trace test passed (N is then a proven lower bound that two seeds reach);
-    ">=N (proven lower bound; ...)": every solution proven, but a graph did not close, the sets differ or one seed ran;
+    ">=N (proven lower bound; ...)": every solution proven, but a graph did not close, one seed ran, or a carried
+    set was not equal (what it said: solutions outside the first set, or paths lost carrying it);
     ">=N (lower bound, numerical)": not every solution proven."""
     n, proven = int(row["solutions"]), int(row["proven"])
     seeds = len(row["seeds"].split())
@@ -116,7 +117,13 @@ def count_text(row: dict) -> str:
         return f"{n} (proven; complete by trace test, residual {row['trace_residual']})"
     if closed and equal:
         return f"{n} (proven; {seeds} seeds equal as sets)"
-    why = "graphs not all closed" if not closed else "one seed" if seeds == 1 else "the seeds' sets differ"
+    if not closed:
+        why = "graphs not all closed"
+    elif seeds == 1:
+        why = "one seed"
+    else:  # what the carried sets said: solutions outside the first set, or only paths lost carrying them
+        why = "seed sets: " + "; ".join(c.removeprefix("not equal: ") for c in row["seed_sets"].split("; ")
+                                        if c != "equal as sets")
     return f">={n} (proven lower bound; {why})"
 
 

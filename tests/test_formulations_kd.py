@@ -414,7 +414,8 @@ def test_table3d_count_evidence_rules():
     assert text(row(6148, trace="passed", residual="3e-12")) == "6148 (proven; complete by trace test, residual 3e-12)"
     assert text(row(2321)) == "2321 (proven; 2 seeds equal as sets)"
     assert text(row(3920, graphs="closed; not closed (2 tracks open)")) == ">=3920 (proven lower bound; graphs not all closed)"
-    assert text(row(3920, sets="not equal: 1 land outside the set")) == ">=3920 (proven lower bound; the seeds' sets differ)"
+    assert text(row(3920, sets="not equal: 1 land outside the set")) == ">=3920 (proven lower bound; seed sets: 1 land outside the set)"
+    assert text(row(36947, sets="not equal: 1 paths lost")) == ">=36947 (proven lower bound; seed sets: 1 paths lost)"
     assert text(row(12965, proven=12960, trace="passed")) == ">=12965 (lower bound, numerical)"
     assert text({**row(20000, sets=""), "seeds": "0"}) == ">=20000 (proven lower bound; one seed)"
     gf = _script("table3d").with_gf_counts
