@@ -136,3 +136,71 @@ def test_cli_count_prints_the_evidence_and_refuses_a_plain_system():
     bad = subprocess.run([sys.executable, "-m", "solvers.cli", "count", os.path.join(ROOT, "examples", "katsura4.ms")],
                          capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "degree" in bad.stderr
+
+
+class _SegmentBlocked:
+    """A stand-in system with the solutions 1, 2, 3 (one unknown) at every parameter, whose tracks of the first
+    point fail on every leg that ends at qb coming along the straight segment qa -> qb (a branch point sitting on
+    the segment, close enough that tight steps and local detours all fail): only a route leaving the segment
+    gets it there."""
+
+    def __init__(self, qa, qb):
+        self.qa, self.qb = qa, qb
+
+    def newton(self, x, q, steps=1, inst=None):
+        return np.round(x.real) + 0j
+
+    def track(self, q0, q1, x0, inst=None, options=None):
+        q0 = np.broadcast_to(q0, (len(x0), len(self.qa))) if np.ndim(q0) == 2 and len(q0) == 1 else q0
+        inst = np.zeros(len(x0), dtype=np.int64) if inst is None else inst
+        out = x0.copy()
+        d = self.qb - self.qa
+        for k in range(len(x0)):
+            a, b = np.atleast_2d(q0)[min(inst[k], len(np.atleast_2d(q0)) - 1)], np.atleast_2d(q1)[min(inst[k], len(np.atleast_2d(q1)) - 1)]
+            t = np.vdot(d, a - self.qa) / np.vdot(d, d)
+            on_segment = abs(t.imag) < 1e-12 and np.linalg.norm(a - self.qa - t.real * d) < 1e-12
+            if x0[k, 0].real == 1.0 and np.allclose(b, self.qb) and on_segment:
+                out[k] = np.nan
+        return out, np.full((len(x0), 4), 0.5)
+
+
+def test_a_carried_path_blocked_on_its_segment_goes_round_through_a_midpoint():
+    qa, qb = np.array([0.0 + 0j, 1.0]), np.array([1.0 + 0j, 0.0])
+    solver = _SegmentBlocked(qa, qb)
+    xs = np.array([[1.0 + 0j], [2.0], [3.0]])
+    ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    assert ok.all() and np.allclose(ends, xs)
+    words, outside = counting._compare(xs, ends, ok, None)
+    assert words == "equal as sets" and outside == 0
+    # without the midpoint routes the path is lost
+    old, counting.CARRY_ROUTES = counting.CARRY_ROUTES, 0
+    try:
+        ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    finally:
+        counting.CARRY_ROUTES = old
+    assert ok.tolist() == [False, True, True]
+
+
+def test_the_trace_test_runs_on_orbits_without_expanding_them():
+    """2D TOA 3r/3s in the direct parametrization: one solution per orbit of the gauge frame's 4 reflections, no
+    coordinate invariant. The test runs on the orbits (the pencil and the traces on the squares of the flipped
+    coordinates): the 8 orbits pass at rounding level, and with any one left out it fails by 8 orders of magnitude
+    or more."""
+    label = "3r3s-toa2d-direct:all"
+    system, q0, x0, group = counting._start(label, 0)
+    assert group is not None and len(group) == 4 and not (group == 1).all(axis=0).any()
+    solver, x0 = monodromy.start_solver(system, q0, x0, 0)
+    roots = graph.graph_monodromy(solver, q0, x0, graph.GraphOptions(), group=group,
+                                  excluded=monodromy._excluded(system, q0)).roots
+    assert len(roots) == 8
+    _, qs, xs, _ = counting._start(label, 1000)
+    whole = trace.trace_test_system(system, q0, roots, (qs, xs), trace.TraceOptions(), group=group)
+    assert whole.status == "passed" and whole.residual < 1e-12, whole
+    assert whole.witnesses > 0
+    for cut in (0, 5):
+        short = trace.trace_test_system(system, q0, np.delete(roots, cut, axis=0), (qs, xs), trace.TraceOptions(),
+                                        group=group)
+        assert short.status == "failed" and short.residual > 1e6 * whole.residual, short
+    # a point fixed by a reflection counts once per distinct image
+    signs = np.array([[1.0, 1.0], [1.0, -1.0]])
+    assert trace._orbit_sizes(np.array([[1.0 + 0j, 2.0], [1.0, 0.0]]), signs).tolist() == [2.0, 1.0]

@@ -121,7 +121,7 @@ def test_endpoints_off_the_fibre_count_as_failed_paths(monkeypatch):
     options = trace.TraceOptions(seed=1)
     test = trace.trace_test_system(system, q0, roots, other, options)
     assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
-    monkeypatch.setattr(trace, "_failed", lambda s, t, e, o, others=None: ~np.all(np.isfinite(e), axis=1))
+    monkeypatch.setattr(trace, "_failed", lambda s, t, e, o, others=None, group=None: ~np.all(np.isfinite(e), axis=1))
     assert trace.trace_test_system(system, q0, roots, other, options).status == "failed"
 
     # the criterion on endpoints at t = 0: roots 0-2, root 0 again, not finite, root 3 moved off, root 4 masked

@@ -71,10 +71,17 @@ WITNESS_TOL = 1e-6
 #: det H cancelling to 7.5e-9 of its terms; points on the spurious locus itself sit at 1e-17 and below.
 LOCUS_REL = 1e-13
 
+#: A witness endpoint whose next Newton step is above this (relative) is run on :data:`SETTLE_STEPS` more steps
+#: before the excluded locus is tested (``off_fibre`` in :func:`trace_test`): well-conditioned points sit at
+#: 1e-15 .. 1e-13.
+SETTLED = 1e-11
+SETTLE_STEPS = 20
+
 #: Version of the test's rules, kept with stored outcomes (scripts/monodromy_counts.py) so that an outcome under
 #: other rules is not read back. 2 (2026-11-28): endpoints off the fibre fail, t1 and t2 a third of a turn apart,
-#: WITNESS_TOL and LOCUS_REL, the continuation fallback.
-TEST_VERSION = 3
+#: WITNESS_TOL and LOCUS_REL, the continuation fallback. 4 (2026-11-29): witnesses by the graph off the lam = 0
+#: component and settled before the locus test; a group's orbits traced on invariant coordinates.
+TEST_VERSION = 4
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
 #: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
@@ -129,17 +136,20 @@ class TraceTest:
         return dataclasses.asdict(self)
 
 
-def trace_equations(equations: Callable, N: int, P: int) -> Callable:
+def trace_equations(equations: Callable, N: int, P: int, square: tuple[bool, ...] | None = None) -> Callable:
     """``equations(y, Q)`` of the trace system in y = (x, lam), Q = (p, v, a, t): F(x; p + lam v) and
-    (a . x - 1) lam + t, written on :mod:`.slp` program values (N + 1 equations, 2 P + N + 1 parameters)."""
+    (a . m(x) - 1) lam + t, written on :mod:`.slp` program values (N + 1 equations, 2 P + N + 1 parameters);
+    m(x)_k = x_k, or x_k^2 where ``square[k]`` (the coordinates a symmetry group flips: :func:`trace_test`)."""
+    square = square or (False,) * N
 
     def traced(y: list, Q: list) -> list:
         x, lam = y[:N], y[N]
         p, v, a, t = Q[:P], Q[P:2 * P], Q[2 * P:2 * P + N], Q[2 * P + N]
         out = list(equations(x, [pk + lam * vk for pk, vk in zip(p, v)]))
-        ax = a[0] * x[0]
-        for ak, xk in zip(a[1:], x[1:]):
-            ax = ax + ak * xk
+        m = [xk * xk if sq else xk for xk, sq in zip(x, square)]
+        ax = a[0] * m[0]
+        for ak, mk in zip(a[1:], m[1:]):
+            ax = ax + ak * mk
         return out + [(ax - 1.0) * lam + t]
 
     return traced
@@ -149,11 +159,14 @@ class TraceSystem:
     """The trace system's compiled tapes with the two calls monodromy needs (``track``, ``newton``:
     :func:`monodromy._monodromy_loop` takes it in place of a :class:`tracking.HomotopySolver`)."""
 
-    def __init__(self, equations: Callable, unknowns: list[str], parameters: list[str]):
+    def __init__(self, equations: Callable, unknowns: list[str], parameters: list[str],
+                 square: tuple[bool, ...] | None = None):
         self.N, self.P = len(unknowns), len(parameters)
+        self.square = np.zeros(self.N, dtype=bool) if square is None else np.asarray(square, dtype=bool)
         names = [f"{u}" for u in unknowns] + ["lam"]
         params = [f"p:{p}" for p in parameters] + [f"v:{p}" for p in parameters] + [f"a:{u}" for u in unknowns] + ["t"]
-        self.tapes = slp.homotopy_tapes(trace_equations(equations, self.N, self.P), names, params)
+        self.tapes = slp.homotopy_tapes(trace_equations(equations, self.N, self.P, tuple(self.square.tolist())),
+                                        names, params)
         self.native = tape_native.addresses(self.tapes)
         self.nvars = self.N + 1
         self.options = TrackerOptions()
@@ -164,6 +177,12 @@ class TraceSystem:
 
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         return tape_kernel.newton(self.tapes, q, x, inst, steps, native=self.native)
+
+    def image(self, y: np.ndarray) -> np.ndarray:
+        """The points y (K, N + 1) as (m(x), lam): the coordinates the pencil and the traces use."""
+        out = y.copy()
+        out[:, :self.N][:, self.square] = y[:, :self.N][:, self.square] ** 2
+        return out
 
     def step(self, y: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Size of a Newton step from each point y (K, N + 1) at parameters q, relative to 1 + |y| (inf where
@@ -182,28 +201,44 @@ def _affine_residual(traces: np.ndarray, ts: np.ndarray, size: float) -> float:
 def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], p: np.ndarray, roots: np.ndarray,
                other: tuple[np.ndarray, np.ndarray], options: TraceOptions = TraceOptions(),
                excluded: Callable | None = None, checkpoint: str | None = None,
-               progress: Callable[[str], None] | None = None) -> TraceTest:
+               progress: Callable[[str], None] | None = None, group: np.ndarray | None = None) -> TraceTest:
     """Trace test of the roots (K, N) of ``equations(x, q)`` at parameters p (P,).
 
     other: a second instance (p*, x*) with a known root (generic, complex); excluded: mask(x, q) of points on
     the locus the roots exclude (:func:`monodromy._excluded`); checkpoint: the witness monodromy's resumable
-    file (:func:`monodromy.monodromy_count`). Returns a :class:`TraceTest`.
+    file (:func:`monodromy.monodromy_count`); group: sign vectors (G, N) of a group acting on the solutions
+    for every parameter, the roots one per orbit. Returns a :class:`TraceTest`.
+
+    With a group the test runs on the orbits, never expanding them: the pencil's form and the traces use the
+    invariant coordinates m(x) (x_k where every sign is +1, x_k^2 where a sign flips x_k), so Q_t is a union of
+    orbits, the witnesses are found one per orbit by the same graph (group-aware), and the trace of the whole
+    fibre is the sum of each representative's m(x) times its orbit's size. This is the trace test of the image
+    curve {(m(x), lam)}, on which the pencil is linear: an orbit maps to one point and, for a group that is
+    the whole symmetry of the solutions, different orbits to different points. m(x) goes to infinity wherever x
+    does, so the pencil has no base point on the curve (a pencil on the offsets alone would: they can stay
+    finite where a root escapes).
     """
     t_start = time.perf_counter()
     p = np.asarray(p, dtype=complex)
     roots = np.asarray(roots, dtype=complex).reshape(-1, len(unknowns))
     N, P, K = len(unknowns), len(parameters), len(roots)
-    system = TraceSystem(equations, list(unknowns), list(parameters))
+    if group is not None:
+        group = np.asarray(group, dtype=float)
+        if group.ndim != 2 or group.shape[1] != N or not np.all(np.abs(group) == 1.0):
+            raise ValueError(f"group: sign vectors (G, {N}) of +-1 expected, got shape {group.shape}")
+    square = tuple(bool(b) for b in (group != 1.0).any(axis=0)) if group is not None else None
+    system = TraceSystem(equations, list(unknowns), list(parameters), square)
+    group_y = None if group is None else np.column_stack([group, np.ones(len(group))])  # lam is invariant
     rng = np.random.default_rng(options.seed)
     p_star, x_star = (np.asarray(z, dtype=complex) for z in other)
     v = p_star - p
     used = np.zeros(N, dtype=bool)
     used[list(options.coordinates) if options.coordinates is not None else slice(None)] = True
     a = (rng.normal(size=N) + 1j * rng.normal(size=N)) * used
-    a = a / (a @ x_star)
+    a = a / (a @ system.image(np.append(x_star, 1.0)[None])[0, :N])
     Q0 = np.concatenate([p, v, a, [0.0]])
     free = np.ones(len(Q0), dtype=bool)
-    free[-1] = False  # the witness loops keep t = 0 and move p, v and a (their lam = 0 points are set apart below)
+    free[-1] = False  # the witness graph keeps t = 0 and moves p, v and a
 
     def on_locus(y: np.ndarray) -> np.ndarray:
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
@@ -215,19 +250,37 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
         raise tk.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
     base = system.newton(base, Q0[None], steps=2)
-    def on_locus_at(y: np.ndarray, Q: np.ndarray) -> np.ndarray:  # at each point's own node's (p, v)
+
+    def off_fibre(y: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """Witness endpoints that are not witnesses, at each point's own node Q (rows): on the lam = 0 component
+        (the roots' own, F(x; p) = 0: at the other nodes it also holds points of the positive-dimensional
+        excluded locus), or on the excluded locus once Newton's method has run on. A point that Newton's method
+        approaches only linearly (a positive-dimensional component: the step halves each time) passes the
+        acceptance after three steps with the locus's conditions still far from zero; twenty more steps bring
+        it onto the locus, and leave a genuine ill-conditioned witness (stalling at rounding level) where it is.
+        10r/4s: without this, the witness graph's other nodes grew 167,000 points, above the fibre's 142,066."""
+        out = np.abs(y[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(y[:, :N], axis=1))
         if excluded is None:
-            return np.zeros(len(y), bool)
-        return excluded(y[:, :N], Q[:, :P] + y[:, N:N + 1] * Q[:, P:2 * P])
+            return out
+        rows = np.arange(len(y))
+        with np.errstate(all="ignore"):
+            step = np.linalg.norm(system.newton(y, Q, steps=1, inst=rows) - y, axis=1) / (1.0 + np.linalg.norm(y, axis=1))
+        slow = np.flatnonzero(~out & ~(step <= SETTLED))
+        z = y.copy()
+        if len(slow):
+            with np.errstate(all="ignore"):
+                z[slow] = system.newton(y[slow], Q[slow], steps=SETTLE_STEPS, inst=np.arange(len(slow)))
+            z[slow] = np.where(np.all(np.isfinite(z[slow]), axis=1)[:, None], z[slow], y[slow])
+        return out | excluded(z[:, :N], Q[:, :P] + z[:, N:N + 1] * Q[:, P:2 * P])
 
     witnesses = graph.graph_monodromy(system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed, retries=1,
                                                                             accept_tol=WITNESS_TOL, seconds=options.seconds),
-                                      excluded=on_locus_at, free=free, checkpoint=checkpoint, progress=progress)
+                                      group=group_y, excluded=off_fibre, free=free, checkpoint=checkpoint, progress=progress)
     W = witnesses.roots
     paths = witnesses.paths
-    # Q_0 is {a . x = 1} u {lam = 0}: the loops also reach points of the lam = 0 component (F(x; p) = 0, the
-    # roots' own; 10r/4s: all 6148 among 142,063 points). They are R's, summed once with R; one R lacks would
-    # make R incomplete, and the trace then fails (R u W is short of the fibre).
+    # the graph keeps no point of the lam = 0 component (F(x; p) = 0, the roots' own; the 10r/4s loops, which
+    # kept them, reached all 6148 among 142,063 points); any that come back are R's, summed once with R, and
+    # one that R lacks makes R incomplete: said, and the trace then fails
     lam0 = np.abs(W[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(W[:, :N], axis=1))
     if lam0.any():
         extra = len(md.add_new(base, W[lam0])) - K
@@ -254,14 +307,14 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     ends, _ = system.track(Q0[None], targets, np.tile(S, (2, 1)), inst)
     paths += 2 * M
     ends = ends.reshape(2, M, -1)
-    failed = np.array([_failed(system, targets[b], ends[b], on_locus) for b in range(2)])
+    failed = np.array([_failed(system, targets[b], ends[b], on_locus, group=group_y) for b in range(2)])
     bi, ki = np.nonzero(failed)
     if len(bi):  # retrack with tight step control
         ends[bi, ki], _ = system.track(Q0[None], targets, S[ki], bi, tracker.TIGHT)
         paths += len(bi)
-        failed = np.array([_failed(system, targets[b], ends[b], on_locus) for b in range(2)])
-        paths += _detours(system, Q0, targets, S, ends, failed, on_locus)
-        paths += _continuation(system, Q0, targets, S, ends, failed, on_locus)
+        failed = np.array([_failed(system, targets[b], ends[b], on_locus, group=group_y) for b in range(2)])
+        paths += _detours(system, Q0, targets, S, ends, failed, on_locus, group=group_y)
+        paths += _continuation(system, Q0, targets, S, ends, failed, on_locus, group=group_y)
     flat = ends.reshape(2 * M, -1)
     ok = np.all(np.isfinite(flat), axis=1)
     flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
@@ -269,11 +322,13 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     n_failed = int(failed.sum())
     sets = [S, ends[0], ends[1]]
     keep = np.append(used, True)  # the pencil's coordinates and lam
+    # each orbit counts with its size (all |G| for a free action); the invariant coordinates are one orbit's
+    weight = _orbit_sizes(S, group_y)[:, None]
     # each point's accuracy: its next Newton step (rounding level times its condition); the traces' own error
     # is at most their sum, which the fit's residual cannot be expected to beat
-    noise = [np.abs(system.newton(s_, q[None]) - s_)[:, keep] if not n_failed else np.zeros((0, keep.sum()))
-             for s_, q in zip(sets, [Q0, *targets])]
-    sets = [s_[:, keep] for s_ in sets]
+    noise = [weight * np.abs(system.image(system.newton(s_, q[None])) - system.image(s_))[:, keep]
+             if not n_failed else np.zeros((0, keep.sum())) for s_, q in zip(sets, [Q0, *targets])]
+    sets = [weight * system.image(s_)[:, keep] for s_ in sets]
     traces = np.array([s_.sum(axis=0) for s_ in sets])
     size = max(float(np.linalg.norm(s_, axis=1).sum()) for s_ in sets) if not n_failed else 1.0
     residual = _affine_residual(traces, ts, size) if not n_failed else float("nan")
@@ -289,12 +344,22 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
                      round(time.perf_counter() - t_start, 1), n_failed, floor)
 
 
+def _orbit_sizes(points: np.ndarray, group: np.ndarray | None) -> np.ndarray:
+    """The size of each point's orbit under the sign group (1 without one): |G| over the number of elements that
+    fix the point (within :data:`graph.SAME`)."""
+    if group is None:
+        return np.ones(len(points))
+    tol = graph.SAME * (1.0 + np.linalg.norm(points, axis=1))
+    fixing = sum((np.linalg.norm(points - g * points, axis=1) <= tol).astype(int) for g in group)
+    return len(group) / fixing
+
+
 def _failed(system: TraceSystem, target: np.ndarray, ends: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray],
-            others: np.ndarray | None = None) -> np.ndarray:
+            others: np.ndarray | None = None, group: np.ndarray | None = None) -> np.ndarray:
     """Mask of the endpoints (M, N + 1) at ``target`` that are not a point of the fibre C n Q_t: not finite, on
     the excluded locus (a path that slid onto the spurious det H = 0 component: 10r/4s, 3 of 284,128 tracks),
     not converged (the next Newton step after two still above WITNESS_TOL), or on another endpoint's point
-    (among ``ends`` and ``others``)."""
+    (among ``ends`` and ``others``; with ``group``, on an image of one: two representatives of one orbit)."""
     bad = ~np.all(np.isfinite(ends), axis=1)
     idx = np.flatnonzero(~bad)
     if len(idx):
@@ -302,13 +367,13 @@ def _failed(system: TraceSystem, target: np.ndarray, ends: np.ndarray, on_locus:
             y = system.newton(ends[idx], target[None], steps=2)
         bad[idx] |= ~(system.step(y, target) <= WITNESS_TOL) | on_locus(y)
     pool = ends if others is None else np.vstack([others, ends])
-    bad |= tk._duplicated(pool)[len(pool) - len(ends):]
+    bad |= tk._duplicated(pool, group=group)[len(pool) - len(ends):]
     return bad
 
 
 def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
              failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray],
-             bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6)) -> int:
+             bumps: tuple[float, ...] = (0.1, -0.1, 0.3, -0.3, 0.6, -0.6), group: np.ndarray | None = None) -> int:
     """Retrack the failed paths (2, M) of ``ends`` (2, M, N + 1) around the straight segment 0 -> t_b (tight step
     control), in place; returns the paths tracked.
 
@@ -332,7 +397,7 @@ def _detours(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.nda
             if ok.any():
                 z[ok], _ = system.track(mids, targets, y[ok], bi[ok], tracker.TIGHT)
         paths += len(bi) + int(ok.sum())
-        _keep(system, targets, ends, failed, bi, ki, z, on_locus)
+        _keep(system, targets, ends, failed, bi, ki, z, on_locus, group)
     return paths
 
 
@@ -344,19 +409,20 @@ def _midpoints(targets: np.ndarray, bump: float) -> np.ndarray:
 
 
 def _keep(system: TraceSystem, targets: np.ndarray, ends: np.ndarray, failed: np.ndarray, bi: np.ndarray,
-          ki: np.ndarray, z: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray]) -> None:
+          ki: np.ndarray, z: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray],
+          group: np.ndarray | None = None) -> None:
     """Retracked endpoints z of the failed paths (bi, ki) replace them in ``ends`` where they pass
     :func:`_failed` against the good endpoints and each other (in place)."""
     for b in range(2):
         rows = np.flatnonzero(bi == b)
-        take = rows[~_failed(system, targets[b], z[rows], on_locus, ends[b][~failed[b]])]
+        take = rows[~_failed(system, targets[b], z[rows], on_locus, ends[b][~failed[b]], group)]
         ends[b, ki[take]] = z[take]
         failed[b, ki[take]] = False
 
 
 def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
                   failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray], n: int = 2000,
-                  bumps: tuple[float | None, ...] = (None, 0.3, -0.3)) -> int:
+                  bumps: tuple[float | None, ...] = (None, 0.3, -0.3), group: np.ndarray | None = None) -> int:
     """The paths still failed after :func:`_detours`, followed by natural-parameter continuation instead: t
     moved to t_b in n equal steps, four Newton steps at each (no predictor, no step control), on the straight
     segment and then, for those still failed, through the midpoint pushed sideways by each bump (as the
@@ -378,13 +444,13 @@ def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: n
                 for j in range(1, n + 1):
                     y = system.newton(y, a + (b - a) * (j / n), steps=4, inst=bi)
         paths += len(bi)
-        _keep(system, targets, ends, failed, bi, ki, y, on_locus)
+        _keep(system, targets, ends, failed, bi, ki, y, on_locus, group)
     return paths
 
 
 def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.ndarray, np.ndarray],
                       options: TraceOptions = TraceOptions(), checkpoint: str | None = None,
-                      progress: Callable[[str], None] | None = None) -> TraceTest:
+                      progress: Callable[[str], None] | None = None, group: np.ndarray | None = None) -> TraceTest:
     """:func:`trace_test` of a formulation's :class:`analysis.formulations.parametric.ParametricSystem` (its
     equations written from the formulas, :func:`slp.system_equations`, or a user's system's expanded ones; its
     non-vanishing conditions excluded)."""
@@ -397,7 +463,7 @@ def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.
     if list(unknowns) != list(system.unknowns) or list(parameters) != list(system.parameters):
         raise ValueError(f"{system.name}: the program's unknowns or parameters differ from the system's")
     return trace_test(equations, unknowns, parameters, p, roots, other, options,
-                      md._excluded(system, p, rel=LOCUS_REL), checkpoint, progress)
+                      md._excluded(system, p, rel=LOCUS_REL), checkpoint, progress, group)
 
 
 def load_record(path: str) -> dict | None:
