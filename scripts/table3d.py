@@ -101,7 +101,8 @@ def monodromy_evidence() -> tuple[dict[tuple[str, int, int, int], str], str]:
 
 def count_text(row: dict) -> str:
     """One cell's text from its row of monodromy3d.csv, the evidence in words (STYLE.md, habit 16):
-    "N (proven; complete by trace test, residual r)": every solution proven, the trace test passed;
+    "N (proven; [k seeds equal as sets; ]complete by trace test, residual r)": every solution proven, the trace
+    test passed (and the seeds' graphs closed on equal sets);
     "N (proven; k seeds equal as sets)": every solution proven, every seed's graph closed and their sets equal,
     no trace test passed (N is then a proven lower bound that two seeds reach);
     ">=N (proven lower bound; ...)": every solution proven, but a graph did not close, one seed ran, or a carried
@@ -114,7 +115,8 @@ def count_text(row: dict) -> str:
     if proven < n:
         return f">={n} (lower bound, numerical)"
     if row["trace_test"] == "passed":
-        return f"{n} (proven; complete by trace test, residual {row['trace_residual']})"
+        both = f"{seeds} seeds equal as sets; " if closed and equal else ""
+        return f"{n} (proven; {both}complete by trace test, residual {row['trace_residual']})"
     if closed and equal:
         return f"{n} (proven; {seeds} seeds equal as sets)"
     if not closed:

@@ -372,15 +372,20 @@ def _cluster(options: CountOptions, system: ParametricSystem, q0: np.ndarray, gr
         return None
     from .continuation.dask_tracks import DaskSystem
 
+    source, saturate = _source(system)
+    return DaskSystem(options.dask, solver, source, saturate, q0, solver.x0, chunk=options.dask_chunk)
+
+
+def _source(system: ParametricSystem) -> tuple[str, bool]:
+    """How a system travels to Dask workers: (a formulation label or the system's text, det H saturated)."""
     try:
         config = Formulation.parse(system.name).config
-        source, saturate = system.name, config.parametrization != "direct"
+        return system.name, config.parametrization != "direct"
     except Exception:  # a user's system travels as its text
         if system.definitions:
             raise ValueError(f"{system.name}: a system with definitions cannot be sent to Dask workers as text; "
                              "count it without --dask") from None
-        source, saturate = system.text(), False
-    return DaskSystem(options.dask, solver, source, saturate, q0, solver.x0, chunk=options.dask_chunk)
+        return system.text(), False
 
 
 def _count(target, options: CountOptions, say, notes: list[str], runs: list, known: list, clusters: list,
@@ -474,6 +479,11 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
            say: Callable[[str], None]) -> dict:
     """The trace test's record on the first seed's solutions (with a group, on the orbits: invariant coordinates)."""
     _, q_star, x_star, _ = _start(target, options.seeds[0] + 1000)
+    stand_in = None
+    if options.dask:
+        from .continuation.dask_tracks import trace_stand_in
+
+        stand_in = trace_stand_in(options.dask, *_source(system), chunk=options.dask_chunk)
     # the compaction formulations' pencil on b alone: b goes to infinity wherever a root escapes (no base point on
     # the curve), and it has fewer witnesses than all unknowns (2D 9r/3s: 1290 against 2045 for 75 roots)
     b = tuple(k for k, u in enumerate(system.unknowns) if re.fullmatch(r"b\d", u))
@@ -481,7 +491,7 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
                                        trace_mod.TraceOptions(seed=options.seeds[0], step=options.trace_step,
                                                               coordinates=b or None),
                                        checkpoint=_checkpoint(options, system, options.seeds[0], "witnesses"), progress=say,
-                                       group=group)
+                                       group=group, dask=stand_in)
     return test.record()
 
 

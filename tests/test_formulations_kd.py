@@ -411,7 +411,9 @@ def test_table3d_count_evidence_rules():
         return {"solutions": str(n), "proven": str(n if proven is None else proven), "seeds": "0 1", "graphs": graphs,
                 "seed_sets": sets, "trace_test": trace, "trace_residual": residual}
 
-    assert text(row(6148, trace="passed", residual="3e-12")) == "6148 (proven; complete by trace test, residual 3e-12)"
+    assert text(row(6148, trace="passed", residual="3e-12")) == "6148 (proven; 2 seeds equal as sets; complete by trace test, residual 3e-12)"
+    assert text(row(6148, sets="not equal: 1 paths lost", trace="passed", residual="3e-12")) == \
+        "6148 (proven; complete by trace test, residual 3e-12)"
     assert text(row(2321)) == "2321 (proven; 2 seeds equal as sets)"
     assert text(row(3920, graphs="closed; not closed (2 tracks open)")) == ">=3920 (proven lower bound; graphs not all closed)"
     assert text(row(3920, sets="not equal: 1 land outside the set")) == ">=3920 (proven lower bound; seed sets: 1 land outside the set)"

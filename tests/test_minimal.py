@@ -281,3 +281,27 @@ def test_a_monodromy_graph_on_a_dask_cluster_gives_the_same_count():
     assert np.array_equal(there.roots, here.roots)
     with pytest.raises(ValueError, match="--dask"):
         dask_tracks.DaskSystem("tcp://127.0.0.1:1", solver, label, False, F.ravel(), x0)
+
+
+def test_the_trace_tests_witness_graph_on_a_dask_cluster_gives_the_same_test():
+    """The trace test's witnesses (the bulk of its paths) tracked on a Dask cluster's workers, which build the same
+    trace system from the formulation's label: the same witnesses, paths and residual as in one process (2D TOA
+    3r/3s direct, on its 8 orbits)."""
+    pytest.importorskip("dask.distributed", reason="pip install -e '.[dev]' installs dask[distributed]")
+    from dask.distributed import Client, LocalCluster
+
+    from solvers import count as counting
+    from solvers.continuation import dask_tracks, graph, trace
+
+    label = "3r3s-toa2d-direct:all"
+    system, q0, x0, group = counting._start(label, 0)
+    solver, x0 = md.start_solver(system, q0, x0, 0)
+    roots = graph.graph_monodromy(solver, q0, x0, graph.GraphOptions(), group=group, excluded=md._excluded(system, q0)).roots
+    _, qs, xs, _ = counting._start(label, 1000)
+    here = trace.trace_test_system(system, q0, roots, (qs, xs), group=group)
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
+        with Client(cluster) as client:
+            there = trace.trace_test_system(system, q0, roots, (qs, xs), group=group,
+                                            dask=dask_tracks.trace_stand_in(client, label, False, chunk=7))
+    assert here.status == there.status == "passed"
+    assert (there.witnesses, there.paths, there.residual) == (here.witnesses, here.paths, here.residual)

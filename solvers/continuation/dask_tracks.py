@@ -27,7 +27,7 @@ from .monodromy import start_solver
 from .tracker import TrackerOptions
 from .tracking import evaluator_for
 
-__all__ = ["DaskSystem", "track_chunk"]
+__all__ = ["DaskSystem", "track_chunk", "track_trace_chunk", "trace_stand_in"]
 
 #: Start solvers built on this worker, by (source, saturate, q0, x0) bytes.
 _SOLVERS: dict = {}
@@ -55,14 +55,42 @@ def track_chunk(source: str, saturate: bool, q0: np.ndarray, x0: np.ndarray, qa:
     return _solver(source, saturate, q0, x0).track(qa, qb, xs, inst, TrackerOptions(**options))
 
 
+def _trace_system(source: str, saturate: bool, square: tuple[bool, ...]):
+    key = ("trace", source, saturate, square)
+    if key not in _SOLVERS:
+        _SOLVERS.clear()
+        from . import trace  # here: trace imports the graph, the graph nothing of this module
+
+        _SOLVERS[key] = trace.TraceSystem(*trace.system_equations(_system(source, saturate)), square)
+    return _SOLVERS[key]
+
+
+def track_trace_chunk(source: str, saturate: bool, square: tuple[bool, ...], qa: np.ndarray, qb: np.ndarray,
+                      xs: np.ndarray, inst: np.ndarray, options: dict) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`track_chunk` for the trace test's system of ``source`` (:class:`.trace.TraceSystem`, its pencil
+    squaring the coordinates ``square`` flags)."""
+    return _trace_system(source, saturate, square).track(qa, qb, xs, inst, TrackerOptions(**options))
+
+
+def trace_stand_in(address, source: str, saturate: bool, chunk: int = 2000):
+    """For :func:`.trace.trace_test`'s ``dask``: a function of the local TraceSystem that returns its DaskSystem
+    (the workers build the same trace system from ``source``)."""
+
+    def make(system) -> "DaskSystem":
+        return DaskSystem(address, system, source, saturate, None, None, chunk, square=tuple(system.square.tolist()))
+
+    return make
+
+
 class DaskSystem:
     """The graph's system with its tracking on a Dask cluster (module docstring). ``solver``: the local start
     solver (Newton steps, options); ``source``: the system as text (a formulation label or a system file's text);
+    ``square``: given, the workers track the trace test's system of ``source`` with this pencil (q0, x0 unused);
     ``address``: a scheduler address, ``"local"``, or a ``dask.distributed.Client`` already connected (then not
     closed here). Use as a context manager, or call :meth:`close`; a bad address raises ValueError in one line."""
 
-    def __init__(self, address, solver, source: str, saturate: bool, q0: np.ndarray, x0: np.ndarray,
-                 chunk: int = 2000, workers: int | None = None):
+    def __init__(self, address, solver, source: str, saturate: bool, q0: np.ndarray | None, x0: np.ndarray | None,
+                 chunk: int = 2000, workers: int | None = None, square: tuple[bool, ...] | None = None):
         workers = workers or os.cpu_count() or 1
         if chunk < 1 or workers < 1:
             raise ValueError(f"chunk and workers must be at least 1, got {chunk} and {workers}")
@@ -73,7 +101,9 @@ class DaskSystem:
                              f"(or pip install 'dask[distributed]'); import failed: {e}") from None
         self.solver, self.source, self.saturate, self.chunk = solver, source, saturate, chunk
         self.options = solver.options
-        self.q0, self.x0 = np.asarray(q0, dtype=complex), np.atleast_2d(np.asarray(x0, dtype=complex))
+        self.square = square  # the trace test's system (track_trace_chunk), else the start solver's
+        self.q0 = None if q0 is None else np.asarray(q0, dtype=complex)
+        self.x0 = None if x0 is None else np.atleast_2d(np.asarray(x0, dtype=complex))
         self.cluster, self.owned = None, True
         if not isinstance(address, str):
             self.client, self.owned = address, False
@@ -101,8 +131,10 @@ class DaskSystem:
         if len(qb) == 1 and len(qa) > 1:
             qb = np.repeat(qb, len(qa), axis=0)
         opts = dataclasses.asdict(options or self.options)
-        futures = [self.client.submit(track_chunk, self.source, self.saturate, self.q0, self.x0, qa, qb,
-                                      x0[i:i + self.chunk], inst[i:i + self.chunk], opts, pure=False)
+        task, args = ((track_chunk, (self.source, self.saturate, self.q0, self.x0)) if self.square is None else
+                      (track_trace_chunk, (self.source, self.saturate, self.square)))
+        futures = [self.client.submit(task, *args, qa, qb, x0[i:i + self.chunk], inst[i:i + self.chunk], opts,
+                                      pure=False)
                    for i in range(0, len(x0), self.chunk)]
         parts = self.client.gather(futures)
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])

@@ -201,13 +201,15 @@ def _affine_residual(traces: np.ndarray, ts: np.ndarray, size: float) -> float:
 def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], p: np.ndarray, roots: np.ndarray,
                other: tuple[np.ndarray, np.ndarray], options: TraceOptions = TraceOptions(),
                excluded: Callable | None = None, checkpoint: str | None = None,
-               progress: Callable[[str], None] | None = None, group: np.ndarray | None = None) -> TraceTest:
+               progress: Callable[[str], None] | None = None, group: np.ndarray | None = None,
+               dask: Callable | None = None) -> TraceTest:
     """Trace test of the roots (K, N) of ``equations(x, q)`` at parameters p (P,).
 
     other: a second instance (p*, x*) with a known root (generic, complex); excluded: mask(x, q) of points on
     the locus the roots exclude (:func:`monodromy._excluded`); checkpoint: the witness monodromy's resumable
     file (:func:`monodromy.monodromy_count`); group: sign vectors (G, N) of a group acting on the solutions
-    for every parameter, the roots one per orbit. Returns a :class:`TraceTest`.
+    for every parameter, the roots one per orbit; dask: ``dask(system)`` returns the stand-in that tracks the
+    witness graph's paths on a cluster (None: here). Returns a :class:`TraceTest`.
 
     With a group the test runs on the orbits, never expanding them: the pencil's form and the traces use the
     invariant coordinates m(x) (x_k where every sign is +1, x_k^2 where a sign flips x_k), so Q_t is a union of
@@ -273,9 +275,15 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
             z[slow] = np.where(np.all(np.isfinite(z[slow]), axis=1)[:, None], z[slow], y[slow])
         return out | excluded(z[:, :N], Q[:, :P] + z[:, N:N + 1] * Q[:, P:2 * P])
 
-    witnesses = graph.graph_monodromy(system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed, retries=1,
+    stand_in = dask(system) if dask is not None else None
+    try:
+        witnesses = graph.graph_monodromy(stand_in or system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed, retries=1,
                                                                             accept_tol=WITNESS_TOL, seconds=options.seconds),
-                                      group=group_y, excluded=off_fibre, free=free, checkpoint=checkpoint, progress=progress)
+                                          group=group_y, excluded=off_fibre, free=free, checkpoint=checkpoint,
+                                          progress=progress)
+    finally:
+        if stand_in is not None:
+            stand_in.close()
     W = witnesses.roots
     paths = witnesses.paths
     # the graph keeps no point of the lam = 0 component (F(x; p) = 0, the roots' own; the 10r/4s loops, which
@@ -450,20 +458,30 @@ def _continuation(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: n
 
 def trace_test_system(system, p: np.ndarray, roots: np.ndarray, other: tuple[np.ndarray, np.ndarray],
                       options: TraceOptions = TraceOptions(), checkpoint: str | None = None,
-                      progress: Callable[[str], None] | None = None, group: np.ndarray | None = None) -> TraceTest:
+                      progress: Callable[[str], None] | None = None, group: np.ndarray | None = None,
+                      dask=None) -> TraceTest:
     """:func:`trace_test` of a formulation's :class:`analysis.formulations.parametric.ParametricSystem` (its
     equations written from the formulas, :func:`slp.system_equations`, or a user's system's expanded ones; its
-    non-vanishing conditions excluded)."""
+    non-vanishing conditions excluded). ``dask``: a function of the local :class:`TraceSystem` that returns its
+    stand-in on a cluster (:func:`.dask_tracks.trace_stand_in`), for the witness graph's paths."""
+    equations, unknowns, parameters = system_equations(system)
+    return trace_test(equations, unknowns, parameters, p, roots, other, options,
+                      md._excluded(system, p, rel=LOCUS_REL), checkpoint, progress, group, dask)
+
+
+def system_equations(system) -> tuple[Callable, list[str], list[str]]:
+    """``(equations, unknowns, parameters)`` of a ParametricSystem for :class:`TraceSystem`: a formulation's written
+    from its formulas (:func:`slp.system_equations`), a user's system's expanded ones (its coefficient code traced
+    on program values)."""
     try:
         equations, unknowns, parameters = slp.system_equations(system.name)
-    except ValueError:  # a user's system: its expanded equations (the coefficient code traced on program values)
+    except ValueError:
         exps, eq = tk.structure(system)
         equations = slp.expanded_equations(tk.load_coefficients(tk.coefficient_source(system)), exps, eq)
         unknowns, parameters = list(system.unknowns), list(system.parameters)
     if list(unknowns) != list(system.unknowns) or list(parameters) != list(system.parameters):
         raise ValueError(f"{system.name}: the program's unknowns or parameters differ from the system's")
-    return trace_test(equations, unknowns, parameters, p, roots, other, options,
-                      md._excluded(system, p, rel=LOCUS_REL), checkpoint, progress, group)
+    return equations, list(unknowns), list(parameters)
 
 
 def load_record(path: str) -> dict | None:
