@@ -21,6 +21,7 @@ stderr with exit status 2; a disagreement between primes exits with status 3.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -873,13 +874,17 @@ def cmd_generate(args: argparse.Namespace) -> int:
                                 f"`tdoa-workbench degree {target}`")
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
+            counted = _generate_count(args, system, start, progress)
             result = gen.generate(system, args.method, out=args.out, name=name, seed=args.seed, start=start,
                                   command=command, progress=progress, evidence=args.evidence,
-                                  from_monodromy=args.from_monodromy, counted=_generate_count(args, system, start, progress))
+                                  from_monodromy=args.from_monodromy, counted=counted)
         else:
+            counted = _generate_count(args, target, None, progress)
             result = gen.generate(target, args.method, out=args.out, seed=args.seed, command=command,
                                   progress=progress, evidence=args.evidence, from_monodromy=args.from_monodromy,
-                                  counted=_generate_count(args, target, None, progress))
+                                  counted=counted)
+        if counted is not None:  # the count ran before generate: its seconds are the build's too
+            result = dataclasses.replace(result, seconds=result.seconds + counted.seconds)
         print(result.summary())
     except (ParametricError, HomotopyError, ActionMatrixError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None

@@ -456,7 +456,8 @@ def _checked_count(system: ParametricSystem, counted):
         raise GenerationError(f"{system.name}: the count given is of {counted.system}")
     if not all(s.closed and s.carried in ("", "equal as sets") for s in counted.seeds) or not len(counted.roots):
         raise GenerationError(f"{system.name}: the monodromy count is not consistent ({counted.evidence}; "
-                              f"{'; '.join(counted.notes) or counted.loops_checked}); no solver from it")
+                              f"{'; '.join(counted.notes) or counted.loops_checked}); no solver from it (another seed draws other "
+                              "graphs)")
     return counted
 
 

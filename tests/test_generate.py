@@ -106,6 +106,20 @@ def test_a_user_system_builds_and_solves_on_the_compiled_tape_without_numba(tmp_
         assert how.startswith("the tape interpreter (") and how != "the tape interpreter (compiled code unavailable)"
 
 
+def test_cli_generate_on_numerical_evidence_builds_on_the_count(tmp_path, capsys):
+    """generate --evidence monodromy: the CLI counts first (solvers.count, seeds 0 and 1, every solution proven) and
+    the module starts from that set; summary, spec and header say the count's words and that it is not certified."""
+    import json
+
+    code = main(["generate", str(ROOT / "examples" / "two_cubics.sys"), "--out", str(tmp_path), "--evidence", "monodromy"])
+    out = capsys.readouterr().out
+    assert code == 0 and "9 roots by monodromy alone (numerical evidence, not certified)" in out
+    spec = json.loads((tmp_path / "two_cubics_homotopy9.json").read_text())
+    assert "certified" not in spec and spec["evidence"]["seeds"] == [0, 1] and spec["evidence"]["proven"] == 9
+    assert spec["evidence"]["count"] == "at least 9, proven (Krawczyk's test, disjoint boxes)"
+    assert spec["evidence"]["count"] in out and spec["evidence"]["count"] in (tmp_path / "two_cubics_homotopy9.py").read_text()
+
+
 def test_graph_growth_short_of_the_certified_count_is_an_error():
     """A build's graph monodromy (solvers.generate.graph_growth) that cannot reach the count (circle.sys has 4 roots;
     5 asked) fails after its graphs, naming how many it found: a solver never silently misses roots."""
