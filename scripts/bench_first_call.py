@@ -3,7 +3,8 @@ and of a user's own systems: ``generate`` in one new process, then the first ``s
 module in another (issue 46: together <= 10 s; the solve <= 1 s once the caches are warm).
 
 Each case runs in a new Python process whose caches are empty temporary directories
-(``TDOA_WORKBENCH_CACHE``: the tapes' C libraries; ``NUMBA_CACHE_DIR``: numba's compiled functions), so
+(``TDOA_WORKBENCH_CACHE``: the tapes' C libraries; ``NUMBA_CACHE_DIR``: numba's compiled functions;
+``XDG_CACHE_HOME``: where the F4 kernels go when the source tree is read-only), so
 it pays everything a new machine, container or CI run pays: imports, compiling, the first call, then a
 second call (the steady state) for comparison. (Neither call loads the F4 kernels, whose library sits in
 ``analysis/__pycache__``, nor any numba function: checked in a fresh process.) Every phase's
@@ -12,12 +13,14 @@ the run, not results): wall seconds, and CPU seconds of the process and the comp
 loaded machine the wall time stretches; the CPU time is what the work costs). Target (issue 34): first
 call <= 3 s.
 
-    python scripts/bench_first_call.py [--repeat 2] [--native on|off] [--cases all|committed|user]
+    python scripts/bench_first_call.py [--repeat 2] [--native on|off] [--cases all|committed|user] [--clone]
 
 ``--native off`` sets ``TDOA_WORKBENCH_NATIVE=off`` (no C compiler: the numba kernels only). The user
 systems (:data:`USER_SYSTEMS`: examples/circle.sys and two more) share one fresh cache between their two
 processes (the second process finds what the first compiled, as a user's machine would); their third
-phase, a second process's solve with every cache warm, is the steady state.
+phase, a second process's solve with every cache warm, is the steady state. ``--clone``: the user systems run
+the code of a fresh ``git clone`` of HEAD, so that ``generate`` also compiles the F4 kernels (a new checkout has
+none in its ``analysis/engine/__pycache__``).
 """
 from __future__ import annotations
 
@@ -79,13 +82,12 @@ phases([t0, t1, t2, t3], ["import", "first call", "second call"], [first.status,
 }
 
 
-#: A user's own systems (name -> (system text, parameter values of the instance solved, monodromy seed; conics:
-#: seed 0's monodromy finds 3 of the 4 roots in 34 loops, generate says so and stops, seed 1 finds all 4)).
+#: A user's own systems in examples/ (name -> (parameter values of the instance solved, monodromy seed)): 4, 9 and
+#: 27 roots.
 USER_SYSTEMS = {
-    "circle.sys": ((ROOT / "examples" / "circle.sys").read_text(), [5.0, 1.0, 1.5], 0),
-    "conics.sys": ("unknowns: x, y\nparameters: a, b\nequations:\nx^2 + y - a\ny^2 - b*x - 1\n", [2.0, 0.5], 1),
-    "sphere.sys": ("unknowns: x, y, z\nparameters: a, b, c\nequations:\nx^2 + y^2 + z^2 - a\nx*y - b\n"
-                   "x + y + z - c\n", [3.0, 0.4, 1.2], 0),
+    "circle.sys": ([5.0, 1.0, 1.5], 0),
+    "two_cubics.sys": ([0.5, 1.0, -0.7, 0.3], 0),
+    "three_cubics.sys": ([0.5, 1.0, -0.7, 0.3, 1.1, -0.4], 0),
 }
 
 #: generate into ./gen (a new process); the module's solve (the next process, twice: first and steady state).
@@ -117,9 +119,10 @@ phases([t0, t1, t2, t3], ["import", "first solve", "second solve"], [int(np.isfi
 """
 
 
-def _env(tmp: str, native: str) -> dict:
+def _env(tmp: str, native: str, root: Path = ROOT) -> dict:
     env = dict(os.environ, TDOA_WORKBENCH_CACHE=str(Path(tmp) / "cache"), NUMBA_CACHE_DIR=str(Path(tmp) / "numba"),
-               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
+               XDG_CACHE_HOME=str(Path(tmp) / "xdg"),
+               PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
     if native == "off":
         env["TDOA_WORKBENCH_NATIVE"] = "off"
     return env
@@ -144,13 +147,18 @@ def run_case(program: str, native: str) -> dict:
         return _child([program], tmp, _env(tmp, native))
 
 
-def run_user_case(name: str, native: str) -> dict:
+def run_user_case(name: str, native: str, clone: bool = False) -> dict:
     """A user's system in a fresh environment: ``generate`` in a new process, then the generated module's first
-    solve in another (the same caches), then a third process's solve (every cache warm)."""
-    text, values, seed = USER_SYSTEMS[name]
+    solve in another (the same caches), then a third process's solve (every cache warm). ``clone``: the code of a
+    fresh ``git clone`` of HEAD (no compiled F4 kernels in its analysis/engine/__pycache__, as a new checkout)."""
+    values, seed = USER_SYSTEMS[name]
     with tempfile.TemporaryDirectory(prefix="first-call-") as tmp:
-        env = _env(tmp, native)
-        Path(tmp, name).write_text(text)
+        root = ROOT
+        if clone:
+            root = Path(tmp) / "clone"
+            subprocess.run(["git", "clone", "-q", str(ROOT), str(root)], check=True)
+        env = _env(tmp, native, root)
+        Path(tmp, name).write_text((ROOT / "examples" / name).read_text())
         gen = _child([GENERATE, name, str(seed)], tmp, env)
         first = _child([SOLVE, json.dumps(values)], tmp, env)
         warm = _child([SOLVE, json.dumps(values)], tmp, env)
@@ -169,18 +177,21 @@ def main(argv: list[str] | None = None) -> int:
                         help="off: TDOA_WORKBENCH_NATIVE=off (the fallback without a C compiler)")
     parser.add_argument("--cases", choices=("all", "committed", "user"), default="all",
                         help="the committed solvers' cases, the user systems', or both (default)")
+    parser.add_argument("--clone", action="store_true",
+                        help="user systems: run the code of a fresh git clone of HEAD (its F4 kernels compiled too)")
     args = parser.parse_args(argv)
     cases = {**({name: (run_case, program) for name, program in CHILD.items()} if args.cases != "user" else {}),
              **({f"user {name}": (run_user_case, name) for name in USER_SYSTEMS} if args.cases != "committed" else {})}
     runs: dict[str, list[dict]] = {name: [] for name in cases}
     for k in range(args.repeat):
         for name, (run, what) in cases.items():  # interleaved: a slow phase of the machine hits every case
-            record = run(what, args.native)
+            record = run(what, args.native, args.clone) if run is run_user_case else run(what, args.native)
             runs[name].append(record)
             print(f"{name} (run {k + 1}, native {args.native}): " + ", ".join(
                 f"{key} {value:.2f} s" for key, value in record.items() if isinstance(value, float))
                 + f"; results {record['results']}; load average {os.getloadavg()[0]:.1f}", flush=True)
-    OUT.write_text(json.dumps({"native": args.native, "runs": runs}, indent=2) + "\n", encoding="utf-8")
+    OUT.write_text(json.dumps({"native": args.native, "clone": args.clone, "runs": runs}, indent=2) + "\n",
+                   encoding="utf-8")
     print(f"wrote {OUT.relative_to(ROOT)}")
     return 0
 

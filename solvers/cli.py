@@ -21,6 +21,7 @@ stderr with exit status 2; a disagreement between primes exits with status 3.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -783,8 +784,9 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
                    "GF(p) and an eigensolve, docs/action-matrix.md)")
     p.add_argument("--evidence", choices=("gf", "monodromy"), default="gf",
                    help="gf (default): certify the root count over GF(p) first; monodromy: numerical evidence "
-                   "alone (loops until many find no new root), for systems F4 cannot count; the spec and the "
-                   "module's header say the count is not certified")
+                   "alone, for systems F4 cannot count: the solutions of `count` (graphs on seeds SEED and SEED+1, "
+                   "every solution proven; refused unless the graphs closed and the sets are equal); the spec and the "
+                   "module's header give its evidence and say the count is not certified")
     p.add_argument("--from-monodromy", metavar="CHECKPOINT",
                    help="start from the roots of a settled monodromy count (a checkpoint of scripts/monodromy_counts.py "
                    "for the same system) instead of growing them again; each root is checked to satisfy the system at "
@@ -872,18 +874,33 @@ def cmd_generate(args: argparse.Namespace) -> int:
                                 f"`tdoa-workbench degree {target}`")
             name = re.sub(r"\W+", "_", os.path.splitext(os.path.basename(target))[0])
             start = _read_start(args.start, system) if args.start else None
+            counted = _generate_count(args, system, start, progress)
             result = gen.generate(system, args.method, out=args.out, name=name, seed=args.seed, start=start,
                                   command=command, progress=progress, evidence=args.evidence,
-                                  from_monodromy=args.from_monodromy)
+                                  from_monodromy=args.from_monodromy, counted=counted)
         else:
+            counted = _generate_count(args, target, None, progress)
             result = gen.generate(target, args.method, out=args.out, seed=args.seed, command=command,
-                                  progress=progress, evidence=args.evidence, from_monodromy=args.from_monodromy)
+                                  progress=progress, evidence=args.evidence, from_monodromy=args.from_monodromy,
+                                  counted=counted)
+        if counted is not None:  # the count ran before generate: its seconds are the build's too
+            result = dataclasses.replace(result, seconds=result.seconds + counted.seconds)
         print(result.summary())
     except (ParametricError, HomotopyError, ActionMatrixError, gen.GenerationError) as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"{args.out}: {exc.strerror or exc}") from None
     return 0
+
+
+def _generate_count(args: argparse.Namespace, target, start, progress):
+    """generate --evidence monodromy (without --from-monodromy): the count of solvers.count (seeds SEED and SEED + 1,
+    every solution proven) the solver is built from; None otherwise."""
+    if args.evidence != "monodromy" or args.from_monodromy:
+        return None
+    from solvers.count import CountOptions, count
+
+    return count(target, CountOptions(seeds=(args.seed, args.seed + 1)), progress=progress, start=start)
 
 
 def _add_count(sub: argparse._SubParsersAction) -> None:

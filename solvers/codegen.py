@@ -288,6 +288,9 @@ def _homotopy_parts(spec: dict) -> ModuleParts:
                      if "evidence" not in spec else
                      (f"The {paths} roots of a generic complex start instance (NOT certified over GF(p): numerical\n"
                       f"evidence alone, monodromy until {spec['evidence']['stall_loops']} loops found no new root) are "
+                      f"tracked to the {data}\nby {by}.{tracked}") if "stall_loops" in spec["evidence"] else
+                     (f"The {paths} roots of a generic complex start instance (NOT certified over GF(p): numerical\n"
+                      f"evidence, monodromy on complete graphs by solvers.count:\n{spec['evidence']['count']}) are "
                       f"tracked to the {data}\nby {by}.{tracked}")),
         rows=paths, pshape=pshape, config=tuple(config) if config else None,
         imports="import os\n\nimport numpy as np\n\nfrom solvers.methods import homotopy as _method",

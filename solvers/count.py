@@ -39,7 +39,7 @@ from analysis.formulations.tdoa import Formulation
 from .continuation import certify as certify_mod
 from .continuation import graph, monodromy, tape_kernel, tracker
 from .continuation import trace as trace_mod
-from .continuation.tracking import (HomotopyError, _duplicated, coefficient_source, evaluator_for,
+from .continuation.tracking import (HomotopyError, _duplicated, _expanded, coefficient_source, evaluator_for,
                                     load_coefficients, structure)
 from .generate import GenerationError, SOLVERS, _job
 
@@ -133,9 +133,14 @@ class CountResult:
     seconds: float
     certify_seconds: float = 0.0
     notes: tuple[str, ...] = field(default=())
+    # the first seed's parameters, its solutions there and the group (sign vectors) they are orbits of: what a
+    # solver is built from (solvers.generate, evidence "monodromy"); not part of the record
+    q0: np.ndarray | None = field(default=None, repr=False, compare=False)
+    roots: np.ndarray | None = field(default=None, repr=False, compare=False)
+    group: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def record(self) -> dict:
-        out = dataclasses.asdict(self)
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("q0", "roots", "group")}
         out["seeds"] = [dataclasses.asdict(s) for s in self.seeds]
         return out
 
@@ -177,12 +182,9 @@ def _gauss_newton_start(system: ParametricSystem, coefficients: Callable, rng: n
     exps, eq = structure(system)
     N, P = len(system.unknowns), len(system.parameters)
     x0 = rng.normal(size=N) + 1j * rng.normal(size=N)
-    mons = np.prod(x0[None, :] ** exps, axis=1)
 
     def f(q: np.ndarray) -> np.ndarray:
-        out = np.zeros(N, dtype=complex)
-        np.add.at(out, eq, coefficients(q[None])[0] * mons)
-        return out
+        return _expanded(coefficients, exps, eq, N, x0[None], q)[0][0]
 
     for attempt in range(10):
         q = rng.normal(size=P) + 1j * rng.normal(size=P)
@@ -463,7 +465,7 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
         notes.append(f"graphs closed on {len(options.seeds)} seeds, their sets equal")
     return CountResult(system.name, len(system.unknowns), len(system.parameters), 1 if group is None else len(group),
                        len(roots), evidence, proven, tuple(seeds), loops_checked, trace_record,
-                       round(time.perf_counter() - t0, 1), round(cert_seconds, 1), tuple(notes))
+                       round(time.perf_counter() - t0, 1), round(cert_seconds, 1), tuple(notes), q0, roots, group)
 
 
 def _checkpoint(options: CountOptions, system: ParametricSystem, seed: int, what: str) -> str | None:

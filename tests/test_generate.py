@@ -68,6 +68,76 @@ def test_generate_file_writes_only_into_out_and_the_module_solves(tmp_path, monk
     assert (tmp_path / "gen" / "circle_homotopy4.py").read_text() == text
 
 
+def test_a_user_system_builds_and_solves_on_the_compiled_tape_without_numba(tmp_path, monkeypatch):
+    """examples/two_cubics.sys (9 roots certified; the loops q0 -> qa -> qb -> q0 stopped at 8): generate grows the
+    count by graph monodromy, and neither the build nor the module's first solve runs numba (the monomial tracker's
+    evaluate and track are never called; no numba function is compiled or loaded in this process): the module
+    tracks on its tapes' compiled C where a C compiler is present, else its tracker says why not."""
+    import shutil
+
+    import numba.core.dispatcher
+
+    from analysis.engine.native import disabled
+    from analysis.formulations.systemfile import read_system_file
+    from solvers.continuation import tape_native, tracker
+    from solvers.generate import generate
+
+    compiler = not disabled() and (os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc"))
+    if compiler:
+        def numba_called(*args, **kwargs):
+            raise AssertionError("a numba function ran for a user's system")
+
+        monkeypatch.setattr(numba.core.dispatcher.Dispatcher, "_compile_for_args", numba_called)
+        monkeypatch.setattr(tracker, "evaluate", numba_called)
+        monkeypatch.setattr(tracker, "track", numba_called)
+    built = generate(read_system_file(str(ROOT / "examples" / "two_cubics.sys")), out=str(tmp_path), name="two_cubics")
+    assert built.degree == built.candidates == 9 and built.report["graphs"] >= 1
+    module = _load(Path(built.module))
+    # a seeded real instance with a known root (x, y): b and d solved from the equations
+    x, y, a, c = np.random.default_rng(11).normal(size=4)
+    q = np.array([a, x ** 3 + y ** 2 - a * x * y, c, (y ** 3 - x ** 2 + c * x - 1) / y])
+    roots = module.solve(q)
+    assert roots.shape == (9, 2)
+    assert np.min(np.linalg.norm(roots - [x, y], axis=1)) < 1e-10 * (1 + np.hypot(x, y))
+    how = tape_native.describe(module.solver().tapes)
+    if compiler:
+        assert how == "compiled straight-line code"
+    else:  # the fallback names its reason
+        assert how.startswith("the tape interpreter (") and how != "the tape interpreter (compiled code unavailable)"
+
+
+def test_cli_generate_on_numerical_evidence_builds_on_the_count(tmp_path, capsys):
+    """generate --evidence monodromy: the CLI counts first (solvers.count, seeds 0 and 1, every solution proven) and
+    the module starts from that set; summary, spec and header say the count's words and that it is not certified."""
+    import json
+
+    code = main(["generate", str(ROOT / "examples" / "two_cubics.sys"), "--out", str(tmp_path), "--evidence", "monodromy"])
+    out = capsys.readouterr().out
+    assert code == 0 and "9 roots by monodromy alone (numerical evidence, not certified)" in out
+    spec = json.loads((tmp_path / "two_cubics_homotopy9.json").read_text())
+    assert "certified" not in spec and spec["evidence"]["seeds"] == [0, 1] and spec["evidence"]["proven"] == 9
+    assert spec["evidence"]["count"] == "at least 9, proven (Krawczyk's test, disjoint boxes)"
+    assert spec["evidence"]["count"] in out and spec["evidence"]["count"] in (tmp_path / "two_cubics_homotopy9.py").read_text()
+
+
+def test_graph_growth_short_of_the_certified_count_is_an_error():
+    """A build's graph monodromy (solvers.generate.graph_growth) that cannot reach the count (circle.sys has 4 roots;
+    5 asked) fails after its graphs, naming how many it found: a solver never silently misses roots."""
+    from analysis.formulations.parametric import parse
+    from solvers.continuation import monodromy
+    from solvers.continuation.tracking import HomotopyError, coefficient_source, evaluator_for, load_coefficients
+    from solvers.generate import GRAPH_ATTEMPTS, graph_growth
+    from solvers.methods.homotopy import affine_start
+
+    system = parse(CIRCLE, "circle")
+    q0, x0 = affine_start(system, load_coefficients(coefficient_source(system)), np.random.default_rng(0))
+    solver, x0 = monodromy.start_solver(system, q0, x0, evaluator=evaluator_for(system.name))
+    roots, record = graph_growth(0)(solver, q0, x0, 4, None, None)
+    assert len(roots) == 4 and record["graphs"] <= GRAPH_ATTEMPTS
+    with pytest.raises(HomotopyError, match=f"found 4 of the certified 5 roots in {GRAPH_ATTEMPTS} graphs"):
+        graph_growth(0)(solver, q0, x0, 5, None, None)
+
+
 def test_generate_configuration_writes_only_into_out(tmp_path, monkeypatch, capsys):
     # the committed pencil solver rebuilt elsewhere: the same spec and module, but for the header's command
     monkeypatch.chdir(tmp_path)

@@ -226,17 +226,28 @@ def test_monodromy_count_resumes_from_its_checkpoint(tmp_path):
 
 
 def test_generate_on_numerical_evidence_alone(tmp_path):
-    """evidence="monodromy": no GF(p) count; the spec says "evidence", not "certified", the header says the
-    count is not certified, and the count found (8) is the certified one."""
+    """evidence="monodromy": no GF(p) count; the solver starts from the solutions of solvers.count (graphs on two
+    seeds, every solution proven); the spec says "evidence", not "certified", with the count's words, the header
+    says the count is not certified and gives them, and the count found (8) is the certified one. Without a count
+    (or with another system's) it is refused."""
     import json
 
-    result = generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="monodromy")
+    from solvers.count import CountOptions, count
+
+    counted = count(SOLVERS["3r3stoa"], CountOptions(seeds=(0, 1)))
+    result = generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="monodromy", counted=counted)
     assert result.degree == 8 and result.evidence == "monodromy"
     spec = json.loads((tmp_path / (result.name + ".json")).read_text())
     assert "certified" not in spec and spec["evidence"]["method"] == "monodromy" and spec["evidence"]["degree"] == 8
-    assert "NOT certified over GF(p)" in (tmp_path / (result.name + ".py")).read_text()
+    assert spec["evidence"]["count"] == counted.evidence == "at least 8, proven (Krawczyk's test, disjoint boxes)"
+    header = (tmp_path / (result.name + ".py")).read_text()
+    assert "NOT certified over GF(p)" in header and counted.evidence in header
     with pytest.raises(GenerationError, match="evidence"):
         generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="guess")
+    with pytest.raises(GenerationError, match="builds on a count"):
+        generate(SOLVERS["3r3stoa"], out=str(tmp_path), evidence="monodromy")
+    with pytest.raises(GenerationError, match="the count given is of"):
+        generate(SOLVERS["6r4s3dtoa"], "homotopy", out=str(tmp_path), counted=counted)
 
 
 def test_monodromy_by_orbits_of_the_direct_parametrization():

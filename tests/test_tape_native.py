@@ -195,3 +195,35 @@ def test_threads_give_the_same_bits(compiled, monkeypatch):
         tape_kernel.threads()
     monkeypatch.delenv(tape_kernel.THREADS_ENV)
     assert tape_kernel.threads() == 1
+
+
+@pytest.mark.skipif(not COMPILED, reason="no C compiler, or TDOA_WORKBENCH_NATIVE=off")
+def test_systems_of_one_size_share_the_lu_and_tracker_object(tmp_path, monkeypatch):
+    """The LU-and-tracker translation unit depends on the number of unknowns alone: a second user's system of 2
+    unknowns compiles only its tapes and links the kept object, and its library's Newton steps (tapes, LU,
+    tracker of that object) converge on a known root."""
+    from analysis.formulations.parametric import parse
+    from solvers.continuation import tracking
+
+    monkeypatch.setenv("TDOA_WORKBENCH_CACHE", str(tmp_path))
+    compiled: list[list[str]] = []
+    run_all = tape_native._run_all
+    monkeypatch.setattr(tape_native, "_run_all", lambda commands: compiled.append(commands) or run_all(commands))
+
+    def tapes(text: str):
+        system = parse(text, "user")
+        exps, eq = tracking.structure(system)
+        spec = {"system": system.name, "unknowns": list(system.unknowns), "parameters": list(system.parameters),
+                "exponents": exps.tolist(), "term_equation": eq.tolist()}
+        return tracking._tapes(spec, tracking.load_coefficients(tracking.coefficient_source(system)), "tape")
+
+    first = tapes("unknowns: x, y\nparameters: a, b\nequations:\nx^2 + y^2 - a\nx*y - b\n")
+    second = tapes("unknowns: x, y\nparameters: a, b, c\nequations:\nx^3 - y - a\nx*y^2 - b*x - c\n")
+    assert tape_native.addresses(first).all()
+    assert len([c for c in compiled[0] if "-c" in c]) == 3 and len(list((tmp_path / "tapes").glob("unit-*.o"))) == 1
+    native = tape_native.addresses(second)
+    assert native.all() and len([c for c in compiled[-2] if "-c" in c]) == tape_native.TAPE_UNITS
+    x, y = 1.3 - 0.2j, -0.7 + 0.4j  # a root of the second system at q
+    q = np.array([[x ** 3 - y, 0.5, x * y * y - 0.5 * x]])
+    start = np.array([[x + 1e-3, y - 2e-3]])
+    np.testing.assert_allclose(tape_kernel.newton(second, q, start, steps=6, native=native)[0], [x, y], atol=1e-13)

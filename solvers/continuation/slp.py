@@ -621,6 +621,9 @@ def system_equations(name: str) -> tuple[Callable[[list[Value], list[Value]], li
     (``4r5s:positions-receivers-orbits``). ValueError for a name of none of these forms or without a
     program. A caller checks the program against the system it stands for (tracking._agrees).
     """
+    if ":" not in name:  # every one of these names has one ("<config>:<equations>"); a user's system ("circle.sys")
+        # is told apart before the formulations and sympy are imported (a generated module's first solve: 0.25 s)
+        raise ValueError(f"{name!r} is not a formulation label ('<config>:<equations>'): no program from formulas")
     from analysis.formulations.tdoa import _family, as_formulation, data_symbols
     from analysis.formulations.parametric import parse_squared_name, square_combinations
     from analysis.formulations.positions import positions_system

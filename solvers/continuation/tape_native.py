@@ -17,7 +17,9 @@ the tracker.
 :func:`tape_kernel.track`, or zeros (the interpreter and numba's tracker run then). The library is
 compiled by the system's C compiler (``$CC``, ``cc`` or ``gcc``) the first time a solver asks, into the
 cache directory (``analysis.sweeps.paths.cache_dir("tapes")``) under a name hashed from the source, the flags
-and the CPU; later calls, and every later process, load it. ``TDOA_WORKBENCH_NATIVE=off`` (as for the F4
+and the CPU; later calls, and every later process, load it. The object of the LU-and-tracker unit, which depends on
+the number of unknowns alone, is kept beside it (``unit-<hash>.o``) and linked into every later library of that
+size, so that a new system compiles only its tapes. ``TDOA_WORKBENCH_NATIVE=off`` (as for the F4
 kernels) or no compiler: the interpreter and numba's tracker only.
 """
 from __future__ import annotations
@@ -622,15 +624,22 @@ def _compile(units: list[str], path: Path) -> None:
                 shutil.rmtree(stale, ignore_errors=True)
         except OSError:
             pass
+    flags = [f for f in FLAGS if f != "-shared"]
     with tempfile.TemporaryDirectory(prefix="build-", dir=path.parent) as tmp:
-        objects = []
+        objects, todo = [], []
         for k, text in enumerate(units):
             (Path(tmp) / f"unit{k}.c").write_text(text, encoding="utf-8")
             objects.append(str(Path(tmp) / f"unit{k}.o"))
-        flags = [f for f in FLAGS if f != "-shared"]
+            # the LU and tracker unit depends on N alone: its object is kept, so that another system of N unknowns
+            # compiles its tapes only (0.34 of 0.45 s of CPU for a user's system of 3 unknowns)
+            kept = path.parent / f"unit-{zlib.crc32((text + ' '.join(flags) + _cpu()).encode()):08x}.o"
+            if k >= TAPE_UNITS and kept.exists():
+                objects[k] = str(kept)
+            else:
+                todo.append((k, kept))
         for extra in (FAST_COMPILE, ()):  # a compiler that refuses the extra flags compiles without them
-            code, why = _run_all([[compiler, *flags, *(extra if k < TAPE_UNITS else ()), "-c", "-o", obj, obj[:-2] + ".c"]
-                                  for k, obj in enumerate(objects)])
+            code, why = _run_all([[compiler, *flags, *(extra if k < TAPE_UNITS else ()), "-c", "-o", objects[k],
+                                   objects[k][:-2] + ".c"] for k, _ in todo])
             if not code:
                 break
         if not code:
@@ -639,6 +648,10 @@ def _compile(units: list[str], path: Path) -> None:
         if code:
             _WHY.append(f"{compiler} failed on a tape: {why or code}")
             return
+        for k, kept in todo:
+            if k >= TAPE_UNITS:  # atomically: a whole object or none
+                shutil.copyfile(objects[k], Path(tmp) / "kept.o")
+                os.replace(Path(tmp) / "kept.o", kept)
         os.replace(so_file, path)
 
 

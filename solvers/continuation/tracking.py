@@ -280,7 +280,8 @@ class HomotopySolver:
     def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
         self.coefficients = coefficients
         self.tapes = _tapes(spec, coefficients, evaluator)
-        self.structure = SystemStructure.from_exponents(np.array(spec["exponents"]), np.array(spec["term_equation"]))
+        self.terms = (np.array(spec["exponents"], dtype=np.int64), np.array(spec["term_equation"], dtype=np.int64))
+        self.structure = SystemStructure.from_exponents(*self.terms)
         self.degree = int(spec["coefficient_degree"])
         self.q0 = _complex_array(spec["start_parameters"])
         roots = spec["start_roots"]
@@ -325,9 +326,16 @@ class HomotopySolver:
         return x
 
     def residual(self, x: np.ndarray, q: np.ndarray, inst: np.ndarray | None = None) -> np.ndarray:
-        G = self.segment(q, q)
-        H, _, _ = tracker.evaluate(self.structure, G, x, np.zeros(len(x)), inst)
-        return np.abs(H).max(axis=1)
+        """Largest |f_e(x)| of each point x (P', N) at parameters q (B, P) (point p at q[inst[p]]), by numpy
+        (:func:`_expanded`): a build's check of its start point compiles no monomial kernel."""
+        x, q = np.atleast_2d(np.asarray(x, dtype=complex)), np.atleast_2d(np.asarray(q, dtype=complex))
+        inst = np.zeros(len(x), dtype=np.int64) if inst is None else np.asarray(inst)
+        out = np.zeros(len(x))
+        for b in np.unique(inst):
+            at = inst == b
+            H, _ = _expanded(self.coefficients, *self.terms, self.nvars, x[at], q[b])
+            out[at] = np.abs(H).max(axis=1)
+        return out
 
     def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
               options: TrackerOptions | None = None, near_end: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -4,9 +4,10 @@ Offline (:func:`build`): from a square :class:`analysis.formulations.parametric.
 1. certify the number of roots at generic parameters over GF(p) (two primes, two seeds);
 2. draw a generic complex start instance q0 with one known root (a complex network, or any system
    whose equations are affine in the parameters: pick x0, solve for q0);
-3. find all roots of q0 by monodromy (:mod:`solvers.continuation.monodromy`: loops q0 -> qa -> qb -> q0
-   in parameter space, every known root tracked around each loop, new endpoints kept) until their
-   number equals the certified count; a run that cannot reach it within its budget is an error naming
+3. find all roots of q0 by monodromy until their number equals the certified count: on complete graphs
+   of parameter nodes when :mod:`solvers.generate` builds (``grow``: :func:`solvers.generate.graph_growth`),
+   else by loops q0 -> qa -> qb -> q0 (:mod:`solvers.continuation.monodromy`, every known root tracked
+   around each loop, new endpoints kept); a run that cannot reach it within its budget is an error naming
    how many roots it found;
 4. check the solver on seeded real instances (the known root must be among the endpoints);
 5. write a plain-JSON spec (start parameters and roots rounded to 11 digits, refined at load time).
@@ -38,12 +39,10 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from ..continuation import tracker
 from ..continuation.monodromy import (MonodromyCheckpoint, _excluded, checked_roots, monodromy, monodromy_count,
                                       system_residuals)
-from ..continuation.tracker import SystemStructure
 from ..continuation.tracking import (SPEC_FORMAT, START_TOL, HomotopyError, HomotopyOptions, HomotopySolver,
-                                     _detour_direction, _distinct, _has_duplicates, _pairs, coefficient_source,
+                                     _detour_direction, _distinct, _expanded, _has_duplicates, _pairs, coefficient_source,
                                      evaluator_for, load_coefficients, structure)
 from .common import load_format, verify_found
 
@@ -91,13 +90,10 @@ def affine_start(system: ParametricSystem, coefficients: Callable, rng: np.rando
                             "(a point q0 with a known root) to build a homotopy")
     N, P = len(system.unknowns), len(system.parameters)
     exps, eq = structure(system)
-    st = SystemStructure.from_exponents(exps, eq)
     x0 = rng.normal(size=N) + 1j * rng.normal(size=N)
 
-    def f(q):
-        G = tracker.segment_coefficients(coefficients, q[None], q[None], 1)
-        H, _, _ = tracker.evaluate(st, G, x0[None], np.zeros(1))
-        return H[0]
+    def f(q):  # numpy (tracking._expanded): a user's build compiles no monomial kernel
+        return _expanded(coefficients, exps, eq, N, x0[None], q)[0][0]
 
     b = f(np.zeros(P, dtype=complex))
     A = np.column_stack([f(np.eye(P, dtype=complex)[k]) - b for k in range(P)])
@@ -142,7 +138,8 @@ def full_system_roots(full: ParametricSystem, spec: dict, coefficients: Callable
 def build(system: ParametricSystem, count: int | None, start: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]] | None = None,
           trials: Callable[[int], tuple[np.ndarray, np.ndarray]] | None = None,
           options: HomotopyOptions = HomotopyOptions(), progress: Callable[[str], None] | None = None,
-          checkpoint: MonodromyCheckpoint | None = None, group: np.ndarray | None = None) -> tuple[dict, str, dict]:
+          checkpoint: MonodromyCheckpoint | None = None, group: np.ndarray | None = None,
+          grow: Callable[..., tuple[np.ndarray, dict]] | None = None) -> tuple[dict, str, dict]:
     """Spec, coefficient source and build report of the homotopy solver of a square system.
 
     count: the certified number of roots (GF(p), two primes), or None: numerical evidence alone, monodromy
@@ -152,7 +149,10 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
     q0 and roots of a settled :func:`monodromy_count` instead of growing them again (checked by
     :func:`checked_roots`); group: sign vectors (G, N) whose orbits the roots come in, one root per orbit
     stored and tracked (the spec's "group"; its "degree" counts every root, G per orbit, and its "paths"
-    the orbits).
+    the orbits). grow: how the roots at q0 are found instead of the loops of :func:`monodromy`:
+    ``grow(solver, q0, x0, count, progress, excluded) -> (roots, record)`` (count None: the roots it returns are
+    the count), the record's fields written into the spec's "monodromy" and the report
+    (:func:`solvers.generate.graph_growth`: graph monodromy).
     """
     t0 = time.perf_counter()
     if not system.is_square:
@@ -198,6 +198,11 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
         count = len(roots) * (1 if group is None else len(group))
         spec["degree"] = count
         spec["monodromy"] = {"checkpoint": True, "paths": checkpoint.paths, "loops_without_new": checkpoint.stall}
+    elif grow is not None:  # found elsewhere (graph monodromy), checked below like the loops' roots
+        roots, growth = grow(solver, solver.q0, x0, count, progress, _excluded(system, solver.q0))
+        if count is None:
+            count = len(roots) * (1 if group is None else len(group))
+            spec["degree"] = count
     elif count is None:  # numerical evidence alone: loops until options.stall_loops of them bring nothing new
         grown = monodromy_count(solver, solver.q0, x0, options, float("inf"), progress=progress,
                                 excluded=_excluded(system, solver.q0))
@@ -216,10 +221,12 @@ def build(system: ParametricSystem, count: int | None, start: Callable[[np.rando
     order = np.lexsort((np.round(roots.imag[:, 0], 8), np.round(roots.real[:, 0], 8)))
     spec["start_parameters"] = _pairs(solver.q0)
     spec["start_roots"] = _pairs(roots[order])
-    spec["monodromy"]["loops"] = loops
+    if grow is None or checkpoint is not None:
+        growth = {"loops": loops}
+    spec["monodromy"].update(growth)
     if group is not None:
         spec["group"] = {"name": "gauge reflections", "order": len(group), "signs": np.asarray(group).astype(int).tolist()}
-    report = {"method": "homotopy", "degree": int(count), "loops": loops, "paths": len(roots)}
+    report = {"method": "homotopy", "degree": int(count), **growth, "paths": len(roots)}
     if trials is not None and options.verify_trials:
         report["verified"] = verify(system.name, spec, coefficients, trials, options.verify_trials)
     report["seconds"] = round(time.perf_counter() - t0, 2)
