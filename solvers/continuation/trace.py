@@ -241,6 +241,9 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     Q0 = np.concatenate([p, v, a, [0.0]])
     free = np.ones(len(Q0), dtype=bool)
     free[-1] = False  # the witness graph keeps t = 0 and moves p, v and a
+    # ... a only on the pencil's coordinates: a node whose form used the others would have a larger fibre (10r/4s
+    # on b: the other nodes grew 167,000 points where the base node's fibre has 142,066, and the graph never closed)
+    free[2 * P:2 * P + N] = used
 
     def on_locus(y: np.ndarray) -> np.ndarray:
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
