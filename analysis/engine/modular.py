@@ -62,8 +62,9 @@ MAX_FRESH_UNLUCKY = 3
 """Fresh primes in a row whose leading monomials differ from the majority's before the majority itself is
 taken for unlucky (:class:`PrimeDisagreement`)."""
 
-MAX_RECONSTRUCTION_PRIMES = 400
-"""Primes spent on one reconstruction of a basis over Q: coefficients of up to about 6,000 digits."""
+MAX_RECONSTRUCTION_PRIMES = 2500
+"""Primes spent on one reconstruction of a basis over Q: numerators and denominators of up to about
+11,600 digits (31-bit primes, 9.3 digits each, half of the modulus for each of the two)."""
 
 DEFAULT_PRIME_SEED = 0
 """Seed of the default random primes: a run is reproducible; another seed draws other primes."""
@@ -282,6 +283,28 @@ def _reduce_mod(basis: dict[tuple, Coefficients], p: int) -> dict[tuple, dict[tu
     return out
 
 
+def _reconstruct(values: dict[tuple, int], modulus: int, first: tuple | None) -> tuple[dict | None, tuple | None]:
+    """Every coefficient recovered as a fraction (lead -> {exponents: Fraction}), or (None, the key that
+    failed). ``first``: the key that failed last time, tried first (it usually fails again: one Euclid)."""
+    keys = ([first] if first in values else []) + [k for k in values if k != first]
+    candidate: dict[tuple, Coefficients] = {}
+    for key in keys:
+        c = rational_reconstruction(values[key], modulus)
+        if c is None:
+            return None, key
+        if c:
+            candidate.setdefault(key[0], {})[key[1]] = c
+    return candidate, None
+
+
+def _digits(basis: Sequence[Coefficients]) -> int:
+    """Decimal digits of the largest numerator or denominator (of any size)."""
+    from .polytext import _int_to_digits
+
+    return len(_int_to_digits(max((max(abs(c.numerator), c.denominator) for f in basis for c in f.values()),
+                                  default=1)))
+
+
 def rational_basis(
     rational: RationalReport,
     exact: Sequence[Coefficients],
@@ -289,6 +312,8 @@ def rational_basis(
     nvars: int,
     compute: Callable[[int], PrimeResult],
     seed: int = DEFAULT_PRIME_SEED,
+    generators: Sequence[Coefficients] | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> tuple[list[Coefficients], str]:
     """The reduced Gröbner basis over Q (monic, sorted by leading monomial) and a status line.
 
@@ -296,11 +321,22 @@ def rational_basis(
     recovered as fractions by :func:`rational_reconstruction`; a candidate is accepted when it reduces
     to the basis computed modulo a fresh prime (one not used for it). A fresh prime that gives other
     leading monomials is unlucky and dropped; one that disagrees with a candidate joins the remaindering.
-    Raises :class:`ReconstructionFailed` after :data:`MAX_RECONSTRUCTION_PRIMES` primes.
+    Reconstruction is tried again only once the primes have grown by a quarter (the failed coefficient
+    first), so its cost stays a constant times that of the last, successful, try.
+
+    ``generators``: the polynomials whose ideal this is (not given for a saturation). With them, once the
+    first candidate fails, FLINT's exact Buchberger over Z runs alongside in a child process
+    (:class:`analysis.engine.exact.ExactRace`, grevlex, lex and deglex); when it finishes first with a
+    Gröbner basis (every S-pair reduced to 0) whose leading monomials are the majority's and which reduces
+    to the fresh prime's basis, that basis is returned. Raises :class:`ReconstructionFailed` after
+    :data:`MAX_RECONSTRUCTION_PRIMES` primes; ``progress`` hears of the primes now and then.
     """
+    from .exact import ExactRace, supported
+
     target = signature(rational.report.per_prime[0])
     used = list(rational.report.per_prime)
     modulus, values = 1, {}  # (lead, exponents) -> residue mod modulus
+    say = progress or (lambda line: None)
 
     def combine(result: PrimeResult) -> None:
         nonlocal modulus
@@ -313,25 +349,16 @@ def rational_basis(
             values[key] = x + modulus * ((r - x) * inv % p)
         modulus *= p
 
-    for r in used:
-        combine(r)
-    draw = random_primes(seed + 1, exclude=rational.computed)
-    fresh_unlucky = in_a_row = 0
-    while True:
-        candidate: dict[tuple, Coefficients] | None = {}
-        for (lead, e), x in values.items():
-            c = rational_reconstruction(x, modulus)
-            if c is None:
-                candidate = None
-                break
-            if c:
-                candidate.setdefault(lead, {})[e] = c
+    def fresh() -> PrimeResult:
+        """The next fresh prime's result with the majority's signature (unlucky ones dropped)."""
+        nonlocal fresh_unlucky
+        in_a_row = 0
         while True:
             q = next(draw)
             if unlucky_reason(exact, q, order, nvars) is None:
                 check = compute(q)
                 if signature(check) == target:
-                    break
+                    return check
                 fresh_unlucky += 1
                 in_a_row += 1
                 if in_a_row >= MAX_FRESH_UNLUCKY:
@@ -340,19 +367,60 @@ def rational_basis(
                         f"{check.dimension}) disagree with the majority of {len(rational.report.per_prime)} primes "
                         f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
                         "another --prime-seed")
-        in_a_row = 0
-        if candidate is not None and len(candidate) == len(target[2]) and _reduce_mod(candidate, q) == \
-                _coefficient_table(check):
-            basis = [candidate[lead] for lead in sorted(candidate, key=order_key(order, nvars))]
-            digits = max((len(str(max(abs(c.numerator), c.denominator))) for f in basis for c in f.values()),
-                         default=1)
-            status = (f"over Q: Chinese remaindering of {len(used)} primes and rational reconstruction (largest "
-                      f"numerator or denominator {digits} digits), checked modulo the fresh prime {q}"
-                      + (f"; {fresh_unlucky} unlucky fresh prime(s) dropped" if fresh_unlucky else ""))
-            return basis, status
-        used.append(check)
-        combine(check)
-        if len(used) >= MAX_RECONSTRUCTION_PRIMES:
-            raise ReconstructionFailed(f"the basis over Q was not recovered from {len(used)} primes "
-                                       f"(coefficients above {len(str(modulus)) // 2} digits)")
 
+    def matches(candidate: dict[tuple, Coefficients] | None, check: PrimeResult) -> bool:
+        return candidate is not None and len(candidate) == len(target[2]) and \
+            _reduce_mod(candidate, check.prime) == _coefficient_table(check)
+
+    def finish(candidate: dict[tuple, Coefficients], how: str, check: PrimeResult) -> tuple[list[Coefficients], str]:
+        basis = [candidate[lead] for lead in sorted(candidate, key=order_key(order, nvars))]
+        status = (f"over Q: {how} (largest numerator or denominator {_digits(basis)} digits), checked modulo the "
+                  f"fresh prime {check.prime}" + (f"; {fresh_unlucky} unlucky fresh prime(s) dropped" if fresh_unlucky
+                                                  else ""))
+        return basis, status
+
+    for r in used:
+        combine(r)
+    draw = random_primes(seed + 1, exclude=rational.computed)
+    fresh_unlucky = 0
+    attempt_at, witness = len(used), None
+    can_race = generators is not None and supported(order)
+    race = None
+    try:
+        while True:
+            found = race.poll() if race is not None else None
+            candidate = None
+            if len(used) >= attempt_at:
+                candidate, witness = _reconstruct(values, modulus, witness)
+                if candidate is None:
+                    attempt_at = max(len(used) + 1, (5 * len(used) + 3) // 4)
+            check = fresh()
+            if found is not None:
+                leads = tuple(sorted(next(iter(f)) for f in found.basis if f))
+                if found.groebner and leads != target[2]:
+                    raise PrimeDisagreement(
+                        f"the exact basis over Q (FLINT, every S-pair reduced) has {len(found.basis)} elements with "
+                        f"other leading monomials than the majority of {len(rational.report.per_prime)} primes "
+                        f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
+                        "another --prime-seed")
+                exact_table = {next(iter(f)): f for f in found.basis if f}
+                if found.groebner and matches(exact_table, check):
+                    return finish(exact_table, "exact Buchberger over Z (FLINT; every S-pair reduces to 0), found "
+                                  f"while {len(used)} primes ran", check)
+                can_race = False  # not confirmed: the primes go on alone
+            if matches(candidate, check):
+                return finish(candidate, f"Chinese remaindering of {len(used)} primes and rational reconstruction",
+                              check)
+            used.append(check)
+            combine(check)
+            if race is None and can_race:
+                race = ExactRace(generators, order, nvars)
+            if len(used) % 200 == 0:
+                say(f"[gb over Q] {len(used)} primes (fractions up to about {len(used) * 93 // 20} digits), "
+                    "no basis yet" + (" (exact Buchberger running alongside)" if race is not None and can_race else ""))
+            if len(used) >= MAX_RECONSTRUCTION_PRIMES:
+                raise ReconstructionFailed(f"the basis over Q was not recovered from {len(used)} primes "
+                                           f"(coefficients above {len(used) * 93 // 20} digits)")
+    finally:
+        if race is not None:
+            race.close()
