@@ -36,6 +36,7 @@ from math import comb, gcd, isqrt
 from typing import Callable, Iterator, Sequence
 
 from .degree import DegreeReport, PrimeDisagreement, PrimeResult, _agreed
+from .exact import coprime_fraction
 from .io import Coefficients, System, to_msolve
 from .orderings import MonomialOrder
 from .ring import is_prime
@@ -259,7 +260,7 @@ def rational_reconstruction(a: int, m: int) -> Fraction | None:
         s0, s1 = s1, s0 - q * s1
     if s1 == 0 or abs(s1) > bound or gcd(r1, s1) != 1 or gcd(s1, m) != 1:
         return None
-    return Fraction(r1, s1)
+    return coprime_fraction(-r1, -s1) if s1 < 0 else coprime_fraction(r1, s1)  # gcd checked: no second one
 
 
 def _coefficient_table(result: PrimeResult) -> dict[tuple, dict[tuple, int]]:
@@ -372,12 +373,26 @@ def rational_basis(
         return candidate is not None and len(candidate) == len(target[2]) and \
             _reduce_mod(candidate, check.prime) == _coefficient_table(check)
 
-    def finish(candidate: dict[tuple, Coefficients], how: str, check: PrimeResult) -> tuple[list[Coefficients], str]:
+    def finish(candidate: dict[tuple, Coefficients], how: str, check: PrimeResult,
+               fresh: bool = True) -> tuple[list[Coefficients], str]:
         basis = [candidate[lead] for lead in sorted(candidate, key=order_key(order, nvars))]
         status = (f"over Q: {how} (largest numerator or denominator {_digits(basis)} digits), checked modulo the "
-                  f"fresh prime {check.prime}" + (f"; {fresh_unlucky} unlucky fresh prime(s) dropped" if fresh_unlucky
-                                                  else ""))
+                  + (f"fresh prime {check.prime}" if fresh else f"prime {check.prime} (not used to compute it)")
+                  + (f"; {fresh_unlucky} unlucky fresh prime(s) dropped" if fresh_unlucky else ""))
         return basis, status
+
+    def confirmed(found) -> dict[tuple, Coefficients] | None:
+        """The child's exact basis when it is a Gröbner basis with the majority's leading monomials that
+        reduces to the basis modulo the last prime computed (which played no part in it), else None."""
+        leads = tuple(sorted(next(iter(f)) for f in found.basis if f))
+        if found.groebner and leads != target[2]:
+            raise PrimeDisagreement(
+                f"the exact basis over Q (FLINT, every S-pair reduced) has {len(found.basis)} elements with "
+                f"other leading monomials than the majority of {len(rational.report.per_prime)} primes "
+                f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
+                "another --prime-seed")
+        table = {next(iter(f)): f for f in found.basis if f}
+        return table if found.groebner and matches(table, used[-1]) else None
 
     for r in used:
         combine(r)
@@ -386,28 +401,30 @@ def rational_basis(
     attempt_at, witness = len(used), None
     can_race = generators is not None and supported(order)
     race = None
+    # a coefficient above 2^46 cannot come back from the majority's three primes: race from the start
+    if can_race and max((max(abs(c.numerator), c.denominator).bit_length() for f in generators for c in f.values()),
+                        default=0) > 46:
+        race = ExactRace(generators, order, nvars)
+    per_prime = rational.report.seconds / max(1, len(rational.report.per_prime))
+    first_wait = min(4 * per_prime, per_prime + 0.05)  # the child's head start, once: a few primes' time at most
+    head_start = first_wait
     try:
         while True:
-            found = race.poll() if race is not None else None
+            if race is not None and can_race:
+                found = race.poll(head_start)
+                head_start = 0.0
+                if found is not None:
+                    table = confirmed(found)
+                    if table is not None:
+                        return finish(table, "exact Buchberger over Z (FLINT; every S-pair reduces to 0), done "
+                                      f"while {len(used)} primes ran", used[-1], fresh=False)
+                    can_race = False  # not confirmed: the primes go on alone
             candidate = None
             if len(used) >= attempt_at:
                 candidate, witness = _reconstruct(values, modulus, witness)
                 if candidate is None:
                     attempt_at = max(len(used) + 1, (5 * len(used) + 3) // 4)
             check = fresh()
-            if found is not None:
-                leads = tuple(sorted(next(iter(f)) for f in found.basis if f))
-                if found.groebner and leads != target[2]:
-                    raise PrimeDisagreement(
-                        f"the exact basis over Q (FLINT, every S-pair reduced) has {len(found.basis)} elements with "
-                        f"other leading monomials than the majority of {len(rational.report.per_prime)} primes "
-                        f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
-                        "another --prime-seed")
-                exact_table = {next(iter(f)): f for f in found.basis if f}
-                if found.groebner and matches(exact_table, check):
-                    return finish(exact_table, "exact Buchberger over Z (FLINT; every S-pair reduces to 0), found "
-                                  f"while {len(used)} primes ran", check)
-                can_race = False  # not confirmed: the primes go on alone
             if matches(candidate, check):
                 return finish(candidate, f"Chinese remaindering of {len(used)} primes and rational reconstruction",
                               check)
@@ -415,6 +432,7 @@ def rational_basis(
             combine(check)
             if race is None and can_race:
                 race = ExactRace(generators, order, nvars)
+                head_start = first_wait
             if len(used) % 200 == 0:
                 say(f"[gb over Q] {len(used)} primes (fractions up to about {len(used) * 93 // 20} digits), "
                     "no basis yet" + (" (exact Buchberger running alongside)" if race is not None and can_race else ""))

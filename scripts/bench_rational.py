@@ -1,0 +1,246 @@
+"""Benchmark the reduced Gröbner basis over Q (``degree --gb``) on large coefficients against Singular (issue 46).
+
+Cases (every file written from a fixed seed into a temporary directory; A, B, ... random integers of the
+given number of decimal digits):
+
+* ``linear-2000``: ``B*x - A`` with 2,000-digit A and B (the issue's case: refused after 400 primes);
+* ``linear-10000``: the same with 10,000 digits;
+* ``quadratic-5000``: ``A*x^2 + B*y - C, D*x*y - E`` with 5,000-digit coefficients: a basis of three
+  elements whose fractions have 10,000 digits;
+* ``quadratic-50000``: the same with 50,000 digits (fractions of 100,000 digits: the fixed costs of a
+  command no longer count);
+* ``ternary-1000``: three quadrics in x, y, z with 1,000-digit coefficients (six basis elements of about
+  4,000 digits);
+* ``katsura-4`` (``examples/katsura4.ms``): small coefficients, where primes are the fast way.
+
+For each, in a fresh process with the interpreter's start excluded (the same child script, timed inside):
+``primes_s``, :func:`analysis.engine.modular.rational_basis` with primes only (``primes_used`` of them);
+``exact_s``, :func:`analysis.engine.exact.exact_basis` alone (FLINT's Buchberger over Z, fastest of
+three); ``warm_s``, the whole ``tdoa-workbench degree FILE --gb --json`` in-process (majority of primes,
+then primes with the exact computation racing them, then the output), fastest of three calls after a
+first one that loads the imports and compiled kernels, as Singular has them loaded at its start;
+``command_s``, the same command in a fresh process by wall clock minus that of a trivial system
+(``x - 1``). ``singular_s``: Singular 4 (``std`` with ``option(redSB)``, the basis made a string),
+20 times in one run, by wall clock minus the start-up of a trivial Singular run, divided by 20. Ratios
+(``ratio``, ``warm_ratio``, ``primes_ratio``, ``exact_ratio``) are against Singular in the same run;
+``agree``: the command's basis and Singular's, made monic, are the same set. Without Singular on PATH
+its columns are empty and the script says so. Each child runs under ``--cap`` seconds (default 120).
+
+Writes tables/bench_rational.timing.json (untracked: seconds are facts of the run, not results) and prints
+one line per case. Usage: python scripts/bench_rational.py [--cases NAME ...] [--cap 120] [--out DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import platform
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from fractions import Fraction
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from analysis.engine.io import format_polynomial, parse_msolve, parse_polynomial, read_system  # noqa: E402
+from analysis.engine.polytext import _int_to_digits  # noqa: E402
+from analysis.engine.modular import order_key  # noqa: E402
+
+SEED = 46
+REPEAT = 3
+"""Timed calls of the warm command and of the exact basis alone (the fastest counts)."""
+SINGULAR_REPEAT = 20
+"""Bases Singular computes in one run (its time per basis: the run minus its start-up, divided by this)."""
+COLUMNS = ["case", "digits", "singular_s", "command_s", "ratio", "warm_s", "warm_ratio", "primes_s", "primes_ratio",
+           "primes_used", "exact_s", "exact_ratio", "agree", "status"]
+
+
+def _number(rng: random.Random, digits: int) -> str:
+    return str(rng.randint(1, 9)) + "".join(rng.choice("0123456789") for _ in range(digits - 1))
+
+
+def linear_text(digits: int, seed: int = SEED) -> str:
+    rng = random.Random(seed)
+    a, b = _number(rng, digits), _number(rng, digits)
+    return f"x\n0\n{b}*x-{a}\n"
+
+
+def quadratic_text(digits: int, seed: int = SEED) -> str:
+    rng = random.Random(seed)
+    a, b, c, d, e = (_number(rng, digits) for _ in range(5))
+    return f"x,y\n0\n{a}*x^2+{b}*y-{c},\n{d}*x*y-{e}\n"
+
+
+def ternary_text(digits: int, seed: int = SEED) -> str:
+    rng = random.Random(seed)
+    n = [_number(rng, digits) for _ in range(9)]
+    return (f"x,y,z\n0\n{n[0]}*x^2+{n[1]}*y*z-{n[2]},\n{n[3]}*y^2+{n[4]}*x*z-{n[5]},\n"
+            f"{n[6]}*z^2+{n[7]}*x*y-{n[8]}\n")
+
+
+CASES = {
+    "linear-2000": lambda: linear_text(2000),
+    "linear-10000": lambda: linear_text(10_000),
+    "quadratic-5000": lambda: quadratic_text(5000),
+    "quadratic-50000": lambda: quadratic_text(50_000),
+    "ternary-1000": lambda: ternary_text(1000),
+    "katsura-4": lambda: (ROOT / "examples" / "katsura4.ms").read_text(),
+}
+
+CHILD = """
+import sys, time
+from analysis.engine.degree import analyse_prime
+from analysis.engine.io import read_system
+from analysis.engine.modular import analyse_rational, input_seed, rational_basis
+from analysis.engine.exact import exact_basis
+import flint  # imported before the clock starts, as the command has it by then
+system = read_system(sys.argv[1])
+mode, REPEAT = sys.argv[2], int(sys.argv[3])
+t = time.perf_counter()
+if mode == "warm":  # the whole command in-process, timed on its second call (imports and kernels loaded)
+    import contextlib, io
+    from solvers.cli import main
+    times = []
+    for _ in range(REPEAT + 1):
+        t = time.perf_counter()
+        with contextlib.redirect_stdout(io.StringIO()):
+            main(["degree", sys.argv[1], "--gb", "--json"])
+        times.append(time.perf_counter() - t)
+    print(min(times[1:]), 0, 1)
+elif mode == "exact":
+    times = []
+    for _ in range(REPEAT):
+        t = time.perf_counter()
+        result = exact_basis(system.polynomials, "grevlex", system.nvars)
+        times.append(time.perf_counter() - t)
+    print(min(times), 0, int(result.groebner))
+else:
+    compute = lambda p: analyse_prime(system.to_ring(p)[1])
+    seed = input_seed(system.variables, system.polynomials)
+    rational = analyse_rational(system.polynomials, "grevlex", system.nvars, compute, None, seed)
+    basis, status = rational_basis(rational, system.polynomials, "grevlex", system.nvars, compute, seed)
+    print(time.perf_counter() - t, status.split("Chinese remaindering of ")[1].split()[0], 1)
+"""
+
+
+def _timed(argv: list[str], cap: float, stdin: str | None = None) -> tuple[float | None, str]:
+    t0 = time.perf_counter()
+    try:
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=cap, cwd=ROOT, input=stdin)
+    except subprocess.TimeoutExpired:
+        return None, f"over the {cap:g} s cap"
+    seconds = time.perf_counter() - t0
+    if done.returncode != 0:
+        return None, (done.stderr.strip().splitlines() or ["exit %d" % done.returncode])[-1]
+    return seconds, done.stdout
+
+
+def monic_set(basis: list[dict], nvars: int) -> frozenset:
+    key = order_key("grevlex", nvars)
+    out = set()
+    for f in basis:
+        if f:
+            lc = f[max(f, key=key)]
+            out.add(frozenset((m, Fraction(c) / lc) for m, c in f.items()))
+    return frozenset(out)
+
+
+def singular_script(text: str, repeat: int) -> str:
+    """Singular computes the reduced basis ``repeat`` times (each time with its text, as the command writes
+    it), then prints it once."""
+    system = parse_msolve(text)
+    ideal = ",\n".join(format_polynomial(f, system.variables, spaced=False) for f in system.polynomials)
+    return (f"option(redSB); option(redTail);\nring r = 0,({','.join(system.variables)}),dp; short = 0;\n"
+            f"ideal i = {ideal};\nideal g; string s; int j; int k;\n"
+            f"for (j = 1; j <= {repeat}; j++) {{ g = std(i); s = string(g); }}\n"
+            'for (k = 1; k <= size(g); k++) { print("G " + string(g[k])); }\nquit;\n')
+
+
+def _min_time(argv: list[str], runs: int = 3) -> float:
+    return min(_timed(argv, 60)[0] or 0.0 for _ in range(runs))
+
+
+def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict) -> dict:
+    text = CASES[name]()
+    path = tmp / f"{name}.ms"
+    path.write_text(text)
+    system = read_system(path)
+    row: dict = {"case": name}
+    seconds, out = _timed([sys.executable, "-m", "solvers.cli", "degree", str(path), "--gb", "--json"], cap)
+    mine = None
+    if seconds is None:
+        row["status"] = out
+    else:
+        row["command_s"] = round(max(seconds - startup["own"], 1e-3), 3)
+        report = json.loads(out)
+        row["status"] = report.get("groebner_basis_status", "")
+        mine = [parse_polynomial(g, system.variables, 0) for g in report["groebner_basis"]]
+        row["digits"] = max(len(_int_to_digits(max(abs(c.numerator), c.denominator))) for f in mine
+                            for c in f.values())
+    print(f"{name}: command {row.get('command_s', out)}", file=sys.stderr, flush=True)
+    for mode in ("warm", "primes", "exact"):
+        seconds, out = _timed([sys.executable, "-c", CHILD, str(path), mode, str(REPEAT)], cap)
+        if seconds is None:
+            row[f"{mode}_s"] = out
+        else:
+            t, used, _ = out.split()
+            row[f"{mode}_s"] = round(float(t), 3)
+            if mode == "primes":
+                row["primes_used"] = int(used)
+        print(f"{name}: {mode} {row[f'{mode}_s']}", file=sys.stderr, flush=True)
+    if singular:
+        seconds, out = _timed([singular, "-q", "--no-warn"], cap, stdin=singular_script(text, SINGULAR_REPEAT))
+        if seconds is None:
+            row["singular_s"] = out
+        else:
+            row["singular_s"] = round(max(seconds - startup["singular"], 1e-4) / SINGULAR_REPEAT, 4)
+            theirs = [parse_polynomial(x[2:], system.variables, 0) for x in out.splitlines() if x.startswith("G ")]
+            if mine is not None:
+                row["agree"] = monic_set(mine, system.nvars) == monic_set(theirs, system.nvars)
+            for mode, column in (("command", "ratio"), ("warm", "warm_ratio"), ("primes", "primes_ratio"),
+                                 ("exact", "exact_ratio")):
+                if isinstance(row.get(f"{mode}_s"), float):
+                    row[column] = round(row[f"{mode}_s"] / row["singular_s"], 2)
+        print(f"{name}: Singular {row['singular_s']}", file=sys.stderr, flush=True)
+    return row
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", nargs="+", choices=sorted(CASES), default=list(CASES))
+    parser.add_argument("--cap", type=float, default=120.0)
+    parser.add_argument("--out", type=Path, default=ROOT / "tables")
+    args = parser.parse_args()
+    singular = shutil.which("Singular")
+    if not singular:
+        print("Singular is not on PATH: its columns and the ratios stay empty (apt-get install singular)",
+              file=sys.stderr)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        (tmp / "trivial.ms").write_text("x\n0\nx-1\n")
+        startup = {"own": _min_time([sys.executable, "-m", "solvers.cli", "degree", str(tmp / "trivial.ms"), "--gb",
+                                     "--json"]),
+                   "singular": _min_time([singular, "-q", "--no-warn", "-c", "quit;"]) if singular else 0.0}
+        rows = [bench(name, tmp, args.cap, singular, startup) for name in args.cases]
+    args.out.mkdir(parents=True, exist_ok=True)
+    version = subprocess.run([singular, "-v", "-q", "-c", "quit;"], capture_output=True, text=True).stdout.strip() \
+        if singular else None
+    record = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
+              "processor": platform.processor() or platform.machine(), "python": platform.python_version(),
+              "singular": singular, "singular_version": (version or "").splitlines()[:1],
+              "startup_s": {k: round(v, 3) for k, v in startup.items()}, "seed": SEED, "columns": COLUMNS,
+              "rows": rows}
+    (args.out / "bench_rational.timing.json").write_text(json.dumps(record, indent=1) + "\n")
+    for row in rows:
+        print(", ".join(f"{k}={row.get(k, '')}" for k in COLUMNS))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
