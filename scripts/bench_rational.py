@@ -32,15 +32,11 @@ one line per case. Usage: python scripts/bench_rational.py [--cases NAME ...] [-
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
-import platform
 import random
 import shutil
-import subprocess
 import sys
 import tempfile
-import time
 from fractions import Fraction
 from pathlib import Path
 
@@ -51,6 +47,7 @@ if str(ROOT) not in sys.path:
 from analysis.engine.io import format_polynomial, parse_msolve, parse_polynomial, read_system  # noqa: E402
 from analysis.engine.polytext import _int_to_digits  # noqa: E402
 from analysis.engine.modular import order_key  # noqa: E402
+from bench_parser import _timed, run_record, write_timing  # noqa: E402  (scripts/ is on the path of a script)
 
 SEED = 46
 REPEAT = 3
@@ -127,18 +124,6 @@ else:
     basis, status = rational_basis(rational, system.polynomials, "grevlex", system.nvars, compute, seed)
     print(time.perf_counter() - t, status.split("Chinese remaindering of ")[1].split()[0], 1)
 """
-
-
-def _timed(argv: list[str], cap: float, stdin: str | None = None) -> tuple[float | None, str]:
-    t0 = time.perf_counter()
-    try:
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=cap, cwd=ROOT, input=stdin)
-    except subprocess.TimeoutExpired:
-        return None, f"over the {cap:g} s cap"
-    seconds = time.perf_counter() - t0
-    if done.returncode != 0:
-        return None, (done.stderr.strip().splitlines() or ["exit %d" % done.returncode])[-1]
-    return seconds, done.stdout
 
 
 def monic_set(basis: list[dict], nvars: int) -> frozenset:
@@ -228,17 +213,9 @@ def main() -> int:
                                      "--json"]),
                    "singular": _min_time([singular, "-q", "--no-warn", "-c", "quit;"]) if singular else 0.0}
         rows = [bench(name, tmp, args.cap, singular, startup) for name in args.cases]
-    args.out.mkdir(parents=True, exist_ok=True)
-    version = subprocess.run([singular, "-v", "-q", "-c", "quit;"], capture_output=True, text=True).stdout.strip() \
-        if singular else None
-    record = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
-              "processor": platform.processor() or platform.machine(), "python": platform.python_version(),
-              "singular": singular, "singular_version": (version or "").splitlines()[:1],
-              "startup_s": {k: round(v, 3) for k, v in startup.items()}, "seed": SEED, "columns": COLUMNS,
-              "rows": rows}
-    (args.out / "bench_rational.timing.json").write_text(json.dumps(record, indent=1) + "\n")
-    for row in rows:
-        print(", ".join(f"{k}={row.get(k, '')}" for k in COLUMNS))
+    write_timing(args.out / "bench_rational.timing.json",
+                 {**run_record(singular), "startup_s": {k: round(v, 3) for k, v in startup.items()}, "seed": SEED,
+                  "repeat": REPEAT, "singular_repeat": SINGULAR_REPEAT}, COLUMNS, rows)
     return 0
 
 
