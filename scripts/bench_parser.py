@@ -151,12 +151,17 @@ def write_timing(path: Path, record: dict, columns: list[str], rows: list[dict])
         print(", ".join(f"{k}={row.get(k, '')}" for k in columns))
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", nargs="+", choices=sorted(CASES), default=list(CASES))
-    parser.add_argument("--cap", type=float, default=300.0)
+def bench_arguments(doc: str, cases: list[str], cap: float) -> argparse.Namespace:
+    """--cases (default all), --cap (seconds per child) and --out (directory of the run record)."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--cases", nargs="+", choices=sorted(cases), default=list(cases))
+    parser.add_argument("--cap", type=float, default=cap)
     parser.add_argument("--out", type=Path, default=ROOT / "tables")
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def main() -> int:
+    args = bench_arguments(__doc__, list(CASES), 300.0)
     singular = shutil.which("Singular")
     startup = 0.0
     with tempfile.TemporaryDirectory() as tmp:

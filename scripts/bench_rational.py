@@ -31,7 +31,6 @@ one line per case. Usage: python scripts/bench_rational.py [--cases NAME ...] [-
 """
 from __future__ import annotations
 
-import argparse
 import json
 import random
 import shutil
@@ -47,7 +46,7 @@ if str(ROOT) not in sys.path:
 from analysis.engine.io import format_polynomial, parse_msolve, parse_polynomial, read_system  # noqa: E402
 from analysis.engine.polytext import _int_to_digits  # noqa: E402
 from analysis.engine.modular import order_key  # noqa: E402
-from bench_parser import _timed, run_record, write_timing  # noqa: E402  (scripts/ is on the path of a script)
+from bench_parser import _timed, bench_arguments, run_record, write_timing  # noqa: E402  (scripts/ is on the path of a script)
 
 SEED = 46
 REPEAT = 3
@@ -126,6 +125,11 @@ else:
 """
 
 
+def _seconds(t: float) -> float:
+    """Three significant digits (a basis may take a tenth of a millisecond)."""
+    return float(f"{t:.3g}")
+
+
 def monic_set(basis: list[dict], nvars: int) -> frozenset:
     key = order_key("grevlex", nvars)
     out = set()
@@ -162,7 +166,7 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
     if seconds is None:
         row["status"] = out
     else:
-        row["command_s"] = round(max(seconds - startup["own"], 1e-3), 3)
+        row["command_s"] = _seconds(max(seconds - startup["own"], 1e-4))
         report = json.loads(out)
         row["status"] = report.get("groebner_basis_status", "")
         mine = [parse_polynomial(g, system.variables, 0) for g in report["groebner_basis"]]
@@ -175,7 +179,7 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
             row[f"{mode}_s"] = out
         else:
             t, used, _ = out.split()
-            row[f"{mode}_s"] = round(float(t), 3)
+            row[f"{mode}_s"] = _seconds(float(t))
             if mode == "primes":
                 row["primes_used"] = int(used)
         print(f"{name}: {mode} {row[f'{mode}_s']}", file=sys.stderr, flush=True)
@@ -184,7 +188,7 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
         if seconds is None:
             row["singular_s"] = out
         else:
-            row["singular_s"] = round(max(seconds - startup["singular"], 1e-4) / SINGULAR_REPEAT, 4)
+            row["singular_s"] = _seconds(max(seconds - startup["singular"], 1e-4) / SINGULAR_REPEAT)
             theirs = [parse_polynomial(x[2:], system.variables, 0) for x in out.splitlines() if x.startswith("G ")]
             if mine is not None:
                 row["agree"] = monic_set(mine, system.nvars) == monic_set(theirs, system.nvars)
@@ -197,11 +201,7 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", nargs="+", choices=sorted(CASES), default=list(CASES))
-    parser.add_argument("--cap", type=float, default=120.0)
-    parser.add_argument("--out", type=Path, default=ROOT / "tables")
-    args = parser.parse_args()
+    args = bench_arguments(__doc__, list(CASES), 120.0)
     singular = shutil.which("Singular")
     if not singular:
         print("Singular is not on PATH: its columns and the ratios stay empty (apt-get install singular)",
