@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import random
+import time
 from dataclasses import dataclass
 from fractions import Fraction
 from math import comb, gcd, isqrt
@@ -326,10 +327,11 @@ def rational_basis(
     first), so its cost stays a constant times that of the last, successful, try.
 
     ``generators``: the polynomials whose ideal this is (not given for a saturation). With them, once the
-    first candidate fails, FLINT's exact Buchberger over Z runs alongside in a child process
-    (:class:`analysis.engine.exact.ExactRace`, grevlex, lex and deglex); when it finishes first with a
-    Gröbner basis (every S-pair reduced to 0) whose leading monomials are the majority's and which reduces
-    to the fresh prime's basis, that basis is returned. Raises :class:`ReconstructionFailed` after
+    first candidate fails (at once for an input coefficient above 2^46), FLINT's exact Buchberger over Z
+    runs alongside in a child process (:class:`analysis.engine.exact.ExactRace`, grevlex, lex and
+    deglex); when it finishes first with the majority's leading monomials and reduces to the basis modulo
+    the last prime computed (not used for it), that basis is returned (other leading monomials:
+    :class:`PrimeDisagreement`, the majority was unlucky). Raises :class:`ReconstructionFailed` after
     :data:`MAX_RECONSTRUCTION_PRIMES` primes; ``progress`` hears of the primes now and then.
     """
     from .exact import ExactRace, supported
@@ -382,17 +384,17 @@ def rational_basis(
         return basis, status
 
     def confirmed(found) -> dict[tuple, Coefficients] | None:
-        """The child's exact basis when it is a Gröbner basis with the majority's leading monomials that
-        reduces to the basis modulo the last prime computed (which played no part in it), else None."""
+        """The child's exact basis when it has the majority's leading monomials and reduces to the basis
+        modulo the last prime computed (which played no part in it), else None."""
         leads = tuple(sorted(next(iter(f)) for f in found.basis if f))
-        if found.groebner and leads != target[2]:
+        if leads != target[2]:
             raise PrimeDisagreement(
-                f"the exact basis over Q (FLINT, every S-pair reduced) has {len(found.basis)} elements with "
+                f"the exact basis over Q (FLINT's Buchberger over Z) has {len(found.basis)} elements with "
                 f"other leading monomials than the majority of {len(rational.report.per_prime)} primes "
                 f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
                 "another --prime-seed")
         table = {next(iter(f)): f for f in found.basis if f}
-        return table if found.groebner and matches(table, used[-1]) else None
+        return table if found.groebner is not False and matches(table, used[-1]) else None
 
     for r in used:
         combine(r)
@@ -401,9 +403,12 @@ def rational_basis(
     attempt_at, witness = len(used), None
     can_race = generators is not None and supported(order)
     race = None
-    # a coefficient above 2^46 cannot come back from the majority's three primes: race from the start
-    if can_race and max((max(abs(c.numerator), c.denominator).bit_length() for f in generators for c in f.values()),
-                        default=0) > 46:
+    # A coefficient above 2^46 cannot come back from the majority's three primes: the race starts at once,
+    # and the primes yield half the time to it (each waits for the child as long as it took), since exact
+    # arithmetic usually wins there; on a loaded machine the two would otherwise share one core's time.
+    big = can_race and max((max(abs(c.numerator), c.denominator).bit_length() for f in generators
+                            for c in f.values()), default=0) > 46
+    if big:
         race = ExactRace(generators, order, nvars)
     per_prime = rational.report.seconds / max(1, len(rational.report.per_prime))
     first_wait = min(4 * per_prime, per_prime + 0.05)  # the child's head start, once: a few primes' time at most
@@ -416,15 +421,18 @@ def rational_basis(
                 if found is not None:
                     table = confirmed(found)
                     if table is not None:
-                        return finish(table, "exact Buchberger over Z (FLINT; every S-pair reduces to 0), done "
-                                      f"while {len(used)} primes ran", used[-1], fresh=False)
+                        return finish(table, f"exact Buchberger over Z (FLINT), done while {len(used)} primes ran",
+                                      used[-1], fresh=False)
                     can_race = False  # not confirmed: the primes go on alone
             candidate = None
             if len(used) >= attempt_at:
                 candidate, witness = _reconstruct(values, modulus, witness)
                 if candidate is None:
                     attempt_at = max(len(used) + 1, (5 * len(used) + 3) // 4)
+            started = time.perf_counter()
             check = fresh()
+            if big:
+                head_start = time.perf_counter() - started
             if matches(candidate, check):
                 return finish(candidate, f"Chinese remaindering of {len(used)} primes and rational reconstruction",
                               check)
