@@ -121,3 +121,18 @@ def test_10000_digit_bases_over_q_through_the_command_line(tmp_path, capsys):
         assert basis == (expected or sympy_basis(system, "grevlex"))
         assert "checked modulo the" in report["groebner_basis_status"]
         assert "largest numerator or denominator 10000 digits" in report["groebner_basis_status"]
+
+
+def test_an_unlucky_majority_is_caught_when_the_exact_basis_comes_first():
+    """Fuzz case 713's lines, dependent modulo each of the first three primes of seed 0 (which all see an
+    inconsistent system): the exact basis (degree 2) or the fresh primes refuse the majority."""
+    import itertools
+
+    from analysis.engine.degree import PrimeDisagreement
+    from analysis.engine.modular import random_primes
+
+    p1, p2, p3 = itertools.islice(random_primes(0), 3)
+    report, compute, system = rational(f"x,y,z\n0\nx+5*y, 2*x+{10 + p1 * p2 * p3}*y+1, z^2-2\n")
+    assert report.report.dimension == -1  # fooled, as the residual risk allows
+    with pytest.raises(PrimeDisagreement, match="the majority's primes were unlucky"):
+        rational_basis(report, system.polynomials, "grevlex", system.nvars, compute, generators=system.polynomials)
