@@ -5,6 +5,8 @@ given number of decimal digits):
 
 * ``linear-2000``: ``B*x - A`` with 2,000-digit A and B (the issue's case: refused after 400 primes);
 * ``linear-10000``: the same with 10,000 digits;
+* ``linear20-200``: 20 dense linear polynomials in 20 unknowns, 200-digit coefficients (a basis of
+  4,000-digit fractions; FLINT's fraction-free row echelon form);
 * ``quadratic-5000``: ``A*x^2 + B*y - C, D*x*y - E`` with 5,000-digit coefficients: a basis of three
   elements whose fractions have 10,000 digits;
 * ``quadratic-50000``: the same with 50,000 digits (fractions of 100,000 digits: the fixed costs of a
@@ -67,6 +69,14 @@ def linear_text(digits: int, seed: int = SEED) -> str:
     return f"x\n0\n{b}*x-{a}\n"
 
 
+def square_linear_text(n: int, digits: int, seed: int = SEED) -> str:
+    """n dense linear polynomials in n unknowns with ``digits``-digit coefficients."""
+    rng = random.Random(seed)
+    names = [f"x{i}" for i in range(n)]
+    rows = ["+".join(f"{_number(rng, digits)}*{v}" for v in names) + f"-{_number(rng, digits)}" for _ in range(n)]
+    return ",".join(names) + "\n0\n" + ",\n".join(rows) + "\n"
+
+
 def quadratic_text(digits: int, seed: int = SEED) -> str:
     rng = random.Random(seed)
     a, b, c, d, e = (_number(rng, digits) for _ in range(5))
@@ -83,6 +93,7 @@ def ternary_text(digits: int, seed: int = SEED) -> str:
 CASES = {
     "linear-2000": lambda: linear_text(2000),
     "linear-10000": lambda: linear_text(10_000),
+    "linear20-200": lambda: square_linear_text(20, 200),
     "quadratic-5000": lambda: quadratic_text(5000),
     "quadratic-50000": lambda: quadratic_text(50_000),
     "ternary-1000": lambda: ternary_text(1000),

@@ -59,7 +59,7 @@ def test_the_race_returns_the_childs_basis():
     with ExactRace(system.polynomials, "grevlex", 1) as race:
         while (found := race.poll()) is None:
             assert not race.failed
-    assert found.groebner is None and found.basis == ({(1,): Fraction(1), (0,): Fraction(-a, b)},)
+    assert found.method.startswith("row echelon form") and found.basis == ({(1,): Fraction(1), (0,): Fraction(-a, b)},)
 
 
 def rational(text):
@@ -136,3 +136,16 @@ def test_an_unlucky_majority_is_caught_when_the_exact_basis_comes_first():
     assert report.report.dimension == -1  # fooled, as the residual risk allows
     with pytest.raises(PrimeDisagreement, match="the majority's primes were unlucky"):
         rational_basis(report, system.polynomials, "grevlex", system.nvars, compute, generators=system.polynomials)
+
+
+@pytest.mark.parametrize("order", sorted(SYMPY_ORDERS))
+@pytest.mark.parametrize("text", [
+    "x,y,z,w\n0\n3*x+2*y-z+1/2, x-y+7*w-2, 2*x+3*y-z-7*w+5/2\n",  # the third: the first minus the second
+    "x,y,z\n0\n3*y+2*z-1, y-z/7, 2*z+4\n",  # no x: pivots from the second column
+    "x,y\n0\nx+y-1, x+y-2\n",  # inconsistent: the unit ideal
+])
+def test_linear_systems_by_row_echelon_form_are_sympys(text, order):
+    system = parse_msolve(text)
+    result = exact_basis(system.polynomials, order, system.nvars)
+    assert result.groebner and as_set(result.basis) == sympy_basis(system, order)
+    assert all(next(iter(f.values())) == 1 for f in result.basis)

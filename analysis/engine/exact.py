@@ -30,6 +30,9 @@ from typing import Sequence
 
 from .io import Coefficients
 
+ECHELON = "row echelon form over Z (FLINT; a linear system)"
+"""The method of :func:`_linear_basis`, as a status line names it."""
+
 FLINT_ORDERS = {"grevlex": "degrevlex", "lex": "lex", "deglex": "deglex"}
 """The orders FLINT's multivariate polynomials know (first variable largest, as here); a block order is
 left to the primes."""
@@ -39,10 +42,11 @@ left to the primes."""
 class ExactBasis:
     """An exact reduced Gröbner basis over Q: monic polynomials (exponents -> Fraction), leading term first,
     as FLINT's autoreduction orders them; ``groebner``: the result of FLINT's ``is_groebner`` (every S-pair
-    reduces to 0) when it was asked for, else None."""
+    reduces to 0) when it was asked for, else None; ``method``: how it was computed, for a status line."""
 
     basis: tuple[Coefficients, ...]
     groebner: bool | None = None
+    method: str = "Buchberger over Z (FLINT)"
 
 
 def supported(order: str) -> bool:
@@ -65,6 +69,8 @@ def exact_basis(generators: Sequence[Coefficients], order: str, nvars: int, cert
     name = order.strip().lower()
     if name not in FLINT_ORDERS:
         raise ValueError(f"no exact basis in the order {order!r}; exact orders: {', '.join(FLINT_ORDERS)}")
+    if all(sum(e) <= 1 for f in generators for e in f):
+        return _linear_basis(generators, nvars)
     ctx = flint.fmpz_mpoly_ctx.get(tuple(f"x{i}" for i in range(nvars)), FLINT_ORDERS[name])
     polys = [ctx.from_dict(_integer_terms(f)) for f in generators if f]
     if not polys:
@@ -75,6 +81,28 @@ def exact_basis(generators: Sequence[Coefficients], order: str, nvars: int, cert
         lead = g.leading_coefficient()
         basis.append({tuple(int(a) for a in e): _fraction(flint.fmpq(c, lead)) for e, c in zip(g.monoms(), g.coeffs())})
     return ExactBasis(tuple(basis), bool(reduced.is_groebner()) if certify else None)
+
+
+def _linear_basis(generators: Sequence[Coefficients], nvars: int) -> ExactBasis:
+    """The reduced basis of linear polynomials: the rows of the reduced row echelon form of their integer
+    coefficient matrix (FLINT's fraction-free ``fmpz_mat.rref``), columns x_1 > ... > x_n > 1 (the order
+    of the degree-one monomials in grevlex, lex and deglex alike). A pivot in the constant column: the unit
+    ideal. Exact, hence certified (``groebner`` True: a linear basis in echelon form has no S-pair left)."""
+    import flint
+
+    monomials = [tuple(int(i == j) for j in range(nvars)) for i in range(nvars)] + [(0,) * nvars]
+    rows = [[terms.get(m, 0) for m in monomials] for f in generators if f for terms in (_integer_terms(f),)]
+    if not rows:
+        return ExactBasis((), True, ECHELON)
+    echelon, den, rank = flint.fmpz_mat(rows).rref()
+    basis = []
+    for i in range(rank):
+        row = [echelon[i, k] for k in range(nvars + 1)]
+        pivot = next(k for k, c in enumerate(row) if c != 0)
+        if pivot == nvars:
+            return ExactBasis(({(0,) * nvars: Fraction(1)},), True, ECHELON)
+        basis.append({monomials[k]: _fraction(flint.fmpq(c, den)) for k, c in enumerate(row) if k >= pivot and c != 0})
+    return ExactBasis(tuple(basis), True, ECHELON)
 
 
 def coprime_fraction(n: int, d: int) -> Fraction:
@@ -98,7 +126,7 @@ def _fraction(q) -> Fraction:
 
 def _encode(result: ExactBasis) -> bytes:
     """One line per polynomial, terms ``e1,e2,..:num/den`` in hexadecimal (no decimal digit limit)."""
-    lines = [f"groebner {result.groebner}"]
+    lines = [f"groebner {result.groebner} {result.method}"]
     for f in result.basis:
         lines.append(" ".join(f"{','.join(map(str, e))}:{c.numerator:x}/{c.denominator:x}" for e, c in f.items()))
     return ("\n".join(lines) + "\n").encode()
@@ -114,7 +142,8 @@ def _decode(data: bytes) -> ExactBasis:
             num, _, den = c.partition("/")
             f[tuple(int(a) for a in e.split(",") if a)] = coprime_fraction(int(num, 16), int(den, 16))
         basis.append(f)
-    return ExactBasis(tuple(basis), {"groebner True": True, "groebner False": False}.get(head))
+    _, groebner, method = head.split(" ", 2)
+    return ExactBasis(tuple(basis), {"True": True, "False": False}.get(groebner), method)
 
 
 CHILD_MEMORY_SHARE = 0.25

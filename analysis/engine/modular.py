@@ -389,7 +389,7 @@ def rational_basis(
         leads = tuple(sorted(next(iter(f)) for f in found.basis if f))
         if leads != target[2]:
             raise PrimeDisagreement(
-                f"the exact basis over Q (FLINT's Buchberger over Z) has {len(found.basis)} elements with "
+                f"the exact basis over Q ({found.method}) has {len(found.basis)} elements with "
                 f"other leading monomials than the majority of {len(rational.report.per_prime)} primes "
                 f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
                 "another --prime-seed")
@@ -421,7 +421,7 @@ def rational_basis(
                 if found is not None:
                     table = confirmed(found)
                     if table is not None:
-                        return finish(table, f"exact Buchberger over Z (FLINT), done while {len(used)} primes ran",
+                        return finish(table, f"exact {found.method}, done while {len(used)} primes ran",
                                       used[-1], fresh=False)
                     can_race = False  # not confirmed: the primes go on alone
             candidate = None
