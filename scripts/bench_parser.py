@@ -151,12 +151,15 @@ def write_timing(path: Path, record: dict, columns: list[str], rows: list[dict])
         print(", ".join(f"{k}={row.get(k, '')}" for k in columns))
 
 
-def bench_arguments(doc: str, cases: list[str], cap: float) -> argparse.Namespace:
-    """--cases (default all), --cap (seconds per child) and --out (directory of the run record)."""
+def bench_arguments(doc: str, cases: list[str], cap: float, fuzz: bool = False) -> argparse.Namespace:
+    """--cases (default all), --cap (seconds per child), --out (directory of the run record) and, with
+    ``fuzz``, --fuzz N (a number of fuzz cases instead of the cases)."""
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--cases", nargs="+", choices=sorted(cases), default=list(cases))
     parser.add_argument("--cap", type=float, default=cap)
     parser.add_argument("--out", type=Path, default=ROOT / "tables")
+    if fuzz:
+        parser.add_argument("--fuzz", type=int, default=0, metavar="N")
     return parser.parse_args()
 
 

@@ -28,8 +28,14 @@ first one that loads the imports and compiled kernels, as Singular has them load
 ``agree``: the command's basis and Singular's, made monic, are the same set. Without Singular on PATH
 its columns are empty and the script says so. Each child runs under ``--cap`` seconds (default 120).
 
+``--fuzz N``: instead, N systems of ``scripts/fuzz_engine.py``'s characteristic-0 category with every
+leading coefficient replaced by a random integer of 30 to 2,000 digits (:func:`large_leading_case`),
+compared with Singular like the fuzz (``agree``: same dimension, degree and reduced basis), with the
+engine's total, median and largest seconds per case (in-process, 30 s each at most) and Singular's total
+for all of them (one process); written to tables/bench_rational_fuzz.timing.json.
+
 Writes tables/bench_rational.timing.json (untracked: seconds are facts of the run, not results) and prints
-one line per case. Usage: python scripts/bench_rational.py [--cases NAME ...] [--cap 120] [--out DIR]
+one line per case. Usage: python scripts/bench_rational.py [--cases NAME ...] [--cap 120] [--out DIR] [--fuzz N]
 """
 from __future__ import annotations
 
@@ -38,6 +44,7 @@ import random
 import shutil
 import sys
 import tempfile
+import time
 from fractions import Fraction
 from pathlib import Path
 
@@ -48,7 +55,8 @@ if str(ROOT) not in sys.path:
 from analysis.engine.io import format_polynomial, parse_msolve, parse_polynomial, read_system  # noqa: E402
 from analysis.engine.polytext import _int_to_digits  # noqa: E402
 from analysis.engine.modular import order_key  # noqa: E402
-from bench_parser import _timed, bench_arguments, run_record, write_timing  # noqa: E402  (scripts/ is on the path of a script)
+import fuzz_engine  # noqa: E402  (scripts/ is on the path of a script)
+from bench_parser import _timed, bench_arguments, run_record, write_timing  # noqa: E402
 
 SEED = 46
 REPEAT = 3
@@ -126,7 +134,7 @@ elif mode == "exact":
         t = time.perf_counter()
         result = exact_basis(system.polynomials, "grevlex", system.nvars)
         times.append(time.perf_counter() - t)
-    print(min(times), 0, int(result.groebner))
+    print(min(times), 0, len(result.basis))
 else:
     compute = lambda p: analyse_prime(system.to_ring(p)[1])
     seed = input_seed(system.variables, system.polynomials)
@@ -211,8 +219,65 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
     return row
 
 
+LEADING_DIGITS = (30, 100, 300, 1000, 2000)
+"""Sizes of the large leading coefficients of the fuzz (:func:`large_leading_case`)."""
+
+
+def large_leading_case(k: int) -> dict:
+    """Fuzz case k: scripts/fuzz_engine.py's characteristic-0 case 8k, each polynomial's leading coefficient
+    (grevlex) replaced by a random integer of 30 to 2,000 digits and either sign (seed 10^6 + k)."""
+    case = fuzz_engine.generate(8 * k)
+    rng = random.Random(10**6 + k)
+    key = order_key(case["order"], len(case["variables"]))
+    polys = []
+    for f in case["polys"]:
+        f = dict(f)
+        if f:
+            d = rng.choice(LEADING_DIGITS)
+            f[max(f, key=key)] = Fraction(rng.randint(10 ** (d - 1), 10**d - 1) * rng.choice((1, -1)))
+        polys.append(f)
+    return {**case, "id": k, "polys": polys}
+
+
+def fuzz(count: int, singular: str) -> dict:
+    """``count`` large-leading-coefficient cases through ``degree --gb`` in-process (fuzz_engine's runner:
+    30 s each) and through Singular (one process): outcomes, and the engine's seconds per case."""
+    cases = [large_leading_case(k) for k in range(count)]
+    t0 = time.perf_counter()
+    refs = fuzz_engine.run_singular(cases, singular)
+    singular_s = time.perf_counter() - t0
+    outcomes: dict[str, int] = {}
+    seconds, slowest = [], (0.0, None)
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in cases:
+            t = time.perf_counter()
+            mine = fuzz_engine.run_engine(case, Path(tmp))
+            seconds.append(time.perf_counter() - t)
+            slowest = max(slowest, (seconds[-1], case["id"]))
+            outcome, detail = fuzz_engine.compare(case, mine, refs.get(case["id"]))
+            outcomes[outcome] = outcomes.get(outcome, 0) + 1
+            if outcome != "agree":
+                print(f"fuzz case {case['id']}: {outcome} {detail}", file=sys.stderr, flush=True)
+    seconds.sort()
+    return {"cases": count, "outcomes": outcomes, "engine_total_s": _seconds(sum(seconds)),
+            "engine_median_s": _seconds(seconds[len(seconds) // 2]), "engine_max_s": _seconds(slowest[0]),
+            "slowest_case": slowest[1], "over_1_s": sum(t > 1 for t in seconds),
+            "singular_total_s": _seconds(singular_s)}
+
+
 def main() -> int:
-    args = bench_arguments(__doc__, list(CASES), 120.0)
+    args = bench_arguments(__doc__, list(CASES), 120.0, fuzz=True)
+    if args.fuzz:
+        singular = shutil.which("Singular")
+        if not singular:
+            print("Singular is not on PATH: the fuzz needs it (apt-get install singular)", file=sys.stderr)
+            return 2
+        result = fuzz(args.fuzz, singular)
+        path = args.out / "bench_rational_fuzz.timing.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({**run_record(singular), **result}, indent=1) + "\n")
+        print(", ".join(f"{k}={v}" for k, v in result.items()))
+        return 0
     singular = shutil.which("Singular")
     if not singular:
         print("Singular is not on PATH: its columns and the ratios stay empty (apt-get install singular)",
