@@ -68,6 +68,14 @@ MAX_RECONSTRUCTION_PRIMES = 2500
 """Primes spent on one reconstruction of a basis over Q: numerators and denominators of up to about
 11,600 digits (31-bit primes, 9.3 digits each, half of the modulus for each of the two)."""
 
+EVERY_PRIME_UNTIL = 32
+"""Reconstruction is tried after every prime up to this many primes, then once the primes grew by a quarter."""
+
+RACE_MAX_BASIS = 50
+"""The exact basis races the primes after a failed candidate only for a reduced basis of at most this many
+elements (katsura-6, 41 elements: FLINT's Buchberger 0.7 s; katsura-7: over 100 s, a core spent for
+nothing); for an input coefficient above 2^46 it races at once, whatever the size."""
+
 DEFAULT_PRIME_SEED = 0
 """Seed of the default random primes: a run is reproducible; another seed draws other primes."""
 
@@ -323,8 +331,9 @@ def rational_basis(
     recovered as fractions by :func:`rational_reconstruction`; a candidate is accepted when it reduces
     to the basis computed modulo a fresh prime (one not used for it). A fresh prime that gives other
     leading monomials is unlucky and dropped; one that disagrees with a candidate joins the remaindering.
-    Reconstruction is tried again only once the primes have grown by a quarter (the failed coefficient
-    first), so its cost stays a constant times that of the last, successful, try.
+    Reconstruction is tried after every prime up to :data:`EVERY_PRIME_UNTIL` primes, then only once the
+    primes have grown by a quarter (the failed coefficient first), so its cost stays a constant times that
+    of the last, successful, try.
 
     ``generators``: the polynomials whose ideal this is (not given for a saturation). With them, once the
     first candidate fails (at once for an input coefficient above 2^46), FLINT's exact Buchberger over Z
@@ -402,6 +411,7 @@ def rational_basis(
     fresh_unlucky = 0
     attempt_at, witness = len(used), None
     can_race = generators is not None and supported(order)
+    small = len(target[2]) <= RACE_MAX_BASIS  # after a failed candidate, a large basis is left to the primes
     race = None
     # A coefficient above 2^46 cannot come back from the majority's three primes: the race starts at once,
     # and the primes yield half the time to it (each waits for the child as long as it took), since exact
@@ -428,7 +438,9 @@ def rational_basis(
             if len(used) >= attempt_at:
                 candidate, witness = _reconstruct(values, modulus, witness)
                 if candidate is None:
-                    attempt_at = max(len(used) + 1, (5 * len(used) + 3) // 4)
+                    # every prime while they are few (a prime costs more than a reconstruction), then
+                    # each quarter more: the tries cost a constant times the last one
+                    attempt_at = len(used) + 1 if len(used) < EVERY_PRIME_UNTIL else (5 * len(used) + 3) // 4
             started = time.perf_counter()
             check = fresh()
             if big:
@@ -438,7 +450,7 @@ def rational_basis(
                               check)
             used.append(check)
             combine(check)
-            if race is None and can_race:
+            if race is None and can_race and small:
                 race = ExactRace(generators, order, nvars)
                 head_start = first_wait
             if len(used) % 200 == 0:
