@@ -69,7 +69,7 @@ MAX_RECONSTRUCTION_PRIMES = 2500
 11,600 digits (31-bit primes, 9.3 digits each, half of the modulus for each of the two)."""
 
 EVERY_PRIME_UNTIL = 32
-"""Reconstruction is tried after every prime up to this many primes, then once the primes grew by a quarter."""
+"""Reconstruction is tried after every prime up to this many primes, then once the primes grew by an eighth."""
 
 RACE_MAX_BASIS = 50
 """The exact basis races the primes after a failed candidate only for a reduced basis of at most this many
@@ -258,9 +258,43 @@ def _random_majority(
 
 # -- the basis over Q -------------------------------------------------------------------------------
 
+LATTICE_BITS = 4000
+"""Moduli of more bits are reconstructed by lattice reduction (:func:`_lattice_reconstruction`), smaller
+ones by Wang's loop (20,000 digits: 0.03 s against 0.27 s)."""
+
+
 def rational_reconstruction(a: int, m: int) -> Fraction | None:
-    """The fraction n/d with n = a d (mod m), |n|, |d| <= sqrt(m/2) and gcd(d, m) = 1, or None
-    (Wang's algorithm: the half-extended Euclidean algorithm stopped at the bound)."""
+    """The fraction n/d with n = a d (mod m), |n|, |d| <= sqrt(m/2), gcd(n, d) = 1 and gcd(d, m) = 1, or
+    None. There is at most one such fraction (two would give n d' - n' d = 0 mod m with |n d' - n' d| < m).
+    Wang's algorithm (the half-extended Euclidean algorithm stopped at the bound) below
+    :data:`LATTICE_BITS`, lattice reduction above (which may miss it, giving None: more primes, never
+    another fraction)."""
+    if m.bit_length() > LATTICE_BITS:
+        return _lattice_reconstruction(a, m)
+    return wang_reconstruction(a, m)
+
+
+def _lattice_reconstruction(a: int, m: int) -> Fraction | None:
+    """The fraction of :func:`rational_reconstruction` among short vectors (n, d) of the lattice
+    {(x, y): x = a y mod m}, basis (m, 0), (a, 1): FLINT's LLL, then the reduced rows and their sum and
+    difference are tried against the same conditions as Wang's (the conditions make the answer unique)."""
+    import flint
+
+    reduced = flint.fmpz_mat([[m, 0], [a % m, 1]]).lll()
+    b1 = (int(reduced[0, 0]), int(reduced[0, 1]))
+    b2 = (int(reduced[1, 0]), int(reduced[1, 1]))
+    bound = isqrt(m // 2)
+    fm = flint.fmpz(m)
+    for x, y in (b1, b2, (b1[0] + b2[0], b1[1] + b2[1]), (b1[0] - b2[0], b1[1] - b2[1])):
+        if y < 0:
+            x, y = -x, -y
+        if 0 < y <= bound and abs(x) <= bound and flint.fmpz(x).gcd(y) == 1 and fm.gcd(y) == 1:
+            return coprime_fraction(x, y)
+    return None
+
+
+def wang_reconstruction(a: int, m: int) -> Fraction | None:
+    """:func:`rational_reconstruction` by Wang's algorithm (the reference: quadratic, in Python)."""
     bound = isqrt(m // 2)
     r0, r1, s0, s1 = m, a % m, 0, 1
     while r1 > bound:
@@ -332,7 +366,7 @@ def rational_basis(
     to the basis computed modulo a fresh prime (one not used for it). A fresh prime that gives other
     leading monomials is unlucky and dropped; one that disagrees with a candidate joins the remaindering.
     Reconstruction is tried after every prime up to :data:`EVERY_PRIME_UNTIL` primes, then only once the
-    primes have grown by a quarter (the failed coefficient first), so its cost stays a constant times that
+    primes have grown by an eighth (the failed coefficient first), so its cost stays a constant times that
     of the last, successful, try.
 
     ``generators``: the polynomials whose ideal this is (not given for a saturation). With them, once the
@@ -439,8 +473,9 @@ def rational_basis(
                 candidate, witness = _reconstruct(values, modulus, witness)
                 if candidate is None:
                     # every prime while they are few (a prime costs more than a reconstruction), then
-                    # each quarter more: the tries cost a constant times the last one
-                    attempt_at = len(used) + 1 if len(used) < EVERY_PRIME_UNTIL else (5 * len(used) + 3) // 4
+                    # each eighth more (and at the cap): the tries cost a constant times the last one
+                    attempt_at = len(used) + 1 if len(used) < EVERY_PRIME_UNTIL else \
+                        min((9 * len(used) + 7) // 8, MAX_RECONSTRUCTION_PRIMES)
             started = time.perf_counter()
             check = fresh()
             if big:
@@ -456,7 +491,7 @@ def rational_basis(
             if len(used) % 200 == 0:
                 say(f"[gb over Q] {len(used)} primes (fractions up to about {len(used) * 93 // 20} digits), "
                     "no basis yet" + (" (exact Buchberger running alongside)" if race is not None and can_race else ""))
-            if len(used) >= MAX_RECONSTRUCTION_PRIMES:
+            if len(used) > MAX_RECONSTRUCTION_PRIMES:  # the last try was at the cap
                 raise ReconstructionFailed(f"the basis over Q was not recovered from {len(used)} primes "
                                            f"(coefficients above {len(used) * 93 // 20} digits)")
     finally:
