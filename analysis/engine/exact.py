@@ -185,7 +185,13 @@ class ExactRace:
         import flint  # noqa: F401  (imported here, once, rather than in every child)
 
         read, write = os.pipe()
-        pid = os.fork()
+        try:
+            pid = os.fork()
+        except OSError:  # no process to spare (a limit on processes or memory): the primes go on alone
+            os.close(read)
+            os.close(write)
+            self.failed = True
+            return
         if pid == 0:  # the child: compute, write, leave without running the parent's cleanup
             code = 1
             try:

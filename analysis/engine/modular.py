@@ -490,7 +490,7 @@ def rational_basis(
                 head_start = first_wait
             if len(used) % 200 == 0:
                 say(f"[gb over Q] {len(used)} primes (fractions up to about {len(used) * 93 // 20} digits), "
-                    "no basis yet" + (" (exact Buchberger running alongside)" if race is not None and can_race else ""))
+                    "no basis yet" + (" (the exact basis computed alongside)" if race is not None and can_race else ""))
             if len(used) > MAX_RECONSTRUCTION_PRIMES:  # the last try was at the cap
                 raise ReconstructionFailed(f"the basis over Q was not recovered from {len(used)} primes "
                                            f"(coefficients above {len(used) * 93 // 20} digits)")
