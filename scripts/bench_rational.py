@@ -21,6 +21,10 @@ For each, in a fresh process with the interpreter's start excluded (the same chi
 three); ``warm_s``, the whole ``tdoa-workbench degree FILE --gb --json`` in-process (majority of primes,
 then primes with the exact computation racing them, then the output), fastest of three calls after a
 first one that loads the imports and compiled kernels, as Singular has them loaded at its start;
+``engine_s``, the library calls of that route on the parsed system (the majority of primes, then
+:func:`~analysis.engine.modular.rational_basis` with the race, then the basis as text), without the
+command's argument parsing and file reading, as Singular's ``std`` is timed without reading its input
+(fastest of three);
 ``command_s``, the same command in a fresh process by wall clock minus that of a trivial system
 (``x - 1``). ``singular_s``: Singular 4 (``std`` with ``option(redSB)``, the basis made a string),
 20 times in one run, by wall clock minus the start-up of a trivial Singular run, divided by 20. Ratios
@@ -63,8 +67,8 @@ REPEAT = 3
 """Timed calls of the warm command and of the exact basis alone (the fastest counts)."""
 SINGULAR_REPEAT = 20
 """Bases Singular computes in one run (its time per basis: the run minus its start-up, divided by this)."""
-COLUMNS = ["case", "digits", "singular_s", "command_s", "ratio", "warm_s", "warm_ratio", "primes_s", "primes_ratio",
-           "primes_used", "exact_s", "exact_ratio", "agree", "status"]
+COLUMNS = ["case", "digits", "singular_s", "command_s", "ratio", "warm_s", "warm_ratio", "engine_s", "engine_ratio",
+           "primes_s", "primes_ratio", "primes_used", "exact_s", "exact_ratio", "agree", "status"]
 
 
 def _number(rng: random.Random, digits: int) -> str:
@@ -111,7 +115,7 @@ CASES = {
 CHILD = """
 import sys, time
 from analysis.engine.degree import analyse_prime
-from analysis.engine.io import read_system
+from analysis.engine.io import format_polynomial, read_system
 from analysis.engine.modular import analyse_rational, input_seed, rational_basis
 from analysis.engine.exact import exact_basis
 import flint  # imported before the clock starts, as the command has it by then
@@ -128,6 +132,20 @@ if mode == "warm":  # the whole command in-process, timed on its second call (im
             main(["degree", sys.argv[1], "--gb", "--json"])
         times.append(time.perf_counter() - t)
     print(min(times[1:]), 0, 1)
+elif mode == "engine":  # the library calls of the default route on the parsed system, as Singular's std
+    from analysis.engine.f4 import F4Options
+    options = F4Options(linear_substitution=True)
+    compute = lambda p: analyse_prime(system.to_ring(p)[1], options)
+    seed = input_seed(system.variables, system.polynomials)
+    times = []
+    for _ in range(REPEAT + 1):
+        t = time.perf_counter()
+        rational = analyse_rational(system.polynomials, "grevlex", system.nvars, compute, None, seed)
+        basis, status = rational_basis(rational, system.polynomials, "grevlex", system.nvars, compute, seed,
+                                       generators=system.polynomials)
+        text = [format_polynomial(f, system.variables) for f in basis]  # Singular's loop makes its text too
+        times.append(time.perf_counter() - t)
+    print(min(times[1:]), 0, len(basis))
 elif mode == "exact":
     times = []
     for _ in range(REPEAT):
@@ -192,7 +210,7 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
         row["digits"] = max(len(_int_to_digits(max(abs(c.numerator), c.denominator))) for f in mine
                             for c in f.values())
     print(f"{name}: command {row.get('command_s', out)}", file=sys.stderr, flush=True)
-    for mode in ("warm", "primes", "exact"):
+    for mode in ("warm", "engine", "primes", "exact"):
         seconds, out = _timed([sys.executable, "-c", CHILD, str(path), mode, str(REPEAT)], cap)
         if seconds is None:
             row[f"{mode}_s"] = out
@@ -211,8 +229,8 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: dict)
             theirs = [parse_polynomial(x[2:], system.variables, 0) for x in out.splitlines() if x.startswith("G ")]
             if mine is not None:
                 row["agree"] = monic_set(mine, system.nvars) == monic_set(theirs, system.nvars)
-            for mode, column in (("command", "ratio"), ("warm", "warm_ratio"), ("primes", "primes_ratio"),
-                                 ("exact", "exact_ratio")):
+            for mode, column in (("command", "ratio"), ("warm", "warm_ratio"), ("engine", "engine_ratio"),
+                                 ("primes", "primes_ratio"), ("exact", "exact_ratio")):
                 if isinstance(row.get(f"{mode}_s"), float):
                     row[column] = round(row[f"{mode}_s"] / row["singular_s"], 2)
         print(f"{name}: Singular {row['singular_s']}", file=sys.stderr, flush=True)
