@@ -79,10 +79,11 @@ print(time.perf_counter() - t0, len(s.polynomials), sum(len(f) for f in s.polyno
 """
 
 
-def _timed(argv: list[str], cap: float) -> tuple[float | None, str]:
+def _timed(argv: list[str], cap: float, stdin: str | None = None) -> tuple[float | None, str]:
+    """(wall seconds, stdout) of a child run under ``cap`` seconds, or (None, why it gave no answer)."""
     t0 = time.perf_counter()
     try:
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=cap, cwd=ROOT)
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=cap, cwd=ROOT, input=stdin)
     except subprocess.TimeoutExpired:
         return None, f"over the {cap:g} s cap"
     seconds = time.perf_counter() - t0
@@ -133,12 +134,37 @@ def bench(name: str, tmp: Path, cap: float, singular: str | None, startup: float
     return row
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", nargs="+", choices=sorted(CASES), default=list(CASES))
-    parser.add_argument("--cap", type=float, default=300.0)
+def run_record(singular: str | None) -> dict:
+    """The facts of a timed run: date, machine, processor, Python, and Singular's path and version."""
+    version = subprocess.run([singular, "-v", "-q", "-c", "quit;"], capture_output=True, text=True).stdout.strip() \
+        if singular else None
+    return {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
+            "processor": platform.processor() or platform.machine(), "python": platform.python_version(),
+            "singular": singular, "singular_version": (version or "").splitlines()[:1]}
+
+
+def write_timing(path: Path, record: dict, columns: list[str], rows: list[dict]) -> None:
+    """Write the run record with its rows (an untracked ``*.timing.json``) and print one line per row."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({**record, "columns": columns, "rows": rows}, indent=1) + "\n")
+    for row in rows:
+        print(", ".join(f"{k}={row.get(k, '')}" for k in columns))
+
+
+def bench_arguments(doc: str, cases: list[str], cap: float, fuzz: bool = False) -> argparse.Namespace:
+    """--cases (default all), --cap (seconds per child), --out (directory of the run record) and, with
+    ``fuzz``, --fuzz N (a number of fuzz cases instead of the cases)."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--cases", nargs="+", choices=sorted(cases), default=list(cases))
+    parser.add_argument("--cap", type=float, default=cap)
     parser.add_argument("--out", type=Path, default=ROOT / "tables")
-    args = parser.parse_args()
+    if fuzz:
+        parser.add_argument("--fuzz", type=int, default=0, metavar="N")
+    return parser.parse_args()
+
+
+def main() -> int:
+    args = bench_arguments(__doc__, list(CASES), 300.0)
     singular = shutil.which("Singular")
     startup = 0.0
     with tempfile.TemporaryDirectory() as tmp:
@@ -148,16 +174,8 @@ def main() -> int:
             runs = [_timed([singular, "-q", str(tmp / "empty.sing")], 60)[0] or 0.0 for _ in range(3)]
             startup = min(runs)
         rows = [bench(name, tmp, args.cap, singular, startup) for name in args.cases]
-    args.out.mkdir(parents=True, exist_ok=True)
-    version = subprocess.run([singular, "-v", "-q", "-c", "quit;"], capture_output=True, text=True).stdout.strip() \
-        if singular else None
-    record = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
-              "processor": platform.processor() or platform.machine(), "python": platform.python_version(),
-              "singular": singular, "singular_version": (version or "").splitlines()[:1],
-              "singular_startup_s": round(startup, 3), "seed": SEED, "columns": COLUMNS, "rows": rows}
-    (args.out / "bench_parser.timing.json").write_text(json.dumps(record, indent=1) + "\n")
-    for row in rows:
-        print(", ".join(f"{k}={row.get(k, '')}" for k in COLUMNS))
+    write_timing(args.out / "bench_parser.timing.json",
+                 {**run_record(singular), "singular_startup_s": round(startup, 3), "seed": SEED}, COLUMNS, rows)
     return 0
 
 

@@ -397,7 +397,9 @@ def _degree_rational(args: argparse.Namespace, system, polys, sat, sat_terms, pr
                         "own engine outvoted or not run (above its check cap); msolve's primes agree")
     gb = None
     if args.gb:
-        basis, gb_status = rational_basis(rational, exact, args.order, system.nvars, compute, seed)
+        basis, gb_status = rational_basis(rational, exact, args.order, system.nvars, compute, seed,
+                                          generators=None if sat_terms is not None else system.polynomials,
+                                          progress=_delayed_progress())
         key = order_key(args.order, system.nvars)
         gb = [format_polynomial(f, system.variables, key=key) for f in basis]
         out["groebner_basis_status"] = gb_status

@@ -449,7 +449,8 @@ def solve_system(system, seed: int = 0, prime_seed: int = 0, options=None, hidde
         raise SolveError(f"{system.source}: not zero-dimensional (dimension {report.dimension}): infinitely many "
                          "solutions; add equations or fix unknowns")
     say(f"[solve] degree {report.degree} ({t_count - t0:.2f} s): {rational.status}")
-    basis, basis_status = rational_basis(rational, exact, "grevlex", nvars, compute, key)
+    basis, basis_status = rational_basis(rational, exact, "grevlex", nvars, compute, key, generators=exact,
+                                         progress=say)
     t_basis = time.perf_counter()
     say(f"[solve] basis over Q ({t_basis - t_count:.2f} s): {basis_status}")
     standard = _standard_monomials(basis, nvars)

@@ -205,3 +205,22 @@ def test_a_majority_of_unlucky_primes_is_caught_by_the_basis_check(capsys, tmp_p
     answer = json.loads(out)
     assert code == 0 and (answer["degree"], answer["dimension"]) == (2, 0)
     assert not {p1, p2, p3} & set(answer["primes"])
+
+
+def test_lattice_reconstruction_is_wangs():
+    """Above LATTICE_BITS the fraction comes from FLINT's LLL; on moduli of 100-200 primes (numerators and
+    denominators near the bound sqrt(m/2), beyond it, and residues of no fraction) it is Wang's answer."""
+    import random
+
+    from analysis.engine.modular import _lattice_reconstruction, wang_reconstruction
+
+    rng = random.Random(46)
+    primes = list(itertools.islice(random_primes(9), 200))
+    for _ in range(60):
+        m = 1
+        for p in primes[:rng.randint(100, 200)]:
+            m *= p
+        bits = m.bit_length() // 2 + rng.choice([-40, -2, -1, 0, 1, 30])
+        n, d = rng.getrandbits(bits) * rng.choice([1, -1]), rng.getrandbits(bits) | 1
+        a = rng.randrange(m) if rng.random() < 0.15 else n * pow(d, -1, m) % m
+        assert _lattice_reconstruction(a, m) == wang_reconstruction(a, m)

@@ -30,12 +30,14 @@ from __future__ import annotations
 
 import hashlib
 import random
+import time
 from dataclasses import dataclass
 from fractions import Fraction
 from math import comb, gcd, isqrt
 from typing import Callable, Iterator, Sequence
 
 from .degree import DegreeReport, PrimeDisagreement, PrimeResult, _agreed
+from .exact import coprime_fraction
 from .io import Coefficients, System, to_msolve
 from .orderings import MonomialOrder
 from .ring import is_prime
@@ -62,8 +64,17 @@ MAX_FRESH_UNLUCKY = 3
 """Fresh primes in a row whose leading monomials differ from the majority's before the majority itself is
 taken for unlucky (:class:`PrimeDisagreement`)."""
 
-MAX_RECONSTRUCTION_PRIMES = 400
-"""Primes spent on one reconstruction of a basis over Q: coefficients of up to about 6,000 digits."""
+MAX_RECONSTRUCTION_PRIMES = 2500
+"""Primes spent on one reconstruction of a basis over Q: numerators and denominators of up to about
+11,600 digits (31-bit primes, 9.3 digits each, half of the modulus for each of the two)."""
+
+EVERY_PRIME_UNTIL = 32
+"""Reconstruction is tried after every prime up to this many primes, then once the primes grew by an eighth."""
+
+RACE_MAX_BASIS = 50
+"""The exact basis races the primes after a failed candidate only for a reduced basis of at most this many
+elements (katsura-6, 41 elements: FLINT's Buchberger 0.7 s; katsura-7: over 100 s, a core spent for
+nothing); for an input coefficient above 2^46 it races at once, whatever the size."""
 
 DEFAULT_PRIME_SEED = 0
 """Seed of the default random primes: a run is reproducible; another seed draws other primes."""
@@ -247,9 +258,43 @@ def _random_majority(
 
 # -- the basis over Q -------------------------------------------------------------------------------
 
+LATTICE_BITS = 4000
+"""Moduli of more bits are reconstructed by lattice reduction (:func:`_lattice_reconstruction`), smaller
+ones by Wang's loop (20,000 digits: 0.03 s against 0.27 s)."""
+
+
 def rational_reconstruction(a: int, m: int) -> Fraction | None:
-    """The fraction n/d with n = a d (mod m), |n|, |d| <= sqrt(m/2) and gcd(d, m) = 1, or None
-    (Wang's algorithm: the half-extended Euclidean algorithm stopped at the bound)."""
+    """The fraction n/d with n = a d (mod m), |n|, |d| <= sqrt(m/2), gcd(n, d) = 1 and gcd(d, m) = 1, or
+    None. There is at most one such fraction (two would give n d' - n' d = 0 mod m with |n d' - n' d| < m).
+    Wang's algorithm (the half-extended Euclidean algorithm stopped at the bound) below
+    :data:`LATTICE_BITS`, lattice reduction above (which may miss it, giving None: more primes, never
+    another fraction)."""
+    if m.bit_length() > LATTICE_BITS:
+        return _lattice_reconstruction(a, m)
+    return wang_reconstruction(a, m)
+
+
+def _lattice_reconstruction(a: int, m: int) -> Fraction | None:
+    """The fraction of :func:`rational_reconstruction` among short vectors (n, d) of the lattice
+    {(x, y): x = a y mod m}, basis (m, 0), (a, 1): FLINT's LLL, then the reduced rows and their sum and
+    difference are tried against the same conditions as Wang's (the conditions make the answer unique)."""
+    import flint
+
+    reduced = flint.fmpz_mat([[m, 0], [a % m, 1]]).lll()
+    b1 = (int(reduced[0, 0]), int(reduced[0, 1]))
+    b2 = (int(reduced[1, 0]), int(reduced[1, 1]))
+    bound = isqrt(m // 2)
+    fm = flint.fmpz(m)
+    for x, y in (b1, b2, (b1[0] + b2[0], b1[1] + b2[1]), (b1[0] - b2[0], b1[1] - b2[1])):
+        if y < 0:
+            x, y = -x, -y
+        if 0 < y <= bound and abs(x) <= bound and flint.fmpz(x).gcd(y) == 1 and fm.gcd(y) == 1:
+            return coprime_fraction(x, y)
+    return None
+
+
+def wang_reconstruction(a: int, m: int) -> Fraction | None:
+    """:func:`rational_reconstruction` by Wang's algorithm (the reference: quadratic, in Python)."""
     bound = isqrt(m // 2)
     r0, r1, s0, s1 = m, a % m, 0, 1
     while r1 > bound:
@@ -258,7 +303,7 @@ def rational_reconstruction(a: int, m: int) -> Fraction | None:
         s0, s1 = s1, s0 - q * s1
     if s1 == 0 or abs(s1) > bound or gcd(r1, s1) != 1 or gcd(s1, m) != 1:
         return None
-    return Fraction(r1, s1)
+    return coprime_fraction(-r1, -s1) if s1 < 0 else coprime_fraction(r1, s1)  # gcd checked: no second one
 
 
 def _coefficient_table(result: PrimeResult) -> dict[tuple, dict[tuple, int]]:
@@ -282,6 +327,28 @@ def _reduce_mod(basis: dict[tuple, Coefficients], p: int) -> dict[tuple, dict[tu
     return out
 
 
+def _reconstruct(values: dict[tuple, int], modulus: int, first: tuple | None) -> tuple[dict | None, tuple | None]:
+    """Every coefficient recovered as a fraction (lead -> {exponents: Fraction}), or (None, the key that
+    failed). ``first``: the key that failed last time, tried first (it usually fails again: one Euclid)."""
+    keys = ([first] if first in values else []) + [k for k in values if k != first]
+    candidate: dict[tuple, Coefficients] = {}
+    for key in keys:
+        c = rational_reconstruction(values[key], modulus)
+        if c is None:
+            return None, key
+        if c:
+            candidate.setdefault(key[0], {})[key[1]] = c
+    return candidate, None
+
+
+def _digits(basis: Sequence[Coefficients]) -> int:
+    """Decimal digits of the largest numerator or denominator (of any size)."""
+    from .polytext import _int_to_digits
+
+    return len(_int_to_digits(max((max(abs(c.numerator), c.denominator) for f in basis for c in f.values()),
+                                  default=1)))
+
+
 def rational_basis(
     rational: RationalReport,
     exact: Sequence[Coefficients],
@@ -289,6 +356,8 @@ def rational_basis(
     nvars: int,
     compute: Callable[[int], PrimeResult],
     seed: int = DEFAULT_PRIME_SEED,
+    generators: Sequence[Coefficients] | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> tuple[list[Coefficients], str]:
     """The reduced Gröbner basis over Q (monic, sorted by leading monomial) and a status line.
 
@@ -296,11 +365,24 @@ def rational_basis(
     recovered as fractions by :func:`rational_reconstruction`; a candidate is accepted when it reduces
     to the basis computed modulo a fresh prime (one not used for it). A fresh prime that gives other
     leading monomials is unlucky and dropped; one that disagrees with a candidate joins the remaindering.
-    Raises :class:`ReconstructionFailed` after :data:`MAX_RECONSTRUCTION_PRIMES` primes.
+    Reconstruction is tried after every prime up to :data:`EVERY_PRIME_UNTIL` primes, then only once the
+    primes have grown by an eighth (the failed coefficient first), so its cost stays a constant times that
+    of the last, successful, try.
+
+    ``generators``: the polynomials whose ideal this is (not given for a saturation). With them, once the
+    first candidate fails (at once for an input coefficient above 2^46), FLINT's exact Buchberger over Z
+    runs alongside in a child process (:class:`analysis.engine.exact.ExactRace`, grevlex, lex and
+    deglex); when it finishes first with the majority's leading monomials and reduces to the basis modulo
+    the last prime computed (not used for it), that basis is returned (other leading monomials:
+    :class:`PrimeDisagreement`, the majority was unlucky). Raises :class:`ReconstructionFailed` after
+    :data:`MAX_RECONSTRUCTION_PRIMES` primes; ``progress`` hears of the primes now and then.
     """
+    from .exact import ExactRace, supported
+
     target = signature(rational.report.per_prime[0])
     used = list(rational.report.per_prime)
     modulus, values = 1, {}  # (lead, exponents) -> residue mod modulus
+    say = progress or (lambda line: None)
 
     def combine(result: PrimeResult) -> None:
         nonlocal modulus
@@ -313,25 +395,16 @@ def rational_basis(
             values[key] = x + modulus * ((r - x) * inv % p)
         modulus *= p
 
-    for r in used:
-        combine(r)
-    draw = random_primes(seed + 1, exclude=rational.computed)
-    fresh_unlucky = in_a_row = 0
-    while True:
-        candidate: dict[tuple, Coefficients] | None = {}
-        for (lead, e), x in values.items():
-            c = rational_reconstruction(x, modulus)
-            if c is None:
-                candidate = None
-                break
-            if c:
-                candidate.setdefault(lead, {})[e] = c
+    def fresh() -> PrimeResult:
+        """The next fresh prime's result with the majority's signature (unlucky ones dropped)."""
+        nonlocal fresh_unlucky
+        in_a_row = 0
         while True:
             q = next(draw)
             if unlucky_reason(exact, q, order, nvars) is None:
                 check = compute(q)
                 if signature(check) == target:
-                    break
+                    return check
                 fresh_unlucky += 1
                 in_a_row += 1
                 if in_a_row >= MAX_FRESH_UNLUCKY:
@@ -340,19 +413,87 @@ def rational_basis(
                         f"{check.dimension}) disagree with the majority of {len(rational.report.per_prime)} primes "
                         f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
                         "another --prime-seed")
-        in_a_row = 0
-        if candidate is not None and len(candidate) == len(target[2]) and _reduce_mod(candidate, q) == \
-                _coefficient_table(check):
-            basis = [candidate[lead] for lead in sorted(candidate, key=order_key(order, nvars))]
-            digits = max((len(str(max(abs(c.numerator), c.denominator))) for f in basis for c in f.values()),
-                         default=1)
-            status = (f"over Q: Chinese remaindering of {len(used)} primes and rational reconstruction (largest "
-                      f"numerator or denominator {digits} digits), checked modulo the fresh prime {q}"
-                      + (f"; {fresh_unlucky} unlucky fresh prime(s) dropped" if fresh_unlucky else ""))
-            return basis, status
-        used.append(check)
-        combine(check)
-        if len(used) >= MAX_RECONSTRUCTION_PRIMES:
-            raise ReconstructionFailed(f"the basis over Q was not recovered from {len(used)} primes "
-                                       f"(coefficients above {len(str(modulus)) // 2} digits)")
 
+    def matches(candidate: dict[tuple, Coefficients] | None, check: PrimeResult) -> bool:
+        return candidate is not None and len(candidate) == len(target[2]) and \
+            _reduce_mod(candidate, check.prime) == _coefficient_table(check)
+
+    def finish(candidate: dict[tuple, Coefficients], how: str, check: PrimeResult,
+               fresh: bool = True) -> tuple[list[Coefficients], str]:
+        basis = [candidate[lead] for lead in sorted(candidate, key=order_key(order, nvars))]
+        status = (f"over Q: {how} (largest numerator or denominator {_digits(basis)} digits), checked modulo the "
+                  + (f"fresh prime {check.prime}" if fresh else f"prime {check.prime} (not used to compute it)")
+                  + (f"; {fresh_unlucky} unlucky fresh prime(s) dropped" if fresh_unlucky else ""))
+        return basis, status
+
+    def confirmed(found) -> dict[tuple, Coefficients] | None:
+        """The child's exact basis when it has the majority's leading monomials and reduces to the basis
+        modulo the last prime computed (which played no part in it), else None."""
+        leads = tuple(sorted(next(iter(f)) for f in found.basis if f))
+        if leads != target[2]:
+            raise PrimeDisagreement(
+                f"the exact basis over Q ({found.method}) has {len(found.basis)} elements with "
+                f"other leading monomials than the majority of {len(rational.report.per_prime)} primes "
+                f"(degree {target[1]}, dimension {target[0]}): the majority's primes were unlucky; try "
+                "another --prime-seed")
+        table = {next(iter(f)): f for f in found.basis if f}
+        return table if found.groebner is not False and matches(table, used[-1]) else None
+
+    for r in used:
+        combine(r)
+    draw = random_primes(seed + 1, exclude=rational.computed)
+    fresh_unlucky = 0
+    attempt_at, witness = len(used), None
+    can_race = generators is not None and supported(order)
+    small = len(target[2]) <= RACE_MAX_BASIS  # after a failed candidate, a large basis is left to the primes
+    race = None
+    # A coefficient above 2^46 cannot come back from the majority's three primes: the race starts at once,
+    # and the primes yield half the time to it (each waits for the child as long as it took), since exact
+    # arithmetic usually wins there; on a loaded machine the two would otherwise share one core's time.
+    big = can_race and max((max(abs(c.numerator), c.denominator).bit_length() for f in generators
+                            for c in f.values()), default=0) > 46
+    if big:
+        race = ExactRace(generators, order, nvars)
+    per_prime = rational.report.seconds / max(1, len(rational.report.per_prime))
+    first_wait = min(4 * per_prime, per_prime + 0.05)  # the child's head start, once: a few primes' time at most
+    head_start = first_wait
+    try:
+        while True:
+            if race is not None and can_race:
+                found = race.poll(head_start)
+                head_start = 0.0
+                if found is not None:
+                    table = confirmed(found)
+                    if table is not None:
+                        return finish(table, f"exact {found.method}, done while {len(used)} primes ran",
+                                      used[-1], fresh=False)
+                    can_race = False  # not confirmed: the primes go on alone
+            candidate = None
+            if len(used) >= attempt_at:
+                candidate, witness = _reconstruct(values, modulus, witness)
+                if candidate is None:
+                    # every prime while they are few (a prime costs more than a reconstruction), then
+                    # each eighth more (and at the cap): the tries cost a constant times the last one
+                    attempt_at = len(used) + 1 if len(used) < EVERY_PRIME_UNTIL else \
+                        min((9 * len(used) + 7) // 8, MAX_RECONSTRUCTION_PRIMES)
+            started = time.perf_counter()
+            check = fresh()
+            if big:
+                head_start = time.perf_counter() - started
+            if matches(candidate, check):
+                return finish(candidate, f"Chinese remaindering of {len(used)} primes and rational reconstruction",
+                              check)
+            used.append(check)
+            combine(check)
+            if race is None and can_race and small:
+                race = ExactRace(generators, order, nvars)
+                head_start = first_wait
+            if len(used) % 200 == 0:
+                say(f"[gb over Q] {len(used)} primes (fractions up to about {len(used) * 93 // 20} digits), "
+                    "no basis yet" + (" (the exact basis computed alongside)" if race is not None and can_race else ""))
+            if len(used) > MAX_RECONSTRUCTION_PRIMES:  # the last try was at the cap
+                raise ReconstructionFailed(f"the basis over Q was not recovered from {len(used)} primes "
+                                           f"(coefficients above {len(used) * 93 // 20} digits)")
+    finally:
+        if race is not None:
+            race.close()
