@@ -198,6 +198,52 @@ def _affine_residual(traces: np.ndarray, ts: np.ndarray, size: float) -> float:
     return float(np.linalg.norm(traces[2] - fit) / size)
 
 
+@dataclass
+class Pencil:
+    """The trace test's set-up (:func:`trace_test`): its system, the group on (x, lam), the rng (a drawn, the angles
+    next), the line's direction v, the pencil's coordinates, the base node Q0 = (p, v, a, 0), the parameters the
+    witness graph's nodes move, and the start point (x*, 1) on the pencil."""
+
+    system: TraceSystem
+    group: np.ndarray | None
+    rng: np.random.Generator
+    v: np.ndarray
+    used: np.ndarray
+    Q0: np.ndarray
+    free: np.ndarray
+    start: np.ndarray
+
+    @classmethod
+    def build(cls, equations: Callable, unknowns: list[str], parameters: list[str], p: np.ndarray,
+              other: tuple[np.ndarray, np.ndarray], options: TraceOptions, group: np.ndarray | None) -> "Pencil":
+        N, P = len(unknowns), len(parameters)
+        if group is not None:
+            group = np.asarray(group, dtype=float)
+            if group.ndim != 2 or group.shape[1] != N or not np.all(np.abs(group) == 1.0):
+                raise ValueError(f"group: sign vectors (G, {N}) of +-1 expected, got shape {group.shape}")
+        square = tuple(bool(b) for b in (group != 1.0).any(axis=0)) if group is not None else None
+        system = TraceSystem(equations, list(unknowns), list(parameters), square)
+        group_y = None if group is None else np.column_stack([group, np.ones(len(group))])  # lam is invariant
+        rng = np.random.default_rng(options.seed)
+        p_star, x_star = (np.asarray(z, dtype=complex) for z in other)
+        v = p_star - np.asarray(p, dtype=complex)
+        used = np.zeros(N, dtype=bool)
+        used[list(options.coordinates) if options.coordinates is not None else slice(None)] = True
+        a = (rng.normal(size=N) + 1j * rng.normal(size=N)) * used
+        a = a / (a @ system.image(np.append(x_star, 1.0)[None])[0, :N])
+        Q0 = np.concatenate([p, v, a, [0.0]])
+        free = np.ones(len(Q0), dtype=bool)
+        free[-1] = False  # the witness graph keeps t = 0 and moves p, v and a
+        # ... a only on the pencil's coordinates: a node whose form used the others would have a larger fibre
+        # (10r/4s on b: the other nodes grew 167,000 points where the base node's fibre has 142,066, and the graph
+        # never closed)
+        free[2 * P:2 * P + N] = used
+        start = system.newton(np.concatenate([x_star, [1.0]])[None], Q0[None], steps=3)
+        if system.step(start, Q0).max() > tk.START_TOL:
+            raise tk.HomotopyError(f"the second instance's root is not a root (Newton step {system.step(start, Q0).max():.1e})")
+        return cls(system, group_y, rng, v, used, Q0, free, start)
+
+
 def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], p: np.ndarray, roots: np.ndarray,
                other: tuple[np.ndarray, np.ndarray], options: TraceOptions = TraceOptions(),
                excluded: Callable | None = None, checkpoint: str | None = None,
@@ -224,33 +270,13 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     p = np.asarray(p, dtype=complex)
     roots = np.asarray(roots, dtype=complex).reshape(-1, len(unknowns))
     N, P, K = len(unknowns), len(parameters), len(roots)
-    if group is not None:
-        group = np.asarray(group, dtype=float)
-        if group.ndim != 2 or group.shape[1] != N or not np.all(np.abs(group) == 1.0):
-            raise ValueError(f"group: sign vectors (G, {N}) of +-1 expected, got shape {group.shape}")
-    square = tuple(bool(b) for b in (group != 1.0).any(axis=0)) if group is not None else None
-    system = TraceSystem(equations, list(unknowns), list(parameters), square)
-    group_y = None if group is None else np.column_stack([group, np.ones(len(group))])  # lam is invariant
-    rng = np.random.default_rng(options.seed)
-    p_star, x_star = (np.asarray(z, dtype=complex) for z in other)
-    v = p_star - p
-    used = np.zeros(N, dtype=bool)
-    used[list(options.coordinates) if options.coordinates is not None else slice(None)] = True
-    a = (rng.normal(size=N) + 1j * rng.normal(size=N)) * used
-    a = a / (a @ system.image(np.append(x_star, 1.0)[None])[0, :N])
-    Q0 = np.concatenate([p, v, a, [0.0]])
-    free = np.ones(len(Q0), dtype=bool)
-    free[-1] = False  # the witness graph keeps t = 0 and moves p, v and a
-    # ... a only on the pencil's coordinates: a node whose form used the others would have a larger fibre (10r/4s
-    # on b: the other nodes grew 167,000 points where the base node's fibre has 142,066, and the graph never closed)
-    free[2 * P:2 * P + N] = used
+    pencil = Pencil.build(equations, unknowns, parameters, p, other, options, group)
+    system, group_y, rng, v, used, Q0, free, start = (pencil.system, pencil.group, pencil.rng, pencil.v, pencil.used,
+                                                      pencil.Q0, pencil.free, pencil.start)
 
     def on_locus(y: np.ndarray) -> np.ndarray:
         return excluded(y[:, :N], p[None, :] + y[:, N:N + 1] * v[None, :]) if excluded is not None else np.zeros(len(y), bool)
 
-    start = system.newton(np.concatenate([x_star, [1.0]])[None], Q0[None], steps=3)
-    if system.step(start, Q0).max() > tk.START_TOL:
-        raise tk.HomotopyError(f"the second instance's root is not a root (Newton step {system.step(start, Q0).max():.1e})")
     base = np.column_stack([roots, np.zeros(K)])
     if system.step(base, Q0).max() > 1e-6:  # the stored roots' 11 digits: steps up to 2e-8 (10r/4s)
         raise tk.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
@@ -313,7 +339,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     ts = np.array([0.0, *(options.step * np.exp(1j * angles))])
     S = np.vstack([base, W])
     M = len(S)
-    targets = np.array([np.concatenate([p, v, a, [t]]) for t in ts[1:]])
+    targets = np.array([np.concatenate([Q0[:-1], [t]]) for t in ts[1:]])
     inst = np.repeat(np.arange(2), M)
     ends, _ = system.track(Q0[None], targets, np.tile(S, (2, 1)), inst)
     paths += 2 * M
