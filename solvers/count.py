@@ -280,6 +280,34 @@ def _carry(solver, qa: np.ndarray, xs: np.ndarray, qb: np.ndarray, excluded, opt
     return ends, ok
 
 
+def _reverse(solver, q0: np.ndarray, known: np.ndarray, qk: np.ndarray, xs: np.ndarray, ends: np.ndarray,
+             ok: np.ndarray, excluded_k, options, group, refine=None) -> np.ndarray:
+    """The paths of xs (at qk) carried to q0 that were lost on every route, tried from the other end: the known
+    solutions at q0 that no carried endpoint landed on are tracked back to qk (:func:`_carry`, every retry), and a
+    lost path whose start point one of them reaches is joined to it (the segment tracked back is the inverse path;
+    a path that ends on an ill-conditioned solution can fail where the track leaving it does not). Fills ``ends``
+    in place; returns the new mask. At most :data:`REVERSE_MAX` lost paths are tried."""
+    lost = np.flatnonzero(~ok)
+    if not len(lost) or len(lost) > REVERSE_MAX or not len(known):
+        return ok
+    hit = graph._match(known, ends[ok], group)
+    free = np.setdiff1d(np.arange(len(known)), hit[hit >= 0])
+    if not len(free) or len(free) > REVERSE_MAX:
+        return ok
+    back, good = _carry(solver, q0, known[free], qk, excluded_k, options, group, refine)
+    where = graph._match(xs[lost], back[good], group)
+    ok = ok.copy()
+    for j, i in zip(free[good], where):
+        if i >= 0 and not ok[lost[i]]:
+            ends[lost[i]] = known[j]
+            ok[lost[i]] = True
+    return ok
+
+
+#: Lost carried paths :func:`_reverse` tries from the other end (a handful in practice: 5r/9s lost 1 of 36,947).
+REVERSE_MAX = 64
+
+
 def _clashes(ends: np.ndarray, ok: np.ndarray, group) -> np.ndarray:
     """Mask of the accepted endpoints that coincide with another accepted one (or an image of one)."""
     out = np.zeros(len(ends), dtype=bool)
@@ -414,7 +442,10 @@ def _count(target, options: CountOptions, say, notes: list[str], runs: list, kno
             results.append(result)
             carried = ""
             if k:
-                carried_sets.append(_carry(solver0, q0_k, result.roots, q0, excluded0, track0, group, refiners[0]))
+                ends, ok = _carry(solver0, q0_k, result.roots, q0, excluded0, track0, group, refiners[0])
+                ok = _reverse(solver0, q0, results[0].roots, q0_k, result.roots, ends, ok, excluded_k, track0, group,
+                              refiners[k])
+                carried_sets.append((ends, ok))
                 carried, _ = _compare(results[0].roots, *carried_sets[-1], group)
             seeds.append(SeedCount(seed, len(result.roots), result.closed, result.open_edges, result.paths,
                                    result.rounds, round(result.seconds, 1), carried))

@@ -204,3 +204,33 @@ def test_the_trace_test_runs_on_orbits_without_expanding_them():
     # a point fixed by a reflection counts once per distinct image
     signs = np.array([[1.0, 1.0], [1.0, -1.0]])
     assert trace._orbit_sizes(np.array([[1.0 + 0j, 2.0], [1.0, 0.0]]), signs).tolist() == [2.0, 1.0]
+
+
+class _EndBlocked(_SegmentBlocked):
+    """As :class:`_SegmentBlocked`, but the first point's tracks fail on every route into qb (an ill-conditioned
+    solution there that no track arriving reaches), while the track leaving it for qa does not fail."""
+
+    def track(self, q0, q1, x0, inst=None, options=None):
+        out = x0.copy()
+        q1 = np.atleast_2d(q1)
+        inst = np.zeros(len(x0), dtype=np.int64) if inst is None else inst
+        for k in range(len(x0)):
+            if x0[k, 0].real == 1.0 and np.allclose(q1[min(inst[k], len(q1) - 1)], self.qb):
+                out[k] = np.nan
+        return out, np.full((len(x0), 4), 0.5)
+
+
+def test_a_carried_path_lost_on_every_route_is_joined_from_the_other_end():
+    qa, qb = np.array([0.0 + 0j, 1.0]), np.array([1.0 + 0j, 0.0])
+    solver = _EndBlocked(qa, qb)
+    xs = np.array([[1.0 + 0j], [2.0], [3.0]])
+    ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    assert ok.tolist() == [False, True, True]
+    known = np.array([[3.0 + 0j], [1.0], [2.0]])
+    joined = counting._reverse(solver, qb, known, qa, xs, ends, ok, None, None, None)
+    assert joined.all() and np.allclose(ends, xs)
+    assert counting._compare(known, ends, joined, None) == ("equal as sets", 0)
+    # a known set without the first point's solution: nothing to join it to, and the comparison says so
+    ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    short = np.array([[3.0 + 0j], [2.0]])
+    assert not counting._reverse(solver, qb, short, qa, xs, ends, ok, None, None, None)[0]
