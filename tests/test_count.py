@@ -157,11 +157,15 @@ class _SegmentBlocked:
         d = self.qb - self.qa
         for k in range(len(x0)):
             a, b = np.atleast_2d(q0)[min(inst[k], len(np.atleast_2d(q0)) - 1)], np.atleast_2d(q1)[min(inst[k], len(np.atleast_2d(q1)) - 1)]
-            t = np.vdot(d, a - self.qa) / np.vdot(d, d)
-            on_segment = abs(t.imag) < 1e-12 and np.linalg.norm(a - self.qa - t.real * d) < 1e-12
-            if x0[k, 0].real == 1.0 and np.allclose(b, self.qb) and on_segment:
+            if x0[k, 0].real == 1.0 and np.allclose(b, self.qb) and self.blocked(a):
                 out[k] = np.nan
         return out, np.full((len(x0), 4), 0.5)
+
+    def blocked(self, a) -> bool:
+        """Whether a leg into qb from a fails: here when a lies on the segment qa -> qb."""
+        d = self.qb - self.qa
+        t = np.vdot(d, a - self.qa) / np.vdot(d, d)
+        return abs(t.imag) < 1e-12 and np.linalg.norm(a - self.qa - t.real * d) < 1e-12
 
 
 def test_a_carried_path_blocked_on_its_segment_goes_round_through_a_midpoint():
@@ -210,14 +214,8 @@ class _EndBlocked(_SegmentBlocked):
     """As :class:`_SegmentBlocked`, but the first point's tracks fail on every route into qb (an ill-conditioned
     solution there that no track arriving reaches), while the track leaving it for qa does not fail."""
 
-    def track(self, q0, q1, x0, inst=None, options=None):
-        out = x0.copy()
-        q1 = np.atleast_2d(q1)
-        inst = np.zeros(len(x0), dtype=np.int64) if inst is None else inst
-        for k in range(len(x0)):
-            if x0[k, 0].real == 1.0 and np.allclose(q1[min(inst[k], len(q1) - 1)], self.qb):
-                out[k] = np.nan
-        return out, np.full((len(x0), 4), 0.5)
+    def blocked(self, a) -> bool:
+        return True
 
 
 def test_a_carried_path_lost_on_every_route_is_joined_from_the_other_end():
