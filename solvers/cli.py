@@ -955,6 +955,10 @@ def cmd_count(args: argparse.Namespace) -> int:
         raise UserError("--start is for a system FILE; TDOA targets draw their own start pairs (complex networks)")
     if not args.seconds > 0:
         raise UserError(f"--seconds must be positive, got {args.seconds}")
+    if args.json:  # before hours of tracking, not after
+        folder = os.path.dirname(os.path.abspath(args.json))
+        if os.path.isdir(args.json) or not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+            raise UserError(f"--json: cannot write {args.json}: give a file in an existing, writable directory")
     tape_kernel.set_threads(args.threads)
     try:
         if args.system is not None:

@@ -136,6 +136,11 @@ def test_cli_count_prints_the_evidence_and_refuses_a_plain_system():
     bad = subprocess.run([sys.executable, "-m", "solvers.cli", "count", os.path.join(ROOT, "examples", "katsura4.ms")],
                          capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "degree" in bad.stderr
+    # an unwritable --json is refused before the count runs, not after it
+    nowhere = subprocess.run([sys.executable, "-m", "solvers.cli", "count", "--tdoa", "5r9s", "--dim", "3", "--json",
+                              os.path.join(ROOT, "no-such-folder", "out.json")], capture_output=True, text=True,
+                             cwd=ROOT, timeout=60)
+    assert nowhere.returncode == 2 and "--json: cannot write" in nowhere.stderr and "Traceback" not in nowhere.stderr
 
 
 class _SegmentBlocked:
