@@ -149,7 +149,8 @@ class CalibrationResult:
         "partial": some nodes could not be placed (NaN);
         "inconsistent": the model does not explain the data (the global test fails with the given
             sigma, or most measurements are rejected): a transposed matrix, wrong units, not TDOA data;
-        "unconverged": the refinement hit its budget or diverged;
+        "unconverged": the refinement hit its budget or diverged (from a fit that explains at least 2/3
+            of the measurements; below that, the fit is "inconsistent" and the divergence a warning);
         "failed": no calibration; arrays are NaN; `message` says why
     message : one line summarising the outcome
     receivers (m, dim), transmitters (n, dim), offsets (n,) : NaN for a node that could not be placed;

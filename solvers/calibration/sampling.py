@@ -514,6 +514,7 @@ def _ransac(F, mask, thr, floor, opts: CalibrationOptions, rng, solvers,
     if not confident and search.samples >= opts.max_samples:
         # stopped by the budget, not by the confidence (nor by running out of blocks)
         search.short_of = int(min(needed, 1e9)) - search.samples
+        search.needed, search.share = needed, ratio_of(best) if best is not None else 0.0
     if confident or (best is not None and not small and search.samples >= opts.min_samples):
         return best, search
     # Sub-networks: the blocks ran out before the adaptive count was reached in a small network (few

@@ -135,5 +135,7 @@ class _Search:
     runners_up: list = field(default_factory=list)  # unrefined models that did not beat the best
     accepted: bool = False  # the search ended because the best model passed the all-data test
     short_of: int = 0  # samples the confidence still needed when the budget (max_samples) stopped the search
+    needed: float = 0.0  # samples the confidence needed then (inf: no sample count reaches it)
+    share: float = 1.0  # the inlier share that count was computed at
     unconfirmed: int = 0  # confirming samples still needed when the distinct blocks ran out (sigma unknown)
     block: tuple = ()  # (entries, gross errors tolerated) of the sample that set the count needed
