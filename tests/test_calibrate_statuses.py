@@ -190,3 +190,18 @@ def test_a_fit_explaining_under_two_thirds_is_inconsistent_and_its_nonconvergenc
     res = pipeline._calibrate_once(F, 1e-3, 0, CalibrationOptions(stability_check=False), 0.0, 3)
     assert res.status == "inconsistent" and "explains only" in res.message, res.message
     assert "did not converge" in " ".join(res.warnings) and _no_nan(res)
+
+
+def test_rejections_look_gross_beyond_doubt_not_as_the_cut_tail_of_a_larger_noise():
+    _, F, _ = _network(12, 10, seed=3)
+    res = calibrate(F, 1e-2, seed=0, options=CalibrationOptions(stability_check=False))
+    w = np.zeros(F.shape)
+    inliers = np.ones(F.shape, bool)
+    inliers[0, :4] = False
+    w[0, :4] = [60.0, 40.0, 5.0, 2.0]  # two far beyond 3 x 3.29, one marginal, one below the critical value
+    gross = replace(res, inliers=inliers, w_test=w, critical_value=3.29)
+    assert pipeline._rejections_look_gross(gross) == (True, 2, 1)
+    w[0, :4] = [9.0, 7.5, 5.0, 4.0]  # a sigma 3x too small: every rejection just above the critical value
+    assert pipeline._rejections_look_gross(replace(gross, w_test=w)) == (False, 0, 4)
+    failed = pipeline._failed(F, "no hypothesis", 0.0, 0)
+    assert pipeline._rejections_look_gross(failed)[0] is False

@@ -195,8 +195,10 @@ def _check_sigma(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result:
     candidates = [lambda: result] + ([second_search] if second_search is not None else [])
     for candidate in candidates:
         answer = candidate()
+        if not _fits_given_sigma(answer):
+            continue
         gross, beyond, marginal = _rejections_look_gross(answer)
-        if not (_fits_given_sigma(answer) and gross):
+        if not gross:
             continue
         ssr, crit, _ = answer.global_test
         note = (f"the calibration with sigma estimated ({est.sigma:.3g}, keeping "
@@ -228,10 +230,10 @@ def _rejections_look_gross(res: CalibrationResult) -> tuple[bool, int, int]:
     beyond). A right sigma rejects gross errors, mostly far beyond (10r/6s at 1 cm: 47 and 114) and
     marginal ones only where a gross error distorts the fit. The rejections look gross when those beyond
     doubt (|w| > GROSS_BEYOND_DOUBT c) are at least as many as the marginal ones, and at least one."""
-    w = np.abs(np.nan_to_num(res.w_test, nan=0.0))[res.measured & ~res.inliers]
     c = res.critical_value
-    if not np.isfinite(c):
+    if res.w_test is None or res.measured is None or not np.isfinite(c):  # (a failed search: no tests)
         return False, 0, 0
+    w = np.abs(np.nan_to_num(res.w_test, nan=0.0))[res.measured & ~res.inliers]
     beyond = int((w > GROSS_BEYOND_DOUBT * c).sum())
     marginal = int(((w > c) & (w <= GROSS_BEYOND_DOUBT * c)).sum())
     return beyond >= max(1, marginal), beyond, marginal
