@@ -140,12 +140,6 @@ def test_the_table4_6r4s_solver_row_is_recomputed():
 REGENERATE_EXPERIMENTS = "python scripts/reproduce_table4.py --jobs 2 && python scripts/make_figures.py --jobs 2"
 """The command that rewrites Table 4, Figures 1-2 and their provenance with the code as it is."""
 
-STALE_AT_ISSUE_46 = "e09ce69a8e4b70960b63fbf69fcaef16f435d517b0d4361d1373633c71e64fb9"
-"""The solver fingerprint Table 4 and Figures 1-2 were written with at a7dce10, stale since: while the committed
-provenance still holds it, the test below is an expected failure that names the command to run; once the outputs
-are regenerated, the mark lifts itself and any later drift fails."""
-
-
 def _recorded_fingerprints() -> list[tuple[str, str, str, str]]:
     """(file, artefact, init, fingerprint) of every code fingerprint a committed JSON under tables/ records."""
     found = []
@@ -160,8 +154,6 @@ def _recorded_fingerprints() -> list[tuple[str, str, str, str]]:
     return found
 
 
-@pytest.mark.xfail(condition=any(f == STALE_AT_ISSUE_46 for *_, f in _recorded_fingerprints()), strict=False,
-                   reason=f"committed experiments are stale; regenerate: {REGENERATE_EXPERIMENTS}")
 def test_committed_outputs_carry_the_fingerprint_of_the_code():
     """A change to the code Table 4 and Figures 1-2 depend on (solvers.experiments.batches.code_fingerprint: the
     numeric pipeline; for "solver" also the 9r/3s and 6r/4s solvers and their kernels) must come with the
