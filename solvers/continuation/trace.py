@@ -305,43 +305,45 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         return out | excluded(z[:, :N], Q[:, :P] + z[:, N:N + 1] * Q[:, P:2 * P])
 
     stand_in = dask(system) if dask is not None else None
+    mover = stand_in or system  # the bulk of the paths (witness graph, the slices' first tracks) on the cluster
     try:
-        witnesses = graph.graph_monodromy(stand_in or system, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed, retries=1,
-                                                                            accept_tol=WITNESS_TOL, seconds=options.seconds),
+        witnesses = graph.graph_monodromy(mover, Q0, start, graph.GraphOptions(nodes=options.nodes, seed=options.seed,
+                                                                               retries=1, accept_tol=WITNESS_TOL,
+                                                                               seconds=options.seconds),
                                           group=group_y, excluded=off_fibre, free=free, checkpoint=checkpoint,
                                           progress=progress)
+        W = witnesses.roots
+        paths = witnesses.paths
+        # the graph keeps no point of the lam = 0 component (F(x; p) = 0, the roots' own; the 10r/4s loops, which
+        # kept them, reached all 6148 among 142,063 points); any that come back are R's, summed once with R, and
+        # one that R lacks makes R incomplete: said, and the trace then fails
+        lam0 = np.abs(W[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(W[:, :N], axis=1))
+        if lam0.any():
+            extra = len(md.add_new(base, W[lam0])) - K
+            if extra and progress:
+                progress(f"trace test: the witness loops reached {extra} root(s) of F(x; p) = 0 that the roots lack")
+            W = W[~lam0]
+        # the witnesses' graph need not close: the test itself tells whether roots and witnesses are the whole fibre
+        # (6r/3s: 185 of 23,000 witness tracks stall on every retry, edges near the det H = 0 component); a graph cut
+        # by the time cap has not looked everywhere, and gives no verdict
+        if not witnesses.finished:
+            if progress:
+                progress(f"trace test: inconclusive, the witnesses' graph was cut by the time cap ({len(W)} witnesses)")
+            return TraceTest("inconclusive", float("nan"), K, len(W), witnesses.rounds, paths,
+                             round(time.perf_counter() - t_start, 1), 0)
+        # the pencil: t = 0 (the sets as they are), t1 and t2 on a circle of radius step, a third of a turn apart (a
+        # random first angle). Two independent angles can fall close (the 10r/4s run of 2026-11-27: 0.10 rad apart),
+        # and a missing point's non-affine part, c t^2 + ..., shows in the fit only as c t2 (t2 - t1).
+        angles = rng.uniform(0.0, 2.0 * np.pi) + np.array([0.0, 2.0 * np.pi / 3.0])
+        ts = np.array([0.0, *(options.step * np.exp(1j * angles))])
+        S = np.vstack([base, W])
+        M = len(S)
+        targets = np.array([np.concatenate([Q0[:-1], [t]]) for t in ts[1:]])
+        inst = np.repeat(np.arange(2), M)
+        ends, _ = mover.track(Q0[None], targets, np.tile(S, (2, 1)), inst)
     finally:
         if stand_in is not None:
             stand_in.close()
-    W = witnesses.roots
-    paths = witnesses.paths
-    # the graph keeps no point of the lam = 0 component (F(x; p) = 0, the roots' own; the 10r/4s loops, which
-    # kept them, reached all 6148 among 142,063 points); any that come back are R's, summed once with R, and
-    # one that R lacks makes R incomplete: said, and the trace then fails
-    lam0 = np.abs(W[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(W[:, :N], axis=1))
-    if lam0.any():
-        extra = len(md.add_new(base, W[lam0])) - K
-        if extra and progress:
-            progress(f"trace test: the witness loops reached {extra} root(s) of F(x; p) = 0 that the roots lack")
-        W = W[~lam0]
-    # the witnesses' graph need not close: the test itself tells whether roots and witnesses are the whole fibre
-    # (6r/3s: 185 of 23,000 witness tracks stall on every retry, edges near the det H = 0 component); a graph cut
-    # by the time cap has not looked everywhere, and gives no verdict
-    if not witnesses.finished:
-        if progress:
-            progress(f"trace test: inconclusive, the witnesses' graph was cut by the time cap ({len(W)} witnesses)")
-        return TraceTest("inconclusive", float("nan"), K, len(W), witnesses.rounds, paths,
-                         round(time.perf_counter() - t_start, 1), 0)
-    # the pencil: t = 0 (the sets as they are), t1 and t2 on a circle of radius step, a third of a turn apart (a
-    # random first angle). Two independent angles can fall close (the 10r/4s run of 2026-11-27: 0.10 rad apart),
-    # and a missing point's non-affine part, c t^2 + ..., shows in the fit only as c t2 (t2 - t1).
-    angles = rng.uniform(0.0, 2.0 * np.pi) + np.array([0.0, 2.0 * np.pi / 3.0])
-    ts = np.array([0.0, *(options.step * np.exp(1j * angles))])
-    S = np.vstack([base, W])
-    M = len(S)
-    targets = np.array([np.concatenate([Q0[:-1], [t]]) for t in ts[1:]])
-    inst = np.repeat(np.arange(2), M)
-    ends, _ = system.track(Q0[None], targets, np.tile(S, (2, 1)), inst)
     paths += 2 * M
     ends = ends.reshape(2, M, -1)
     failed = np.array([_failed(system, targets[b], ends[b], on_locus, group=group_y) for b in range(2)])
