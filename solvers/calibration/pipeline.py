@@ -511,7 +511,8 @@ def _all_data_fit(F, work, model: _Model, sigma, floor, opts: CalibrationOptions
     return ls.R, ls.S, ls.O, work & placed, ls.converged, scale, passed
 
 
-def _leave_one_out(F, work, starts, inl, st: AdjustmentStatistics, opts: CalibrationOptions):
+def _leave_one_out(F, work, starts, inl, st: AdjustmentStatistics, opts: CalibrationOptions,
+                   only: np.ndarray | None = None):
     """The entry whose removal explains the misfit best, by refitting without it (nonlinear), and the
     entries that explain it as well (their removal fits no significantly worse: an error there cannot be
     told apart, e.g. the three measurements of a receiver with three transmitters).
@@ -523,13 +524,16 @@ def _leave_one_out(F, work, starts, inl, st: AdjustmentStatistics, opts: Calibra
     the exact 680). Candidates: every entry, largest |w| first, at most loo_candidates.
     Each refit starts from every (R, S, O) of `starts` (the current fit, and the search's best
     hypothesis: a fit pulled off by a gross error is often in another basin than the truth) and keeps
-    the smallest SSR. Returns (t, critical value, group (list of (i, j)), refit of the best) or None."""
-    if st.dof < 3 or len(st.entries) == 0:
+    the smallest SSR. `only` (bool per entry of `st`): test these entries alone (the critical value
+    stays that of all entries). Returns (t, critical value, group (list of (i, j)), refit of the best) or
+    None."""
+    if st.dof < 3 or len(st.entries) == 0 or (only is not None and not only.any()):
         return None
     # every entry is a candidate: the redundancy numbers of a fit pulled off by a gross error can put
     # the erroneous entry itself below min_redundancy (refitting without an entry of redundancy 0
     # changes nothing and cannot be selected)
-    order = list(np.argsort(-np.abs(np.nan_to_num(st.w, nan=0.0)), kind="stable")[: opts.loo_candidates])
+    aw = np.abs(np.nan_to_num(st.w, nan=0.0))
+    order = [k for k in np.argsort(-aw, kind="stable") if only is None or only[k]][: opts.loo_candidates]
     # a start that predicts every entry like the first one (within 3 a-posteriori sigmas) is in its basin
     E0 = _residual_matrix(F, *starts[0])
     s_post = math.sqrt(st.ssr / st.dof)
@@ -563,13 +567,16 @@ def _leave_one_out(F, work, starts, inl, st: AdjustmentStatistics, opts: Calibra
 
 
 def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions, notes: list | None = None,
-                          hypothesis: tuple | None = None):
+                          hypothesis: tuple | None = None, weak_only: bool = False,
+                          unresolved: list | None = None):
     """Sigma unknown, little redundancy: reject the entry whose removal explains the misfit best while its
     exact externally studentised residual (`_leave_one_out`) exceeds the Bonferroni bound (alpha over
     the entries) and the fit keeps at least 2 degrees of freedom; when other entries explain it
     as well and all belong to one node, the error cannot be located among them and all of them are
-    rejected (said in `notes`); equally good entries of different nodes stop the snooping.
-    Returns (R, S, O, inl, converged)."""
+    rejected (said in `notes`); equally good entries of different nodes stop the snooping (the finding,
+    (t, critical value, group), is appended to `unresolved`). weak_only: only the entries whose
+    redundancy number is below opts.weak_redundancy are tested (after the robust route, whose w-test
+    cannot see an error there). Returns (R, S, O, inl, converged)."""
     inl = inl.copy()
     converged = True
     while True:
@@ -577,7 +584,9 @@ def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions, notes
                                    alpha_global=opts.alpha_global)
         if st is None or st.dof < 3:
             break
-        found = _leave_one_out(F, work, [(R, S, O)] + ([hypothesis] if hypothesis is not None else []), inl, st, opts)
+        only = st.redundancy < opts.weak_redundancy if weak_only else None
+        found = _leave_one_out(F, work, [(R, S, O)] + ([hypothesis] if hypothesis is not None else []), inl, st, opts,
+                               only)
         # family-wise level alpha (0.001): with 2-9 degrees of freedom one false rejection costs a node
         # (a receiver with 3 measurements keeps 2 and cannot be placed), a gross error is far beyond it
         if found is None or found[0] <= found[1]:
@@ -586,6 +595,8 @@ def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions, notes
         if len({i for i, _ in group}) > 1 and len({j for _, j in group}) > 1:
             # entries of different nodes that explain the misfit equally: nothing local to reject
             # (a degenerate geometry or a fit in a wrong basin); the status reports the misfit
+            if unresolved is not None:
+                unresolved.append((t, c, group))
             break
         for i, j in group:
             inl[i, j] = False
@@ -601,14 +612,16 @@ def _snoop_low_redundancy(F, work, R, S, O, inl, opts: CalibrationOptions, notes
 
 
 def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, all_data=None,
-            notes: list | None = None):
+            notes: list | None = None, unresolved: list | None = None, exact: list | None = None):
     """The final adjustment from the best hypothesis: (R, S, O, inliers, converged, route).
 
     1. The all-data hypothesis: least squares on every entry between placed nodes; if the fit shows
        no outlier (`_no_outlier`), every entry is kept (route "all data").
     2. Otherwise the robust route: robust refinement and classification at threshold_sigmas x sigma
        (sigma given, or `_robust_scale`), flipped nodes repaired, then data snooping with
-       readmission (`_snoop`).
+       readmission (`_snoop`); with sigma unknown, then the exact leave-one-out test of the kept
+       entries of small redundancy number (`_snoop_low_redundancy`, weak_only; an error it finds but
+       cannot locate goes to `unresolved`, the mask of the entries it rejected to `exact`).
     """
     R, S, O, use, converged, scale, passed = all_data or _all_data_fit(F, work, best, sigma, floor, opts, rng)
     if passed:
@@ -636,6 +649,15 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
         # scale it cannot estimate. Only classic snooping from the all-data fit is justified.
         R, S, O, inl, converged = _snoop_low_redundancy(F, work, R, S, O, use, opts, notes, (best.R, best.S, best.O))
         return R, S, O, inl, converged, "snooping"
+    if sigma is None:
+        # the w-test of an entry with a small redundancy number shows almost nothing of an error in it, and an
+        # estimated sigma that absorbed the error hides it further: such entries are tested exactly
+        before = inl
+        R2, S2, O2, inl, weak_converged = _snoop_low_redundancy(F, work, R2, S2, O2, inl, opts, notes, weak_only=True,
+                                                                unresolved=unresolved)
+        converged = converged and weak_converged
+        if exact is not None:
+            exact.append(before & ~inl)
     return R2, S2, O2, inl, converged, "robust"
 
 
@@ -690,7 +712,10 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
                        t0, seed, search, warnings, dim=dim)
 
     notes: list[str] = []
-    R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)), notes)
+    unresolved: list = []
+    exact: list = []  # entries rejected by the exact leave-one-out test (their w-test says little)
+    R, S, O, inl, converged, route = _adjust(F, work, best, sigma, floor, opts, rng, fits.get(id(best)), notes,
+                                             unresolved, exact)
     log.info("  adjustment (%s): %d of %d measurements kept (%.1f s)", route, int(inl.sum()), int(work.sum()),
              time.perf_counter() - t0)
     warnings += notes
@@ -847,6 +872,21 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
                       f"error in them cannot be detected (nodes {listed})"))
     if deficient:
         found.append(("uncontrolled", "the fit is rank-deficient: some coordinates are not determined (std inf)"))
+    for t, c, group in unresolved:
+        names = ", ".join(f"r{i + 1}-s{j + 1}" for i, j in group[:6]) + (", ..." if len(group) > 6 else "")
+        found.append(("uncontrolled", f"the exact leave-one-out test finds an error (t = {t:.3g} > {c:.3g}) that "
+                      f"cannot be located: removing any of {names} (different nodes) explains it as well"))
+    if sigma is None:
+        tested = work & ~inl & placed_r[:, None] & placed_t[None, :]
+        for done in exact:
+            tested &= ~done
+        marginal = _marginal_rejections(tested, inl, w_test, redundancy, crit, opts)
+        if marginal:
+            names = ", ".join(f"r{i + 1}-s{j + 1}" for i, j in marginal[:6]) + (", ..." if len(marginal) > 6 else "")
+            found.append(("uncontrolled", f"{len(marginal)} rejected measurement(s) ({names}) lie only 1-3 critical "
+                          f"values out at a node that keeps measurements of redundancy number below "
+                          f"{opts.weak_redundancy:g}: an error absorbed there (sigma estimated, its tests blind) can "
+                          "push good measurements out instead; give sigma to test them"))
     status = _worst("ok", *(s for s, _ in found))
     warnings = [why for _, why in found] + symptoms + [w for w in warnings if w not in {why for _, why in found}]
     res = CalibrationResult(
@@ -869,6 +909,24 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
 #: A search that would need more samples than this for its confidence cannot reach it (at ~3 ms a 3D sample,
 #: hours): its message says so instead of a count of samples short.
 SEARCH_REACH = 1e6
+
+
+def _marginal_rejections(rejected, inl, w_test, redundancy, crit: float, opts: CalibrationOptions) -> list:
+    """Rejected entries (i, j) whose test statistic lies between 1 and 3 critical values, at a receiver or
+    transmitter that keeps an entry of redundancy number below opts.weak_redundancy.
+
+    A gross error is far beyond the critical value; a rejection just beyond it is either a small error
+    or the symptom of an error the fit absorbed at the same node: an entry of small redundancy number
+    pulls its node without showing in its own test, the node's good entries then look wrong (12r/8s,
+    1 mm, 5 % gross errors, sigma estimated 18 x too large: one kept at r 0.047, two good ones rejected
+    at 1.5 and 4 critical values, a receiver 12 std off under status "ok"). With sigma unknown nothing
+    tells the two apart."""
+    if not np.isfinite(crit) or not rejected.any():
+        return []
+    weak = inl & (np.nan_to_num(redundancy, nan=1.0) < opts.weak_redundancy)
+    aw = np.abs(np.nan_to_num(w_test, nan=np.inf))
+    marginal = rejected & (aw > crit) & (aw <= 3.0 * crit) & (weak.any(axis=1)[:, None] | weak.any(axis=0)[None, :])
+    return [(int(i), int(j)) for i, j in np.argwhere(marginal)]
 
 
 def _short_search(search: _Search, short_of: int, opts: CalibrationOptions, sigma_unknown: bool) -> str:

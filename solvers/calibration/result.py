@@ -66,6 +66,12 @@ class CalibrationOptions:
         minimum is taken, a distinct one about as good makes the answer ambiguous
     loo_candidates : with sigma unknown and little redundancy (below min_dof_for_sigma), the entries
         (largest linearised test statistic first) refitted without themselves to test them exactly
+    weak_redundancy : with sigma unknown, the kept entries whose redundancy number is below this are
+        tested exactly after the robust route too (refitted without themselves, at most loo_candidates):
+        the linearised w-test of an entry with r ~ 0.05 shows almost nothing of an error in it (12r/8s,
+        5 % gross errors, 1 cm: one kept at r 0.034, |w| 2.95, exact t 6.9); and a rejection only 1-3
+        critical values out at a node that keeps such an entry makes the status "uncontrolled" (an
+        error the fit absorbed there pushes the node's good entries out instead)
     unknown_sigma_outliers : with sigma unknown, the RANSAC sample count assumes at least this share of
         gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted), unless the
         network has trusted_ratio_redundancy measured entries per unknown or more and the hypothesis
@@ -111,6 +117,7 @@ class CalibrationOptions:
     min_dof_for_sigma: int = 10
     max_snooping_rounds: int = 60
     loo_candidates: int = 30
+    weak_redundancy: float = 0.1
     probe_nodes: int = 4
     probe_radii: tuple = (0.02, 0.05)
     stability_check: bool = True
@@ -132,6 +139,8 @@ class CalibrationOptions:
                 raise ValueError(f"{name} must be in (0, 1), got {getattr(self, name)}")
         if not 0.0 <= self.min_redundancy < 1.0:
             raise ValueError(f"min_redundancy must be in [0, 1), got {self.min_redundancy}")
+        if not 0.0 <= self.weak_redundancy < 1.0:
+            raise ValueError(f"weak_redundancy must be in [0, 1), got {self.weak_redundancy}")
 
 
 @dataclass(frozen=True, eq=False)
