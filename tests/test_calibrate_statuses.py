@@ -226,14 +226,17 @@ def test_a_fit_that_absorbed_an_error_at_a_small_redundancy_number_is_never_ok()
 def test_an_error_kept_at_a_small_redundancy_number_is_tested_exactly():
     """The same room at 1 cm: one gross error was kept at redundancy number 0.034 (|w| 2.95, exact
     leave-one-out t 6.9) and the answer was "ok" with a node 6.2 std off; the exact test of the kept
-    entries of small redundancy number rejects it, and the answer is "ok" and right."""
+    entries of small redundancy number rejects it and the answer is right, but "uncontrolled": the
+    robust classification missed an error, and the same test in a fit that absorbed three (15007) hits a
+    good entry."""
     from solvers.metrics import standardised_node_errors
 
     net, F, bad = _room(12, 8, 7007, sigma=1e-2, gross=0.05)
     res = calibrate(F, dim=3, seed=7007, options=CalibrationOptions(stability_check=False))
     assert not (bad & res.inliers).any()  # every gross error rejected
     z = standardised_node_errors(res, net)
-    assert res.status == "ok" and z.max() < 3.0, (res.message, z.max())  # fixed, not downgraded
+    assert z.max() < 3.0, (res.message, z.max())
+    assert res.status == "uncontrolled" and "exact leave-one-out test rejected r6-s7" in res.message
 
 
 def test_marginal_rejections_count_only_at_nodes_that_keep_a_weak_entry():
