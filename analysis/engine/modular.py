@@ -72,6 +72,10 @@ EVERY_PRIME_UNTIL = 32
 """Reconstruction is tried after every prime up to this many primes, then once the primes grew by an eighth."""
 
 RACE_MAX_BASIS = 50
+
+#: A linear system with an input coefficient above 2^46 and at most this many matrix cells (polynomials x
+#: (unknowns + 1)) gets its exact basis in this process (:func:`rational_basis`); a larger one races in a child.
+INPROCESS_LINEAR_CELLS = 10_000
 """The exact basis races the primes after a failed candidate only for a reduced basis of at most this many
 elements (katsura-6, 41 elements: FLINT's Buchberger 0.7 s; katsura-7: over 100 s, a core spent for
 nothing); for an input coefficient above 2^46 it races at once, whatever the size."""
@@ -452,6 +456,20 @@ def rational_basis(
     # arithmetic usually wins there; on a loaded machine the two would otherwise share one core's time.
     big = can_race and max((max(abs(c.numerator), c.denominator).bit_length() for f in generators
                             for c in f.values()), default=0) > 46
+    if big and len(generators) * (nvars + 1) <= INPROCESS_LINEAR_CELLS and \
+            all(sum(e) <= 1 for f in generators for e in f):
+        # a small linear system: FLINT's fraction-free row echelon form here, not in a child (its cost is
+        # bounded by the matrix's size; forking and polling a child cost more than the echelon form itself:
+        # B x - A with 10,000-digit A and B, 0.5 ms against 4-8 ms)
+        from .exact import exact_basis
+
+        try:
+            found = exact_basis(generators, order, nvars)
+        except (MemoryError, ValueError, ArithmeticError):  # the race and the primes go on, as after a child's failure
+            found = None
+        table = confirmed(found) if found is not None else None
+        if table is not None:
+            return finish(table, f"exact {found.method}, done after {len(used)} primes", used[-1], fresh=False)
     if big:
         race = ExactRace(generators, order, nvars)
     per_prime = rational.report.seconds / max(1, len(rational.report.per_prime))
