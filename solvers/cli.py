@@ -956,9 +956,12 @@ def cmd_count(args: argparse.Namespace) -> int:
     if not args.seconds > 0:
         raise UserError(f"--seconds must be positive, got {args.seconds}")
     if args.json:  # before hours of tracking, not after
-        folder = os.path.dirname(os.path.abspath(args.json))
-        if os.path.isdir(args.json) or not os.path.isdir(folder) or not os.access(folder, os.W_OK):
-            raise UserError(f"--json: cannot write {args.json}: give a file in an existing, writable directory")
+        from solvers.calibrate_io import MeasurementFileError, check_output_path
+
+        try:
+            check_output_path(args.json, "--json")
+        except MeasurementFileError as e:
+            raise UserError(str(e)) from None
     tape_kernel.set_threads(args.threads)
     try:
         if args.system is not None:

@@ -288,7 +288,8 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     base = system.newton(base, Q0[None], steps=2)
 
     def off_fibre(y: np.ndarray, Q: np.ndarray) -> np.ndarray:
-        """Witness endpoints that are not witnesses, at each point's own node Q (rows): on the lam = 0 component
+        """Witness endpoints that are not witnesses, at each point's own node Q (a row per point, or one row for
+        all): on the lam = 0 component
         (the roots' own, F(x; p) = 0: at the other nodes it also holds points of the positive-dimensional
         excluded locus), or, once Newton's method has run on, off where it was (:data:`DRIFT`) or on the
         excluded locus. A point that Newton's method approaches only linearly (a positive-dimensional component:
@@ -296,14 +297,14 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         it away or bring it onto the locus, and leave a genuine ill-conditioned witness (stalling at rounding
         level) where it is."""
         out = np.abs(y[:, N]) <= LAM_ZERO * (1.0 + np.linalg.norm(y[:, :N], axis=1))
-        rows = np.arange(len(y))
+        rows = np.arange(len(y)) if len(Q) == len(y) else np.zeros(len(y), dtype=np.int64)  # Q: per point, or one
         with np.errstate(all="ignore"):
             step = np.linalg.norm(system.newton(y, Q, steps=1, inst=rows) - y, axis=1) / (1.0 + np.linalg.norm(y, axis=1))
         slow = np.flatnonzero(~out & ~(step <= SETTLED))
         z = y.copy()
         if len(slow):
             with np.errstate(all="ignore"):
-                z[slow] = system.newton(y[slow], Q[slow], steps=SETTLE_STEPS, inst=np.arange(len(slow)))
+                z[slow] = system.newton(y[slow], Q, steps=SETTLE_STEPS, inst=rows[slow])
                 drift = np.linalg.norm(z[slow] - y[slow], axis=1) / (1.0 + np.linalg.norm(y[slow], axis=1))
             out[slow] |= ~(drift <= DRIFT)  # Newton's method wanders off: no regular point here
             z[slow] = np.where(np.all(np.isfinite(z[slow]), axis=1)[:, None], z[slow], y[slow])
@@ -331,7 +332,7 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
             W = W[~lam0]
         # the rule again on the base node's points as they stand (a checkpoint may hold points kept under older
         # rules: 10r/4s, 3 of 135,921 that 20 more Newton steps moved by 6-93 %)
-        W = W[~off_fibre(W, np.repeat(Q0[None], len(W), axis=0))]
+        W = W[~off_fibre(W, Q0[None])]
         # the witnesses' graph need not close: the test itself tells whether roots and witnesses are the whole fibre
         # (6r/3s: 185 of 23,000 witness tracks stall on every retry, edges near the det H = 0 component); a graph cut
         # by the time cap has not looked everywhere, and gives no verdict
