@@ -138,7 +138,7 @@ SQUARE_MINORS = {"5r5s": ("M123_123", "M124_124", "M134_134", "M234_234")}
 #: networks missed); squared systems already run Pade (tracker.FAMILY); the chord corrector lost more paths in
 #: nearly every solver (scripts/bench_tracker_variants.py; docs/findings/homotopy-speed.md, "Pade by default").
 #: 9r/3s from its imaginary start (:data:`START_POSITIONS`): "contract" 0.2 (a step is kept when the second Newton
-#: correction is under 0.2 of the first, not 0.1: 47-49 step attempts per path against 51-52) and "final_newton" 5
+#: correction is under 0.2 of the first, not 0.1: 46-49 step attempts per path against 51-52) and "final_newton" 5
 #: (two more Newton steps on the target: network 442's true root sits 1.3e-3 from another root, and three steps
 #: left it 2.9e-6 off, five 4e-12). On three sets of 1000 seeded networks (seeds 0, 1, 2 of bench_solvers' sequence)
 #: the same missed networks (49; none; none) and no more roots lost (23, 2, 2 against 23, 2, 4) than the complex
@@ -250,9 +250,10 @@ def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2, mod
     Receivers, transmitters and (TDOA) offsets are complex normal, in ``dim`` dimensions (drawn in this
     order; TOA draws no offsets); with ``positions="imaginary"`` (:data:`START_POSITIONS`) the receivers and
     transmitters are i times real normal (their squared distances negative reals), the offsets complex normal as
-    before. d_ij is a square root of the (complex) squared distance (the equations use only d_ij^2). The root is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with
-    H = (4 S^T S)^-1, S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0;
-    transposes, not conjugates), as in solvers.synthetic and analysis.formulations.kd.
+    before. d_ij is a square root of the (complex) squared distance (the equations use only d_ij^2). The root
+    is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with H = (4 S^T S)^-1,
+    S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0; transposes, not conjugates), as in
+    solvers.synthetic and analysis.formulations.kd.
     """
     if positions not in ("complex", "imaginary"):
         raise ValueError(f"positions: 'complex' or 'imaginary', not {positions!r}")
