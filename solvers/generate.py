@@ -137,10 +137,25 @@ SQUARE_MINORS = {"5r5s": ("M123_123", "M124_124", "M134_134", "M234_234")}
 #: against 21), the 3D TOA solvers (6r/4s 3x slower, 4r/6s Gram 1.2x) nor 5r/5s TOA (chord: as fast, other
 #: networks missed); squared systems already run Pade (tracker.FAMILY); the chord corrector lost more paths in
 #: nearly every solver (scripts/bench_tracker_variants.py; docs/findings/homotopy-speed.md, "Pade by default").
-STEP_CONTROL = {"9r3s": {"tracker": {"predictor": "pade"}},
+#: 9r/3s from its imaginary start (:data:`START_POSITIONS`): "contract" 0.2 (a step is kept when the second Newton
+#: correction is under 0.2 of the first, not 0.1: 46-49 step attempts per path against 51-52) and "final_newton" 5
+#: (two more Newton steps on the target: network 442's true root sits 1.3e-3 from another root, and three steps
+#: left it 2.9e-6 off, five 4e-12). On three sets of 1000 seeded networks (seeds 0, 1, 2 of bench_solvers' sequence)
+#: the same missed networks (49; none; none) and no more roots lost (23, 2, 2 against 23, 2, 4) than the complex
+#: start with the defaults; contraction 0.3, or target 0.02 with 0.2, lost more (docs/findings/homotopy-speed.md,
+#: "Imaginary start networks").
+STEP_CONTROL = {"9r3s": {"tracker": {"predictor": "pade", "contract": 0.2, "final_newton": 5}},
                 "8r3s": {"tracker": {"predictor": "pade"}},
                 "6r3s": {"tracker": {"predictor": "pade"}},
                 "4r5s": {"tracker": {"max_steps": 400, "predictor": "pade"}, "starts": 3}}
+
+#: Start networks of a configuration's homotopy other than complex normal (:func:`complex_instance`'s ``positions``):
+#: "imaginary", receivers and transmitters i times real normal. The start parameters q0 are then close to i times a
+#: real network's data, and the straight segments from there to real data pass farther from the systems whose
+#: paths meet: 9r/3s plain tracks took 49-57 step attempts per path from such starts against 64 from its complex
+#: one (docs/findings/homotopy-speed.md, "Imaginary start networks").
+START_POSITIONS = {"9r3s": "imaginary"}
+
 
 def step_control_fields(step_control: dict | None, squared: bool) -> dict:
     """The spec's "tracker" and "retrack" fields of a homotopy solver: :data:`tracker.FAMILY` for a squared system
@@ -226,20 +241,27 @@ class Generated:
 
 
 def complex_instance(m: int, n: int, rng: np.random.Generator, dim: int = 2, model: str = "tdoa",
-                     parametrization: str = "compaction") -> tuple[np.ndarray, np.ndarray]:
+                     parametrization: str = "compaction", positions: str = "complex") -> tuple[np.ndarray, np.ndarray]:
     """A complex network's data F (m, n), normalised by its RMS modulus, and its compaction root in that frame
     (``parametrization="direct"``: the network is first put in the gauge frame, r_1 = 0, r_2 on the x-axis,
     r_3 in the xy-plane, by zeroing those coordinates, and the root is the direct unknowns: the receivers'
     free coordinates, the transmitters, the offsets).
 
     Receivers, transmitters and (TDOA) offsets are complex normal, in ``dim`` dimensions (drawn in this
-    order; TOA draws no offsets); d_ij is a square root of the (complex) squared distance (the equations
-    use only d_ij^2). The root is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with
-    H = (4 S^T S)^-1, S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0;
-    transposes, not conjugates), as in solvers.synthetic and analysis.formulations.kd.
+    order; TOA draws no offsets); with ``positions="imaginary"`` (:data:`START_POSITIONS`) the receivers and
+    transmitters are i times real normal (their squared distances negative reals), the offsets complex normal as
+    before. d_ij is a square root of the (complex) squared distance (the equations use only d_ij^2). The root
+    is (H, b, o) (TOA: (H, b)), H's upper triangle row by row, with H = (4 S^T S)^-1,
+    S = [s_2 - s_1, ..., s_{K+1} - s_1], b = -1/2 S^-1 s_1 (r_1 translated to 0; transposes, not conjugates), as in
+    solvers.synthetic and analysis.formulations.kd.
     """
-    r = rng.normal(size=(m, dim)) + 1j * rng.normal(size=(m, dim))
-    t = rng.normal(size=(n, dim)) + 1j * rng.normal(size=(n, dim))
+    if positions not in ("complex", "imaginary"):
+        raise ValueError(f"positions: 'complex' or 'imaginary', not {positions!r}")
+    if positions == "imaginary":
+        r, t = 1j * rng.normal(size=(m, dim)), 1j * rng.normal(size=(n, dim))
+    else:
+        r = rng.normal(size=(m, dim)) + 1j * rng.normal(size=(m, dim))
+        t = rng.normal(size=(n, dim)) + 1j * rng.normal(size=(n, dim))
     o = rng.normal(size=n) + 1j * rng.normal(size=n) if model == "tdoa" else np.zeros(0)
     if parametrization == "direct":
         for i in range(min(dim, m)):
@@ -274,10 +296,10 @@ def gauge_reflections(unknowns: Sequence[str]) -> np.ndarray:
     return np.array(out)
 
 
-def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa",
-                parametrization: str = "compaction") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
+def _tdoa_start(m: int, n: int, dim: int = 2, model: str = "tdoa", parametrization: str = "compaction",
+                positions: str = "complex") -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]:
     def start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        F, x = complex_instance(m, n, rng, dim, model, parametrization)
+        F, x = complex_instance(m, n, rng, dim, model, parametrization, positions)
         return F.ravel(), x
 
     return start
@@ -711,7 +733,8 @@ def _job(target, name: str | None, start: Start | None, method: str | None,
     full = from_formulation(formulation, saturate_det_h=True) if squared else None
     trials = _tdoa_trials(formulation.split(":")[0], system.scale_powers) if label else None
     group = gauge_reflections(system.unknowns) if direct else None
-    return (Job(name, formulation, system, config, _tdoa_start(*config, kind.dim, kind.model, kind.parametrization),
+    start = _tdoa_start(*config, kind.dim, kind.model, kind.parametrization, START_POSITIONS.get(label, "complex"))
+    return (Job(name, formulation, system, config, start,
                 trials, full, seeds=(0,) if squared else (0, 1), step_control=STEP_CONTROL.get(label), group=group),
             chosen, label)
 

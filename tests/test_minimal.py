@@ -69,15 +69,17 @@ def test_program_agrees_with_the_expanded_system(label):
     assert np.allclose(H, expanded, rtol=1e-9, atol=1e-9 * np.abs(expanded).max())
 
 
-@pytest.mark.parametrize("dim, model", [(3, "toa"), (2, "toa")])
-def test_complex_start_is_a_root(dim, model):
-    """The generator's complex start network (any dimension and model) is a root of the system."""
-    label = SOLVERS["6r4s3dtoa" if dim == 3 else "3r3stoa"]
+@pytest.mark.parametrize("dim, model, positions", [(3, "toa", "complex"), (2, "toa", "complex"),
+                                                   (2, "tdoa", "imaginary"), (2, "tdoa", "complex")])
+def test_complex_start_is_a_root(dim, model, positions):
+    """The generator's complex start network (any dimension and model; positions complex or, as 9r/3s's,
+    imaginary) is a root of the system."""
+    label = SOLVERS["6r4s3dtoa" if dim == 3 else ("3r3stoa" if model == "toa" else "9r3s")]
     m, n = Formulation.parse(label).config.m, Formulation.parse(label).config.n
     system = from_formulation(label, saturate_det_h=True)
     coefficients = tk.load_coefficients(tk.coefficient_source(system))
     exps, eq = tk.structure(system)
-    F, x = complex_instance(m, n, np.random.default_rng(0), dim, model)
+    F, x = complex_instance(m, n, np.random.default_rng(0), dim, model, positions=positions)
     c = coefficients(F.ravel()[None])[0]
     value = np.zeros(len(x), dtype=complex)
     np.add.at(value, eq, c * np.prod(x[None, :] ** exps, axis=1))

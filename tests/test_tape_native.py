@@ -81,7 +81,8 @@ def test_native_switch_and_bad_addresses(monkeypatch):
 @pytest.mark.skipif(not COMPILED, reason="no C compiler, or TDOA_WORKBENCH_NATIVE=off")
 def test_compiled_lu_equals_batched():
     """The solver's compiled LU and solves (four columns per pass) give the batched kernels' bits: factors,
-    pivots, singular flags and solutions, on 9 columns (a last pass into spare columns) with a singular one."""
+    pivots, singular flags and solutions, on 9 columns (a last pass into spare columns) with a singular one and
+    one with a NaN entry."""
     _, solver = _solver()
     lin = tape_native.addresses(solver.tapes, wait=True)[3:5]
     assert np.all(lin != 0), tape_native.describe(solver.tapes)
@@ -90,6 +91,7 @@ def test_compiled_lu_equals_batched():
     P, cap = 9, 12
     A = rng.normal(size=(N + N * N, cap)) + 1j * rng.normal(size=(N + N * N, cap))
     A[N:, 4] = 0.0  # a singular matrix
+    A[N + N * N - 1, 7] = np.nan  # a NaN in the last pivot (the interchanges are vector selects: NaN lanes too)
     b = rng.normal(size=(N, cap)) + 1j * rng.normal(size=(N, cap))
 
     def factor_solve(addresses):
@@ -103,7 +105,7 @@ def test_compiled_lu_equals_batched():
     compiled, batched = factor_solve(lin), factor_solve(np.zeros(2, dtype=np.int64))
     for got, ref in zip(compiled, batched):
         np.testing.assert_array_equal(got, ref)
-    assert not batched[3][4] and batched[3][[0, 1, 2, 3, 5, 6, 7, 8]].all()
+    assert not batched[3][4] and not batched[3][7] and batched[3][[0, 1, 2, 3, 5, 6, 8]].all()
     M = A[N:, 0].reshape(N, N)  # and the solves are solves
     np.testing.assert_allclose(M @ batched[1][:, 0], b[:, 0], rtol=1e-10, atol=1e-10)
 

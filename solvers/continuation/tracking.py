@@ -366,16 +366,20 @@ class HomotopySolver:
         stalled = stats[:, 0].reshape(B, K) == 1
         self._local_detours(qa, xa, q, x, stalled, stats[:, 3].reshape(B, K)[stalled])
         redo = stalled & ~np.all(np.isfinite(x), axis=2)
+        lost = ~np.all(np.isfinite(x), axis=2)  # :func:`unresolved` of each instance, kept where nothing is retracked
         for b in range(B):
-            redo[b] |= _duplicated(x[b])
+            dup = _duplicated(x[b])
+            lost[b] |= dup
+            redo[b] |= dup
             if _degenerate(redo[b]):
                 redo[b] = False
         bi, ki = np.nonzero(redo)
         if len(bi):
             xr, _ = self.track(qa[None], q, xa[ki], bi, self.retrack)
             x[bi, ki] = xr
-        complete = np.array([not unresolved(x[b]).any() for b in range(B)])
-        return x, complete
+            for b in np.unique(bi):
+                lost[b] = unresolved(x[b])
+        return x, ~lost.any(axis=1)
 
     def _local_detours(self, qa: np.ndarray, xa: np.ndarray, q: np.ndarray, x: np.ndarray, stalled: np.ndarray,
                        at: np.ndarray) -> None:
