@@ -45,9 +45,10 @@ CELLS = {"10r4s": "10r4s", "7r5s": "7r5s", "6r6s": "6r6s", "5r9s": "5r9s"}
 #: run it on a cluster with --dask).
 TRACE = ("10r4s", "7r5s", "6r6s")
 
-#: |t1| = |t2| of the trace test's pencil per cell (trace.TraceOptions.step otherwise): 10r/4s at 0.2, where no
-#: track is lost on the b coordinates (at 0.3 and 0.5 one was, docs/minimal-3d.md).
-TRACE_STEP = {"10r4s": 0.2}
+#: |t1| = |t2| of the trace test's pencil per cell (trace.TraceOptions.step otherwise): 0.2, where no track is lost
+#: (10r/4s on b: at 0.3 and 0.5 one was; 7r/5s on the offsets: at 0.5 one witness of norm 723 was lost on every
+#: route, docs/minimal-3d.md).
+TRACE_STEP = {"10r4s": 0.2, "7r5s": 0.2, "6r6s": 0.2}
 
 SEEDS = (0, 1)
 

@@ -533,50 +533,72 @@ def _pencil(system: ParametricSystem, group, say: Callable[[str], None]) -> tupl
     The compaction formulations': b alone. b goes to infinity wherever a root escapes (no base point on the curve),
     and it has fewer witnesses than all unknowns (2D 9r/3s: 1290 against 2045 for 75 roots).
 
-    The direct TDOA parametrization's: the offsets alone, when they determine the network up to the group. The test
-    is then the trace test of the curve's image in (offsets, lam) (trace.py), sound when that image is birational
-    to the curve up to the group: given the offsets, the data are TOA data, so this holds exactly when the TOA
-    system of the same configuration has |G| solutions at a random consistent instance, which F4 decides over GF(p)
-    (7r/5s, 6r/6s, 5r/9s: 8 = |G| in 0.1-0.4 s). The offsets have far fewer witnesses: 2D 6r/3s direct 1,778 witness
-    orbits against 7,384 with every unknown (180 orbits; passed at 3e-14, one orbit removed 1.3e-5). Where F4 does
-    not give |G|, every unknown."""
+    The direct TDOA parametrization's: the fewest offsets that determine the network up to the group. The witnesses
+    are the poles of the pencil's form, about as many per offset (2D 6r/3s direct, 180 orbits: 734, 1,256 and 1,778
+    witness orbits on one, two and three offsets, 7,384 on every unknown), and the test is then the trace test of
+    the curve's image in (those offsets, lam) (trace.py), sound when that image is birational to the curve up to
+    the group: exactly when the system with those offsets fixed has |G| solutions at a random consistent instance,
+    which F4 decides over GF(p). With every offset fixed the data are TOA data (7r/5s, 6r/6s, 5r/9s: 8 solutions in
+    0.1-0.5 s); each offset freed makes F4's work larger, so offsets are freed one at a time while the basis stays
+    within :data:`PENCIL_CELLS` (6r/6s: three offsets fixed, 12,605 x 12,500, about a minute; one fixed, not
+    finished for 7r/5s in 15 minutes). Where F4 does not give |G| with every offset fixed, every unknown."""
     names = system.unknowns
     b = tuple(k for k, u in enumerate(names) if re.fullmatch(r"b\d", u))
     if b:
         return b, "b"
     offsets = tuple(k for k, u in enumerate(names) if re.fullmatch(r"o\d+", u))
-    label = re.fullmatch(r"(\d+r\d+s)-tdoa([23])d-direct:all", system.name or "")
-    if not offsets or label is None or group is None:
+    if not offsets or group is None or not re.fullmatch(r"\d+r\d+s-tdoa[23]d-direct:all", system.name or ""):
         return None, "every unknown"
-    toa = f"{label.group(1)}-toa{label.group(2)}d-direct:all"
-    degree = _toa_degree(toa)
-    if degree == len(group):
-        words = (f"offsets (given them, {toa} has {degree} solutions over GF(p), the group's order: they determine "
-                 f"each orbit)")
-        say(f"trace test: pencil on the {words}")
-        return offsets, words
-    say(f"trace test: pencil on every unknown ({toa}: degree {degree} over GF(p), not the group's order {len(group)})")
-    return None, "every unknown"
+    chosen = None
+    for k in range(len(offsets), 0, -1):
+        fixed = tuple(names[j] for j in offsets[:k])
+        degree = _fixed_degree(system.name, fixed)
+        say(f"trace test: with {', '.join(fixed)} fixed, {degree if degree is not None else 'no degree within F4 budget'}"
+            f" (group order {len(group)})")
+        if degree != len(group):
+            break
+        chosen = k
+    if chosen is None:
+        say("trace test: pencil on every unknown (the offsets do not determine each orbit over GF(p))")
+        return None, "every unknown"
+    fixed = [names[j] for j in offsets[:chosen]]
+    words = (f"{', '.join(fixed)} (with {'it' if chosen == 1 else 'them'} fixed the system has {len(group)} solutions "
+             f"over GF(p), the group's order: {'it determines' if chosen == 1 else 'they determine'} each orbit)")
+    say(f"trace test: pencil on {words}")
+    return offsets[:chosen], words
 
 
-def _toa_degree(label: str) -> int | None:
-    """The degree of a TOA formulation at consistent random instances modulo two primes (each instance's known root
-    checked), or None when the primes disagree or the ideal is not zero-dimensional."""
+#: F4's budget (rows x columns of its largest matrix) for :func:`_pencil`'s checks.
+PENCIL_CELLS = 200_000_000
+
+
+def _fixed_degree(label: str, fixed: tuple[str, ...]) -> int | None:
+    """The degree of a formulation with the unknowns ``fixed`` set to their values at the known root of a consistent
+    random instance, modulo two primes (the root checked), or None when the primes disagree, the ideal is not
+    zero-dimensional or F4 exceeds :data:`PENCIL_CELLS`."""
     from analysis.engine.degree import DEFAULT_PRIMES, PrimeDisagreement, analyse
+    from analysis.engine.f4 import F4Options
+    from analysis.engine.linalg import MatrixTooLarge
     from analysis.engine.ring import Ring
     from analysis.formulations import tdoa as tf
 
     formulation = as_formulation(label)
+    unknowns = list(formulation.config.unknowns)
 
     def polys(p: int):
         instance = tf.sample_gf_instance(formulation.config, p, 0)
         tf.check_root(formulation, instance)
-        ring = Ring(formulation.config.unknowns, p)
-        return [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
+        ring = Ring(unknowns, p)
+        eqs = [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
+        for name in fixed:
+            k = unknowns.index(name)
+            eqs.append(ring.from_terms({tuple(int(j == k) for j in range(len(unknowns))): 1,
+                                        (0,) * len(unknowns): (-int(instance.root[k])) % p}))
+        return eqs
 
     try:
-        return analyse(polys, DEFAULT_PRIMES).degree
-    except PrimeDisagreement:
+        return analyse(polys, DEFAULT_PRIMES, F4Options(max_matrix_cells=PENCIL_CELLS)).degree
+    except (PrimeDisagreement, MatrixTooLarge):
         return None
 
 

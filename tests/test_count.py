@@ -242,13 +242,13 @@ def test_a_carried_path_lost_on_every_route_is_joined_from_the_other_end():
 
 def test_the_direct_tdoa_pencil_is_on_the_offsets_where_they_determine_each_orbit():
     """2D TDOA 6r/3s, direct parametrization (180 orbits of the 4 reflections): given the offsets the data are
-    TOA data, whose system F4 finds with 4 solutions (the group's order) over GF(p), so the offsets alone carry
-    the trace test. Their pencil has a quarter of the witnesses of every unknown's (1,778 against 7,384), passes
-    on the whole set and fails with one orbit removed."""
+    TOA data, and F4 finds the system with the offsets fixed, down to o1 alone, with 4 solutions (the group's
+    order) over GF(p): o1 determines each orbit and carries the trace test. Its pencil has a tenth of the witnesses
+    of every unknown's (734 against 7,384), passes on the whole set and fails with one orbit removed."""
     label = "6r3s-tdoa2d-direct:all"
     system, q0, x0, group = counting._start(label, 0)
     coordinates, words = counting._pencil(system, group, lambda msg: None)
-    assert [system.unknowns[k] for k in coordinates] == ["o1", "o2", "o3"] and "4 solutions" in words
+    assert [system.unknowns[k] for k in coordinates] == ["o1"] and "4 solutions" in words
     solver, x0 = monodromy.start_solver(system, q0, x0, 0)
     roots = graph.graph_monodromy(solver, q0, x0, graph.GraphOptions(), group=group,
                                   excluded=monodromy._excluded(system, q0)).roots
@@ -256,6 +256,6 @@ def test_the_direct_tdoa_pencil_is_on_the_offsets_where_they_determine_each_orbi
     _, qs, xs, _ = counting._start(label, 1000)
     options = trace.TraceOptions(coordinates=coordinates)
     whole = trace.trace_test_system(system, q0, roots, (qs, xs), options, group=group)
-    assert whole.status == "passed" and whole.residual < 1e-11 and whole.witnesses < 7384 / 2, whole
+    assert whole.status == "passed" and whole.residual < 1e-11 and whole.witnesses < 7384 / 5, whole
     short = trace.trace_test_system(system, q0, roots[1:], (qs, xs), options, group=group)
     assert short.status == "failed" and short.residual > 1e5 * whole.residual, short
