@@ -45,10 +45,8 @@ CELLS = {"10r4s": "10r4s", "7r5s": "7r5s", "6r6s": "6r6s", "5r9s": "5r9s"}
 #: run it on a cluster with --dask).
 TRACE = ("10r4s", "7r5s", "6r6s")
 
-#: |t1| = |t2| of the trace test's pencil per cell (trace.TraceOptions.step otherwise): 0.2, where no track is lost
-#: (10r/4s on b: at 0.3 and 0.5 one was; 7r/5s on the offsets: at 0.5 one witness of norm 723 was lost on every
-#: route, docs/minimal-3d.md).
-TRACE_STEP = {"10r4s": 0.2, "7r5s": 0.2, "6r6s": 0.2}
+#: |t1| = |t2| of the trace test's pencil per cell (count's TRACE_STEP otherwise, 0.2).
+TRACE_STEP: dict[str, float] = {}
 
 SEEDS = (0, 1)
 
@@ -137,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     for cell in [] if args.reuse else (args.cells or list(CELLS)):
         traced = not args.no_trace and cell in args.trace
         options = counting.CountOptions(seeds=tuple(args.seeds), trace=traced,
-                                        trace_step=TRACE_STEP.get(cell, trace.TraceOptions.step),
+                                        trace_step=TRACE_STEP.get(cell, counting.TRACE_STEP),
                                         checkpoints=args.checkpoint)
         t0 = time.perf_counter()
         result = counting.count(counting.tdoa_target(CELLS[cell], 3), options,

@@ -64,6 +64,10 @@ COUNT_TRACKER = tracker.TrackerOptions()
 #: straight retrack and every local detour).
 CARRY_ROUTES = 3
 
+#: |t1| = |t2| of count's trace test: at 0.5 a path was lost on every route on 3D 10r/4s (pencil on b) and on 7r/5s
+#: (offsets: a witness of norm 723), at 0.2 none was (docs/minimal-3d.md).
+TRACE_STEP = 0.2
+
 #: Seeded random known solutions carried around each fresh verification loop.
 VERIFY_SAMPLE = 64
 
@@ -89,7 +93,7 @@ class CountOptions:
     verify_loops: int = 1
     certify: bool = True
     trace: bool = False
-    trace_step: float = trace_mod.TraceOptions.step
+    trace_step: float = TRACE_STEP
     seconds: float = float("inf")
     checkpoints: str | None = None
     tracker: tracker.TrackerOptions | None = None
