@@ -113,8 +113,8 @@ def simulate(rng: np.random.Generator, mics: int, events: int, rt60: float, snr_
     return rec, Network(mic_pos, src_pos, c * (emit + filter_delay)), kinds, c
 
 
-def run(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[float, float], snr_db: float) -> dict:
-    """One room, one table row."""
+def record(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[float, float], snr_db: float):
+    """One room simulated and measured: (the row's room columns, TdoaMatrix, Network, speed of sound)."""
     import soundfile
 
     rng = np.random.default_rng(seed)
@@ -128,6 +128,18 @@ def run(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[f
         tm = tdoa_matrix(read_recording(path), TdoaOptions(speed=c))
     row = {"seed": seed, "mics": m, "events": n, "rt60_s": rt60_s, "snr_db": snr_db,
            "signals": "/".join(str(kinds.count(k)) for k in KINDS)}
+    return row, tm, net, c
+
+
+def run(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[float, float], snr_db: float) -> dict:
+    """One room, one table row."""
+    row, tm, net, c = record(seed, mics, events, rt60, snr_db)
+    return assess(row, tm, net, c, seed)
+
+
+def assess(row: dict, tm, net: Network, c: float, seed: int) -> dict:
+    """The row of one measured room: `tdoa`'s entries against the truth, then `calibrate` (sigma estimated)."""
+    m, n = row["mics"], row["events"]
     # Each detected event is the true event whose direct sound starts within 60 ms after its onset
     # (the first microphone hears it within 30 ms; the 5 ms frames start up to 20 ms early).
     lead = tm.onsets[:, None] - net.offsets[None, :] / c
