@@ -226,9 +226,10 @@ def test_a_fit_that_absorbed_an_error_at_a_small_redundancy_number_is_never_ok()
 
 
 def test_absorbed_error_probe_decides_by_the_f_test_of_the_two_sigmas(monkeypatch):
-    """The probe's decisions with stand-in searches: the same sigma without the suspects refutes an
-    absorbed error; a sigma significantly smaller restarts the calibration from that fit (hinted);
-    no usable fit, or a restart that does not keep the better fit, leaves it undecided."""
+    """The probe's decisions with stand-in searches: the same sigma and the same calibration without the
+    suspects refute an absorbed error; a sigma significantly smaller restarts the calibration from that
+    fit (hinted); another calibration of no better sigma (the search missed the basin), no usable fit, or
+    a restart that does not keep the better fit leave it undecided."""
     _, F, _ = _network(12, 10, seed=3)
     res = calibrate(F, 1e-2, seed=0, options=CalibrationOptions(stability_check=False))
     suspects = [(0, 1), (4, 2)]
@@ -246,32 +247,44 @@ def test_absorbed_error_probe_decides_by_the_f_test_of_the_two_sigmas(monkeypatc
 
     opts = CalibrationOptions()
     dof = 60
+    fit = (res.receivers, res.transmitters, res.receiver_std, res.transmitter_std)
+
+    def probe(suspects_=suspects):
+        return pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects_, 0.01, dof, fit)
+
     same = replace(res, sigma=0.011, dof=58)
     monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(same, None))
-    verdict = pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects, 0.01, dof)
+    verdict = probe()
     assert verdict[0] == "refuted" and "r1-s2, r5-s3" in verdict[2] and len(calls) == 1
+    moved = res.transmitters.copy()
+    moved[3] += 10.0 * np.hypot(res.transmitter_std[3], res.transmitter_std[3])  # 10 combined std
+    monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(replace(same, transmitters=moved), None))
+    verdict = probe()
+    assert verdict[0] == "undecided" and "another calibration" in verdict[2]
     better = replace(res, sigma=0.002, dof=58, receivers=res.receivers + 1.0)
     restarted = replace(res, sigma=0.0021)
     monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(better, restarted))
-    verdict = pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects, 0.01, dof)
+    verdict = probe()
     assert verdict[0] == "absorbed" and verdict[1] is restarted and "absorbed an error" in verdict[2]
     assert np.array_equal(calls[-1][0], better.receivers)  # restarted from the better fit
     monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(better, replace(res, sigma=0.02)))
-    assert pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects, 0.01, dof)[0] == "undecided"
+    assert probe()[0] == "undecided"
     monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(replace(better, status="partial"), restarted))
-    assert pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects, 0.01, dof)[0] == "undecided"
-    assert pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, [], 0.01, dof) is None
+    assert probe()[0] == "undecided"
+    assert probe([]) is None
 
 
 def test_absorbed_error_probe_refutes_on_a_network_without_gross_errors():
     """A 12r/8s room at 1 mm without gross errors, sigma estimated: without its kept entries of small
-    redundancy number the search fits with the same sigma (nothing was absorbed)."""
+    redundancy number the search fits with the same sigma and places the nodes where they were (nothing
+    was absorbed)."""
     net, F, _ = _room(12, 8, 2007, sigma=1e-3)
     opts = CalibrationOptions(stability_check=False)
     res = calibrate(F, dim=3, seed=2007, options=opts)
     suspects = [(int(i), int(j)) for i, j in np.argwhere(res.redundancy < 0.1)][:3]
     assert suspects, "the room has entries of small redundancy number"
-    verdict = pipeline._absorbed_error_probe(F, 2007, opts, 0.0, 3, suspects, res.sigma, res.dof)
+    fit = (res.receivers, res.transmitters, res.receiver_std, res.transmitter_std)
+    verdict = pipeline._absorbed_error_probe(F, 2007, opts, 0.0, 3, suspects, res.sigma, res.dof, fit)
     assert verdict[0] == "refuted", verdict[2]
 
 

@@ -1,6 +1,8 @@
 """Flags: what the data cannot decide (collinear or coplanar nodes, mirror positions, alternative hypotheses)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .adjustment import n_unknowns, robust_refine
@@ -242,22 +244,48 @@ def _distinct(a: _Model, b: _Model, tol: float) -> bool:
 def _beyond_std(R2, S2, R, S, rstd, tstd, atol: float) -> bool:
     """True when another fit (R2, S2) puts a node farther than 3 reported std (plus atol) from (R, S)
     after a rigid alignment (reflections allowed), or places other nodes."""
+    ok = np.isfinite(R[:, 0]).tolist() + np.isfinite(S[:, 0]).tolist()
+    if ok != np.isfinite(R2[:, 0]).tolist() + np.isfinite(S2[:, 0]).tolist():
+        return True
+    shift, ok = _aligned_shift(R2, S2, R, S)
+    if shift is None:
+        return False
+    std = _node_std(rstd, tstd)[ok]
+    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + atol
+    return bool((shift > tol).any())
+
+
+def _aligned_shift(R2, S2, R, S):
+    """(distance of each node placed in both fits after a rigid alignment of (R2, S2) onto (R, S),
+    reflections allowed; the mask of those nodes), or (None, mask) when too few nodes are placed in both."""
     from ..metrics import align_rigid
 
     X = np.vstack([R, S])
     Y = np.vstack([R2, S2])
-    ok = np.isfinite(X[:, 0])
-    if not np.array_equal(ok, np.isfinite(Y[:, 0])):
-        return True
+    ok = np.isfinite(X[:, 0]) & np.isfinite(Y[:, 0])
     if ok.sum() <= X.shape[1]:
-        return False
-    shift = np.linalg.norm(align_rigid(Y[ok], X[ok]).apply(Y[ok]) - X[ok], axis=1)
+        return None, ok
+    return np.linalg.norm(align_rigid(Y[ok], X[ok]).apply(Y[ok]) - X[ok], axis=1), ok
+
+
+def _node_std(rstd, tstd) -> np.ndarray:
+    """Receivers' then transmitters' reported std, a gauge receiver (std 0) given a typical node's: it
+    moves with an alignment like any node (48 x 540: every node 4e-7 apart after aligning two fits of
+    equal cost, the gauge receiver "beyond 3 std")."""
     std = np.concatenate([rstd, tstd])
-    # a gauge receiver (std 0) moves with the alignment like a typical node (48 x 540: every node
-    # 4e-7 apart after aligning two fits of equal cost, the gauge receiver "beyond 3 std")
-    std = np.where(std == 0.0, _typical_std(rstd, tstd), std)[ok]
-    tol = 3.0 * np.where(np.isfinite(std), std, np.inf) + atol
-    return bool((shift > tol).any())
+    return np.where(std == 0.0, _typical_std(rstd, tstd), std)
+
+
+def _standardised_shift(R2, S2, rstd2, tstd2, R, S, rstd, tstd) -> float:
+    """The largest distance between two fits' nodes (after a rigid alignment) over the root sum of
+    squares of their reported stds; inf when too few nodes are placed in both to align them."""
+    shift, ok = _aligned_shift(R2, S2, R, S)
+    if shift is None:
+        return math.inf
+    std = np.hypot(_node_std(rstd, tstd), _node_std(rstd2, tstd2))[ok]
+    if not (np.isfinite(std).all() and (std > 0).all()):
+        return math.inf  # a node without a finite std: no comparison
+    return float(np.max(shift / std))
 
 
 def _flags(F, work, inl, R, S, O, sigma, rstd, tstd, opts, floor, deficient, search, best, sigma_given, rms,
