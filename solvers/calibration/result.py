@@ -69,9 +69,10 @@ class CalibrationOptions:
     weak_redundancy : with sigma unknown, the kept entries whose redundancy number is below this are
         tested exactly after the robust route too (refitted without themselves, at most loo_candidates):
         the linearised w-test of an entry with r ~ 0.05 shows almost nothing of an error in it (12r/8s,
-        5 % gross errors, 1 cm: one kept at r 0.034, |w| 2.95, exact t 6.9); an entry that test rejects,
-        and a rejection only 1-3 critical values out at a node that keeps such an entry, make the status
-        "uncontrolled" (an error the fit absorbed there pushes the node's good entries out instead)
+        5 % gross errors, 1 cm: one kept at r 0.034, |w| 2.95, exact t 6.9); an entry that test rejects
+        makes the status "uncontrolled"; a rejection only 1-3 critical values out at a node that keeps
+        such an entry (an error the fit absorbed there pushes the node's good entries out instead) is
+        tested by a search without those entries (pipeline._absorbed_error_probe)
     unknown_sigma_outliers : with sigma unknown, the RANSAC sample count assumes at least this share of
         gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted), unless the
         network has trusted_ratio_redundancy measured entries per unknown or more and the hypothesis
