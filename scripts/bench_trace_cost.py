@@ -1,7 +1,8 @@
 """The cost of a trace test's witness path on the 3D TDOA minimal cells, to plan the tests that do not fit here.
 
 Per cell (default 7r5s, 6r6s, 5r9s: the direct parametrization, 35-45 unknowns, on orbits of 8 reflections): the
-trace test's system (solvers.continuation.trace.Pencil, seed 0, the count's start pair and its second instance),
+trace test's system (solvers.continuation.trace.Pencil, seed 0, the count's start pair and its second instance, the
+pencil on count's coordinates: the fewest offsets that determine each orbit),
 and ``--paths`` tracks of its start point from the base node to as many random nodes of the witness graph (the
 graph's own node distribution and tracking options), on one thread. Prints and writes, per cell, the seconds per
 path and the share that failed, and, given the witnesses per orbit measured on a cell whose test ran
@@ -45,7 +46,9 @@ def measure(cell: str, paths: int) -> dict:
     system, q0, _, group = counting._start(target, 0)
     _, q_star, x_star, _ = counting._start(target, 1000)
     equations, unknowns, parameters = trace.system_equations(system)
-    pencil = trace.Pencil.build(equations, unknowns, parameters, q0, (q_star, x_star), trace.TraceOptions(), group)
+    coordinates, words = counting._pencil(system, group, lambda msg: print(f"  {cell}: {msg}", file=sys.stderr))
+    pencil = trace.Pencil.build(equations, unknowns, parameters, q0, (q_star, x_star),
+                                trace.TraceOptions(coordinates=coordinates), group)
     rng = np.random.default_rng(7)
     Q0 = pencil.Q0
     scale = np.sqrt(np.mean(np.abs(Q0) ** 2))
@@ -58,7 +61,7 @@ def measure(cell: str, paths: int) -> dict:
     ends, _ = pencil.system.track(Q0[None], nodes, xs, inst)
     seconds = time.perf_counter() - t0
     _, ok = graph._accept(pencil.system, ends, nodes, inst, graph.GraphOptions().accept_tol, None)
-    return {"cell": cell, "unknowns": len(unknowns), "paths": paths, "seconds_per_path": seconds / paths,
+    return {"cell": cell, "unknowns": len(unknowns), "pencil": words, "paths": paths, "seconds_per_path": seconds / paths,
             "failed": float(1.0 - ok.mean())}
 
 
