@@ -40,9 +40,9 @@ TABLES = os.path.join(ROOT, "tables")
 #: The minimal 3D TDOA cells: configuration keys of solvers.count.tdoa_target (dimension 3).
 CELLS = {"10r4s": "10r4s", "7r5s": "7r5s", "6r6s": "6r6s", "5r9s": "5r9s"}
 
-#: Cells whose trace test runs by default (the direct cells' on their orbits: docs/count.md). Not 5r/9s: its
-#: witnesses would be about 40 x its 36,947 orbits in 45 unknowns (docs/minimal-3d.md: the cost, and the plan to
-#: run it on a cluster with --dask).
+#: Cells whose trace test runs by default (the direct cells' on their orbits, the pencil on the offsets: docs/count.md).
+#: Not 5r/9s: its witnesses would be 20-33 x its 36,947 orbits in 45 unknowns, days of this machine
+#: (docs/minimal-3d.md: the cost, and the plan to run it on a cluster with --dask).
 TRACE = ("10r4s", "7r5s", "6r6s")
 
 #: |t1| = |t2| of the trace test's pencil per cell (count's TRACE_STEP otherwise, 0.2).
