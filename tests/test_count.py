@@ -182,13 +182,17 @@ def test_a_carried_path_blocked_on_its_segment_goes_round_through_a_midpoint():
     assert ok.all() and np.allclose(ends, xs)
     words, outside = counting._compare(xs, ends, ok, None)
     assert words == "equal as sets" and outside == 0
-    # without the midpoint routes the path is lost
+    # without the midpoint routes the path is lost, unless natural-parameter continuation (no tracker) carries it
     old, counting.CARRY_ROUTES = counting.CARRY_ROUTES, 0
+    steps, counting.NATURAL_STEPS = counting.NATURAL_STEPS, 0
     try:
         ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+        assert ok.tolist() == [False, True, True]
+        counting.NATURAL_STEPS = 5
+        ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+        assert ok.all() and np.allclose(ends, xs)
     finally:
-        counting.CARRY_ROUTES = old
-    assert ok.tolist() == [False, True, True]
+        counting.CARRY_ROUTES, counting.NATURAL_STEPS = old, steps
 
 
 def test_the_trace_test_runs_on_orbits_without_expanding_them():
@@ -228,14 +232,22 @@ def test_a_carried_path_lost_on_every_route_is_joined_from_the_other_end():
     qa, qb = np.array([0.0 + 0j, 1.0]), np.array([1.0 + 0j, 0.0])
     solver = _EndBlocked(qa, qb)
     xs = np.array([[1.0 + 0j], [2.0], [3.0]])
-    ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    steps, counting.NATURAL_STEPS = counting.NATURAL_STEPS, 0  # the stand-in's Newton steps are not blocked
+    try:
+        ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    finally:
+        counting.NATURAL_STEPS = steps
     assert ok.tolist() == [False, True, True]
     known = np.array([[3.0 + 0j], [1.0], [2.0]])
     joined = counting._reverse(solver, qb, known, qa, xs, ends, ok, None, None, None)
     assert joined.all() and np.allclose(ends, xs)
     assert counting._compare(known, ends, joined, None) == ("equal as sets", 0)
     # a known set without the first point's solution: nothing to join it to, and the comparison says so
-    ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    steps, counting.NATURAL_STEPS = counting.NATURAL_STEPS, 0
+    try:
+        ends, ok = counting._carry(solver, qa, xs, qb, None, None)
+    finally:
+        counting.NATURAL_STEPS = steps
     short = np.array([[3.0 + 0j], [2.0]])
     assert not counting._reverse(solver, qb, short, qa, xs, ends, ok, None, None, None)[0]
 
