@@ -33,8 +33,13 @@ from typing import Callable
 
 import numpy as np
 
-from analysis.formulations.parametric import ParametricSystem
+from analysis.engine.degree import DEFAULT_PRIMES, PrimeDisagreement, analyse
+from analysis.engine.f4 import F4Options
+from analysis.engine.linalg import MatrixTooLarge
+from analysis.engine.ring import Ring
+from analysis.formulations import tdoa as tf
 from analysis.formulations.base import as_formulation
+from analysis.formulations.parametric import ParametricSystem
 from analysis.formulations.tdoa import Formulation
 
 from .continuation import certify as certify_mod
@@ -602,12 +607,6 @@ def _fixed_degree(label: str, fixed: tuple[str, ...]) -> int | None:
     """The degree of a formulation with the unknowns ``fixed`` set to their values at the known root of a consistent
     random instance, modulo two primes (the root checked), or None when the primes disagree, the ideal is not
     zero-dimensional or F4 exceeds :data:`PENCIL_CELLS`."""
-    from analysis.engine.degree import DEFAULT_PRIMES, PrimeDisagreement, analyse
-    from analysis.engine.f4 import F4Options
-    from analysis.engine.linalg import MatrixTooLarge
-    from analysis.engine.ring import Ring
-    from analysis.formulations import tdoa as tf
-
     formulation = as_formulation(label)
     unknowns = list(formulation.config.unknowns)
 
