@@ -550,10 +550,12 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
 
         stand_in = trace_stand_in(options.dask, *_source(system), chunk=options.dask_chunk)
     coordinates, pencil = _pencil(system, group, say)
+    # the witnesses belong to one pencil: its coordinates name the file (another pencil's run does not overwrite it)
+    witnesses = "witnesses-" + ("all" if coordinates is None else "-".join(system.unknowns[k] for k in coordinates))
     test = trace_mod.trace_test_system(system, q0, roots, (q_star, x_star),
                                        trace_mod.TraceOptions(seed=options.seeds[0], step=options.trace_step,
                                                               coordinates=coordinates),
-                                       checkpoint=_checkpoint(options, system, options.seeds[0], "witnesses"), progress=say,
+                                       checkpoint=_checkpoint(options, system, options.seeds[0], witnesses), progress=say,
                                        group=group, dask=stand_in)
     return {**test.record(), "pencil": pencil}
 

@@ -252,6 +252,16 @@ def test_a_carried_path_lost_on_every_route_is_joined_from_the_other_end():
     assert not counting._reverse(solver, qb, short, qa, xs, ends, ok, None, None, None)[0]
 
 
+def test_the_trace_witness_checkpoint_is_named_by_its_pencil(tmp_path):
+    """A resumable witness file belongs to one pencil: another pencil's run must not overwrite it."""
+    result = counting.count("3r3stoa", counting.CountOptions(seeds=(0,), certify=False, trace=True,
+                                                             checkpoints=str(tmp_path)))
+    assert result.trace["status"] == "passed", result.trace
+    names = sorted(p.name for p in tmp_path.iterdir() if "witnesses" in p.name)
+    # the compaction formulation's pencil is b (count._pencil)
+    assert names == ["3r3s_toa2d_A_B2_B3_C2_C3-seed0-witnesses-b1-b2.json"], names
+
+
 def test_the_direct_tdoa_pencil_is_on_the_offsets_where_they_determine_each_orbit():
     """2D TDOA 6r/3s, direct parametrization (180 orbits of the 4 reflections): given the offsets the data are
     TOA data, and F4 finds the system with the offsets fixed, down to o1 alone, with 4 solutions (the group's
