@@ -81,6 +81,35 @@ def test_paths_lost_on_the_straight_route_are_retracked_around_it(monkeypatch):
     assert trace.trace_test_system(system, q0, roots, other, options).status == "inconclusive"
 
 
+def test_a_slice_whose_paths_fail_on_every_route_is_redrawn(monkeypatch):
+    """Two paths to the first t1 made to fail on every route (the detours and the continuation fallback off): the
+    slice is drawn again at another t of the same circle and the test passes on the whole fibre (2D TOA 3r/3s);
+    with no redraw allowed the same run is inconclusive."""
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    straight = trace.TraceSystem.track
+    first: list[complex] = []
+
+    def lossy(self, q0_, q1_, x0, inst=None, options=None):
+        x, stats = straight(self, q0_, q1_, x0, inst, options)
+        q0_, q1_ = np.atleast_2d(q0_), np.atleast_2d(q1_)
+        if np.all(q0_[:, -1] == 0) and np.all(q1_[:, -1] != 0):  # the slices' tracks from t = 0
+            t = q1_[np.zeros(len(x), dtype=np.int64) if inst is None else np.asarray(inst), -1]
+            first.append(first[0] if first else t[0])  # the first slice's t1, as first drawn
+            x[np.flatnonzero(t == first[0])[:2]] = np.nan
+        return x, stats
+
+    monkeypatch.setattr(trace.TraceSystem, "track", lossy)
+    monkeypatch.setattr(trace, "_detours", lambda *args, **kw: 0)
+    monkeypatch.setattr(trace, "_continuation", lambda *args, **kw: 0)
+    messages = []
+    test = trace.trace_test_system(system, q0, roots, other, trace.TraceOptions(seed=1), progress=messages.append)
+    assert test.status == "passed" and test.redrawn == 1 and test.residual < trace.PASS_TOL, test
+    assert any("slice 1 failed on every route; the slice redrawn" in m for m in messages), messages
+    monkeypatch.setattr(trace, "REDRAWS", 0)
+    first.clear()
+    assert trace.trace_test_system(system, q0, roots, other, trace.TraceOptions(seed=1)).status == "inconclusive"
+
+
 def test_witness_points_on_the_roots_component_are_set_apart(monkeypatch):
     """Q_0 = {a . x = 1} u {lam = 0}: the witness graph can reach the roots themselves (lam = 0; the 10r/4s loops
     reached all 6148). Mixed into the witnesses, they are summed once with the roots and the test passes

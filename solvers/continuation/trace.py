@@ -34,7 +34,8 @@ that the roots exclude (``excluded`` masks, as in :func:`monodromy._excluded`); 
 the part off that locus, a union of curves whose points over generic lam are the isolated roots. Paths
 from points of C stay on C; a witness landing on the excluded locus is not kept.
 
-A failed path makes the test "inconclusive", never "passed": lost, two landing on one point, an endpoint where
+A failed path (after its slice is drawn again at another t, :data:`REDRAWS` times) makes the test "inconclusive",
+never "passed": lost, two landing on one point, an endpoint where
 Newton's method has not converged, or one on the excluded locus (a path that slid onto the spurious component
 there: 3 of 10r/4s's 284,128 tracks did, and counted as points of the fibre its residual was 1.1e-5, not 2.3e-8).
 """
@@ -86,6 +87,11 @@ SETTLE_STEPS = 20
 #: is no regular point there. 10r/4s: three such endpoints moved by 6 %, 24 % and 93 %; its genuine
 #: ill-conditioned witnesses (norm 76, step 6e-8; norm 1.25e6) moved by 6e-8 and 1e-8.
 DRIFT = 1e-4
+
+#: A slice (t1 or t2) whose paths fail on every route is drawn again at most this many times (another t on the
+#: same circle, all M paths tracked again) before the test says "inconclusive": 7r/5s on five offsets at |t| = 0.5
+#: lost one witness of norm 723 on every route.
+REDRAWS = 2
 
 #: Version of the test's rules, kept with stored outcomes (scripts/monodromy_counts.py) so that an outcome under
 #: other rules is not read back. 2 (2026-11-28): endpoints off the fibre fail, t1 and t2 a third of a turn apart,
@@ -143,6 +149,7 @@ class TraceTest:
     seconds: float
     failed_paths: int
     floor: float = float("nan")
+    redrawn: int = 0  # slices given another t after paths failed on every route (at most REDRAWS)
 
     def record(self) -> dict:
         return dataclasses.asdict(self)
@@ -364,13 +371,24 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
     paths += 2 * M
     ends = ends.reshape(2, M, -1)
     failed = np.array([_failed(system, targets[b], ends[b], on_locus, group=group_y) for b in range(2)])
-    bi, ki = np.nonzero(failed)
-    if len(bi):  # retrack with tight step control
-        ends[bi, ki], _ = system.track(Q0[None], targets, S[ki], bi, tracker.TIGHT)
-        paths += len(bi)
-        failed = np.array([_failed(system, targets[b], ends[b], on_locus, group=group_y) for b in range(2)])
-        paths += _detours(system, Q0, targets, S, ends, failed, on_locus, group=group_y)
-        paths += _continuation(system, Q0, targets, S, ends, failed, on_locus, group=group_y)
+    paths += _retrack(system, Q0, targets, S, ends, failed, on_locus, group_y)
+    # a slice whose paths failed on every route gets another t on the same circle, at least a third of a turn from
+    # the other slice's (the trace is affine in t whichever t: any two distinct t of the circle test the same thing)
+    redrawn = 0
+    while failed.any() and redrawn < REDRAWS:
+        redrawn += 1
+        for b in np.flatnonzero(failed.any(axis=1)):
+            lost = int(failed[b].sum())
+            other = ts[2 - b]
+            ts[b + 1] = other * np.exp(1j * rng.uniform(2.0 * np.pi / 3.0, 4.0 * np.pi / 3.0))
+            targets[b] = np.concatenate([Q0[:-1], [ts[b + 1]]])
+            if progress:
+                progress(f"trace test: {lost} path(s) of slice {b + 1} failed on every route; the slice redrawn at "
+                         f"t = {ts[b + 1]:.3f} ({redrawn} of {REDRAWS})")
+            ends[b], _ = system.track(Q0[None], targets[b:b + 1], S, np.zeros(M, dtype=np.int64))
+            paths += M
+            failed[b] = _failed(system, targets[b], ends[b], on_locus, group=group_y)
+        paths += _retrack(system, Q0, targets, S, ends, failed, on_locus, group_y)
     flat = ends.reshape(2 * M, -1)
     ok = np.all(np.isfinite(flat), axis=1)
     flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
@@ -398,7 +416,20 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
                f"residual {residual:.1e} (the points' Newton steps sum to {floor:.1e})")
         progress(f"trace test: {status}, {why}, {K} roots + {len(W)} witnesses, {paths} paths")
     return TraceTest(status, residual, K, len(W), witnesses.rounds, paths,
-                     round(time.perf_counter() - t_start, 1), n_failed, floor)
+                     round(time.perf_counter() - t_start, 1), n_failed, floor, redrawn)
+
+
+def _retrack(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
+             failed: np.ndarray, on_locus: Callable[[np.ndarray], np.ndarray], group: np.ndarray | None) -> int:
+    """The failed paths (2, M) of ``ends`` tracked again: tight step control, then :func:`_detours`, then
+    :func:`_continuation` (``ends`` and ``failed`` in place). Returns the paths followed."""
+    bi, ki = np.nonzero(failed)
+    if not len(bi):
+        return 0
+    ends[bi, ki], _ = system.track(Q0[None], targets, S[ki], bi, tracker.TIGHT)
+    failed[:] = [_failed(system, targets[b], ends[b], on_locus, group=group) for b in range(2)]
+    paths = len(bi) + _detours(system, Q0, targets, S, ends, failed, on_locus, group=group)
+    return paths + _continuation(system, Q0, targets, S, ends, failed, on_locus, group=group)
 
 
 def _orbit_sizes(points: np.ndarray, group: np.ndarray | None) -> np.ndarray:
