@@ -97,7 +97,8 @@ def test_guided_entries_are_measured_peaks_and_a_wrong_guide_is_caught():
 def test_an_event_without_a_position_is_located_from_its_candidates():
     rec, receivers, sources, delays = room()
     given = guided_tdoa_matrix(rec, receivers, sources, OPTIONS, sigma=1e-3)
-    located = guided_tdoa_matrix(rec, receivers, np.vstack([sources[0], [np.nan] * 3]), OPTIONS, sigma=1e-3)
+    located = guided_tdoa_matrix(rec, receivers, np.vstack([sources[0], [np.nan] * 3]), OPTIONS, sigma=1e-3,
+                                 guide=GuideOptions(locate_samples=500))
     assert np.allclose(located.F, given.F, equal_nan=True, atol=1e-9)
     assert "1 event(s) at their given source, 1 located" in located.notes[-1]
     # locate_source directly: the position to a few mm from exact candidates of every pair, none with 4 agreeing channels
@@ -105,16 +106,16 @@ def test_an_event_without_a_position_is_located_from_its_candidates():
     i, k = np.triu_indices(7, 1)
     lags = (delays[i, 1] - delays[k, 1])[:, None] + np.array([0.0, 17.0, -31.0])[None, :]  # the truth and two others
     heights = np.tile([0.5, 0.6, 0.4], (len(i), 1))
-    s, pairs, rms = locate_source(receivers * scale, i, k, lags, heights, references=[0, 1, 2], seed=1)
+    s, pairs, rms = locate_source(receivers * scale, i, k, lags, heights, references=[0, 1, 2], samples=500, seed=1)
     assert np.linalg.norm(s / scale - sources[1]) < 1e-6 and pairs.sum() == 7 * 6 and rms < 1e-6
     junk = (i >= 4) | (k >= 4)  # channels 4-6 agree with nothing: 4 channels cannot fix a position and a time
     lags[junk] = np.random.default_rng(0).uniform(-90, 90, (junk.sum(), 3))
-    assert locate_source(receivers * scale, i, k, lags, heights, references=[0, 1, 2], seed=1) is None
+    assert locate_source(receivers * scale, i, k, lags, heights, references=[0, 1, 2], samples=500, seed=1) is None
 
 
 def test_tdoa_guided_says_why_it_did_not_guide(tmp_path, capsys):
     """Two events of seven microphones cannot be calibrated in 3D: the first pass's matrix is the answer,
-    a note says why, and --no-guide skips the calibration."""
+    a note says why (tdoa and calibrate of a recording), and --no-guide skips the calibration."""
     rec, _, _, _ = room()
     run = tdoa_guided(rec, OPTIONS)
     assert not run.guided and run.first_calibration.status == "failed"
@@ -126,6 +127,8 @@ def test_tdoa_guided_says_why_it_did_not_guide(tmp_path, capsys):
     assert main(["tdoa", str(tmp_path / "rec.wav"), "--max-distance", "6", "--no-guide"]) == 0
     err = capsys.readouterr().err
     assert "guided" not in err and "2 events" in err
+    assert main(["calibrate", str(tmp_path / "rec.wav"), "--dim", "3", "--max-distance", "6"]) == 1  # too few events
+    assert "no guided pass" in capsys.readouterr().err  # calibrate reads a recording as tdoa does
 
 
 def test_guide_options_are_checked():
