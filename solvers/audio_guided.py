@@ -399,9 +399,10 @@ def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, d
                                 progress=progress)
     matrix = reconcile(first, matrix, cal.inliers, options.tolerance)
     before, after = int(np.isfinite(first.F).sum()), int(np.isfinite(matrix.F).sum())
+    own = tuple(f"first pass: {n}" for n in first.notes[len(recording.notes):])  # the recording's notes are in both
     note = (f"first pass: {before}/{first.F.size} entries, calibrated {cal.status!r} (sigma {cal.sigma:.3g} m); "
             f"guided pass: {after}/{matrix.F.size}")
-    return GuidedTdoa(first, cal, replace(matrix, notes=matrix.notes + (note,)), True)
+    return GuidedTdoa(first, cal, replace(matrix, notes=matrix.notes + own + (note,)), True)
 
 
 def tdoa_and_calibrate(recording: Recording, options: TdoaOptions = TdoaOptions(), *, dim: int = 3,
