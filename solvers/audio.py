@@ -325,7 +325,7 @@ class TdoaMatrix:
     """The measurement matrix of a recording (see the module docstring).
 
     F : (channels, events) metres, NaN where missing (unreliable)
-    confidence : (channels, events) peak-to-sidelobe ratio of each entry (inf for the reference's own)
+    confidence : (channels, events) each entry's support: how many other channels agree with it
     reference : (events,) the reference channel of each event (0-based)
     onsets : (events,) seconds from the start of the recording
     rate, speed : sample rate (Hz), speed of sound (m/s)

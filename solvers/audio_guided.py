@@ -168,7 +168,8 @@ def locate_source(receivers: np.ndarray, i, k, lags, heights, *, references, tol
     sol = sol[sol[:, dim] >= 0]  # the reference's range
     if not len(sol):
         return None
-    score = _agreeing_pairs(P, _differences(receivers, sol[:, :dim]), tol).sum(axis=(1, 2))
+    score = np.concatenate([_agreeing_pairs(P, _differences(receivers, part[:, :dim]), tol).sum(axis=(1, 2))
+                            for part in np.array_split(sol, -(-len(sol) // 100))])  # 100 at a time: bounded memory
     best = None
     for h in np.argsort(-score, kind="stable")[:refined]:  # a hypothesis from noisy lags fits better once refined
         s, pairs = sol[h, :dim], None
