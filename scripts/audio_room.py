@@ -7,20 +7,23 @@ apart); each event a clap (a 20 ms exponentially decaying noise burst), a chirp 
 or a speech-like sound (0.4 s of noise with a speech-like spectrum and a 4 Hz syllabic envelope), drawn
 at random; white noise at the microphones for the given SNR (noise power = the mean power of the
 noise-free recording while the events sound x 10^(-SNR/10)). The recording is written as a 24-bit
-multichannel WAV file and read back by `solvers.audio.read_recording`, then `solvers.audio.tdoa_matrix`
-(what `tdoa-workbench tdoa` runs, default options: the emitted signals are not used) and
-`solvers.calibrate(F, dim=3)` (what `tdoa-workbench calibrate --dim 3` runs; sigma estimated).
+multichannel WAV file and read back by `solvers.audio.read_recording`, then
+`solvers.audio_guided.tdoa_and_calibrate(recording, dim=3)` (what `tdoa-workbench calibrate --dim 3 room.wav`
+runs, default options: the emitted signals are not used): the first pass `solvers.audio.tdoa_matrix`,
+`calibrate(F, dim=3)` of it (sigma estimated), the guided second pass at that calibration's positions when
+its status is "ok" or "uncontrolled" with every receiver placed, and `calibrate(F, dim=3)` of the guided matrix.
 
 Columns: the room (`seed`, `mics`, `events`, `rt60_s`, `snr_db`, `signals`: claps/chirps/speech-like);
-`detected` (events detected and matched to a simulated one / simulated, + spurious detections); what
-`tdoa` measured against the simulator's truth on the detected events, over the entries other than each
+`detected` (events detected and matched to a simulated one / simulated, + spurious detections);
+`first_pass_within_2` (the first pass's `within_2_samples`, below), `guided` ("yes", or "no (status)": the
+first calibration's status that could not guide); what `tdoa` (the guided pass's matrix) measured against the simulator's truth on the detected events, over the entries other than each
 event's reference (whose delay is 0 by definition): `within_2_samples` (share within 2 samples of the true time difference,
 missing entries counting as misses), `within_2_of_offset` (share of all the entries, the reference's too,
 within 2 samples of the true arrival time once the event's offset is taken out, the median of its
 measured entries' errors; missing entries counting as misses: `calibrate` estimates every event's offset,
 so an event whose reference locked onto a reflection has one wrong entry, not all but one), `missing` (share left missing), `gross`
 (measured entries more than 2 samples off), `entry_noise_m` (rms error in metres of the entries within 2 samples); and what
-`calibrate` made of it: `status` and `reason` (what decided it, from the result's message), `unplaced`
+`calibrate` made of the guided matrix: `status` and `reason` (what decided it, from the result's message), `unplaced`
 (nodes with measurements it could not place; an event `tdoa` left missing whole has none), `kept`
 (inliers / measured), `rms_position_err_m` (after the best rigid alignment, reflections allowed, over
 the placed nodes of the detected events), `crb_position_rms_m` (the Cramer-Rao bound of that rms from
@@ -51,8 +54,8 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from solvers.audio import TdoaOptions, read_recording, tdoa_matrix  # noqa: E402
-from solvers.calibration import calibrate  # noqa: E402
+from solvers.audio import TdoaOptions, read_recording  # noqa: E402
+from solvers.audio_guided import tdoa_and_calibrate  # noqa: E402
 from solvers.metrics import align_rigid, cramer_rao_position_rms, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
 
@@ -114,7 +117,8 @@ def simulate(rng: np.random.Generator, mics: int, events: int, rt60: float, snr_
 
 
 def record(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[float, float], snr_db: float):
-    """One room simulated and measured: (the row's room columns, TdoaMatrix, Network, speed of sound)."""
+    """One room simulated and recorded: (the row's room columns, Recording read back from the WAV file, Network,
+    speed of sound)."""
     import soundfile
 
     rng = np.random.default_rng(seed)
@@ -125,36 +129,34 @@ def record(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tupl
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "room.wav")
         soundfile.write(path, (rec / (1.05 * np.max(np.abs(rec)))).T, FS, subtype="PCM_24")
-        tm = tdoa_matrix(read_recording(path), TdoaOptions(speed=c))
+        recording = read_recording(path)
     row = {"seed": seed, "mics": m, "events": n, "rt60_s": rt60_s, "snr_db": snr_db,
            "signals": "/".join(str(kinds.count(k)) for k in KINDS)}
-    return row, tm, net, c
+    return row, recording, net, c
 
 
 def run(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[float, float], snr_db: float) -> dict:
-    """One room, one table row."""
-    row, tm, net, c = record(seed, mics, events, rt60, snr_db)
-    return assess(row, tm, net, c, seed)
+    """One room, one table row: recorded, then `tdoa` (first pass, calibration, guided pass) and `calibrate`
+    of the guided matrix (solvers.audio_guided.tdoa_and_calibrate, what `calibrate --dim 3 room.wav` runs)."""
+    row, recording, net, c = record(seed, mics, events, rt60, snr_db)
+    return assess(row, tdoa_and_calibrate(recording, TdoaOptions(speed=c), dim=3, seed=seed), net, c)
 
 
-def assess(row: dict, tm, net: Network, c: float, seed: int) -> dict:
-    """The row of one measured room: `tdoa`'s entries against the truth, then `calibrate` (sigma estimated)."""
-    m, n = row["mics"], row["events"]
-    # Each detected event is the true event whose direct sound starts within 60 ms after its onset
-    # (the first microphone hears it within 30 ms; the 5 ms frames start up to 20 ms early).
+def _matched(tm, net: Network, c: float):
+    """(detected events, the true event of each): each detected event is the true event whose direct sound
+    starts within 60 ms after its onset (the first microphone hears it within 30 ms; the 5 ms frames start up
+    to 20 ms early); a split event counts once."""
     lead = tm.onsets[:, None] - net.offsets[None, :] / c
     near = (lead > -0.02) & (lead < 0.06)
     det = [d for d in range(len(tm.events)) if near[d].any()]
     truth = [int(np.argmax(near[d])) for d in det]
-    keep = [k for k in range(len(det)) if truth[k] not in truth[:k]]  # a split event counts once
-    det, truth = np.array([det[k] for k in keep], int), np.array([truth[k] for k in keep], int)
-    row["detected"] = f"{len(det)}/{n}" + (f" +{len(tm.events) - len(det)}" if len(tm.events) > len(det) else "")
-    empty = ("within_2_samples", "within_2_of_offset", "missing", "gross", "entry_noise_m", "status", "reason", "unplaced",
-             "kept", "rms_position_err_m", "crb_position_rms_m", "rms_over_crb", "max_err_over_std")
-    if len(det) < 4:
-        row.update(dict.fromkeys(empty, ""))
-        return row
-    # tdoa's entries against the truth, on the detected events (the reference's own entry is exact)
+    keep = [k for k in range(len(det)) if truth[k] not in truth[:k]]
+    return np.array([det[k] for k in keep], int), np.array([truth[k] for k in keep], int)
+
+
+def entry_errors(tm, net: Network, c: float, det: np.ndarray, truth: np.ndarray) -> dict:
+    """tdoa's entries against the truth on the detected events (the module docstring's columns
+    within_2_samples .. entry_noise_m; the reference's own entry is exact)."""
     D = np.linalg.norm(net.receivers[:, None, :] - net.transmitters[None, truth, :], axis=2)
     Fd, ref = tm.F[:, det], tm.reference[det]
     cols = np.arange(len(det))
@@ -166,12 +168,31 @@ def assess(row: dict, tm, net: Network, c: float, seed: int) -> dict:
     arrival = Fd - net.offsets[truth][None, :] - D  # each entry's arrival-time error, up to the event's offset
     offset = np.array([np.median(col[np.isfinite(col)]) if np.isfinite(col).any() else np.nan for col in arrival.T])
     noise = float(np.sqrt(np.mean(err[good] ** 2)))
-    row.update({"within_2_samples": round(float(good.sum() / other.sum()), 4),
-                "within_2_of_offset": round(float(np.mean(np.abs(arrival - offset[None, :]) <= 2 * c / FS)), 4),
-                "missing": round(float((other & ~measured).sum() / other.sum()), 4),
-                "gross": int((other & measured & ~good).sum()), "entry_noise_m": float(f"{noise:.3g}")})
+    return {"within_2_samples": round(float(good.sum() / other.sum()), 4),
+            "within_2_of_offset": round(float(np.mean(np.abs(arrival - offset[None, :]) <= 2 * c / FS)), 4),
+            "missing": round(float((other & ~measured).sum() / other.sum()), 4),
+            "gross": int((other & measured & ~good).sum()), "entry_noise_m": float(f"{noise:.3g}")}
+
+
+def assess(row: dict, run, net: Network, c: float) -> dict:
+    """The row of one measured room (run: a solvers.audio_guided.GuidedTdoa with its calibration): the first
+    pass's and the guided pass's entries against the truth, then what `calibrate` made of the guided matrix."""
+    tm, m, n = run.matrix, row["mics"], row["events"]
+    det, truth = _matched(tm, net, c)
+    row["detected"] = f"{len(det)}/{n}" + (f" +{len(tm.events) - len(det)}" if len(tm.events) > len(det) else "")
+    empty = ("first_pass_within_2", "guided", "within_2_samples", "within_2_of_offset", "missing", "gross",
+             "entry_noise_m", "status", "reason", "unplaced", "kept", "rms_position_err_m", "crb_position_rms_m",
+             "rms_over_crb", "max_err_over_std")
+    if len(det) < 4:
+        row.update(dict.fromkeys(empty, ""))
+        return row
+    first = run.first_calibration
+    row["first_pass_within_2"] = entry_errors(run.first, net, c, det, truth)["within_2_samples"]
+    row["guided"] = "yes" if run.guided else f"no ({first.status})"
+    row.update(entry_errors(tm, net, c, det, truth))
+    noise = row["entry_noise_m"]
     # the whole matrix (spurious events too, as a user has it) calibrated; errors on the detected events
-    res = calibrate(tm.F, dim=3, seed=seed)
+    res = run.calibration
     row.update({"status": res.status, "reason": res.message.split(" - ", 1)[-1].replace("|", "/")[:120],
                 "unplaced": int((~np.isfinite(res.receivers[:, 0]) & np.isfinite(tm.F).any(axis=1)).sum() +
                                 (~np.isfinite(res.transmitters[:, 0]) & np.isfinite(tm.F).any(axis=0)).sum()),
@@ -209,8 +230,13 @@ def summary(rows: list[dict]) -> str:
     pooled_offset = sum(r["within_2_of_offset"] * r["mics"] * int(r["detected"].split("/")[0]) for r in done) / max(
         sum(r["mics"] * int(r["detected"].split("/")[0]) for r in done), 1)
     worst = max((r["max_err_over_std"] for r in done if r["status"] == "ok" and r["max_err_over_std"] != ""), default=None)
+    first = [r["first_pass_within_2"] for r in done]
+    pooled_first = sum(v * e for v, e in zip(first, entries)) / max(sum(entries), 1)
+    guided = sum(r["guided"] == "yes" for r in done)
     return (f"Rooms whose entries are >= 95 % within 2 samples: {sum(v >= 0.95 for v in share)} of {len(rows)} "
-            f"(median share {np.median(share) if share else float('nan'):.4f}, pooled {pooled:.4f}); every entry, up to "
+            f"(median share {np.median(share) if share else float('nan'):.4f}, pooled {pooled:.4f}; the first pass "
+            f"{sum(v >= 0.95 for v in first)} of {len(rows)}, pooled {pooled_first:.4f}; guided: {guided} of {len(rows)} "
+            f"rooms); every entry, up to "
             f"its event's offset: {given} of {len(rows)} (pooled {pooled_offset:.4f}). Rooms with every "
             f"node that has measurements placed and rms position error <= 2 x the Cramer-Rao bound: {within} of {len(rows)}; of those "
             f"\"ok\": {met}. Largest node error over its reported std in an \"ok\" room: "

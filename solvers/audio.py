@@ -325,7 +325,7 @@ class TdoaMatrix:
     """The measurement matrix of a recording (see the module docstring).
 
     F : (channels, events) metres, NaN where missing (unreliable)
-    confidence : (channels, events) peak-to-sidelobe ratio of each entry (inf for the reference's own)
+    confidence : (channels, events) each entry's support: how many other channels agree with it
     reference : (events,) the reference channel of each event (0-based)
     onsets : (events,) seconds from the start of the recording
     rate, speed : sample rate (Hz), speed of sound (m/s)
@@ -365,8 +365,17 @@ def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int):
     return i, k, ranked - max_lag + shift, heights
 
 
+def _candidate_tensor(m: int, i, k, lags, heights):
+    """(P (m, m, peaks): channel a's lag behind channel b per candidate, NaN for none; H: their heights)."""
+    P = np.full((m, m, lags.shape[1]), np.nan)
+    H = np.zeros((m, m, lags.shape[1]))
+    P[i, k], P[k, i] = lags, -lags
+    H[i, k], H[k, i] = heights, heights
+    return P, H
+
+
 def _consensus(m: int, ref: int, i, k, lags, heights, tol: float, early: float = 0.5, sweeps: int = 4,
-               starts=None):
+               starts=None, init=None):
     """Arrival times t (m,) of an event's channels relative to channel `ref` (t_ref = 0) from the
     candidate pair delays (t_i - t_k ~ one of lags[pair]), and each channel's support: how many other
     channels have a candidate within `tol` samples of the times' difference.
@@ -376,19 +385,23 @@ def _consensus(m: int, ref: int, i, k, lags, heights, tol: float, early: float =
     candidates weighted by height; of the times with at least `early` x the best support the earliest,
     since a channel's reflections arrive after its direct sound), and the mean of the supporting votes;
     the start whose end supports the most pairs wins, and a least-squares fit of its supported pairs
-    gives the times (the graph Laplacian with t_ref = 0)."""
-    P = np.full((m, m, lags.shape[1]), np.nan)
-    H = np.zeros((m, m, lags.shape[1]))
-    P[i, k], P[k, i] = lags, -lags
-    H[i, k], H[k, i] = heights, heights
+    gives the times (the graph Laplacian with t_ref = 0). init : None, or the one start (m,) times (the
+    guided pass: the arrivals the geometry predicts; NaN lags are no candidate). A channel whose
+    agreeing pairs do not connect it to `ref` has support 0: its time relative to ref is not measured."""
+    P, H = _candidate_tensor(m, i, k, lags, heights)
     best = None
-    for start in (range(m) if starts is None else starts):
-        t = _sweep(P, H, np.where(np.arange(m) == start, 0.0, P[:, start, 0]), tol, early, sweeps)
+    if init is not None:
+        firsts = [np.asarray(init, dtype=float).copy()]
+    else:
+        firsts = (np.where(np.arange(m) == start, 0.0, P[:, start, 0]) for start in (range(m) if starts is None else starts))
+    for first in firsts:
+        t = _sweep(P, H, first, tol, early, sweeps)
         ok, val = _supported(P, t, tol)
         score = int(ok.sum())  # agreeing pairs; the first start of the most wins
         if best is None or score > best[0]:
             best = (score, t, ok, val)
     _, t, ok, val = best
+    ok = ok & np.outer(*(2 * [_component(ok, ref)]))  # pairs connected to the reference
     support = ok.sum(axis=1)
     L = np.diag(support.astype(float)) - ok.astype(float)
     rhs = np.where(ok, val, 0.0).sum(axis=1)
@@ -397,6 +410,17 @@ def _consensus(m: int, ref: int, i, k, lags, heights, tol: float, early: float =
     if ok.any():
         t[free] = np.linalg.lstsq(L[np.ix_(free, free)], rhs[free], rcond=None)[0]
     return t, support
+
+
+def _component(ok: np.ndarray, ref: int) -> np.ndarray:
+    """(m,) bool: the channels connected to `ref` by agreeing pairs (ok, symmetric)."""
+    seen = np.zeros(len(ok), bool)
+    seen[ref] = True
+    while True:
+        grown = seen | ok[seen].any(axis=0)
+        if np.array_equal(grown, seen):
+            return seen
+        seen = grown
 
 
 def _sweep(P, H, t, tol: float, early: float, sweeps: int) -> np.ndarray:
@@ -461,6 +485,33 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     progress : None, or a callable taking one line (called every 10 events)
     Raises RecordingError when no event is found.
     """
+    return _measure(recording, options, lambda j, seg, after, max_lag: _over_tapers(
+        seg, after, options, lambda weighted: _event_arrivals(weighted, max_lag, options)), progress)
+
+
+def _over_tapers(seg: np.ndarray, after: np.ndarray, options: TdoaOptions, analyse):
+    """(reference, times, support) of the taper (options.taper, then options.retry_tapers while fewer than
+    retry_below of the pairs agree) whose analysis agrees on the most pairs; analyse(weighted segment)
+    -> (reference, times, support)."""
+    m = seg.shape[0]
+    best = None
+    for taper in (options.taper, *options.retry_tapers):
+        r, t, support = analyse(seg * np.exp(-after / taper))
+        if best is None or support.sum() > best[2].sum():
+            best = (r, t, support)
+        if best[2].sum() >= options.retry_below * m * (m - 1):
+            break  # enough pairs agree: no other taper tried
+    return best
+
+
+def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None, label: str = "tdoa") -> TdoaMatrix:
+    """The event loop both passes share (tdoa_matrix, solvers.audio_guided): detect the events, cut each
+    event's segment (the lag range either side of `options.window` after its onset; `after`: seconds
+    after the onset of each sample, 0 before it), and turn arrivals(j, segment, after, max_lag) ->
+    (reference, times in samples relative to it, support[, the share of agreeing pairs the event needs])
+    or None (the event left missing) into the matrix: an entry is kept with support >= min_support; an
+    event whose channels agree on fewer than that share of the pairs (default options.min_agreement) is
+    left missing whole."""
     x, rate = recording.samples, recording.rate
     events = detect_events(x, rate, options)
     if len(events) == 0:
@@ -473,32 +524,30 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     conf = np.zeros((m, n))
     ref = np.zeros(n, int)
     onsets = events[:, 0] / rate
-    dropped: list[int] = []
+    dropped: dict[float, list[int]] = {}
     for j, (start, _end) in enumerate(events):
         a, b = max(0, start - max_lag), min(x.shape[1], start + length + max_lag)
         seg = x[:, a:b] - x[:, a:b].mean(axis=1, keepdims=True)
         after = np.maximum(np.arange(a, b) - start, 0) / rate  # the direct sound weighs more than the tail
-        best = None
-        for taper in (options.taper, *options.retry_tapers):
-            r, t, support = _event_arrivals(seg * np.exp(-after / taper), max_lag, options)
-            if best is None or support.sum() > best[2].sum():
-                best = (r, t, support)
-            if best[2].sum() >= options.retry_below * m * (m - 1):
-                break  # enough pairs agree: no other taper tried
-        r, t, support = best
-        ref[j] = r
-        conf[:, j] = support
-        keep = support >= options.min_support
-        keep[r] = support[r] >= 1
-        if support.sum() < options.min_agreement * m * (m - 1):
-            keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
-            dropped.append(j)
-        F[keep, j] = options.speed * (onsets[j] + t[keep] / rate)
+        got = arrivals(j, seg, after, max_lag)
+        if got is None:
+            ref[j] = int(np.argmax(np.sum(seg**2, axis=1)))
+        else:
+            r, t, support = got[:3]
+            needed = got[3] if len(got) > 3 else options.min_agreement
+            ref[j] = r
+            conf[:, j] = support
+            keep = support >= options.min_support
+            keep[r] = support[r] >= 1
+            if support.sum() < needed * m * (m - 1):
+                keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
+                dropped.setdefault(needed, []).append(j)
+            F[keep, j] = options.speed * (onsets[j] + t[keep] / rate)
         if progress is not None and (j + 1) % 10 == 0:
-            progress(f"tdoa: {j + 1}/{n} events")
+            progress(f"{label}: {j + 1}/{n} events")
     names = tuple(f"e{j + 1}" for j in range(n))
     notes = recording.notes
-    if dropped:
-        notes += (f"{len(dropped)} event(s) left missing, their channels agreeing on fewer than "
-                  f"{100 * options.min_agreement:g} % of the pairs: {', '.join(names[j] for j in dropped)}",)
+    for needed, events_dropped in sorted(dropped.items(), reverse=True):
+        notes += (f"{len(events_dropped)} event(s) left missing, their channels agreeing on fewer than "
+                  f"{100 * needed:g} % of the pairs: {', '.join(names[j] for j in events_dropped)}",)
     return TdoaMatrix(F, conf, ref, onsets, rate, options.speed, recording.channels, names, recording.source, notes)

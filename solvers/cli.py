@@ -1167,6 +1167,8 @@ def _add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-support", type=_integer_at_least("--min-support", 1), default=d.min_support, metavar="N",
                    help="an entry is kept when at least N other channels agree with its arrival time "
                    f"(default {d.min_support})")
+    g.add_argument("--no-guide", action="store_true", help="keep the first pass's matrix: no calibration of it "
+                   "guiding a second pass (solvers.audio_guided)")
 
 
 def _tdoa_options(args: argparse.Namespace):
@@ -1174,6 +1176,13 @@ def _tdoa_options(args: argparse.Namespace):
 
     return TdoaOptions(speed=args.speed, max_distance=args.max_distance, threshold_db=args.threshold,
                        min_support=args.min_support)
+
+
+def _guide(args: argparse.Namespace):
+    """The guided pass's options (None with --no-guide)."""
+    from solvers.audio_guided import GuideOptions
+
+    return None if args.no_guide else GuideOptions()
 
 
 def _progress(line: str) -> None:
@@ -1220,12 +1229,17 @@ def _add_tdoa(sub: argparse._SubParsersAction) -> None:
         description="Detect the sound events of RECORDING (one multichannel WAV/FLAC file, or one file per "
         "microphone) by their energy onsets and measure each channel's arrival time against the event's loudest "
         "channel by GCC-PHAT of every channel pair (sub-sample), without knowing the emitted sound; an arrival "
-        "fewer than --min-support other channels agree with is left missing. Writes the matrix calibrate reads: "
+        "fewer than --min-support other channels agree with is left missing. Then (unless --no-guide) calibrates that "
+        "matrix (--dim, sigma estimated) and, when the calibration places every receiver with status ok or "
+        "uncontrolled, measures again with each pair's peaks searched within a few samples of the difference its "
+        "positions predict (solvers.audio_guided). Writes the matrix calibrate reads: "
         "one row per channel, one column per event, arrival time x speed of sound in metres (solvers.audio).")
     p.add_argument("recording", nargs="+", metavar="RECORDING", help="a multichannel audio file, or one file per channel")
     p.add_argument("--out", metavar="FILE.csv", help="write the matrix to FILE.csv (default: standard output)")
     p.add_argument("--confidence", metavar="FILE.csv", help="also write each entry's support (how many other channels "
                    "agree with it) in the same layout")
+    p.add_argument("--dim", type=int, choices=(2, 3), default=3, help="dimension of the calibration that guides the "
+                   "second pass: 3 (default; microphones in a room) or 2")
     _add_recording_options(p)
     p.set_defaults(func=cmd_tdoa)
 
@@ -1233,12 +1247,14 @@ def _add_tdoa(sub: argparse._SubParsersAction) -> None:
 def cmd_tdoa(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from solvers.audio import read_recording, tdoa_matrix
+    from solvers.audio import read_recording
+    from solvers.audio_guided import tdoa_guided
     from solvers.calibrate_io import Measurements, format_matrix, recording_measurements
 
     _check_outputs({"--out": (args.out, None), "--confidence": (args.confidence, None)}, args.recording)
     recording = read_recording(args.recording)
-    tm = tdoa_matrix(recording, _tdoa_options(args), progress=_progress)
+    with _progress_on_stderr("solvers.calibration", after=2.0 if sys.stderr.isatty() else 30.0):
+        tm = tdoa_guided(recording, _tdoa_options(args), dim=args.dim, guide=_guide(args), progress=_progress).matrix
     for note in tm.notes:  # the reader's and the analysis's
         _progress(f"tdoa: {note}")
     meas = recording_measurements(tm)
@@ -1362,8 +1378,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     _check_outputs({"--out": (args.out, None), "--plot": (args.plot, plot_formats() if args.plot else None),
                     "--csv": (args.csv, None)}, args.file + ([args.anchors] if args.anchors else []))
     try:
-        meas = read_input(args.file, delimiter=args.delimiter, header=args.header, tdoa_options=_tdoa_options(args),
-                          progress=_progress)
+        with _progress_on_stderr("solvers.calibration", after=2.0 if sys.stderr.isatty() else 30.0):
+            meas = read_input(args.file, delimiter=args.delimiter, header=args.header, tdoa_options=_tdoa_options(args),
+                              guide=_guide(args), dim=args.dim, seed=args.seed, progress=_progress)
     except MeasurementFileError as e:
         raise UserError(str(e)) from None
     if args.transpose:
