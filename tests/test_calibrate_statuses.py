@@ -274,6 +274,32 @@ def test_absorbed_error_probe_decides_by_the_f_test_of_the_two_sigmas(monkeypatc
     assert probe([]) is None
 
 
+def test_a_hint_never_beaten_is_counted_at_its_own_inlier_share():
+    """The search restarted from a calibration found otherwise (the absorbed-error probe's, the sigma
+    check's): every sample is drawn after the hint, so while it stays the best the samples needed are
+    counted at its inlier share, as for a best model from a sample. (The count had stayed unset, and a
+    right restart could never end confident: 12r/8s, 1 mm, network 7007, "uncontrolled".) Blocks from a
+    solver that never gives a hypothesis leave the hint (the truth) the best."""
+    import math
+
+    from solvers.calibration.sampling import MinimalSolver, _needed, _ransac
+
+    net, F, bad = _room(16, 10, 7007, sigma=1e-3, gross=0.05)
+    mask = np.isfinite(F)
+    silent = MinimalSolver("silent", 12, 5, lambda F_sub, sigma=None: [], 1.0, 3, tolerates=1)
+    opts = CalibrationOptions()
+    truth = (net.receivers, net.transmitters, net.offsets)
+    best, search = _ransac(F, mask, 3e-3, 1e-12, opts, np.random.default_rng(0), (silent,), dim=3, hint=truth)
+    assert 0.9 < best.inlier_ratio < 1.0  # the gross errors (5 %) out
+    need = _needed(best.inlier_ratio, 60, opts.confidence, tolerated=1)  # 12 x 5 entries, one gross error tolerated
+    assert search.block == (60, 1) and search.short_of == 0 and search.productive == 0
+    assert search.samples == max(math.ceil(need), opts.min_samples) < opts.max_samples
+    def spans(R):
+        return np.linalg.norm(R[:, None] - R[None], axis=2)
+
+    assert np.allclose(spans(best.R), spans(net.receivers), atol=0.01)  # the hint (locally optimised) stayed best
+
+
 def test_absorbed_error_probe_refutes_on_a_network_without_gross_errors():
     """A 12r/8s room at 1 mm without gross errors, sigma estimated: without its kept entries of small
     redundancy number the search fits with the same sigma and places the nodes where they were (nothing
