@@ -14,7 +14,7 @@ import pytest
 
 from solvers.calibrate_io import ellipse_magnification
 from solvers.calibration import calibrate
-from solvers.calibration.frame import AnchorError, Anchors, anchor_frame, parse_anchors
+from solvers.calibration.frame import AnchorError, Anchors, anchor_frame, parse_anchors, widen_far_ranges
 from solvers.cli import main
 from solvers.synthetic import random_network, room_network
 
@@ -189,3 +189,36 @@ def test_room_covariance_is_3d(monkeypatch):
     assert res.receiver_cov.shape == (10, 3, 3) and res.transmitter_cov.shape == (6, 4, 4)
     assert np.allclose(np.sqrt(np.trace(res.receiver_cov, axis1=1, axis2=2)), res.receiver_std)
     assert dataclasses.replace(res).to_dict()["transmitter_cov"] is not None
+
+
+def test_a_far_node_with_a_weak_range_is_widened_to_the_far_side_in_inverse_range():
+    """frame.widen_far_ranges: 8 receivers in a 25 cm cube, sources 4 m away. A source whose linear range std is
+    0.6 m (15 % of its range) gets 0.6 / (1 - 0.15) along the range, its bearing's variance kept; one at 2.5 %
+    keeps its covariance exactly; one whose range std exceeds its range is not bounded (inf). The receivers,
+    inside the sources' spread, and any room-like network, whose nodes lie among each other, are untouched."""
+    rng = np.random.default_rng(0)
+    R = rng.uniform(-0.125, 0.125, (8, 3))
+    c = R.mean(axis=0)
+    dirs = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-1.0, 0, 0]])
+    S = c + 4.0 * dirs
+    rcov = np.tile(np.eye(3) * 1e-8, (8, 1, 1))
+    tcov = np.zeros((4, 4, 4))
+    for k, sr in enumerate((0.6, 0.1, 5.0, 0.6)):
+        d = dirs[k]
+        tcov[k, :3, :3] = sr**2 * np.outer(d, d) + 0.01**2 * (np.eye(3) - np.outer(d, d))
+        tcov[k, 3, 3] = 1e-4
+    r2, t2, widened = widen_far_ranges(R, S, rcov, tcov)
+    assert widened == ["s1", "s3", "s4"]
+    np.testing.assert_array_equal(r2, rcov)
+    np.testing.assert_array_equal(t2[1], tcov[1])
+    d = dirs[0]
+    eps = 0.6 / float(np.linalg.norm(S[0] - c))
+    assert d @ t2[0, :3, :3] @ d == pytest.approx((0.6 / (1 - eps)) ** 2, rel=1e-12)
+    side = np.array([0.0, 1.0, 0.0])
+    assert side @ t2[0, :3, :3] @ side == pytest.approx(0.01**2, rel=1e-12)
+    assert t2[0, 3, 3] == tcov[0, 3, 3]
+    assert np.all(np.isinf(t2[2, :3, :3]))
+    # a room: receivers and sources among each other, large stds and all, nothing widened
+    Rr, Sr = rng.uniform(0, 6, (10, 3)), rng.uniform(0, 6, (6, 3))
+    big_r, big_t = np.tile(np.eye(3), (10, 1, 1)), np.tile(np.eye(4), (6, 1, 1))
+    assert widen_far_ranges(Rr, Sr, big_r, big_t)[2] == []

@@ -6,6 +6,8 @@ module owns what takes it elsewhere:
 
 * `node_covariances`: the full covariance of every node from the adjustment, sigma^2 N^-1 restricted
   to the node's coordinates (receivers dim x dim; transmitters (dim + 1) x (dim + 1), the offset last);
+* `widen_far_ranges`: that covariance widened along the range of a far node whose range is weakly
+  determined (a far-field source: its error is skewed, symmetric in 1 / range);
 * `read_anchors` / `parse_anchors`: known positions of some nodes with their standard deviations (a
   CSV read by the project's own tokenizer, solvers.calibrate_io.parse_measurements);
 * `anchor_frame`: the rigid (or similarity) transform that takes the calibrated anchors onto their
@@ -27,7 +29,14 @@ from typing import Literal
 
 import numpy as np
 
-__all__ = ["ANCHOR_FITS", "AnchorError", "Anchors", "anchor_frame", "node_covariances", "parse_anchors", "read_anchors"]
+__all__ = ["ANCHOR_FITS", "AnchorError", "Anchors", "anchor_frame", "node_covariances", "parse_anchors", "read_anchors",
+           "widen_far_ranges"]
+
+#: A node farther than this many times the other kind's spread (rms distance from its centroid) from that
+#: centroid is "far" for `widen_far_ranges` (a room's nodes are among each other: none is).
+FAR_SPREADS = 2.0
+#: ... and its range is "weakly determined" where its linear std along the range exceeds this share of the range.
+RANGE_SHARE = 0.05
 
 AnchorFit = Literal["rigid", "similarity"]
 #: The transforms `anchor_frame` fits (``--anchor-fit``).
@@ -59,6 +68,52 @@ def node_covariances(st, m: int, n: int, dim: int):
         block[undetermined[:, :, None] | undetermined[:, None, :]] = np.inf
         out[nodes] = block
     return rcov, tcov
+
+
+def widen_far_ranges(R: np.ndarray, S: np.ndarray, rcov: np.ndarray, tcov: np.ndarray, *, far: float = FAR_SPREADS,
+                     share: float = RANGE_SHARE):
+    """(rcov, tcov, widened (names)): the node covariances with each far node's range variance widened to the far
+    side of its 1-sigma interval in inverse range.
+
+    A node far from the other kind's nodes (a source 4 m from a 25 cm array) is located in bearing well and in
+    range poorly, and its range error is skewed: the data determine u = 1 / range (with the bearing) about
+    linearly, so the error is symmetric in u and the range runs out far more than it runs in (the 48 x 540
+    far-field array: a source fitted at 2.05 m with a linear std of 0.31 m lies at 3.72 m, 5.45 std out, and
+    2.97 std out in u). Where the node lies more than `far` spreads of the other kind from its centroid c and
+    its linear range std sigma_r (along d = (x - c) / r, r = |x - c|) exceeds `share` r, the range std becomes
+    1 / (u - sigma_u) - r = sigma_r / (1 - eps), eps = sigma_r / r, sigma_u = sigma_r / r^2 (the far side of the
+    1-sigma interval in u; as for a distance from a parallax), and inf where eps >= 1 (the range is not
+    bounded): the position block gets (sigma_r'^2 - sigma_r^2) d d^T more. Nodes that are not far, or whose
+    range is well determined, keep their covariance exactly. R, S: positions (NaN: not placed); rcov
+    (m, dim, dim), tcov (n, dim + 1, dim + 1) as `node_covariances` gives them."""
+    rcov, tcov = rcov.copy(), tcov.copy()
+    dim = R.shape[1]
+    widened: list[str] = []
+    for X, cov, others, tag in ((R, rcov, S, "r"), (S, tcov, R, "s")):
+        placed = others[np.all(np.isfinite(others), axis=1)]
+        if len(placed) < 2:
+            continue
+        c = placed.mean(axis=0)
+        spread = float(np.sqrt(np.mean(np.sum((placed - c) ** 2, axis=1))))
+        for k in range(len(X)):
+            C = cov[k, :dim, :dim]
+            if not (np.all(np.isfinite(X[k])) and np.all(np.isfinite(C))):
+                continue
+            v = X[k] - c
+            r = float(np.linalg.norm(v))
+            if r <= far * spread:
+                continue
+            d = v / r
+            var_r = float(d @ C @ d)
+            eps = math.sqrt(max(var_r, 0.0)) / r
+            if eps <= share:
+                continue
+            if eps >= 1.0:
+                cov[k, :dim, :dim] = np.inf
+            else:
+                cov[k, :dim, :dim] = C + (var_r / (1.0 - eps) ** 2 - var_r) * np.outer(d, d)
+            widened.append(f"{tag}{k + 1}")
+    return rcov, tcov, widened
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from .adjustment import (
     robust_refine,
 )
 from .flags import _beyond_std, _flags, _principal_ratio, _probe_basins, _repair_flips, _standardised_shift
-from .frame import node_covariances
+from .frame import RANGE_SHARE, node_covariances, widen_far_ranges
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
@@ -913,6 +913,17 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
                 warnings.append(f"{head}; {verdict[2]}")
     status = _worst("ok", *(s for s, _ in found))
     warnings = [why for _, why in found] + symptoms + [w for w in warnings if w not in {why for _, why in found}]
+    # reported only (every test above used the linear std): a far node's skewed range error (frame.widen_far_ranges)
+    rcov, tcov, widened = widen_far_ranges(R, S, rcov, tcov)
+    if widened:
+        rstd, tstd = rstd.copy(), tstd.copy()
+        for name in widened:
+            std, cov, k = (rstd, rcov, int(name[1:]) - 1) if name[0] == "r" else (tstd, tcov, int(name[1:]) - 1)
+            std[k] = math.sqrt(float(np.trace(cov[k, :dim, :dim])))
+        listed = ", ".join(widened[:8]) + (", ..." if len(widened) > 8 else "")
+        warnings.append(f"{len(widened)} node(s) far from the other nodes have their range weakly determined (its std "
+                        f"over {100 * RANGE_SHARE:g} % of the range): their std and covariance are widened along the range to "
+                        f"the far side of the 1-sigma interval in 1 / range, where the error is symmetric ({listed})")
     res = CalibrationResult(
         status=status, message="", receivers=R, transmitters=S, offsets=O, inliers=inl, residuals=E,
         rms=rms, sigma=float(sig), sigma_estimated=sigma is None,
