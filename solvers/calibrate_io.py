@@ -310,14 +310,15 @@ def read_measurements(path: str, *, delimiter: str | None = None, header: str = 
     return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
 
 
-def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdoa_options=None, guide=None,
-               dim: int = 3, seed: int | None = 0, progress=None) -> Measurements:
+def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdoa_options=None, analyse=None,
+               progress=None) -> Measurements:
     """The one reader of every verb that takes measurements: a measurement CSV (one path, ``-`` for
     standard input), or a recording (one multichannel audio file, or one file per channel: recognised
     by their first bytes, solvers.audio.is_recording), turned into the matrix by
-    solvers.audio.tdoa_matrix with `tdoa_options` (a solvers.audio.TdoaOptions; None: the defaults) and, with
-    `guide` (a solvers.audio_guided.GuideOptions), the guided second pass of a calibration in `dim` with `seed`
-    (solvers.audio_guided.tdoa_guided; None: the first pass only).
+    solvers.audio.tdoa_matrix with `tdoa_options` (a solvers.audio.TdoaOptions; None: the defaults), or by
+    `analyse` (a callable taking the solvers.audio.Recording and returning its solvers.audio.TdoaMatrix: the CLI
+    passes the guided pass, solvers.audio_guided.tdoa_guided; this module imports nothing of the calibration,
+    which reads its anchor files through it).
     progress: None, or a callable taking one line (the analysis's progress and notes).
 
     Raises MeasurementFileError or solvers.audio.RecordingError (one line) for what cannot be read.
@@ -329,11 +330,11 @@ def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdo
             other = next(p for p in paths if p not in audio)
             raise MeasurementFileError(f"{other} is not a recording, but {audio[0]} is: give recordings only (one "
                                        "multichannel file or one file per channel), or one measurement CSV")
-        from .audio import TdoaOptions, read_recording
-        from .audio_guided import tdoa_guided
+        from .audio import TdoaOptions, read_recording, tdoa_matrix
 
-        tm = tdoa_guided(read_recording(paths), tdoa_options or TdoaOptions(), dim=dim, seed=seed, guide=guide,
-                         progress=progress).matrix
+        recording = read_recording(paths)
+        tm = (analyse(recording) if analyse is not None else
+              tdoa_matrix(recording, tdoa_options or TdoaOptions(), progress=progress))
         for note in tm.notes if progress is not None else ():
             progress(f"tdoa: {note}")
         return recording_measurements(tm)

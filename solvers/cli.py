@@ -1185,6 +1185,18 @@ def _guide(args: argparse.Namespace):
     return None if args.no_guide else GuideOptions()
 
 
+def _recording_reader(args: argparse.Namespace):
+    """How `calibrate` turns a recording into its matrix: the first pass, then (unless --no-guide) the pass guided
+    by a calibration in --dim with --seed (solvers.audio_guided.tdoa_guided)."""
+    from solvers.audio_guided import tdoa_guided
+
+    def analyse(recording):
+        return tdoa_guided(recording, _tdoa_options(args), dim=args.dim, seed=args.seed, guide=_guide(args),
+                           progress=_progress).matrix
+
+    return analyse
+
+
 def _progress(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
@@ -1379,8 +1391,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                     "--csv": (args.csv, None)}, args.file + ([args.anchors] if args.anchors else []))
     try:
         with _progress_on_stderr("solvers.calibration", after=2.0 if sys.stderr.isatty() else 30.0):
-            meas = read_input(args.file, delimiter=args.delimiter, header=args.header, tdoa_options=_tdoa_options(args),
-                              guide=_guide(args), dim=args.dim, seed=args.seed, progress=_progress)
+            meas = read_input(args.file, delimiter=args.delimiter, header=args.header, analyse=_recording_reader(args),
+                              progress=_progress)
     except MeasurementFileError as e:
         raise UserError(str(e)) from None
     if args.transpose:
