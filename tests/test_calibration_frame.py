@@ -208,7 +208,7 @@ def test_a_far_node_with_a_weak_range_is_widened_to_the_far_side_in_inverse_rang
         tcov[k, :3, :3] = sr**2 * np.outer(d, d) + 0.01**2 * (np.eye(3) - np.outer(d, d))
         tcov[k, 3, 3] = 1e-4
     r2, t2, widened = widen_far_ranges(R, S, rcov, tcov)
-    assert widened == ["s1", "s3", "s4"]
+    assert widened == [("s", 0), ("s", 2), ("s", 3)]
     np.testing.assert_array_equal(r2, rcov)
     np.testing.assert_array_equal(t2[1], tcov[1])
     d = dirs[0]

@@ -72,7 +72,7 @@ def node_covariances(st, m: int, n: int, dim: int):
 
 def widen_far_ranges(R: np.ndarray, S: np.ndarray, rcov: np.ndarray, tcov: np.ndarray, *, far: float = FAR_SPREADS,
                      share: float = RANGE_SHARE):
-    """(rcov, tcov, widened (names)): the node covariances with each far node's range variance widened to the far
+    """(rcov, tcov, widened ((kind "r" or "s", index) of each node widened)): the node covariances with each far node's range variance widened to the far
     side of its 1-sigma interval in inverse range.
 
     A node far from the other kind's nodes (a source 4 m from a 25 cm array) is located in bearing well and in
@@ -88,7 +88,7 @@ def widen_far_ranges(R: np.ndarray, S: np.ndarray, rcov: np.ndarray, tcov: np.nd
     (m, dim, dim), tcov (n, dim + 1, dim + 1) as `node_covariances` gives them."""
     rcov, tcov = rcov.copy(), tcov.copy()
     dim = R.shape[1]
-    widened: list[str] = []
+    widened: list[tuple[str, int]] = []
     for X, cov, others, tag in ((R, rcov, S, "r"), (S, tcov, R, "s")):
         placed = others[np.all(np.isfinite(others), axis=1)]
         if len(placed) < 2:
@@ -112,7 +112,7 @@ def widen_far_ranges(R: np.ndarray, S: np.ndarray, rcov: np.ndarray, tcov: np.nd
                 cov[k, :dim, :dim] = np.inf
             else:
                 cov[k, :dim, :dim] = C + (var_r / (1.0 - eps) ** 2 - var_r) * np.outer(d, d)
-            widened.append(f"{tag}{k + 1}")
+            widened.append((tag, k))
     return rcov, tcov, widened
 
 

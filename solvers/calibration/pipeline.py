@@ -917,10 +917,10 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
     rcov, tcov, widened = widen_far_ranges(R, S, rcov, tcov)
     if widened:
         rstd, tstd = rstd.copy(), tstd.copy()
-        for name in widened:
-            std, cov, k = (rstd, rcov, int(name[1:]) - 1) if name[0] == "r" else (tstd, tcov, int(name[1:]) - 1)
+        for kind, k in widened:
+            std, cov = (rstd, rcov) if kind == "r" else (tstd, tcov)
             std[k] = math.sqrt(float(np.trace(cov[k, :dim, :dim])))
-        listed = ", ".join(widened[:8]) + (", ..." if len(widened) > 8 else "")
+        listed = ", ".join(f"{kind}{k + 1}" for kind, k in widened[:8]) + (", ..." if len(widened) > 8 else "")
         warnings.append(f"{len(widened)} node(s) far from the other nodes have their range weakly determined (its std "
                         f"over {100 * RANGE_SHARE:g} % of the range): their std and covariance are widened along the range to "
                         f"the far side of the 1-sigma interval in 1 / range, where the error is symmetric ({listed})")
