@@ -86,3 +86,108 @@ def test_no_traceback_in_a_real_process(tmp_path):
     err = proc.stderr.read().decode()
     proc.wait()
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+# -- every check before the work (issue 55): numbers, shapes and output paths refused at reading -----------
+
+def _network_csv(path: Path, cell: str | None = None) -> None:
+    """A consistent 8 x 5 network's measurements (seeded), with the entry of line 4, column 3 replaced by cell."""
+    import numpy as np
+
+    from solvers.synthetic import random_network
+
+    F = random_network(8, 5, rng=np.random.default_rng(3)).measurements()
+    rows = ["rx," + ",".join(f"s{j + 1}" for j in range(5))]
+    rows += [f"r{i + 1}," + ",".join(f"{v:.6f}" for v in row) for i, row in enumerate(F)]
+    if cell is not None:
+        cells = rows[3].split(",")
+        cells[2] = cell
+        rows[3] = ",".join(cells)
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.fixture
+def never_calibrated(monkeypatch):
+    """Fails the test if the calibration starts: the error must come before any computing."""
+    import solvers.calibration
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the calibration ran before the error")
+
+    monkeypatch.setattr(solvers.calibration, "calibrate", refuse)
+
+
+@pytest.mark.parametrize("cell, fragment", [
+    ("1e300", "e.csv: line 4, column 3: '1e300' is out of range: a measurement's square summed over the 8 x 5 matrix"),
+    ("-1e200", "e.csv: line 4, column 3: '-1e200' is out of range"),
+    ("1e20", "e.csv: line 4, column 3: '1e20' is absurd next to the other measurements"),
+])
+def test_calibrate_refuses_a_huge_cell_at_reading(capsys, tmp_path, never_calibrated, cell, fragment):
+    _network_csv(tmp_path / "e.csv", cell)
+    code, _, err = run(capsys, ["calibrate", str(tmp_path / "e.csv")])
+    assert code == 2 and fragment in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_gross_error_is_still_left_to_the_calibration(tmp_path):
+    """1e4 among distances of tens is a gross error the robust calibration rejects, not an absurd value."""
+    from solvers.calibrate_io import read_measurements
+
+    _network_csv(tmp_path / "e.csv", "1e4")
+    assert read_measurements(str(tmp_path / "e.csv")).F[2, 1] == 1e4
+
+
+def test_too_few_receivers_is_said_before_the_work(capsys, tmp_path, never_calibrated):
+    (tmp_path / "one.csv").write_text("rx," + ",".join(f"s{j}" for j in range(8)) + "\nr1," + ",".join(["1.5"] * 8) + "\n")
+    code, _, err = run(capsys, ["calibrate", str(tmp_path / "one.csv")])
+    assert code == 2 and ("one.csv: 1 row (receivers) x 8 columns (transmitters) cannot be calibrated in 2D: too few "
+                          "receivers (1): each transmitter is placed from >= 4 receivers") in err, err
+
+
+def test_an_empty_file_is_the_same_words_in_tdoa_and_calibrate(capsys, tmp_path):
+    (tmp_path / "empty.csv").write_bytes(b"")
+    said = []
+    for verb in ("tdoa", "calibrate"):
+        code, _, err = run(capsys, [verb, str(tmp_path / "empty.csv")])
+        assert code == 2, err
+        said.append(err.split("error: ", 1)[1].strip())
+    assert said == [f"{tmp_path / 'empty.csv'}: no data (empty file)"] * 2
+
+
+UNWRITABLE = "/proc/tdoa-workbench-test"  # writing there fails even for root, whom permissions do not stop
+
+
+@pytest.mark.skipif(not Path("/proc/self").exists(), reason="needs Linux's /proc")
+@pytest.mark.parametrize("argv, option", [
+    (["calibrate", "{csv}", "--out", UNWRITABLE + ".json"], "--out"),
+    (["calibrate", "{csv}", "--plot", UNWRITABLE + ".png"], "--plot"),
+    (["calibrate", "{csv}", "--csv", UNWRITABLE + ".csv"], "--csv"),
+    (["degree", EXAMPLE, "--export", "msolve", UNWRITABLE + ".ms"], "--export"),
+    (["generate", "{tmp}/par.txt", "--out", UNWRITABLE], "--out"),
+    (["count", "{tmp}/par.txt", "--json", UNWRITABLE + ".json"], "--json"),
+    (["count", "{tmp}/par.txt", "--checkpoint", UNWRITABLE], "--checkpoint"),
+    (["tables", "--quick", "--out", UNWRITABLE], "--out"),
+])
+def test_an_unwritable_output_fails_before_the_work(capsys, tmp_path, never_calibrated, monkeypatch, argv, option):
+    """Every verb that writes tries its output paths first (one check, solvers.calibrate_io.check_output_path)."""
+    import solvers.count
+    import solvers.generate
+
+    for module, name in ((solvers.count, "count"), (solvers.generate, "generate")):
+        monkeypatch.setattr(module, name, lambda *a, **k: pytest.fail("the work ran before the error"))
+    _network_csv(tmp_path / "m.csv")
+    (tmp_path / "par.txt").write_text("unknowns: x\nparameters: a\nequations:\nx^2 - a\n")
+    code, _, err = run(capsys, [a.replace("{csv}", str(tmp_path / "m.csv")).replace("{tmp}", str(tmp_path))
+                                for a in argv])
+    path = argv[argv.index(option) + (2 if option == "--export" else 1)]
+    assert code == 2 and f"cannot write {path} ({option}): " in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_unwritable_check_leaves_no_file_behind(tmp_path):
+    from solvers.calibrate_io import check_output_path
+
+    check_output_path(str(tmp_path / "new.json"), "--out")
+    check_output_path(str(tmp_path / "a" / "b"), "--out", directory=True)
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "old.json").write_text("kept")
+    check_output_path(str(tmp_path / "old.json"), "--out")
+    assert (tmp_path / "old.json").read_text() == "kept"

@@ -113,3 +113,13 @@ def test_an_equation_spanning_beyond_float64_is_refused(capsys, tmp_path):
     path.write_text(f"unknowns: x, y\nparameters: a, b\nequations:\n{BIG}*x^2 + y^2 - a\nx*y - b\n")
     code, out, err = run(capsys, "count", str(path))
     assert code == 2 and "constants span 2^0 to 2^6640, more than float64's range" in err, err
+
+
+@pytest.mark.parametrize("start", ['{"parameters": [1e400, 2], "root": [1, 2]}',
+                                   '{"parameters": [1, 2], "root": [' + "1" + "0" * 400 + ', 2]}'])
+def test_a_start_pair_beyond_float64_is_refused_by_name(capsys, tmp_path, start):
+    path = tmp_path / "c.txt"
+    path.write_text("unknowns: x, y\nparameters: a, b\nequations:\nx^2 + y^2 - a\nx*y - b\n")
+    (tmp_path / "s.json").write_text(start)
+    code, out, err = run(capsys, "count", str(path), "--start", str(tmp_path / "s.json"))
+    assert code == 2 and "s.json: '" in err and "is not a finite float64" in err, err
