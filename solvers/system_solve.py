@@ -326,37 +326,31 @@ def float_coefficients(polys: Sequence[Mapping[tuple[int, ...], Fraction]]
 
 def unknown_shifts(columns: Sequence[Sequence[Mapping[int, Fraction]]], standard: Sequence[tuple[int, ...]],
                    nvars: int) -> tuple[int, ...]:
-    """Powers of two s_i for the unknowns (x_i = 2^s_i y_i) that bring the exact action matrices' entries
-    nearest 1 when some entry lies beyond 2^+-SCALE_BITS (else all 0: the unknowns as written).
+    """Powers of two s_i for the unknowns (x_i = 2^s_i y_i) when some entry of the exact action matrices lies
+    beyond 2^+-SCALE_BITS (else all 0: the unknowns as written): s_i = log2 of the geometric mean of |x_i| over
+    the solutions where x_i != 0, exactly from the characteristic polynomial of x_i's action matrix (its
+    eigenvalues are x_i's values: with lowest nonzero coefficient c_k of the monic degree-n polynomial, the
+    product of the n - k nonzero ones is +-c_k). In y the coordinates are then near 1 in magnitude when the
+    solutions share a scale, so that the float64 eigenvectors, the distinctness and realness tolerances and
+    Newton's steps work at that scale (solutions near 1e-150 or 1e200). (Balancing the entries themselves, by a
+    linear program on their log2, was tried first: it brings a negligible 1e-5000 entry up at the price of
+    overflowing the others.)"""
+    import flint
 
-    In y the action matrix of x_i has entries M[j, k] 2^(<s, b_j - b_k> - s_i) (b: standard monomials):
-    s minimises the largest |log2| of an entry, a linear program; its eigenvalues are then y's coordinates,
-    near 1 in magnitude when the solutions share a scale, so that the float64 eigenvectors, the distinctness
-    and realness tolerances and Newton's steps work at that scale (solutions near 1e-150 or 1e200)."""
-    extremes: dict[tuple[int, ...], list[int]] = {}  # exponent of s in an entry's scale -> [min, max] log2
-    for i, cols in enumerate(columns):
+    if all(abs(log2_floor(c)) <= SCALE_BITS for cols in columns for col in cols for c in col.values()):
+        return (0,) * nvars
+    size = len(standard)
+    shifts = []
+    for cols in columns:
+        M = flint.fmpq_mat(size, size)
         for k, col in enumerate(cols):
             for j, c in col.items():
-                a = tuple(standard[j][v] - standard[k][v] - (v == i) for v in range(nvars))
-                L = log2_floor(c)
-                lo_hi = extremes.setdefault(a, [L, L])
-                lo_hi[0], lo_hi[1] = min(lo_hi[0], L), max(lo_hi[1], L)
-    if not extremes or all(abs(L) <= SCALE_BITS for lo_hi in extremes.values() for L in lo_hi):
-        return (0,) * nvars
-    from scipy.optimize import linprog  # only here: its import takes a second
-
-    rows, bounds = [], []
-    for a, (lo, hi) in sorted(extremes.items()):  # |L + a.s| <= t for the extreme L of each a
-        rows.append(list(a) + [-1.0])
-        bounds.append(-hi)
-        rows.append([-x for x in a] + [-1.0])
-        bounds.append(lo)
-    cost = [0.0] * nvars + [1.0]
-    done = linprog(cost, A_ub=np.array(rows, dtype=float), b_ub=np.array(bounds, dtype=float),
-                   bounds=[(None, None)] * (nvars + 1), method="highs")
-    if not done.success:
-        return (0,) * nvars
-    return tuple(int(round(v)) for v in done.x[:nvars])
+                M[j, k] = flint.fmpq(c.numerator, c.denominator)
+        coeffs = [Fraction(int(c.p), int(c.q)) for c in M.charpoly().coeffs()]  # lowest first, monic
+        low = next(k for k, c in enumerate(coeffs) if c)
+        nonzero_roots = len(coeffs) - 1 - low
+        shifts.append(round(log2_floor(coeffs[low]) / nonzero_roots) if nonzero_roots else 0)
+    return tuple(shifts)
 
 
 def _shift(c: Fraction, k: int) -> Fraction:

@@ -71,6 +71,19 @@ def test_a_system_with_huge_and_tiny_roots_against_sympy():
     _close([s.values for s in result.solutions], [(complex(r),) for r in sympy.Poly(10**300 * x**2 - 1).all_roots()])
 
 
+def test_a_5000_digit_coefficient_next_to_a_small_one():
+    """B x^2 + x - 4 B, B of 5000 digits: the monic basis holds 1/B (about 2^-16600) beside 4; the unknowns keep
+    their scale (geometric mean of the roots, 2) instead of being balanced towards the negligible entry."""
+    import flint
+
+    B = int(flint.fmpz(10) ** 4999 + 7)
+    system = parse_msolve(f"x\n0\n{flint.fmpz(B)}*x^2 + x - {flint.fmpz(4 * B)}\n")
+    result = solve_system(system)
+    assert result.complete and "s = 1 for unknown 1" in result.status, result.status
+    expected = [(complex(r),) for r in sympy.Poly(B * x**2 + x - 4 * B, x).nroots(n=30, maxsteps=200)]
+    _close([s.values for s in result.solutions], expected)
+
+
 def test_coordinates_beyond_float64_are_a_named_refusal():
     with pytest.raises(SolveError, match=r"coordinates of about 2\^-1659 \(1e-500\): outside float64's range"):
         solve_system(parse_msolve("x,y\n0\nx^2 - 1e400, x*y - 3e-300\n"))
