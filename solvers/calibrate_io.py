@@ -45,6 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.engine.io import InputError, read_input_bytes
+
 __all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "format_matrix",
            "parse_measurements", "plot_calibration", "plot_formats", "read_input", "read_measurements", "report_dict",
            "write_json", "write_nodes_csv"]
@@ -347,14 +349,9 @@ def read_measurements(path: str, *, delimiter: str | None = None, header: str = 
     """
     source = "stdin" if path == _STDIN else path
     try:
-        if path == _STDIN:
-            stream = getattr(sys.stdin, "buffer", None)
-            data = stream.read() if stream is not None else sys.stdin.read().encode("utf-8")
-        else:
-            with open(path, "rb") as handle:
-                data = handle.read()
-    except OSError as exc:
-        raise MeasurementFileError(f"cannot read {source}: {exc.strerror or exc}") from None
+        data = read_input_bytes(path)
+    except InputError as exc:
+        raise MeasurementFileError(str(exc)) from None
     return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
 
 

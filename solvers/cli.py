@@ -258,16 +258,12 @@ def read_system_arg(path: str, name: str | None = None):
     """The system in FILE ('-': stdin), in either format (analysis.formulations.systemfile.read_system_text): an
     analysis.engine.io.System (a plain system) or a ParametricSystem named ``name`` (default: the path); a
     one-line UserError for anything wrong. Every verb that takes a system FILE reads it here."""
-    from analysis.engine.io import InputError, decode_text
+    from analysis.engine.io import InputError, decode_text, read_input_bytes
     from analysis.formulations.systemfile import ParametricError, read_system_text
 
-    try:
-        data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
-    except OSError as e:
-        raise UserError(f"cannot read {path}: {e.strerror}") from None
     source = "<stdin>" if path == "-" else path
     try:
-        return read_system_text(decode_text(data, source), name or source)
+        return read_system_text(decode_text(read_input_bytes(path), source), name or source)
     except (InputError, ParametricError) as e:
         raise UserError(str(e)) from None
 
@@ -649,14 +645,18 @@ def cmd_tables(args: argparse.Namespace) -> int:
 
 
 def _read_text(path: str) -> str:
-    """A text file's content, or a one-line UserError naming it."""
+    """A text file's content (may be empty: --params with no values), or a one-line UserError naming it in
+    the words of every input file (analysis.engine.io.read_input_bytes)."""
+    from analysis.engine.io import InputError, read_input_bytes
+
     try:
-        with open(path, encoding="utf-8") as fh:
-            return fh.read()
+        data = read_input_bytes(path, empty_ok=True)
+    except InputError as exc:
+        raise UserError(str(exc)) from None
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise UserError(f"{path}: not a UTF-8 text file") from None
-    except OSError as exc:
-        raise UserError(f"{path}: {exc.strerror or exc}") from None
 
 
 def _add_solve(sub: argparse._SubParsersAction) -> None:

@@ -191,3 +191,22 @@ def test_the_unwritable_check_leaves_no_file_behind(tmp_path):
     (tmp_path / "old.json").write_text("kept")
     check_output_path(str(tmp_path / "old.json"), "--out")
     assert (tmp_path / "old.json").read_text() == "kept"
+
+
+@pytest.mark.parametrize("verb", [["degree"], ["solve"], ["count"], ["generate", "--out", "{tmp}/g"],
+                                  ["template-check"], ["tdoa"], ["calibrate"]])
+def test_the_same_words_for_the_same_input_problem_in_every_verb(capsys, tmp_path, verb):
+    """A missing file, a directory and a 0-byte file: one wording, whatever the verb reads (a system, a
+    measurement CSV or a recording)."""
+    (tmp_path / "empty").write_bytes(b"")
+    (tmp_path / "adir").mkdir()
+    said = {}
+    for name in ("empty", "adir", "missing"):
+        argv = [verb[0], str(tmp_path / name)] + [a.replace("{tmp}", str(tmp_path)) for a in verb[1:]]
+        code, _, err = run(capsys, argv)
+        assert code == 2, err
+        said[name] = err.split("error: ", 1)[1].strip()
+    assert said["empty"] == f"{tmp_path / 'empty'}: no data (empty file)"
+    assert said["adir"] == f"cannot read {tmp_path / 'adir'}: it is a directory"
+    if verb[0] not in ("generate", "template-check"):  # those take a label too: 'no such file (and not a label)'
+        assert said["missing"] == f"cannot read {tmp_path / 'missing'}: no such file"
