@@ -441,7 +441,7 @@ def _distinct(points: np.ndarray) -> bool:
 
 
 def _polish_and_check(points: np.ndarray, ev: "_Evaluator", degree: int, shown: int, lost: int = 0,
-                      shifts: Sequence[int] = (), source: str = "<system>") -> tuple[tuple["Solution", ...], bool, str]:
+                      shifts: Sequence[int] = (), source: str = "<system>", lost_what: str = "path(s) lost") -> tuple[tuple["Solution", ...], bool, str]:
     """Newton on every point, real ones marked, sorted (real first); complete when there are ``degree``
     points, pairwise distinct, each with a nonsingular Jacobian. Returns (solutions, complete, status).
     ``shifts``: the points are in y, x_i = 2^shifts[i] y_i (:func:`unknown_shifts`): checked in y, reported
@@ -481,7 +481,7 @@ def _polish_and_check(points: np.ndarray, ev: "_Evaluator", degree: int, shown: 
                   f"<= {max((s.condition for s in solutions), default=0.0):.2g}), residual <= {worst:.2g}; real ones "
                   f"judged numerically (|imaginary part| <= {REAL_TOL:g} relative)")
     else:
-        why = ([f"{lost} path(s) lost"] if lost else []) + \
+        why = ([f"{lost} {lost_what}"] if lost else []) + \
             (["points closer than the distinctness tolerance (a multiple root or lost accuracy)"] if not distinct else []) + \
             (["a singular Jacobian (a multiple root?)"] if not simple else []) + \
             ([f"{len(solutions)} points for degree {degree}"] if len(solutions) != degree else [])
@@ -570,9 +570,13 @@ def solve_system(system, seed: int = 0, prime_seed: int = 0, options=None, hidde
         A.append(M)
     t_action = time.perf_counter()
     say(f"[solve] {nvars} action matrices {len(standard)} x {len(standard)} ({t_action - t_basis:.2f} s)")
-    points = _eigen_points(A, np.random.default_rng(seed))
-    solutions, complete, status = _polish_and_check(points, _Evaluator(exact, nvars), report.degree, len(shown),
-                                                    shifts=shifts, source=system.source)
+    with np.errstate(all="ignore"):
+        points = _eigen_points(A, np.random.default_rng(seed))
+    finite = np.all(np.isfinite(points), axis=1)  # an eigenvector without its constant entry: lost in float64
+    solutions, complete, status = _polish_and_check(
+        points[finite], _Evaluator(exact, nvars), report.degree, len(shown), lost=int((~finite).sum()), shifts=shifts,
+        source=system.source, lost_what="eigenvector(s) lost in float64 (solutions whose coordinates span more than "
+                                        "float64's precision?)")
     t_newton = time.perf_counter()
     say(f"[solve] eigenvectors and Newton ({t_newton - t_action:.2f} s)")
     return SystemSolutions(shown, report.degree, 0, solutions, f"certified over GF(p): {rational.status}",
@@ -670,6 +674,11 @@ def solve_by_homotopy(system, values: Mapping[str, Fraction], target=None, seed:
     say = progress or (lambda line: None)
     t0 = time.perf_counter()
     instance = instance_system(system, values, source, saturate=False)
+    for name, v in values.items():  # the homotopy tracks in float64: a value it cannot hold is refused by name
+        if v and log2_floor(v) > SCALE_BITS:
+            raise SolveError(f"{name} = 2^{log2_floor(v)} (about): beyond "
+                             f"2^{SCALE_BITS}, too far from the generated solver's start values for tracking in "
+                             "float64; --method action-matrix solves the instance exactly")
     module, spec = generated_solver(system, target, seed, progress)
     t_build = time.perf_counter()
     q = np.array([float(values.get(p, 0)) for p in spec["parameters"]])

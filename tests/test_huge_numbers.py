@@ -136,3 +136,23 @@ def test_a_start_pair_beyond_float64_is_refused_by_name(capsys, tmp_path, start)
     (tmp_path / "s.json").write_text(start)
     code, out, err = run(capsys, "count", str(path), "--start", str(tmp_path / "s.json"))
     assert code == 2 and "s.json: '" in err and "is not a finite float64" in err, err
+
+
+def test_the_homotopy_refuses_a_parameter_beyond_its_floats_and_the_action_matrix_says_what_it_lost(capsys, tmp_path):
+    """x^2 + y^2 = a, x y = 2: with a = 1e400 the homotopy (tracking in float64) refuses by name; with a = 1e300 the
+    action matrix finds the two solutions near (1e150, 2e-150) and says it lost the other two (x spans 1e300
+    over the solutions, more than float64's precision): not complete, exit 3, never an 'all' status."""
+    path = tmp_path / "c.txt"
+    path.write_text("unknowns: x, y\nparameters: a, b\nequations:\nx^2 + y^2 - a\nx*y - b\n")
+    with pytest.raises(SolveError, match=r"a = 2\^1328 \(about\): beyond 2\^500.*--method action-matrix"):
+        from solvers.system_solve import solve_by_homotopy
+
+        solve_by_homotopy(parse(path.read_text()), {"a": Fraction(10**400), "b": Fraction(2)})
+    code, out, err = run(capsys, "solve", str(path), "--param", "a=1e300", "--param", "b=2")
+    assert code == 3 and "NOT checked complete: 2 eigenvector(s) lost in float64" in out, out + err
+    A = sympy.Integer(10) ** 300  # x^4 - A x^2 + 4 = 0 (y = 2 / x): the large root of x^2 has no cancellation
+    xb = sympy.sqrt((A + sympy.sqrt(A**2 - 16)) / 2)
+    assert sympy.simplify(xb**4 - A * xb**2 + 4) == 0
+    big = [(s * complex(xb.evalf(40)), s * complex((2 / xb).evalf(40))) for s in (-1, 1)]
+    found = [tuple(complex(v) for v in line.split()[3:5]) for line in out.splitlines()[5:]]
+    _close(found, big, rel=1e-12)
