@@ -196,7 +196,7 @@ def _is_text(cell: str, decimal_comma: bool) -> bool:
 
 
 def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | None = None,
-                       header: str = "auto") -> Measurements:
+                       header: str = "auto", network: bool = True) -> Measurements:
     """A measurement matrix from CSV text (rules in the module docstring).
 
     Parameters
@@ -206,6 +206,9 @@ def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | No
     delimiter : None to sniff it, else a name of DELIMITERS or the character
     header : "auto", "row" (first row: transmitter names), "column" (first column: receiver names),
         "both" or "none"
+    network : the table is a measurement matrix (rows receivers, columns transmitters), whose values absurd
+        next to their column are refused (:data:`ABSURD_SPREAD`); False for another table read by the same
+        rules (the anchors' coordinates, solvers.calibration.frame), which keeps only the overflow bound
 
     Raises MeasurementFileError (one line naming source, line and column) for anything that is not
     a matrix of measurements.
@@ -254,7 +257,7 @@ def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | No
                 raise MeasurementFileError(f"{where}: {cell!r} overflows (beyond {sys.float_info.max:.3g}); "
                                            "check the units")
             F[i, j] = value
-    _check_magnitudes(F, [line for line, _ in body], first, [row[first:] for _, row in body], source)
+    _check_magnitudes(F, [line for line, _ in body], first, [row[first:] for _, row in body], source, network)
     names_r = tuple(row[0] or str(i + 1) for i, (_, row) in enumerate(body)) if header_col else \
         tuple(str(i + 1) for i in range(len(body)))
     names_t = tuple(c or str(j + 1) for j, c in enumerate(rows[0][1][first:])) if header_row else \
@@ -271,11 +274,13 @@ has the spread of the receiver array whatever the offsets are; a gross error (an
 a few times that spread and left to the robust calibration, a millionfold one is not a measurement."""
 
 
-def _check_magnitudes(F: np.ndarray, lines: list[int], first: int, cells: list[list[str]], source: str) -> None:
+def _check_magnitudes(F: np.ndarray, lines: list[int], first: int, cells: list[list[str]], source: str,
+                      network: bool = True) -> None:
     """Refuse, at reading, a value the calibration cannot compute with: (1) one whose square, summed over
     the matrix, overflows float64 (|f| above sqrt(1.8e308 / (m n)): the calibration normalises by the root
     mean square of the entries and squares them in its equations), and (2) one absurd relative to the
-    others (:data:`ABSURD_SPREAD`). One MeasurementFileError naming the file, line and column."""
+    others (:data:`ABSURD_SPREAD`; ``network`` tables only). One MeasurementFileError naming the file, line and
+    column."""
     def refuse(i: int, j: int, why: str) -> MeasurementFileError:
         return MeasurementFileError(f"{source}: line {lines[i]}, column {j + first + 1}: {cells[i][j]!r} {why}")
 
@@ -288,6 +293,8 @@ def _check_magnitudes(F: np.ndarray, lines: list[int], first: int, cells: list[l
         i, j = big[0]
         raise refuse(i, j, f"is out of range: a measurement's square summed over the {F.shape[0]} x {F.shape[1]} "
                            f"matrix must stay within float64 (|value| <= {limit:.3g}); check the units")
+    if not network:
+        return
     counts = finite.sum(axis=0)
     usable = counts >= 3
     if not usable.any():

@@ -210,3 +210,13 @@ def test_the_same_words_for_the_same_input_problem_in_every_verb(capsys, tmp_pat
     assert said["adir"] == f"cannot read {tmp_path / 'adir'}: it is a directory"
     if verb[0] not in ("generate", "template-check"):  # those take a label too: 'no such file (and not a label)'
         assert said["missing"] == f"cannot read {tmp_path / 'missing'}: no such file"
+
+
+def test_anchor_coordinates_are_not_judged_by_a_network_spread():
+    """Near-collinear anchors (y spread 1e-6 beside x spread 5) are coordinates, not a measurement matrix."""
+    from solvers.calibrate_io import parse_measurements
+
+    text = "node,x,y,std\nr1,0,0,0.01\nr2,5,0.000001,0.01\nr3,10,0.000002,0.01\n"
+    assert parse_measurements(text, "a.csv", header="both", network=False).F[2, 0] == 10
+    with pytest.raises(Exception, match="is absurd next to the other measurements"):
+        parse_measurements(text, "a.csv", header="both")
