@@ -145,11 +145,9 @@ def equation_shifts(system: ParametricSystem) -> tuple[int, ...]:
     """Per equation the k of its scaling by 2^-k where its coefficients become floats (0: as written):
     :func:`solvers.scaling.equation_shift` of the numeric constants of its coefficients (polynomials in the
     parameters and definitions)."""
-    import sympy
-
-    gens = system.q_symbols + system.aux_symbols or (sympy.Symbol("_dummy"),)
-    return tuple(equation_shift(Fraction(int(sympy.Rational(v).p), int(sympy.Rational(v).q))
-                                for _, c in eq for v in sympy.Poly(c, *gens).coeffs()) for eq in system.terms)
+    # the system's own expansion of its coefficients in the parameters (cached; the one its GF(p) counts use)
+    return tuple(equation_shift(Fraction(int(v.p), int(v.q)) for _, cterms in row for _, v in cterms)
+                 for row in system._gf_coefficients)
 
 
 def _scaled_coefficient(c, k: int, system: ParametricSystem):
