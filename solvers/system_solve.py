@@ -34,7 +34,7 @@ import numpy as np
 
 from analysis.engine.polytext import InputError, read_number
 
-from .scaling import SCALE_BITS, equation_shift, log2_floor, scaled_float
+from .continuation.scaling import SCALE_BITS, equation_shift, log2_floor, scaled_float
 
 __all__ = ["HOMOTOPY", "METHOD", "SolveError", "Solution", "SystemSolutions", "generated_solver", "instance_system",
            "parameter_values", "solve_by_homotopy",

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from ..scaling import equation_shift, log2_floor, scaled_float
+from .scaling import equation_shift, log2_floor, scaled_float
 from . import tape_kernel, tape_native, tracker
 from .tracker import SystemStructure, TrackerOptions
 
@@ -143,7 +143,7 @@ def _print(expr) -> str:
 
 def equation_shifts(system: ParametricSystem) -> tuple[int, ...]:
     """Per equation the k of its scaling by 2^-k where its coefficients become floats (0: as written):
-    :func:`solvers.scaling.equation_shift` of the numeric constants of its coefficients (polynomials in the
+    :func:`solvers.continuation.scaling.equation_shift` of the numeric constants of its coefficients (polynomials in the
     parameters and definitions)."""
     # the system's own expansion of its coefficients in the parameters (cached; the one its GF(p) counts use)
     return tuple(equation_shift(Fraction(int(v.p), int(v.q)) for _, cterms in row for _, v in cterms)
@@ -183,7 +183,7 @@ def coefficient_source(system: ParametricSystem, name: str = "coefficients") -> 
 
     Definitions are computed first (in order), then the coefficients with shared subexpressions
     (``sympy.cse``); byte-stable for a given system. An equation with a constant beyond 2^+-SCALE_BITS is
-    scaled exactly by a power of two first (:func:`equation_shifts`, :data:`solvers.scaling.SCALE_BITS`).
+    scaled exactly by a power of two first (:func:`equation_shifts`, :data:`solvers.continuation.scaling.SCALE_BITS`).
     """
     import sympy
 

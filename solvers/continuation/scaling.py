@@ -3,7 +3,8 @@ range is multiplied by a power of two first (its solutions unchanged), then each
 
 One rule for every verb that starts numerics from exact coefficients: ``solve`` (the input equations'
 floats for Newton, :mod:`solvers.system_solve`) and the homotopy coefficient code of ``count`` and
-``generate`` (:func:`solvers.continuation.tracking.coefficient_source`).
+``generate`` (:func:`solvers.continuation.tracking.coefficient_source`). It lives in this package because
+the continuation imports only itself (tests/test_generate.py); it needs nothing but :mod:`fractions`.
 """
 from __future__ import annotations
 
