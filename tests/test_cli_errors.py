@@ -220,3 +220,28 @@ def test_anchor_coordinates_are_not_judged_by_a_network_spread():
     assert parse_measurements(text, "a.csv", header="both", network=False).F[2, 0] == 10
     with pytest.raises(Exception, match="is absurd next to the other measurements"):
         parse_measurements(text, "a.csv", header="both")
+
+
+def test_the_absurd_value_test_passes_hard_real_shapes():
+    """Seeded networks with far transmitters (up to 1e6 times the array), offsets up to 1e12 (absolute
+    timestamps), 20 % missing and 1 mm noise: none is refused at reading; one cell 1e6 spreads off is."""
+    import numpy as np
+
+    from solvers.calibrate_io import MeasurementFileError, _check_magnitudes
+
+    rng = np.random.default_rng(55)
+    for _ in range(300):
+        m, n, dim = int(rng.integers(4, 20)), int(rng.integers(3, 20)), int(rng.choice([2, 3]))
+        R = rng.normal(size=(m, dim)) * rng.choice([1, 10])
+        far = rng.random(n) < rng.random()
+        S = rng.normal(size=(n, dim)) * np.where(far, 10 ** rng.uniform(2, 6, n), 1)[:, None]
+        F = np.linalg.norm(R[:, None] - S[None], axis=2) + rng.normal(size=n) * 10 ** rng.uniform(0, 12)
+        F = F + rng.normal(size=(m, n)) * 1e-3
+        F[rng.random(F.shape) < 0.2] = np.nan
+        cells = [[repr(v) for v in row] for row in F]
+        _check_magnitudes(F, list(range(1, m + 1)), 1, cells, "sim")
+    F = np.arange(40.0).reshape(8, 5) % 7
+    F[2, 1] = 1e8
+    with pytest.raises(MeasurementFileError, match="line 3, column 3: '1e8' is absurd"):
+        _check_magnitudes(F, list(range(1, 9)), 1, [["1e8" if (i, j) == (2, 1) else "x" for j in range(5)]
+                                                    for i in range(8)], "sim")
