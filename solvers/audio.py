@@ -85,6 +85,8 @@ def _read_one(path: str):
         raise RecordingError(f"cannot read {path}: no such file")
     if os.path.isdir(path):
         raise RecordingError(f"cannot read {path}: it is a directory")
+    if os.path.getsize(path) == 0:  # the words of the measurement reader (solvers.calibrate_io) for the same file
+        raise RecordingError(f"{path}: no data (empty file)")
     try:
         data, rate = soundfile.read(path, dtype="float64", always_2d=True)
     except FileNotFoundError:

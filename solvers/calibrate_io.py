@@ -40,9 +40,12 @@ import math
 import os
 import re
 import sys
+import tempfile
 from dataclasses import dataclass
 
 import numpy as np
+
+from analysis.engine.io import InputError, read_input_bytes
 
 __all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "format_matrix",
            "parse_measurements", "plot_calibration", "plot_formats", "read_input", "read_measurements", "report_dict",
@@ -193,7 +196,7 @@ def _is_text(cell: str, decimal_comma: bool) -> bool:
 
 
 def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | None = None,
-                       header: str = "auto") -> Measurements:
+                       header: str = "auto", network: bool = True) -> Measurements:
     """A measurement matrix from CSV text (rules in the module docstring).
 
     Parameters
@@ -203,6 +206,9 @@ def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | No
     delimiter : None to sniff it, else a name of DELIMITERS or the character
     header : "auto", "row" (first row: transmitter names), "column" (first column: receiver names),
         "both" or "none"
+    network : the table is a measurement matrix (rows receivers, columns transmitters), whose values absurd
+        next to their column are refused (:data:`ABSURD_SPREAD`); False for another table read by the same
+        rules (the anchors' coordinates, solvers.calibration.frame), which keeps only the overflow bound
 
     Raises MeasurementFileError (one line naming source, line and column) for anything that is not
     a matrix of measurements.
@@ -214,8 +220,8 @@ def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | No
         content = _strip_comment(raw)
         if content.strip():
             lines.append((k + 1, content))
-    if not lines:
-        raise MeasurementFileError(f"{source}: no data (empty file, or only comments)")
+    if not lines:  # the same words as the recording reader's (solvers.audio) for an empty file
+        raise MeasurementFileError(f"{source}: no data ({'empty file' if not text.strip() else 'only comments'})")
     d = _sniff(lines) if delimiter is None else _delimiter(delimiter)
     decimal_comma = d != ","
     rows = [(line, _split(content, d, source, line)) for line, content in lines]
@@ -251,11 +257,62 @@ def parse_measurements(text: str, source: str = "<text>", *, delimiter: str | No
                 raise MeasurementFileError(f"{where}: {cell!r} overflows (beyond {sys.float_info.max:.3g}); "
                                            "check the units")
             F[i, j] = value
+    _check_magnitudes(F, [line for line, _ in body], first, [row[first:] for _, row in body], source, network)
     names_r = tuple(row[0] or str(i + 1) for i, (_, row) in enumerate(body)) if header_col else \
         tuple(str(i + 1) for i in range(len(body)))
     names_t = tuple(c or str(j + 1) for j, c in enumerate(rows[0][1][first:])) if header_row else \
         tuple(str(j + 1) for j in range(F.shape[1]))
     return Measurements(F, names_r, names_t, source, d)
+
+
+ABSURD_SPREAD = 1e6
+"""A measurement farther from its column's median than this many times the network's spread (the median,
+over the columns, of each column's median absolute deviation) is refused as a typo or a unit error. A
+column holds one transmitter's measurements at every receiver, f_ij = |r_i - s_j| + o_j: they share the
+offset o_j and differ by at most the receivers' distances (|f_ij - f_kj| <= |r_i - r_k|), so every column
+has the spread of the receiver array whatever the offsets are; a gross error (an echo, a wrong event) is
+a few times that spread and left to the robust calibration, a millionfold one is not a measurement."""
+
+
+def _check_magnitudes(F: np.ndarray, lines: list[int], first: int, cells: list[list[str]], source: str,
+                      network: bool = True) -> None:
+    """Refuse, at reading, a value the calibration cannot compute with: (1) one whose square, summed over
+    the matrix, overflows float64 (|f| above sqrt(1.8e308 / (m n)): the calibration normalises by the root
+    mean square of the entries and squares them in its equations), and (2) one absurd relative to the
+    others (:data:`ABSURD_SPREAD`; ``network`` tables only). One MeasurementFileError naming the file, line and
+    column."""
+    def refuse(i: int, j: int, why: str) -> MeasurementFileError:
+        return MeasurementFileError(f"{source}: line {lines[i]}, column {j + first + 1}: {cells[i][j]!r} {why}")
+
+    finite = np.isfinite(F)
+    if not finite.any():
+        return
+    limit = math.sqrt(sys.float_info.max / F.size)
+    big = np.argwhere(finite & (np.abs(np.where(finite, F, 0.0)) > limit))
+    if len(big):
+        i, j = big[0]
+        raise refuse(i, j, f"is out of range: a measurement's square summed over the {F.shape[0]} x {F.shape[1]} "
+                           f"matrix must stay within float64 (|value| <= {limit:.3g}); check the units")
+    if not network:
+        return
+    counts = finite.sum(axis=0)
+    usable = counts >= 3
+    if not usable.any():
+        return
+    with np.errstate(all="ignore"):
+        med = np.nanmedian(np.where(finite, F, np.nan)[:, usable], axis=0)
+        mad = np.nanmedian(np.abs(np.where(finite, F, np.nan)[:, usable] - med), axis=0)
+    spread = float(np.median(mad))
+    if not spread > 0:
+        return
+    deviation = np.abs(np.where(finite, F, np.nan)[:, usable] - med)
+    absurd = np.argwhere(np.nan_to_num(deviation, nan=0.0) > ABSURD_SPREAD * spread)
+    if len(absurd):
+        i, k = absurd[0]
+        j = int(np.flatnonzero(usable)[k])
+        raise refuse(i, j, f"is absurd next to the other measurements: {deviation[i, k]:.3g} from its column's median "
+                           f"{med[k]:.6g}, more than {ABSURD_SPREAD:g} times the network's spread {spread:.3g} (the "
+                           "median over the columns of their median absolute deviations); check the value and the units")
 
 
 def _names_layout(rows, header: str, decimal_comma: bool, source: str) -> tuple[bool, bool]:
@@ -299,14 +356,9 @@ def read_measurements(path: str, *, delimiter: str | None = None, header: str = 
     """
     source = "stdin" if path == _STDIN else path
     try:
-        if path == _STDIN:
-            stream = getattr(sys.stdin, "buffer", None)
-            data = stream.read() if stream is not None else sys.stdin.read().encode("utf-8")
-        else:
-            with open(path, "rb") as handle:
-                data = handle.read()
-    except OSError as exc:
-        raise MeasurementFileError(f"cannot read {source}: {exc.strerror or exc}") from None
+        data = read_input_bytes(path)
+    except InputError as exc:
+        raise MeasurementFileError(str(exc)) from None
     return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
 
 
@@ -384,19 +436,37 @@ def plot_formats() -> tuple[str, ...]:
     return tuple(sorted(Figure().canvas.get_supported_filetypes()))
 
 
-def check_output_path(path: str, option: str, reading: str | None = None, formats: tuple[str, ...] | None = None) -> None:
-    """Refuse, before any computing, an output path that cannot be written: a directory, a missing or
-    unwritable directory, the measurement file itself (`reading`), or (`formats` given) an extension
-    not among them. One-line MeasurementFileError naming the option and the path."""
+def check_output_path(path: str, option: str, reading: str | None = None, formats: tuple[str, ...] | None = None,
+                      directory: bool = False) -> None:
+    """Refuse, before any computing, an output path that cannot be written: a directory (a file for
+    ``directory``), a missing or unwritable directory, the measurement file itself (`reading`), or
+    (`formats` given) an extension not among them. Writing is tried, not guessed from permissions (which
+    say yes to root on a read-only file system or in /proc): the file is opened for appending (an existing
+    one keeps its bytes; one created for the test is removed), a directory gets a temporary file (a
+    missing one is tried in its nearest existing parent, and not created). One-line MeasurementFileError
+    naming the path and the option, in the same words for every verb: ``cannot write PATH (OPTION): why``."""
+    def refuse(why: str) -> MeasurementFileError:
+        return MeasurementFileError(f"cannot write {path} ({option}): {why}")
+
     if path == _STDIN:
         raise MeasurementFileError(f"{option} -: give a file name ({'--json prints the JSON' if option == '--out' else 'a plot is a file'})")
+    if directory:
+        if os.path.exists(path) and not os.path.isdir(path):
+            raise refuse("it is a file; give a directory")
+        parent = os.path.abspath(path)
+        while not os.path.exists(parent):
+            parent = os.path.dirname(parent)
+        if not os.path.isdir(parent):
+            raise refuse(f"{parent} is a file")
+        _try_writing(parent, refuse)
+        return
     if os.path.isdir(path):
-        raise MeasurementFileError(f"cannot write {path} ({option}): it is a directory")
+        raise refuse("it is a directory")
     folder = os.path.dirname(path) or "."
     if not os.path.isdir(folder):
-        raise MeasurementFileError(f"cannot write {path} ({option}): no directory {folder}")
+        raise refuse(f"no directory {folder}")
     if not os.access(folder, os.W_OK | os.X_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise MeasurementFileError(f"cannot write {path} ({option}): permission denied")
+        raise refuse("permission denied")
     if reading not in (None, _STDIN) and os.path.exists(path) and os.path.exists(reading) and os.path.samefile(path, reading):
         raise MeasurementFileError(f"{option} {path} is the measurement file; give another name")
     if formats is not None:
@@ -404,6 +474,24 @@ def check_output_path(path: str, option: str, reading: str | None = None, format
         if ext not in formats:
             got = f"extension .{ext}" if ext else "no extension"
             raise MeasurementFileError(f"{option} {path}: {got}; give one of {', '.join('.' + f for f in formats)}")
+    existed = os.path.exists(path)
+    try:
+        with open(path, "a", encoding="utf-8"):
+            pass
+    except OSError as exc:
+        raise refuse(exc.strerror or str(exc)) from None
+    finally:
+        if not existed and os.path.isfile(path):
+            os.remove(path)
+
+
+def _try_writing(folder: str, refuse) -> None:
+    """Create and remove a temporary file in folder, or raise refuse(why)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise refuse(exc.strerror or str(exc)) from None
 
 
 def report_dict(result, measurements: Measurements | None = None, units: str | None = None) -> dict:

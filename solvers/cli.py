@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import re
 import sys
@@ -257,16 +258,12 @@ def read_system_arg(path: str, name: str | None = None):
     """The system in FILE ('-': stdin), in either format (analysis.formulations.systemfile.read_system_text): an
     analysis.engine.io.System (a plain system) or a ParametricSystem named ``name`` (default: the path); a
     one-line UserError for anything wrong. Every verb that takes a system FILE reads it here."""
-    from analysis.engine.io import InputError, decode_text
+    from analysis.engine.io import InputError, decode_text, read_input_bytes
     from analysis.formulations.systemfile import ParametricError, read_system_text
 
-    try:
-        data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
-    except OSError as e:
-        raise UserError(f"cannot read {path}: {e.strerror}") from None
     source = "<stdin>" if path == "-" else path
     try:
-        return read_system_text(decode_text(data, source), name or source)
+        return read_system_text(decode_text(read_input_bytes(path), source), name or source)
     except (InputError, ParametricError) as e:
         raise UserError(str(e)) from None
 
@@ -298,6 +295,17 @@ def _degree_parametric(args: argparse.Namespace, system) -> int:
     return _finish_report(out, report, args, header)
 
 
+def _check_export(args: argparse.Namespace, readings) -> None:
+    """degree --export FORMAT PATH: the format and the path checked before any computing (_check_outputs)."""
+    if not args.export:
+        return
+    from analysis.engine.io import WRITE_FORMATS
+
+    if args.export[0] not in WRITE_FORMATS:
+        raise UserError(f"--export: unknown format {args.export[0]!r}; valid: {', '.join(WRITE_FORMATS)}")
+    _check_outputs({"--export": (args.export[1], None)}, [r for r in readings if r and r != "-"])
+
+
 def cmd_degree(args: argparse.Namespace) -> int:
     from analysis.engine.io import InputError, System, parse_polynomial
     from analysis.engine.ring import check_prime, BadPrime
@@ -310,6 +318,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
         raise UserError("--equations, --model, --dim, --parametrization and --saturate-det-h need --tdoa CONFIG")
     if args.file is None:
         raise UserError("give a system FILE (msolve's format or the parametric one), or --tdoa CONFIG --equations SPEC")
+    _check_export(args, [args.file])
     system = read_system_arg(args.file)
     if not isinstance(system, System):
         return _degree_parametric(args, system)
@@ -441,6 +450,7 @@ def _degree_tdoa(args: argparse.Namespace) -> int:
 
     if args.equations is not None and not args.equations.strip():
         raise UserError("--equations is empty; give e.g. 'C2-C6', 'B2,C2-C6,minors' or 'all'")
+    _check_export(args, [])
     try:
         config = tf.TDOAConfig.parse(args.tdoa, model=args.model, dim=args.dim, parametrization=args.parametrization)
         if args.saturate_det_h and config.parametrization == "direct":
@@ -579,8 +589,7 @@ def _output_dir(args: argparse.Namespace):
             os.environ["NUMBA_CACHE_DIR"] = str(Path(os.environ[CACHE_ENV]) / "numba")
     if args.out:
         out = Path(args.out).expanduser()
-        if out.exists() and not out.is_dir():
-            raise UserError(f"--out {args.out} is a file; give a directory")
+        _check_outputs({}, directories={"--out": str(out)})
         return out.resolve()
     return default_output_dir() / QUICK_DIR if args.quick else default_output_dir()
 
@@ -636,14 +645,18 @@ def cmd_tables(args: argparse.Namespace) -> int:
 
 
 def _read_text(path: str) -> str:
-    """A text file's content, or a one-line UserError naming it."""
+    """A text file's content (may be empty: --params with no values), or a one-line UserError naming it in
+    the words of every input file (analysis.engine.io.read_input_bytes)."""
+    from analysis.engine.io import InputError, read_input_bytes
+
     try:
-        with open(path, encoding="utf-8") as fh:
-            return fh.read()
+        data = read_input_bytes(path, empty_ok=True)
+    except InputError as exc:
+        raise UserError(str(exc)) from None
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise UserError(f"{path}: not a UTF-8 text file") from None
-    except OSError as exc:
-        raise UserError(f"{path}: {exc.strerror or exc}") from None
 
 
 def _add_solve(sub: argparse._SubParsersAction) -> None:
@@ -815,12 +828,17 @@ def _read_start(path: str, system) -> tuple:
             raise UserError(f"{path}: '{key}' must be a list of {len(names)} values ({', '.join(names)})")
         out = []
         for v in raw:
-            if isinstance(v, list) and len(v) == 2 and all(isinstance(t, (int, float)) for t in v):
-                out.append(complex(v[0], v[1]))
-            elif isinstance(v, (int, float)) and not isinstance(v, bool):
-                out.append(complex(v))
-            else:
+            parts = v if isinstance(v, list) and len(v) == 2 else [v, 0.0]
+            if not all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in parts):
                 raise UserError(f"{path}: '{key}' values must be numbers or [re, im] pairs, got {v!r}")
+            try:
+                z = complex(float(parts[0]), float(parts[1]))
+            except OverflowError:
+                z = complex(math.inf)
+            if not (math.isfinite(z.real) and math.isfinite(z.imag)):  # 1e400 and NaN read by json
+                raise UserError(f"{path}: '{key}' value {v!r} is not a finite float64 (a start pair is numerics: "
+                                "give generic values of modest size)")
+            out.append(z)
         return np.array(out)
 
     return values("parameters", system.parameters), values("root", system.unknowns)
@@ -838,6 +856,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
     if args.seed < 0:
         raise UserError(f"--seed must be a non-negative integer, got {args.seed}")
+    _check_outputs({}, directories={"--out": args.out})
 
     def progress(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
@@ -955,13 +974,9 @@ def cmd_count(args: argparse.Namespace) -> int:
         raise UserError("--start is for a system FILE; TDOA targets draw their own start pairs (complex networks)")
     if not args.seconds > 0:
         raise UserError(f"--seconds must be positive, got {args.seconds}")
-    if args.json:  # before hours of tracking, not after
-        from solvers.calibrate_io import MeasurementFileError, check_output_path
-
-        try:
-            check_output_path(args.json, "--json")
-        except MeasurementFileError as e:
-            raise UserError(str(e)) from None
+    # before hours of tracking, not after
+    _check_outputs({"--json": (args.json, None)}, [args.system] if args.system else [],
+                   directories={"--checkpoint": args.checkpoint})
     tape_kernel.set_threads(args.threads)
     try:
         if args.system is not None:
@@ -1217,15 +1232,19 @@ def _delayed_progress(after: float | None = None):
     return say
 
 
-def _check_outputs(outputs: dict, readings) -> None:
-    """Refuse, before any computing, output paths that cannot be written (check_output_path, against
-    every input file) or that name the same file. outputs: {option: (path or None, formats or None)}."""
+def _check_outputs(outputs: dict, readings=(), directories: dict | None = None) -> None:
+    """Refuse, before any computing, output paths that cannot be written (check_output_path: writing is tried,
+    against every input file) or that name the same file: the one check of every verb that writes. outputs:
+    {option: (file path or None, formats or None)}; directories: {option: directory path or None}."""
     from solvers.calibrate_io import MeasurementFileError, check_output_path
 
     given = [(option, path, formats) for option, (path, formats) in outputs.items() if path]
     try:
+        for option, path in (directories or {}).items():
+            if path:
+                check_output_path(path, option, directory=True)
         for option, path, formats in given:
-            for reading in readings:
+            for reading in list(readings) or [None]:
                 check_output_path(path, option, reading=reading, formats=formats)
         for a, (option, path, _) in enumerate(given):
             for other, path2, _ in given[a + 1:]:
@@ -1372,15 +1391,11 @@ class _progress_on_stderr:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    import math
+    import numpy as np
 
-    from solvers.api import select_solver
     from solvers.audio import is_recording
-    from solvers.calibration import CalibrationOptions, calibrate
-    from solvers.calibration.adjustment import enough_data
     from solvers.calibrate_io import (MeasurementFileError, plot_calibration, plot_formats, read_input, report_dict,
                                       write_json, write_nodes_csv)
-    from solvers.calibration.frame import anchor_frame, read_anchors
 
     if args.sigma is not None and not (args.sigma > 0 and math.isfinite(args.sigma)):
         why = "the noise of real measurements is never zero" if args.sigma == 0 else "it is a standard deviation"
@@ -1395,6 +1410,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                               progress=_progress)
     except MeasurementFileError as e:
         raise UserError(str(e)) from None
+    # the solvers and the pipeline only now: options, outputs and the file are checked first (a second, not three)
+    from solvers.api import select_solver
+    from solvers.calibration import CalibrationOptions, calibrate
+    from solvers.calibration.adjustment import enough_data
+    from solvers.calibration.frame import anchor_frame, read_anchors
+
     if args.transpose:
         meas = meas.transposed()
     if args.units is None and is_recording(args.file[0]):
@@ -1410,9 +1431,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             return False
         return True
 
+    def count(k: int, what: str) -> str:
+        return f"{k} {what}" + ("" if k == 1 else "s")
+
+    layout = (f"{count(m, 'row')} (receivers) x {count(n, 'column')} (transmitters)" if not args.transpose else
+              f"with --transpose, {count(m, 'column')} (receivers) x {count(n, 'row')} (transmitters)")
+    short = _too_few(m, n, int(np.isfinite(meas.F).sum()), args.dim)
+    if short and not solvable(n, m):  # the shape, before any computing
+        raise UserError(f"{meas.source}: {layout} cannot be calibrated in {args.dim}D: {short}")
     if not solvable(m, n) and solvable(n, m):
-        layout = (f"{m} rows (receivers) x {n} columns (transmitters)" if not args.transpose else
-                  f"with --transpose, {m} columns (receivers) x {n} rows (transmitters)")
         advice = ("the file looks transposed: if its rows are transmitters, give --transpose" if not args.transpose
                   else "drop --transpose if the file's rows are receivers")
         raise UserError(f"{meas.source}: {layout} cannot be calibrated (too few receivers or transmitters for every "
@@ -1448,6 +1475,23 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     else:
         _print_calibration(result, meas, args.units)
     return 0 if result.status == "ok" else 1
+
+
+def _too_few(m: int, n: int, entries: int, dim: int) -> str:
+    """What an m x n measurement matrix with this many measured entries lacks for any calibration in dim
+    dimensions ('' when nothing: solvers.calibration.adjustment.enough_data), in the pipeline's words."""
+    from solvers.calibration.adjustment import min_measurements, n_unknowns
+
+    need_r, need_t = min_measurements(dim)
+    if m < need_t:
+        return (f"too few receivers ({m}): each transmitter is placed from >= {need_t} receivers, so a {dim}D network "
+                f"needs >= {need_t} receivers and >= {need_r} transmitters")
+    if n < need_r:
+        return (f"too few transmitters ({n}): each receiver is placed from >= {need_r} transmitters, so a {dim}D network "
+                f"needs >= {need_t} receivers and >= {need_r} transmitters")
+    if entries < n_unknowns(m, n, dim):
+        return f"too few measurements ({entries}) for the {n_unknowns(m, n, dim)} unknowns of the network"
+    return ""
 
 
 def _print_calibration(result, meas, units: str | None = None) -> None:

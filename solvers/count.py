@@ -46,7 +46,7 @@ from .continuation import certify as certify_mod
 from .continuation import graph, monodromy, tape_kernel, tracker
 from .continuation import trace as trace_mod
 from .continuation.tracking import (HomotopyError, _duplicated, _expanded, coefficient_source, evaluator_for,
-                                    load_coefficients, structure)
+                                    load_coefficients, scaling_note, structure)
 from .generate import GenerationError, SOLVERS, _job
 
 __all__ = ["CountOptions", "CountResult", "SeedCount", "count", "tdoa_target", "CELLS"]
@@ -419,6 +419,8 @@ def count(target, options: CountOptions = CountOptions(), progress: Callable[[st
         solver, x0 = monodromy.start_solver(system, q0, x0, seed, evaluator=evaluator_for(system.name))
         runs.append((system, q0, group, solver, monodromy._excluded(system, q0)))
         known.append(x0)
+    if scaling_note(runs[0][0]):
+        notes.append(scaling_note(runs[0][0]))
     clusters = [_cluster(options, *run) for run in runs]
     try:
         return _count(target, options, say, notes, runs, known, clusters, t0)

@@ -830,8 +830,12 @@ def generate(target: "str | ParametricSystem", method: str | None = None, *, out
             command = f"call solvers.generate.generate({what}, method={kind!r}, out=..., seed={seed})"
     py_path = write(out, job.name, built.spec, built.coefficients, command)
     system = job.system.name if job.system is not None else job.formulation
+    report = built.report
+    note = tracking.scaling_note(job.system) if job.system is not None else ""
+    if note:  # said, not hidden: the solver's float coefficients are the scaled equations'
+        report = {**report, "scaling": note}
     return Generated(codegen.module_name(job.name, built.spec), system, kind, built.degree, built.candidates,
-                     time.perf_counter() - t0, py_path, built.report, evidence)
+                     time.perf_counter() - t0, py_path, report, evidence)
 
 
 def emit_committed(json_path: str) -> tuple[str, str]:

@@ -32,6 +32,10 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from analysis.engine.polytext import InputError, read_number
+
+from .continuation.scaling import SCALE_BITS, equation_shift, log2_floor, scaled_float
+
 __all__ = ["HOMOTOPY", "METHOD", "SolveError", "Solution", "SystemSolutions", "generated_solver", "instance_system",
            "parameter_values", "solve_by_homotopy",
            "solve_system"]
@@ -129,9 +133,10 @@ class SystemSolutions:
 # --------------------------------------------------------------------------------------------------
 
 def parameter_values(items: Sequence[str], where: str = "--param") -> dict[str, Fraction]:
-    """``name=value`` texts to exact values: a value is an integer, a decimal (``-1.25e-3``) or a
-    fraction (``3/4``), read by :class:`fractions.Fraction` (no evaluation); a name given twice, a
-    missing ``=`` or a value like ``nan`` is a :class:`SolveError`."""
+    """``name=value`` texts to exact values: a value is an integer, a decimal, scientific notation
+    (``-1.25e-3`` is -1/800, ``1e300`` is 10^300) or a fraction (``3/4``), read exactly by the project's
+    number reader (:func:`analysis.engine.polytext.read_number`, the one of system files; no evaluation);
+    a name given twice, a missing ``=`` or a value like ``nan`` is a :class:`SolveError`."""
     out: dict[str, Fraction] = {}
     for item in items:
         name, sep, text = item.partition("=")
@@ -139,9 +144,9 @@ def parameter_values(items: Sequence[str], where: str = "--param") -> dict[str, 
         if not sep or not name or not text:
             raise SolveError(f"{where}: expected name=value, got {item!r}")
         try:
-            value = Fraction(text)
-        except (ValueError, ZeroDivisionError):
-            raise SolveError(f"{where}: {name}: {text!r} is not a number (an integer, a decimal or p/q)") from None
+            value = read_number(text, f"{where}: {name}")
+        except InputError as exc:
+            raise SolveError(str(exc)) from None
         if name in out:
             raise SolveError(f"{where}: {name} given twice")
         out[name] = value
@@ -282,22 +287,94 @@ def _standard_monomials(basis: Sequence[Mapping[tuple[int, ...], Fraction]], nva
 # numeric part: evaluation, eigenvectors, Newton
 # --------------------------------------------------------------------------------------------------
 
+@dataclass(frozen=True)
+class FloatScaling:
+    """How a system over Q became floats: the power of two 2^-k each equation was multiplied by (0: as
+    written) and how many of its nonzero coefficients fell below float64's range after that (dropped)."""
+
+    shifts: tuple[int, ...]
+    dropped: int = 0
+
+    def describe(self) -> str:
+        """One clause for a status ('' when every equation kept its coefficients as written)."""
+        scaled = [(k + 1, s) for k, s in enumerate(self.shifts) if s]
+        if not scaled and not self.dropped:
+            return ""
+        text = ("equations scaled for float64 (largest coefficient in [1, 2); the solutions are unchanged, "
+                "residuals are of the scaled equations): " + ", ".join(f"{k} by 2^{-s}" for k, s in scaled)) if scaled else ""
+        if self.dropped:
+            text += ("; " if text else "") + (f"{self.dropped} coefficient(s) below float64's range relative to their "
+                                              "equation's largest were dropped: the floating-point system is not the "
+                                              "exact one")
+        return text
+
+
+def float_coefficients(polys: Sequence[Mapping[tuple[int, ...], Fraction]]
+                       ) -> tuple[list[dict[tuple[int, ...], float]], FloatScaling]:
+    """The polynomials' coefficients as floats, where the numerics start: each equation as written when
+    its largest coefficient lies within 2^+-SCALE_BITS, else scaled by the power of two that brings it
+    into [1, 2) (exactly, before rounding); see :class:`FloatScaling`."""
+    out, shifts, dropped = [], [], 0
+    for f in polys:
+        k = equation_shift(Fraction(c) for c in f.values())
+        row = {e: scaled_float(Fraction(c), k) for e, c in f.items() if c}
+        dropped += sum(1 for v in row.values() if v == 0.0)
+        out.append({e: v for e, v in row.items() if v})
+        shifts.append(k)
+    return out, FloatScaling(tuple(shifts), dropped)
+
+
+def unknown_shifts(columns: Sequence[Sequence[Mapping[int, Fraction]]], standard: Sequence[tuple[int, ...]],
+                   nvars: int) -> tuple[int, ...]:
+    """Powers of two s_i for the unknowns (x_i = 2^s_i y_i) when some entry of the exact action matrices lies
+    beyond 2^+-SCALE_BITS (else all 0: the unknowns as written): s_i = log2 of the geometric mean of |x_i| over
+    the solutions where x_i != 0, exactly from the characteristic polynomial of x_i's action matrix (its
+    eigenvalues are x_i's values: with lowest nonzero coefficient c_k of the monic degree-n polynomial, the
+    product of the n - k nonzero ones is +-c_k). In y the coordinates are then near 1 in magnitude when the
+    solutions share a scale, so that the float64 eigenvectors, the distinctness and realness tolerances and
+    Newton's steps work at that scale (solutions near 1e-150 or 1e200). (Balancing the entries themselves, by a
+    linear program on their log2, was tried first: it brings a negligible 1e-5000 entry up at the price of
+    overflowing the others.)"""
+    import flint
+
+    if all(abs(log2_floor(c)) <= SCALE_BITS for cols in columns for col in cols for c in col.values()):
+        return (0,) * nvars
+    size = len(standard)
+    shifts = []
+    for cols in columns:
+        M = flint.fmpq_mat(size, size)
+        for k, col in enumerate(cols):
+            for j, c in col.items():
+                M[j, k] = flint.fmpq(c.numerator, c.denominator)
+        coeffs = [Fraction(int(c.p), int(c.q)) for c in M.charpoly().coeffs()]  # lowest first, monic
+        low = next(k for k, c in enumerate(coeffs) if c)
+        nonzero_roots = len(coeffs) - 1 - low
+        shifts.append(round(log2_floor(coeffs[low]) / nonzero_roots) if nonzero_roots else 0)
+    return tuple(shifts)
+
+
+def _shift(c: Fraction, k: int) -> Fraction:
+    """c * 2^k, exactly."""
+    return Fraction(c.numerator << k, c.denominator) if k >= 0 else Fraction(c.numerator, c.denominator << -k)
+
+
 class _Evaluator:
     """The input polynomials and their Jacobian at a batch of complex points: every monomial that the
-    polynomials and their derivatives use is evaluated once per point, then two matrix products."""
+    polynomials and their derivatives use is evaluated once per point, then two matrix products. The
+    coefficients are those of :func:`float_coefficients` (``scaling`` says how they were scaled)."""
 
     def __init__(self, polys: Sequence[Mapping[tuple[int, ...], Fraction]], nvars: int):
         self.nvars = nvars
-        polys = [f for f in polys if f]
+        polys, self.scaling = float_coefficients([f for f in polys if f])
         columns: dict[tuple[int, ...], int] = {}
         entries_f, entries_j = [], []  # (monomial column, equation[, unknown], coefficient)
         for r, f in enumerate(polys):
             for e, c in f.items():
-                entries_f.append((columns.setdefault(e, len(columns)), r, float(c)))
+                entries_f.append((columns.setdefault(e, len(columns)), r, c))
                 for i in range(nvars):
                     if e[i]:
                         d = e[:i] + (e[i] - 1,) + e[i + 1:]
-                        entries_j.append((columns.setdefault(d, len(columns)), r, i, float(c) * e[i]))
+                        entries_j.append((columns.setdefault(d, len(columns)), r, i, c * e[i]))
         self.exponents = np.array(list(columns), dtype=np.int64).reshape(len(columns), nvars)
         self.C = np.zeros((len(columns), len(polys)), dtype=complex)
         for u, r, c in entries_f:
@@ -363,18 +440,30 @@ def _distinct(points: np.ndarray) -> bool:
     return True
 
 
-def _polish_and_check(points: np.ndarray, ev: "_Evaluator", degree: int, shown: int, lost: int = 0
-                      ) -> tuple[tuple["Solution", ...], bool, str]:
+def _polish_and_check(points: np.ndarray, ev: "_Evaluator", degree: int, shown: int, lost: int = 0,
+                      shifts: Sequence[int] = (), source: str = "<system>", lost_what: str = "path(s) lost") -> tuple[tuple["Solution", ...], bool, str]:
     """Newton on every point, real ones marked, sorted (real first); complete when there are ``degree``
-    points, pairwise distinct, each with a nonsingular Jacobian. Returns (solutions, complete, status)."""
+    points, pairwise distinct, each with a nonsingular Jacobian. Returns (solutions, complete, status).
+    ``shifts``: the points are in y, x_i = 2^shifts[i] y_i (:func:`unknown_shifts`): checked in y, reported
+    in x; a coordinate outside float64's range is a :class:`SolveError` naming its size."""
     X, residuals, conditions = _newton(ev, np.asarray(points, dtype=complex).reshape(-1, ev.nvars))
+    shifts = np.array(list(shifts) or [0] * ev.nvars, dtype=np.int64)
+    if shifts.any():
+        with np.errstate(divide="ignore"):
+            size = np.log2(np.abs(X[:, :shown])) + shifts[:shown]
+        if np.any(size[np.isfinite(size)] > 1023) or np.any(size[np.isfinite(size)] < -1021):
+            top = size[np.isfinite(size)]
+            worst = top.max() if top.max() > 1023 else top.min()
+            raise SolveError(f"{source}: solutions with coordinates of about 2^{worst:.0f} (1e{worst * 0.30103:.0f}): "
+                             "outside float64's range; rescale the unknowns (x = 10^k y)")
     solutions = []
     for z, res, cond in zip(X, residuals, conditions):
         real = bool(np.all(np.abs(z.imag) <= REAL_TOL * np.maximum(1.0, np.abs(z))))
         if real:
             z = z.real.astype(complex)
             res = float(np.abs(ev.values(z[None])).max())
-        solutions.append(Solution(tuple(complex(v) for v in z[:shown]), real, float(res), float(cond)))
+        x = np.ldexp(z.real, shifts) + 1j * np.ldexp(z.imag, shifts) if shifts.any() else z
+        solutions.append(Solution(tuple(complex(v) for v in x[:shown]), real, float(res), float(cond)))
     order = sorted(range(len(solutions)), key=lambda k: (not solutions[k].real,
                                                          tuple(round(v.real, 12) for v in solutions[k].values),
                                                          tuple(round(v.imag, 12) for v in solutions[k].values)))
@@ -383,17 +472,23 @@ def _polish_and_check(points: np.ndarray, ev: "_Evaluator", degree: int, shown: 
     simple = all(s.condition < SINGULAR_COND for s in solutions)
     complete = len(solutions) == degree and distinct and simple
     worst = max((s.residual for s in solutions), default=0.0)
+    scaled = ev.scaling.describe()
+    if shifts.any():
+        scaled = "; ".join(filter(None, [f"unknowns scaled for float64 (x = 2^s y; checked and residuals in y): " + ", ".join(
+            f"s = {k} for unknown {i + 1}" for i, k in enumerate(shifts) if k), scaled]))
     if complete:
         status = (f"all {degree} solutions: pairwise distinct, each with a nonsingular Jacobian (condition "
                   f"<= {max((s.condition for s in solutions), default=0.0):.2g}), residual <= {worst:.2g}; real ones "
                   f"judged numerically (|imaginary part| <= {REAL_TOL:g} relative)")
     else:
-        why = ([f"{lost} path(s) lost"] if lost else []) + \
+        why = ([f"{lost} {lost_what}"] if lost else []) + \
             (["points closer than the distinctness tolerance (a multiple root or lost accuracy)"] if not distinct else []) + \
             (["a singular Jacobian (a multiple root?)"] if not simple else []) + \
             ([f"{len(solutions)} points for degree {degree}"] if len(solutions) != degree else [])
         status = (f"NOT checked complete: {'; '.join(why)}; {len(solutions)} points for degree {degree} (with "
                   f"multiplicity), residual <= {worst:.2g}")
+    if scaled:
+        status += f"; {scaled}"
     return tuple(solutions), complete, status
 
 
@@ -457,19 +552,31 @@ def solve_system(system, seed: int = 0, prime_seed: int = 0, options=None, hidde
     if len(standard) != report.degree:
         raise SolveError(f"internal: {len(standard)} standard monomials over Q, degree {report.degree} over GF(p)")
     columns = _action_matrices(basis, standard, nvars)
+    shifts = unknown_shifts(columns, standard, nvars)
+    if any(shifts):  # x = 2^s y, exactly: the action matrices and the equations in y
+        columns = [[{j: _shift(c, sum(shifts[v] * (standard[j][v] - standard[k][v]) for v in range(nvars)) - shifts[i])
+                     for j, c in col.items()} for k, col in enumerate(cols)] for i, cols in enumerate(columns)]
+        exact = [{e: _shift(c, sum(a * b for a, b in zip(shifts, e))) for e, c in f.items()} for f in exact]
     A = []
-    for cols in columns:
+    for i, cols in enumerate(columns):
         M = np.zeros((len(standard), len(standard)))
         for k, col in enumerate(cols):
             for j, c in col.items():
-                M[j, k] = float(c)
+                if abs(log2_floor(c)) > 1020 and log2_floor(c) > 0:
+                    raise SolveError(f"{system.source}: the action matrix of {system.variables[i]} has an entry of about "
+                                     f"2^{log2_floor(c)} (above float64's 1.8e308): solutions this large cannot be had in "
+                                     "floating point; rescale the unknowns (x = 10^k y)")
+                M[j, k] = scaled_float(c, 0)
         A.append(M)
-    if not all(np.isfinite(M).all() for M in A):
-        raise SolveError("the action matrices overflow float64 (coefficients above 1e308): rescale the unknowns")
     t_action = time.perf_counter()
     say(f"[solve] {nvars} action matrices {len(standard)} x {len(standard)} ({t_action - t_basis:.2f} s)")
-    points = _eigen_points(A, np.random.default_rng(seed))
-    solutions, complete, status = _polish_and_check(points, _Evaluator(exact, nvars), report.degree, len(shown))
+    with np.errstate(all="ignore"):
+        points = _eigen_points(A, np.random.default_rng(seed))
+    finite = np.all(np.isfinite(points), axis=1)  # an eigenvector without its constant entry: lost in float64
+    solutions, complete, status = _polish_and_check(
+        points[finite], _Evaluator(exact, nvars), report.degree, len(shown), lost=int((~finite).sum()), shifts=shifts,
+        source=system.source, lost_what="eigenvector(s) lost in float64 (solutions whose coordinates span more than "
+                                        "float64's precision?)")
     t_newton = time.perf_counter()
     say(f"[solve] eigenvectors and Newton ({t_newton - t_action:.2f} s)")
     return SystemSolutions(shown, report.degree, 0, solutions, f"certified over GF(p): {rational.status}",
@@ -567,6 +674,11 @@ def solve_by_homotopy(system, values: Mapping[str, Fraction], target=None, seed:
     say = progress or (lambda line: None)
     t0 = time.perf_counter()
     instance = instance_system(system, values, source, saturate=False)
+    for name, v in values.items():  # the homotopy tracks in float64: a value it cannot hold is refused by name
+        if v and log2_floor(v) > SCALE_BITS:
+            raise SolveError(f"{name} = 2^{log2_floor(v)} (about): beyond "
+                             f"2^{SCALE_BITS}, too far from the generated solver's start values for tracking in "
+                             "float64; --method action-matrix solves the instance exactly")
     module, spec = generated_solver(system, target, seed, progress)
     t_build = time.perf_counter()
     q = np.array([float(values.get(p, 0)) for p in spec["parameters"]])

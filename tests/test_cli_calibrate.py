@@ -72,9 +72,9 @@ def test_plot_is_written(capsys, tmp_path):
 @pytest.mark.parametrize("text, fragment", [
     ("1,2,3\n4,abc,6\n7,8,9\n", "line 2, column 2: 'abc' is not a number"),
     ("rx,a,b\nr1,1,2\nr2,1\n", "line 3 has 2 cells, expected 3"),
-    ("", "no data (empty file"),
-    ("\n\n", "no data (empty file"),
-    ("# only\n  # comments\n", "no data (empty file, or only comments)"),
+    ("", "no data (empty file)"),
+    ("\n\n", "no data (empty file)"),
+    ("# only\n  # comments\n", "no data (only comments)"),
     ("1,2\n3,inf\n", "line 2, column 2: infinite value"),
     ("1,2\n3,4\n# note\n5,1e400\n", "line 4, column 2: '1e400' overflows"),
     ("rx,s1,s2\nr1,1.5,-1e999\n", "line 2, column 3: '-1e999' overflows"),
@@ -101,11 +101,16 @@ def test_missing_file_and_unwritable_output(capsys, tmp_path):
     assert code == 2 and f"cannot write {bad_out}" in err and err.count("\n") == 1
 
 
-def test_too_small_network_fails_with_exit_status_1(capsys, tmp_path):
+def test_too_small_network_is_refused_before_the_work(capsys, tmp_path):
+    """A shape no calibration can use is a malformed input (exit 2, one line naming what is needed), said
+    before any computing (issue 55); the pipeline's own 'too few measurements' remains for entries missing."""
     path = tmp_path / "small.csv"
     path.write_text("1,2,3\n4,5,6\n")
-    code, out, _ = run(capsys, "calibrate", str(path))
-    assert code == 1 and out.startswith("too few measurements")
+    code, out, err = run(capsys, "calibrate", str(path))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert ("small.csv: 2 rows (receivers) x 3 columns (transmitters) cannot be calibrated in 2D: too few receivers "
+            "(2): each transmitter is placed from >= 4 receivers, so a 2D network needs >= 4 receivers and >= 3 "
+            "transmitters") in err
 
 
 def cells(meas):

@@ -62,7 +62,7 @@ def test_user_system_counts_like_sympy():
     ("unknowns: x\nparameters: a, b\nequations:\nx^2 - a\n", None),
     ("unknowns: x\nequations:\nx - 1\n", "no parameters: a solver needs data"),  # a plain system: nothing to vary
     ("unknowns: x\nparameters: a\nequations:\nsin(x) - a\n", "unknown name 'sin'.*polynomial"),
-    ("unknowns: x\nparameters: a\nequations:\nx^2 - 0.5*a\n", "line 4, column 8: decimal numbers"),
+    ("unknowns: x\nparameters: a\nequations:\nx^2 - 0.5.1*a\n", "line 4, column 7: malformed number '0.5.1'"),
     ("parameters: a\nequations:\nx - a\n", "unknowns"),
     ("unknowns: x\nparameters: x\nequations:\nx\n", "both"),
 ])

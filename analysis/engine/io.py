@@ -23,6 +23,7 @@ The writers emit scripts for cross-checking elsewhere: ``to_msolve`` (round-trip
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass, field
 from fractions import Fraction
 from numbers import Integral
@@ -43,6 +44,7 @@ __all__ = [
     "parse_polynomial",
     "read_system",
     "decode_text",
+    "read_input_bytes",
     "format_polynomial",
     "to_msolve",
     "to_macaulay2",
@@ -333,6 +335,29 @@ def parse_msolve(text: str, source: str = "<string>") -> System:
     return System(variables, p, polys, lines=tuple(g[0].line for g in groups), source=source)
 
 
+def read_input_bytes(path: str, empty_ok: bool = False) -> bytes:
+    """The bytes of an input file ('-': standard input), in the same words for the same problem whichever verb
+    reads it (a system file here, a measurement CSV in solvers.calibrate_io; the recording reader, solvers.audio,
+    says the same): ``cannot read PATH: no such file`` / ``: it is a directory`` / ``: <the system's reason>``,
+    and ``PATH: no data (empty file)`` for a file of 0 bytes (unless ``empty_ok``). Raises :class:`InputError`."""
+    try:
+        if path == "-":
+            stream = getattr(sys.stdin, "buffer", None)
+            data = stream.read() if stream is not None else sys.stdin.read().encode("utf-8")
+        else:
+            with open(path, "rb") as handle:
+                data = handle.read()
+    except FileNotFoundError:
+        raise InputError(f"cannot read {path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"cannot read {path}: it is a directory") from None
+    except OSError as exc:
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if not data and not empty_ok:
+        raise InputError(f"{'stdin' if path == '-' else path}: no data (empty file)")
+    return data
+
+
 def decode_text(data: bytes, source: str) -> str:
     """UTF-8 text of a file's bytes (a UTF-8 byte-order mark is dropped); :class:`InputError` naming the
     source for anything else (UTF-16, binary files)."""
@@ -350,8 +375,7 @@ def decode_text(data: bytes, source: str) -> str:
 
 def read_system(path: "str | Path") -> System:
     """Read a system from a file in msolve's input format (see :func:`parse_msolve`)."""
-    path = Path(path)
-    return parse_msolve(decode_text(path.read_bytes(), str(path)), source=str(path))
+    return parse_msolve(decode_text(read_input_bytes(str(path)), str(path)), source=str(path))
 
 
 # -- writers -------------------------------------------------------------------------------------

@@ -66,6 +66,55 @@ def _int_to_digits(n: int) -> str:
     return str(flint.fmpz(n))
 
 
+NUMBER = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+"""A number as written in a system file, a parameter value or a definition (regular expression): an
+integer, a decimal or scientific notation (``12``, ``1.5``, ``.5``, ``1e300``, ``1.5e-3``), read exactly
+(:func:`number_value`: 1e300 is 10^300, 1.5e-3 is 3/2000), never as a float."""
+_NUMBER = re.compile(NUMBER + r"\Z")
+_DECIMAL = re.compile(r"([0-9]*)(?:\.([0-9]*))?(?:[eE]([+-]?[0-9]+))?\Z")
+
+MAX_EXPONENT10 = MAX_COEFFICIENT_BITS * 3 // 10
+"""Largest power of ten scientific notation may write, either way (1,258,291: a coefficient of about
+MAX_COEFFICIENT_BITS bits, the cap on a power's coefficient); beyond, the number is refused, not rounded."""
+
+_TOO_FAR = (f"a power of ten beyond 10^{MAX_EXPONENT10} or 10^-{MAX_EXPONENT10} (numbers are read exactly; "
+            "the value would have more digits than a coefficient may)")
+NUMBER_RULE = ("an integer, a decimal or scientific notation (12, 1.5, 1e300, 1.5e-3), read exactly, or p/q")
+
+
+def number_value(text: str) -> Fraction | None:
+    """The exact value of a number written as :data:`NUMBER` (1e300 -> 10^300, 1.5e-3 -> 3/2000); None
+    when its power of ten is beyond :data:`MAX_EXPONENT10` (the caller names the number in its error)."""
+    if text.isdigit():
+        return Fraction(_int_from_digits(text))
+    whole, frac, exp = _DECIMAL.match(text).groups()
+    frac = frac or ""
+    e = (int(exp) if exp and len(exp.lstrip("+-")) < 12 else 10**12 if exp else 0) - len(frac)
+    digits = (whole + frac).lstrip("0") or "0"
+    if abs(e) > MAX_EXPONENT10 and digits != "0":
+        return None
+    n = _int_from_digits(digits)
+    return Fraction(n * 10**e) if e >= 0 else Fraction(n, 10**-e)
+
+
+def read_number(text: str, where: str) -> Fraction:
+    """A number's text (:data:`NUMBER`, or p/q of two such numbers) read exactly, else :class:`InputError`
+    naming ``where`` and the text (used for ``--param`` values and every other number given as text)."""
+    t = text.strip()
+    sign = -1 if t[:1] == "-" else 1
+    body = t[1:].strip() if t[:1] in "+-" else t
+    num, slash, den = body.partition("/")
+    num, den = num.strip(), den.strip()
+    if not _NUMBER.match(num) or (slash and not _NUMBER.match(den)):
+        raise InputError(f"{where}: {text!r} is not a number ({NUMBER_RULE})")
+    values = [number_value(num), number_value(den) if slash else Fraction(1)]
+    if None in values:
+        raise InputError(f"{where}: {text!r}: {_TOO_FAR}")
+    if values[1] == 0:
+        raise InputError(f"{where}: {text!r}: division by zero")
+    return sign * values[0] / values[1]
+
+
 def _short(n: "int | Fraction") -> str:
     """A number for an error message: as it is, or its size when it is very long."""
     n = Fraction(n)
@@ -222,7 +271,7 @@ class _Expr:
 # -- tokenizer and recursive-descent parser ------------------------------------------------------
 
 def _token_pattern(name: str) -> re.Pattern:
-    return re.compile(rf"\s*(?:(?P<num>[0-9]+)|(?P<name>{name})|(?P<op>\*\*|[-+*/^(),])|(?P<bad>\S))")
+    return re.compile(rf"\s*(?:(?P<num>{NUMBER})|(?P<name>{name})|(?P<op>\*\*|[-+*/^(),])|(?P<bad>\S))")
 
 
 _TOKEN = _token_pattern(MSOLVE_NAME)
@@ -251,9 +300,17 @@ def _tokenize(lines: Sequence[tuple[int, str]], source: str, pattern: re.Pattern
                 ch = m.group(kind)
                 where = _where(source, lineno, m.start(kind) + 1)
                 if ch == "." and out and out[-1].kind == "num" and out[-1].line == lineno:
-                    raise InputError(f"{where}: decimal numbers are not supported; write exact rationals such as 3/2")
+                    raise InputError(f"{where}: malformed number {out[-1].text + ch!r}; numbers are {NUMBER_RULE}")
                 raise InputError(f"{where}: unexpected character {ch!r}")
-            out.append(_Token(kind, m.group(kind), lineno, m.start(kind) + 1))  # type: ignore[arg-type]
+            token = _Token(kind, m.group(kind), lineno, m.start(kind) + 1)  # type: ignore[arg-type]
+            prev = out[-1] if out else None
+            if (prev is not None and prev.kind == "num" and prev.line == lineno
+                    and prev.col + len(prev.text) == token.col
+                    and (kind == "num" or (kind == "name" and token.text[0] in "eE"))):
+                product = f"; a product is {prev.text}*{token.text}" if kind == "name" else ""
+                raise InputError(f"{_where(source, lineno, prev.col)}: malformed number {prev.text + token.text!r} "
+                                 f"(scientific notation is 1e300 or 1.5e-3{product}); numbers are {NUMBER_RULE}")
+            out.append(token)
     return out
 
 
@@ -387,8 +444,12 @@ class _Parser:
     def atom(self) -> _Expr:
         tok = self.take()
         if tok.kind == "num":
-            value = _int_from_digits(tok.text)
-            return _Expr({0: value} if value else {})  # the zero polynomial has no terms
+            value = number_value(tok.text)
+            if value is None:
+                raise self.fail(tok, f"{tok.text!r}: {_TOO_FAR}")
+            if not value:
+                return _Expr({})  # the zero polynomial has no terms
+            return _Expr({0: value.numerator}, value.denominator)
         if tok.kind == "name":
             i = self.index.get(tok.text)
             if i is None:
@@ -411,7 +472,7 @@ class _Parser:
 
 _FACTOR = rf"(?>{MSOLVE_NAME})(?:\s*+(?:\^|\*\*)\s*+[0-9]++)?"
 _MONOMIAL = rf"{_FACTOR}(?:\s*+\*\s*+{_FACTOR})*+"
-_PIECES = re.compile(rf"(,)|([+-]?)\s*+(?:([0-9]++)(?:\s*+/\s*+([0-9]++))?(?:\s*+\*\s*+({_MONOMIAL}))?"
+_PIECES = re.compile(rf"(,)|([+-]?)\s*+(?:((?>{NUMBER}))(?:\s*+/\s*+([0-9]++))?(?:\s*+\*\s*+({_MONOMIAL}))?"
                      rf"|({_MONOMIAL}))|(\S)")
 """The pieces of a text of sums of terms, in one pass: (comma, sign, numerator, denominator, monomial
 after a number, monomial alone, any other character: not a sum of terms)."""
@@ -444,13 +505,17 @@ def parse_sums(text: str, variables: Sequence[str], characteristic: int = 0
             continue
         terms += 1
         if num:
+            if not num.isdigit():  # a decimal or scientific notation, exactly
+                c = number_value(num)
+                if c is None or (characteristic and c.denominator % characteristic == 0):
+                    return None
+            else:
+                c = int(num) if len(num) <= _CHUNK else _int_from_digits(num)
             if den:
                 d = _int_from_digits(den)
                 if d == 0 or (characteristic and d % characteristic == 0):
                     return None
-                c = Fraction(_int_from_digits(num), d)
-            else:
-                c = int(num) if len(num) <= _CHUNK else _int_from_digits(num)
+                c = Fraction(c, d)
         else:
             c, mono = 1, bare
         if sign == "-":

@@ -163,7 +163,7 @@ def parse_anchors(text: str, receivers, transmitters, dim: int, source: str = "<
     from ..calibrate_io import MeasurementFileError, parse_measurements
 
     try:
-        table = parse_measurements(text, source, header="both")
+        table = parse_measurements(text, source, header="both", network=False)  # coordinates: no column-spread test
     except MeasurementFileError as e:
         raise AnchorError(str(e)) from None
     columns = [c.strip().lower() for c in table.transmitters]

@@ -675,11 +675,11 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
     need_r, need_t = min_measurements(dim)
 
     rows_ok, cols_ok = _prune(mask, dim)
-    for i in np.flatnonzero(~rows_ok):
-        warnings.append(f"receiver {i + 1}: only {int(mask[i].sum())} measured transmitters usable "
+    for i in np.flatnonzero(~rows_ok):  # usable: measured to a node that is itself kept (pruning is iterated)
+        warnings.append(f"receiver {i + 1}: only {int((mask[i] & cols_ok).sum())} measured transmitters usable "
                         f"(needs {need_r}); not placed")
     for j in np.flatnonzero(~cols_ok):
-        warnings.append(f"transmitter {j + 1}: only {int(mask[:, j].sum())} measured receivers usable "
+        warnings.append(f"transmitter {j + 1}: only {int((mask[:, j] & rows_ok).sum())} measured receivers usable "
                         f"(needs {need_t}); not placed")
     work = mask & rows_ok[:, None] & cols_ok[None, :]
     n_params = n_unknowns(int(rows_ok.sum()), int(cols_ok.sum()), dim)

@@ -8,6 +8,8 @@ and root counts import it, so the import graph has no circle.
 
 Modules, from the kernels up:
 
+* :mod:`~solvers.continuation.scaling`: where exact coefficients become floats (an equation beyond 2^+-500
+  scaled by a power of two first), for the coefficient code here and for ``solve``'s Newton steps;
 * :mod:`~solvers.continuation.tracker`: the compiled predictor-corrector on an expanded monomial system
   (numba), :class:`~solvers.continuation.tracker.TrackerOptions`;
 * :mod:`~solvers.continuation.slp`: straight-line programs of a system and of its homotopy (tapes);

@@ -23,17 +23,20 @@ from __future__ import annotations
 import dataclasses
 import re
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from .scaling import equation_shift, log2_floor, scaled_float
 from . import tape_kernel, tape_native, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
     from analysis.formulations.parametric import ParametricSystem
 
-__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "SPEC_FORMAT", "coefficient_source",
+__all__ = ["HomotopyError", "HomotopyOptions", "HomotopySolver", "SPEC_FORMAT", "coefficient_source", "equation_shifts",
+           "scaling_note",
            "load_coefficients", "structure", "unresolved"]
 
 #: Format of the spec a :class:`HomotopySolver` reads (written by :func:`solvers.methods.homotopy.build`).
@@ -138,15 +141,54 @@ def _print(expr) -> str:
     return _FRACTION.sub(lambda mm: repr(int(mm.group(1)) / int(mm.group(2))), text)
 
 
+def equation_shifts(system: ParametricSystem) -> tuple[int, ...]:
+    """Per equation the k of its scaling by 2^-k where its coefficients become floats (0: as written):
+    :func:`solvers.continuation.scaling.equation_shift` of the numeric constants of its coefficients (polynomials in the
+    parameters and definitions)."""
+    # the system's own expansion of its coefficients in the parameters (cached; the one its GF(p) counts use)
+    return tuple(equation_shift(Fraction(int(v.p), int(v.q)) for _, cterms in row for _, v in cterms)
+                 for row in system._gf_coefficients)
+
+
+def _scaled_coefficient(c, k: int, system: ParametricSystem):
+    """A coefficient (polynomial in the parameters) times 2^-k, each constant rounded once to a float written
+    with 17 digits (which reads back as the same float): a constant of thousands of digits never meets
+    numpy as an integer."""
+    import sympy
+
+    gens = system.q_symbols + system.aux_symbols or (sympy.Symbol("_dummy"),)
+    out = []
+    for e, v in sympy.Poly(c, *gens).terms():
+        r = sympy.Rational(v)
+        value = scaled_float(Fraction(int(r.p), int(r.q)), k)
+        if not value:
+            lg = log2_floor(Fraction(int(r.p), int(r.q)))
+            raise HomotopyError(f"{system.name}: an equation's constants span 2^{lg} to 2^{k}, more than float64's "
+                                "range: the floating-point system would not be the exact one; rescale the unknowns "
+                                "(x = 10^k y) so that each equation's terms are of comparable size")
+        if value:
+            out.append(sympy.Float(repr(value), 17) * sympy.Mul(*[g**x for g, x in zip(gens, e) if x]))
+    return sympy.Add(*out)
+
+
+def scaling_note(system: ParametricSystem) -> str:
+    """One sentence saying which equations :func:`coefficient_source` scaled ('' when none)."""
+    scaled = [f"{k + 1} by 2^{-s}" for k, s in enumerate(equation_shifts(system)) if s]
+    return ("equations scaled for float64 (largest constant in [1, 2); the solutions are unchanged): "
+            + ", ".join(scaled)) if scaled else ""
+
+
 def coefficient_source(system: ParametricSystem, name: str = "coefficients") -> str:
     """Python source of ``name(q)``: parameters (K, P) -> term coefficients (K, T), numpy only.
 
     Definitions are computed first (in order), then the coefficients with shared subexpressions
-    (``sympy.cse``); byte-stable for a given system.
+    (``sympy.cse``); byte-stable for a given system. An equation with a constant beyond 2^+-SCALE_BITS is
+    scaled exactly by a power of two first (:func:`equation_shifts`, :data:`solvers.continuation.scaling.SCALE_BITS`).
     """
     import sympy
 
-    coeffs = [c for eq in system.terms for _, c in eq]
+    shifts = equation_shifts(system)
+    coeffs = [_scaled_coefficient(c, k, system) if k else c for eq, k in zip(system.terms, shifts) for _, c in eq]
     lines = [f"def {name}(q):",
              f'    """Coefficients of the {len(coeffs)} terms from the {len(system.parameters)} parameters q (K, P) -> (K, T)."""',
              "    q = np.asarray(q)",
