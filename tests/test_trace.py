@@ -151,7 +151,10 @@ def test_endpoints_off_the_fibre_count_as_failed_paths(monkeypatch):
     test = trace.trace_test_system(system, q0, roots, other, options)
     assert test.status == "passed" and test.failed_paths == 0 and test.residual < trace.PASS_TOL, test
     monkeypatch.setattr(trace, "_failed", lambda s, t, e, o, others=None, group=None: ~np.all(np.isfinite(e), axis=1))
-    assert trace.trace_test_system(system, q0, roots, other, options).status == "failed"
+    # counted as points they never pass; their own Newton steps (6.9e-3) put the residual (2.4e-2) within the
+    # rounding level, too inaccurate for a verdict: inconclusive, not "failed" (a verdict the points cannot carry)
+    unchecked = trace.trace_test_system(system, q0, roots, other, options)
+    assert unchecked.status == "inconclusive" and "rounding level" in unchecked.why, unchecked
 
     # the criterion on endpoints at t = 0: roots 0-2, root 0 again, not finite, root 3 moved off, root 4 masked
     ts = trace.TraceSystem(*slp.system_equations(system.name))
