@@ -17,9 +17,13 @@ For a square parametric system F(x; q) = 0 (a system file, a TDOA/TOA formulatio
    found by the same graph strategy.
 
 The evidence is said in words, the strongest that holds (STYLE.md, habit 16): "at least N, proven" (every
-solution proven and distinct: a lower bound that is a theorem), "complete by trace test (residual r)" added when
-the trace test passed, else "lower bound (numerical)" with the reason. A count is never called complete on a
-rule that only stops looking.
+solution proven and distinct: a lower bound that is a theorem); "complete: ..." only where it holds for the whole
+solution set (F4's degree over GF(p) or Bezout's bound equals N, or the trace test passed on an incidence variety
+shown irreducible: :func:`_scope`); "complete for the component reached (N found) by trace test ...; another
+component may exist" where the trace test passed and nothing more is known; else the number found numerically,
+"lower bound (numerical)", beside the proven one. The count shown is the proven number; singular points (multiple
+roots, positive-dimensional components) are named and never counted. A count is never called complete on a rule
+that only stops looking.
 """
 from __future__ import annotations
 

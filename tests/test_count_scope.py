@@ -154,3 +154,14 @@ def test_cli_exit_status_and_json_carry_the_scope(tmp_path):
     record = json.loads(out.read_text(encoding="utf-8"))
     assert record["scope"] == "lower bound" and record["count"] == 0 and record["found"] > 0
     assert record["gf_degree"] == {"degree": 8, "dimension": 0}
+
+
+def test_a_line_beside_isolated_solutions_never_raises_the_count():
+    """(x - a)(x^2 + y^2 - b) = (x - a)(x y - c) = 0: the line x = a and 4 isolated solutions. The graphs wander on
+    the line (tens of points found numerically); only isolated solutions are proven and counted, the line is named."""
+    system = _system("unknowns: x, y\nparameters: a, b, c\nequations:\n(x - a)*(x^2 + y^2 - b)\n(x - a)*(x*y - c)\n",
+                     "line-and-points")
+    r = counting.count(system, counting.CountOptions(seeds=(2, 3)))
+    assert r.count == r.proven <= 4 and r.found > r.count and not r.complete, r.summary()
+    assert any("positive-dimensional (dimension 1)" in n for n in r.notes), r.notes
+    assert any("singular" in n and "none counted" in n for n in r.notes), r.notes
