@@ -96,8 +96,10 @@ REDRAWS = 2
 #: Version of the test's rules, kept with stored outcomes (scripts/monodromy_counts.py) so that an outcome under
 #: other rules is not read back. 2 (2026-11-28): endpoints off the fibre fail, t1 and t2 a third of a turn apart,
 #: WITNESS_TOL and LOCUS_REL, the continuation fallback. 4 (2026-11-29): witnesses by the graph off the lam = 0
-#: component and settled before the locus test; a group's orbits traced on invariant coordinates.
-TEST_VERSION = 4
+#: component and settled before the locus test; a group's orbits traced on invariant coordinates. 5 (2026-12-02): a
+#: failed verdict regrown (:data:`REGROW`), inconclusive within a rounding level above FLOOR_MAX / FLOOR_FACTOR,
+#: witnesses started from several roots of the second instance.
+TEST_VERSION = 5
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
 #: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
