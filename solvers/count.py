@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+import sympy
 
 from analysis.engine.degree import DEFAULT_PRIMES, PrimeDisagreement, analyse
 from analysis.engine.f4 import F4Options
@@ -702,8 +703,6 @@ def _linear_bundle(system: ParametricSystem) -> str | None:
     parameters solving F = 0 are an affine space of dimension P - N, the same everywhere, so the incidence variety
     is an affine-space bundle over the unknowns' space (or over the open set the non-vanishing conditions leave):
     irreducible. Exact arithmetic on the coefficients (sympy rationals)."""
-    import sympy
-
     if system.definitions or any(c > 1 for c in system.coefficient_degrees):
         return None
     N, P = len(system.unknowns), len(system.parameters)

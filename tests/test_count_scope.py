@@ -165,3 +165,26 @@ def test_a_line_beside_isolated_solutions_never_raises_the_count():
     assert r.count == r.proven <= 4 and r.found > r.count and not r.complete, r.summary()
     assert any("positive-dimensional (dimension 1)" in n for n in r.notes), r.notes
     assert any("singular" in n and "none counted" in n for n in r.notes), r.notes
+
+
+def test_cli_start_serves_both_seeds_and_the_trace_test(tmp_path):
+    """`count FILE --start JSON` on a system with a parameter-free equation: both seeds and --trace run from the one
+    pair given; without it the message names the equation (exit status 2, one line)."""
+    import json
+
+    path = tmp_path / "line-circle.sys"
+    path.write_text(LINE_CIRCLE, encoding="utf-8")
+    theta = 0.3 + 0.7j
+    c, s, a = np.cos(theta), np.sin(theta), 0.4 - 1.1j
+    b = (1 - a * c) / s
+    start = tmp_path / "start.json"
+    start.write_text(json.dumps({"parameters": [[a.real, a.imag], [b.real, b.imag]],
+                                 "root": [[c.real, c.imag], [s.real, s.imag]]}), encoding="utf-8")
+    run = subprocess.run([sys.executable, "-m", "solvers.cli", "count", str(path), "--start", str(start), "--trace"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert "seed 1: 2 solutions" in run.stdout and "trace test: passed" in run.stdout, run.stdout
+    bare = subprocess.run([sys.executable, "-m", "solvers.cli", "count", str(path)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300)
+    assert bare.returncode == 2 and "equation 1 (c^2 + s^2 - 1) holds no parameter" in bare.stderr
+    assert "Traceback" not in bare.stderr and len(bare.stderr.strip().splitlines()) == 1
