@@ -666,6 +666,9 @@ def _gf_words(gf, proven: int, total: int | None) -> str:
     if total is not None and total == gf.degree:
         return f"F4 over GF(p): degree {gf.degree}, equal to the proven count"
     have = total if total is not None else proven
+    if gf.degree < have:
+        return (f"F4 over GF(p): degree {gf.degree}, below the {have} proven: its random parameters mod p were not "
+                "generic for this system; not used")
     return (f"F4 over GF(p): degree {gf.degree} (with multiplicity); {gf.degree - have} not found or not proven "
             "(another component, a multiple root, or a path not tracked)")
 
@@ -729,13 +732,15 @@ def _scope(system: ParametricSystem, roots: np.ndarray, cert, proven: int, group
     total = _orbit_total(roots, cert, group)
     if total is not None and gf is not None and gf.zero_dimensional and gf.degree == total:
         return "whole solution set", f"complete: F4's degree over GF(p) is {gf.degree} (2 primes, 2 seeds)"
+    # F4 sees more solutions (or multiplicity): nothing is complete for the whole solution set, whatever else holds
+    more = gf is not None and gf.zero_dimensional and (total is None or gf.degree > total)
     bezout = _bezout(system)
-    if total is not None and total == bezout:
+    if total is not None and total == bezout and not more:
         return "whole solution set", f"complete: Bezout's bound (the product of the degrees) is {bezout}"
     if trace_record is None or trace_record["status"] != "passed":
         return "lower bound", ""
     passed = f"by trace test (residual {trace_record['residual']:.0e})"
-    bundle = _linear_bundle(system)
+    bundle = None if more else _linear_bundle(system)
     if bundle is not None:
         return "whole solution set", f"complete {passed}; {bundle}"
     return "component reached", (f"complete for the component reached ({found} found) {passed}; another component "

@@ -231,3 +231,20 @@ def test_the_ed_degree_of_a_quartic_surface_passes_the_trace_test_on_every_seed_
 def test_the_ed_degree_of_a_cubic_surface_is_complete_by_an_irreducible_trace_test():
     r = counting.count(_ed_system(3, 3), counting.CountOptions(seeds=(0, 1), trace=True, degree=False))
     assert r.count == 21 and r.complete and "irreducible" in r.evidence and "u1, u2, u3, c0" in r.evidence, r.summary()
+
+
+def test_f4_seeing_more_solutions_forbids_every_whole_claim():
+    """_scope: with F4's degree above the proven count neither Bezout's bound nor an irreducible incidence variety
+    makes the count complete; a passed trace test then speaks for the component reached only."""
+    from types import SimpleNamespace
+
+    bundle = _system("unknowns: x, y\nparameters: a, b\nequations:\nx*y - a\nx^2*y + y - b\n", "bundle")
+    roots = np.array([[1.0 + 0j, 2.0], [3.0, 4.0]])
+    passed = {"status": "passed", "residual": 1e-15}
+    assert counting._scope(bundle, roots, None, 2, None, None, passed)[0] == "whole solution set"
+    more = SimpleNamespace(degree=3, zero_dimensional=True, dimension=0)
+    scope, words = counting._scope(bundle, roots, None, 2, None, more, passed)
+    assert scope == "component reached" and "another component may exist" in words
+    assert counting._scope(bundle, roots, None, 2, None, more, None) == ("lower bound", "")
+    fewer = SimpleNamespace(degree=1, zero_dimensional=True, dimension=0)
+    assert "not used" in counting._gf_words(fewer, 2, 2)
