@@ -847,13 +847,24 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
 
         stand_in = trace_stand_in(options.dask, *_source(system), chunk=options.dask_chunk)
     coordinates, pencil = _pencil(system, group, say)
-    # the witnesses belong to one pencil: its coordinates name the file (another pencil's run does not overwrite it)
-    witnesses = "witnesses-" + ("all" if coordinates is None else "-".join(system.unknowns[k] for k in coordinates))
-    test = trace_mod.trace_test_system(system, q0, roots, (q_star, starts),
-                                       trace_mod.TraceOptions(seed=options.seeds[0], step=options.trace_step,
-                                                              coordinates=coordinates),
-                                       checkpoint=_checkpoint(options, system, options.seeds[0], witnesses), progress=say,
-                                       group=group, dask=stand_in)
+
+    def run(coordinates):
+        # the witnesses belong to one pencil: its coordinates name the file (another pencil's run does not overwrite it)
+        witnesses = "witnesses-" + ("all" if coordinates is None else "-".join(system.unknowns[k] for k in coordinates))
+        return trace_mod.trace_test_system(system, q0, roots, (q_star, starts),
+                                           trace_mod.TraceOptions(seed=options.seeds[0], step=options.trace_step,
+                                                                  coordinates=coordinates),
+                                           checkpoint=_checkpoint(options, system, options.seeds[0], witnesses),
+                                           progress=say, group=group, dask=stand_in)
+
+    test = run(coordinates)
+    if test.status == "inconclusive" and test.failed_paths and coordinates is not None:
+        # paths lost on every route on a pencil of a few coordinates: the fibre's points escape with those coordinates
+        # finite (base points of the pencil on the curve; 3D TOA 4r/6s on b: 71 of 1,866 slice paths diverged, 24 of
+        # the 38 roots among them); the pencil on every unknown has none (passed at 9.1e-8, 2026-12-02)
+        say(f"trace test: {test.failed_paths} paths lost on the pencil on {pencil}; again on every unknown")
+        pencil = f"every unknown (on {pencil}: {test.failed_paths} slice paths lost on every route, base points)"
+        test = run(None)
     return {**test.record(), "pencil": pencil}
 
 

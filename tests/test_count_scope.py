@@ -248,3 +248,12 @@ def test_f4_seeing_more_solutions_forbids_every_whole_claim():
     assert counting._scope(bundle, roots, None, 2, None, more, None) == ("lower bound", "")
     fewer = SimpleNamespace(degree=1, zero_dimensional=True, dimension=0)
     assert "not used" in counting._gf_words(fewer, 2, 2)
+
+
+@pytest.mark.slow
+def test_a_pencil_with_base_points_is_retried_on_every_unknown():
+    """3D TOA 4r/6s (38): on b, 71 of 1,866 slice paths diverge (roots escaping with b finite: base points of the
+    pencil on the curve), an inconclusive test; count then runs it on every unknown, where it passes (9.1e-8,
+    2026-12-02). About 90 s."""
+    r = counting.count("4r6s3dtoa", counting.CountOptions(seeds=(0,), trace=True, degree=False, certify=False))
+    assert r.trace["status"] == "passed" and r.trace["pencil"].startswith("every unknown (on b"), r.trace
