@@ -921,7 +921,8 @@ def _generate_count(args: argparse.Namespace, target, start, progress):
         return None
     from solvers.count import CountOptions, count
 
-    return count(target, CountOptions(seeds=(args.seed, args.seed + 1)), progress=progress, start=start)
+    # numerical evidence alone, as asked: no F4 inside the count either (its scope from Bezout's bound or a trace test)
+    return count(target, CountOptions(seeds=(args.seed, args.seed + 1), degree=False), progress=progress, start=start)
 
 
 def _add_count(sub: argparse._SubParsersAction) -> None:
@@ -931,8 +932,12 @@ def _add_count(sub: argparse._SubParsersAction) -> None:
         "(solvers.count): monodromy on a complete graph of parameter nodes until it closes, for every seed; every "
         "solution of the first seed proven by Krawczyk's test in ball arithmetic, boxes disjoint; the other seeds' "
         "sets carried to the first and compared as sets; random solutions carried around a fresh loop. The "
-        "evidence is printed in words: 'at least N, proven', with 'complete by trace test (residual r)' when "
-        "--trace passed, else 'lower bound (numerical)'. Progress on stderr.")
+        "count shown is the proven number (the number found numerically beside it, named as such), and the evidence "
+        "is printed in words: 'at least N, proven', with 'complete: ...' where F4's degree over GF(p) or Bezout's "
+        "bound equals it or the trace test (--trace) passed on an irreducible incidence variety, 'complete for the "
+        "component reached (N found) ...; another component may exist' where the trace test passed and nothing "
+        "shows the incidence variety irreducible (docs/count.md). Exit status 0 when the count is complete for the "
+        "whole solution set, 3 when it is a lower bound (the JSON's scope), 2 for bad input. Progress on stderr.")
     p.add_argument("system", nargs="?", metavar="FILE", help="a parametric system file (the generate verb's format); "
                    "or give --tdoa")
     p.add_argument("--tdoa", metavar="CONFIG", help="a configuration (7r5s with --dim 3; 3r3s with --model toa) or a "
@@ -956,7 +961,8 @@ def _add_count(sub: argparse._SubParsersAction) -> None:
                    "or 'local' for a LocalCluster of one process per core (the same numbers; pip install -e \".[dask]\")")
     p.add_argument("--dask-chunk", type=_integer_at_least("--dask-chunk", 1), default=2000, metavar="N",
                    help="paths per Dask task (default 2000)")
-    p.add_argument("--start", metavar="JSON", help="FILE only: a start pair for seed 0, as for generate --start")
+    p.add_argument("--start", metavar="JSON", help="FILE only: a start pair for the first seed, as for generate --start; "
+                   "every other seed's (and the trace test's) is drawn from it, its root tracked to random parameters")
     p.add_argument("--json", metavar="OUT", help="also write the result as JSON to OUT")
     p.set_defaults(func=cmd_count)
 
@@ -1002,7 +1008,7 @@ def cmd_count(args: argparse.Namespace) -> int:
             counting.write_record(result, args.json)
         except OSError as exc:
             raise UserError(f"--json: cannot write {args.json}: {exc.strerror or exc}") from None
-    return 0
+    return 0 if result.complete else 3
 
 
 def _add_template_check(sub: argparse._SubParsersAction) -> None:

@@ -563,7 +563,7 @@ class HomotopyMethod:
                         "loops_checked": counted.loops_checked, "notes": list(counted.notes),
                         "saturated_by": list(system.nonzero),
                         "note": "numerical evidence only: no GF(p) certificate (F4 could not be run or was not asked); "
-                                "the count of solvers.count, a lower bound unless a trace test completes it"}
+                                "the count of solvers.count, a lower bound unless its words say it is complete"}
         else:
             if progress:
                 progress(f"{system.name}: certifying the root count over GF(p) (two primes x {len(job.seeds)} seed(s))")
