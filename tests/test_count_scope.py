@@ -13,6 +13,7 @@ import pytest
 
 from analysis.formulations.parametric import parse
 from solvers import count as counting
+from solvers import count_evidence as evidence
 from solvers.continuation.tracking import HomotopyError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -69,14 +70,14 @@ def test_one_component_reached_says_so(monkeypatch):
 
 def test_irreducibility_is_decided_for_parameters_with_constant_coefficients():
     circle = parse(open(os.path.join(ROOT, "examples", "circle.sys"), encoding="utf-8").read(), "circle")
-    words = counting._linear_bundle(circle)
+    words = evidence.linear_bundle(circle)
     assert words is not None and "irreducible" in words and "a, c" in words
-    assert counting._linear_bundle(_system(TWO_COMPONENTS, "two")) is None  # a^2: not linear
+    assert evidence.linear_bundle(_system(TWO_COMPONENTS, "two")) is None  # a^2: not linear
     # linear, but no parameter enters with a constant coefficient: not decided
-    assert counting._linear_bundle(_system("unknowns: x, y\nparameters: a, b\nequations:\nx^2 - a*y\nx*y - b*x\n",
+    assert evidence.linear_bundle(_system("unknowns: x, y\nparameters: a, b\nequations:\nx^2 - a*y\nx*y - b*x\n",
                                            "noconst")) is None
     # constant coefficients of rank 1 < 2 (b and c move the same equation): not decided
-    assert counting._linear_bundle(_system("unknowns: x, y\nparameters: a, b, c\nequations:\nx^2 - a*y\ny^2 - b - c\n",
+    assert evidence.linear_bundle(_system("unknowns: x, y\nparameters: a, b, c\nequations:\nx^2 - a*y\ny^2 - b - c\n",
                                            "rank1")) is None
 
 
@@ -222,7 +223,7 @@ def test_the_ed_degree_of_a_quartic_surface_passes_the_trace_test_on_every_seed_
     seed pairs (164 witnesses of 165); measured 2026-12-02: 4 of 4 pass, two after a regrowth (163 and 162 -> 165).
     About a minute per pair."""
     system = _ed_system(3, 4)
-    assert counting._linear_bundle(system) is not None  # u and the constant coefficient: an irreducible bundle
+    assert evidence.linear_bundle(system) is not None  # u and the constant coefficient: an irreducible bundle
     for s in range(4):
         r = counting.count(system, counting.CountOptions(seeds=(s, s + 1), trace=True, degree=False))
         assert r.count == 52 and r.trace["status"] == "passed" and r.complete, r.summary()
@@ -234,20 +235,20 @@ def test_the_ed_degree_of_a_cubic_surface_is_complete_by_an_irreducible_trace_te
 
 
 def test_f4_seeing_more_solutions_forbids_every_whole_claim():
-    """_scope: with F4's degree above the proven count neither Bezout's bound nor an irreducible incidence variety
+    """scope_of: with F4's degree above the proven count neither Bezout's bound nor an irreducible incidence variety
     makes the count complete; a passed trace test then speaks for the component reached only."""
     from types import SimpleNamespace
 
     bundle = _system("unknowns: x, y\nparameters: a, b\nequations:\nx*y - a\nx^2*y + y - b\n", "bundle")
     roots = np.array([[1.0 + 0j, 2.0], [3.0, 4.0]])
     passed = {"status": "passed", "residual": 1e-15}
-    assert counting._scope(bundle, roots, None, 2, None, None, passed)[0] == "whole solution set"
+    assert evidence.scope_of(bundle, roots, None, 2, None, None, passed)[0] == "whole solution set"
     more = SimpleNamespace(degree=3, zero_dimensional=True, dimension=0)
-    scope, words = counting._scope(bundle, roots, None, 2, None, more, passed)
+    scope, words = evidence.scope_of(bundle, roots, None, 2, None, more, passed)
     assert scope == "component reached" and "another component may exist" in words
-    assert counting._scope(bundle, roots, None, 2, None, more, None) == ("lower bound", "")
+    assert evidence.scope_of(bundle, roots, None, 2, None, more, None) == ("lower bound", "")
     fewer = SimpleNamespace(degree=1, zero_dimensional=True, dimension=0)
-    assert "not used" in counting._gf_words(fewer, 2, 2)
+    assert "not used" in evidence.gf_words(fewer, 2, 2)
 
 
 @pytest.mark.slow
