@@ -22,11 +22,16 @@ from .adjustment import (
 )
 from .flags import _beyond_std, _flags, _principal_ratio, _probe_basins, _repair_flips, _standardised_shift
 from .frame import RANGE_SHARE, node_covariances, widen_far_ranges
+from .diagnose import ORIENTATION_DECIDED, diagnose
+from .adjust import adjust_plane_waves
+from .initialise import plane_wave_start
+from .judge import judge_kept, message, plane_wave_result, worst
 from .placement import _fill
 from .result import STATUSES, CalibrationOptions, CalibrationResult
 from .robust import _drop_undetermined, _polish
 from .sampling import _needed, _ransac, available_solvers
 from .scoring import MAD_TO_SIGMA, _Model, _prune, _residual_matrix, _score, _Search
+from .state import Diagnosis
 
 #: Progress of long calls (stage by stage, each snooping round), at INFO; the CLI shows it on stderr.
 log = logging.getLogger("solvers.calibration")
@@ -104,7 +109,14 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
                          f"None estimates it), got {sigma}")
     if dim not in (2, 3) or isinstance(dim, bool):
         raise ValueError(f"dim must be 2 or 3, got {dim!r}")
-    result = _calibrate_once(F, sigma, seed, opts, t0, dim)
+    diagnosis = diagnose(F, dim)
+    log.info("diagnosis: %d entries, %d unknowns, %d degrees of freedom; wavefronts %s (curvature %.3g)",
+             diagnosis.entries, diagnosis.unknowns, diagnosis.dof, diagnosis.wavefront, diagnosis.curvature)
+    result = _calibrate_once(F, sigma, seed, opts, t0, dim, diagnosis=diagnosis)
+    if result.solver == FACTORIZATION:
+        # a start from the data's own structure, no sampling: a second seed gives the same answer, and the
+        # factorization has already compared the two orientations (diagnosis.orientation_ratio)
+        return replace(judge_kept(_judge_route(F, diagnosis, result, opts)), seconds=time.perf_counter() - t0, seed=seed)
     seed2 = int(np.random.SeedSequence(seed if seed is not None else None).generate_state(1)[0])
     second: list[CalibrationResult] = []
 
@@ -134,9 +146,9 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
                 note = (f"seed-dependent: a second search (seed {second.seed}) gives another answer that fits about as "
                         f"well (cost +{gap:.2g} sigma^2; {n_diff} measurements classified differently or nodes moved "
                         f"beyond 3 std); both are reported")
-                status = _worst(first.status, "ambiguous")
+                status = worst(first.status, "ambiguous")
                 result = replace(first, status=status, warnings=(note,) + first.warnings, alternative=second.to_dict(),
-                                 message=_message(status, first, note))
+                                 message=message(status, first, note))
             elif first is other:
                 note = (f"the search with seed {result.seed} ended {result.status} (cost +{gap:.3g} sigma^2); a second "
                         f"search (seed {other.seed}) found this answer")
@@ -149,7 +161,23 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
         result = _suggest_3d(F, sigma, seed, opts, t0, result)
     if sigma is None and result.status in ("ok", "uncontrolled", "ambiguous"):
         result = _check_orientation(F, seed, opts, t0, dim, result)
-    return replace(result, seconds=time.perf_counter() - t0, seed=seed)
+    return replace(judge_kept(result), seconds=time.perf_counter() - t0, seed=seed)
+
+
+#: The solver label of a calibration started from the plane-wave factorization (initialise.plane_wave_start).
+FACTORIZATION = "factorization"
+
+
+def _judge_route(F, diagnosis: Diagnosis, result: CalibrationResult, opts: CalibrationOptions) -> CalibrationResult:
+    """The orientation of a factorization-started answer: decided when the row-offset fit is
+    ORIENTATION_DECIDED times worse than the column-offset one, else said (the columns were taken as the
+    transmitters); with the orientation given (CalibrationOptions.orientation_given) nothing is said."""
+    if (not opts.orientation_given and not diagnosis.orientation_ratio >= ORIENTATION_DECIDED
+            and result.status in ("ok", "uncontrolled")):
+        note = (f"the factorization fits the transposed matrix about as well (scale ratio "
+                f"{diagnosis.orientation_ratio:.2g}): the data do not decide whether rows are receivers")
+        return replace(result, warnings=result.warnings + (note,))
+    return result
 
 
 #: Statuses of an answer that is no usable calibration (a second answer is preferred to it).
@@ -213,7 +241,7 @@ def _check_sigma(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result:
             f"degrees of freedom; with the given sigma SSR / sigma^2 = {statistic:.4g} > {critical:.4g}); the answer "
             f"is the one with sigma estimated, which keeps {kept} more measurement(s) the given sigma would reject: "
             f"give --sigma {est.sigma:.2g} or omit it")
-    return replace(est, status="inconsistent", message=_message("inconsistent", est, note),
+    return replace(est, status="inconsistent", message=message("inconsistent", est, note),
                    warnings=(note,) + est.warnings)
 
 
@@ -295,8 +323,8 @@ def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: 
     if other.sigma < TRANSPOSED_SIGMA_RATIO * result.sigma:
         note = (f"the transposed matrix fits far better (sigma {other.sigma:.3g} against {result.sigma:.3g}): the rows "
                 "look like transmitters; give --transpose (calibrate(F.T))")
-        return replace(result, status=_worst(result.status, "inconsistent"), warnings=(note,) + result.warnings,
-                       message=_message(_worst(result.status, "inconsistent"), result, note))
+        return replace(result, status=worst(result.status, "inconsistent"), warnings=(note,) + result.warnings,
+                       message=message(worst(result.status, "inconsistent"), result, note))
     if result.sigma < TRANSPOSED_SIGMA_RATIO * other.sigma:
         return result
     if opts.orientation_given:
@@ -305,8 +333,8 @@ def _check_orientation(F, seed, opts: CalibrationOptions, t0, dim: int, result: 
         return replace(result, warnings=result.warnings + (note,))
     note = (f"the transposed matrix fits about as well (sigma {other.sigma:.3g} against {result.sigma:.3g}): the data do "
             "not decide whether rows are receivers or transmitters (give the orientation: --oriented)")
-    return replace(result, status=_worst(result.status, "ambiguous"), warnings=(note,) + result.warnings,
-                   message=_message(_worst(result.status, "ambiguous"), result, note))
+    return replace(result, status=worst(result.status, "ambiguous"), warnings=(note,) + result.warnings,
+                   message=message(worst(result.status, "ambiguous"), result, note))
 
 
 def _suggest_3d(F, sigma, seed, opts: CalibrationOptions, t0, result: CalibrationResult) -> CalibrationResult:
@@ -340,10 +368,6 @@ def _truncated_costs(a: CalibrationResult, b: CalibrationResult, sigma, opts: Ca
     return cost(a), cost(b), s
 
 
-def _worst(*statuses: str) -> str:
-    return min(statuses, key=STATUSES.index)
-
-
 def _differs(a: CalibrationResult, b: CalibrationResult) -> bool:
     """True when two results differ: another inlier set, nodes placed in one only, or positions that
     differ (after a rigid alignment, reflections allowed) by more than 3 reported standard deviations."""
@@ -356,20 +380,6 @@ def _differs(a: CalibrationResult, b: CalibrationResult) -> bool:
     X = np.vstack([a.receivers, a.transmitters])[pa]
     return _beyond_std(b.receivers, b.transmitters, a.receivers, a.transmitters, a.receiver_std, a.transmitter_std,
                        1e-9 * max(float(np.abs(X).max()), 1.0))
-
-
-def _message(status, res: CalibrationResult, why: str = "") -> str:
-    m, n = res.inliers.shape
-    placed_r, placed_t = np.isfinite(res.receivers[:, 0]), np.isfinite(res.transmitters[:, 0])
-    measured = res.measured
-    n_missing = m * n - int(measured.sum())
-    sig = (f"sigma {res.sigma:.3g} {'estimated' if res.sigma_estimated else 'given'}" if np.isfinite(res.sigma) else
-           "sigma not estimated (no redundancy)")
-    rms = f"rms {res.rms:.3g}" if np.isfinite(res.rms) else "no rms (no inlier)"
-    head = (f"{status}: {int(placed_r.sum())}/{m} receivers, {int(placed_t.sum())}/{n} transmitters placed; "
-            f"{int(res.inliers.sum())} inliers, {int(measured.sum() - res.inliers.sum())} rejected, {n_missing} "
-            f"missing; {rms}; {sig}")
-    return head + (f" - {why}" if why else "")
 
 
 def _no_outlier(st: AdjustmentStatistics, sigma, opts: CalibrationOptions) -> bool:
@@ -663,7 +673,7 @@ def _adjust(F, work, best: _Model, sigma, floor, opts: CalibrationOptions, rng, 
 
 def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
                     hint: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                    probe: bool = True) -> CalibrationResult:
+                    probe: bool = True, diagnosis: Diagnosis | None = None) -> CalibrationResult:
     """One search and adjustment; `hint` (receivers, transmitters, offsets) is offered to the search
     before any sample. probe: with sigma unknown, marginal rejections at a node that keeps entries of
     small redundancy number are tested by a search without those entries (`_absorbed_error_probe`);
@@ -704,8 +714,21 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         fits[id(model)] = _all_data_fit(F, work, model, sigma, floor, opts, rng, memo)
         return fits[id(model)][-1]
 
-    log.info("calibrate %dD, %d x %d, %d measured, seed %s, sigma %s: hypothesis search", dim, m, n, int(mask.sum()),
-             seed, "estimated" if sigma is None else f"{sigma:g} given")
+    if hint is None and diagnosis is not None and diagnosis.wavefront == "plane":
+        # the route the diagnosis chose: plane waves start from the factorization and are adjusted with
+        # every source as a direction and an inverse range (adjust), then judged (judge)
+        log.info("calibrate %dD, %d x %d, %d measured, sigma %s: plane-wave factorization", dim, m, n, int(mask.sum()),
+                 "estimated" if sigma is None else f"{sigma:g} given")
+        start = plane_wave_start(F, work, diagnosis)
+        fit = adjust_plane_waves(F, work, start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
+                                 max_iter=opts.max_iterations)
+        log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)", int(fit.inliers.sum()),
+                 int(work.sum()), fit.rounds, time.perf_counter() - t0)
+        res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, warnings + list(diagnosis.notes) + list(start.notes),
+                                seed)
+        return replace(res, seconds=time.perf_counter() - t0)
+    log.info("calibrate %dD, %d x %d, %d measured, seed %s, sigma %s: hypothesis search", dim, m, n,
+             int(mask.sum()), seed, "estimated" if sigma is None else f"{sigma:g} given")
     best, search = _ransac(F, work, thr, floor, opts, rng, available_solvers(dim), accept,
                            0.0 if sigma is not None else opts.confirm_outliers, dim=dim, hint=hint)
     log.info("  search: %d samples, %d hypotheses (%.1f s)", search.samples, search.hypotheses,
@@ -911,7 +934,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
                               "tests blind) can push good measurements out instead; give sigma to test them"))
             else:
                 warnings.append(f"{head}; {verdict[2]}")
-    status = _worst("ok", *(s for s, _ in found))
+    status = worst("ok", *(s for s, _ in found))
     warnings = [why for _, why in found] + symptoms + [w for w in warnings if w not in {why for _, why in found}]
     # reported only (every test above used the linear std): a far node's skewed range error (frame.widen_far_ranges)
     rcov, tcov, widened = widen_far_ranges(R, S, rcov, tcov)
@@ -938,7 +961,7 @@ def _calibrate_once(F, sigma, seed, opts: CalibrationOptions, t0, dim: int,
         receiver_cov=np.where(placed_r[:, None, None], rcov, np.nan),
         transmitter_cov=np.where(placed_t[:, None, None], tcov, np.nan),
     )
-    return replace(res, message=_message(status, res, found[0][1] if found else route_note(route)))
+    return replace(res, message=message(status, res, found[0][1] if found else route_note(route)))
 
 
 #: A search that would need more samples than this for its confidence cannot reach it (at ~3 ms a 3D sample,
