@@ -14,7 +14,7 @@ left to the damping while iterating and to the pseudo-inverse in the statistics.
 
 Robust route: Cauchy-weighted iterations at 3 robust scales from the factorization's start, then data
 snooping with readmission (one rejection per source and per receiver each round, Baarda's w-test or the
-externally studentised residual), as in `pipeline._snoop` for the point-source model.
+externally studentised residual), as in `robust._snoop` for the point-source model.
 
 Reference: inverse-depth parametrisation (Civera, Davison and Montiel, IEEE T-RO 2008); Baarda (1968).
 """
