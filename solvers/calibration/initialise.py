@@ -25,12 +25,13 @@ def _level_upgrade(low: LowRank):
     """The upgrade when the directions hardly leave one plane (one elevation cone): their elevation, and with
     it the receivers' height, is not in the plane waves (the unit norm no longer fixes the metric: a cone
     at any elevation fits), so the start is level: the directions' varying part (the top two principal
-    axes of the factorization's B) upgraded as unit directions in that plane, the receivers in it, height 0.
+    axes of the factorization's product) upgraded as unit directions in that plane, the receivers in it, height 0.
     The adjustment then finds what the curvature says of the height; the judge reports how weakly."""
+    # the varying part A (B - mean B)^T (the mean is the per-receiver height term), its top two singular
+    # directions: those of the data, not of B alone (the factorization leaves A and B unbalanced)
     Bc = low.B - low.B.mean(axis=0)[None, :]
-    V = np.linalg.svd(Bc, full_matrices=False)[2][:2].T
-    flat = LowRank(low.o, low.A @ V, Bc @ V, low.scale, low.inliers,
-                   low.singular_values[:2])
+    U2, s2, Vt2 = np.linalg.svd(low.A @ Bc.T, full_matrices=False)
+    flat = LowRank(low.o, U2[:, :2] * s2[:2], Vt2[:2].T, low.scale, low.inliers, s2[:2])
     up = metric_upgrade(flat)
     pad = np.zeros((len(up.receivers), 1))
     return type(up)(np.hstack([up.receivers, pad]), np.hstack([up.directions, np.zeros((len(up.directions), 1))]),
