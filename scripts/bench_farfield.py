@@ -6,12 +6,18 @@ in [0, 1] m; F[i, j] = |r_i - s_j| + o_j quantized to whole samples at 48 kHz (s
 a step of 7.15 mm, rounding noise of std 2.06 mm), then a few gross errors (a wrong GCC-PHAT peak: an
 entry moved by a whole number of samples, uniform in +-(10..60) samples, i.e. 7-43 cm).
 
+`--array tetra`: the simulated analogue of a real array instead (issue 52, `solvers.synthetic.array_network`):
+48 microphones on the six edges of a tetrahedron (radius 0.15 m), sources on elevation cones within +-16 deg
+(`--cones`, `--per-cone`) at 3.5-4.2 m, TDOAs in quarter samples at 48 kHz (rounding std 0.52 mm), 0.3 mm of
+model error, 1.5 % gross errors; the Cramer-Rao bound at the quarter-sample rounding noise.
+
 Per run it prints (one line, and a CSV row with --csv): sources, seconds, status, the receivers' rms
 error after rigid alignment, the Cramer-Rao bound of that rms (at the rounding noise, on the entries
 without gross error), their ratio, gross errors rejected / good entries rejected, and the largest
 standardised node error (|error| / reported std). Run facts go to stdout only.
 
 Usage: python scripts/bench_farfield.py [--sources 540] [--every 1] [--gross 8] [--seed 0] [--sigma] [--oriented]
+       python scripts/bench_farfield.py --array tetra [--per-cone 180] [--cones=-12,2,14] [--seed 0] [--sigma]
        --every 17 takes every 17th source (the 32-source subset of the issue); --sigma gives the
        rounding noise's std as sigma (default: sigma estimated); --oriented says the rows are receivers
        (CalibrationOptions.orientation_given, the CLI's --oriented).
@@ -68,32 +74,6 @@ def farfield_network(m: int = 48, n: int = 540, gross: int = 8, seed: int = 0, *
     return net, F, bad
 
 
-def receiver_crb_rms(net: Network, mask: np.ndarray, sigma: float) -> float:
-    """Cramer-Rao bound of the receivers' rms position error after a rigid alignment of the receivers.
-
-    The sources are nuisance parameters: each source block (position, offset) is eliminated by its Schur
-    complement, leaving the receivers' Fisher information (3m)^2, singular along the 6 rigid motions;
-    its pseudo-inverse's trace / m, square-rooted (solvers.metrics.cramer_rao_position_rms, restricted to
-    the receivers, without forming the 25,920 x 2,304 Jacobian).
-    """
-    R, S = net.receivers, net.transmitters
-    m, dim = R.shape
-    info = np.zeros((m * dim, m * dim))
-    for j in range(S.shape[0]):
-        rows = np.flatnonzero(mask[:, j])
-        d = R[rows] - S[j]
-        u = d / np.linalg.norm(d, axis=1)[:, None]
-        Jr = np.zeros((len(rows), m * dim))
-        for a in range(dim):
-            Jr[np.arange(len(rows)), dim * rows + a] = u[:, a]
-        Js = np.column_stack([-u, np.ones(len(rows))])
-        C = Js.T @ Js
-        B = Jr.T @ Js
-        info += Jr.T @ Jr - B @ np.linalg.solve(C, B.T)
-    cov = np.linalg.pinv(info / sigma**2, rcond=1e-9, hermitian=True)
-    return float(np.sqrt(np.trace(cov) / m))
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--receivers", type=int, default=48)
@@ -103,6 +83,9 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--sigma", action="store_true", help="give the rounding noise's std as sigma")
     ap.add_argument("--oriented", action="store_true", help="say the rows are receivers (orientation_given)")
+    ap.add_argument("--array", choices=("cube", "tetra"), default="cube", help="the receivers and sources (see above)")
+    ap.add_argument("--per-cone", type=int, default=180, help="--array tetra: sources per elevation cone")
+    ap.add_argument("--cones", default="-12,2,14", help="--array tetra: cone elevations in degrees (--cones=-12,14)")
     ap.add_argument("--csv", help="append a row to this CSV")
     args = ap.parse_args()
     import logging
@@ -110,14 +93,22 @@ def main() -> int:
     logging.basicConfig(level=logging.INFO, format="%(relativeCreated)8.0f ms %(message)s", stream=sys.stderr)
 
     from solvers.calibration import CalibrationOptions, calibrate
-    from solvers.metrics import align_rigid, standardised_node_errors
+    from solvers.metrics import align_rigid, receiver_cramer_rao_rms, standardised_node_errors
 
-    net, F, bad = farfield_network(args.receivers, args.sources, args.gross, args.seed, every=args.every)
-    sigma = ROUNDING_SIGMA if args.sigma else None
+    from solvers.synthetic import array_network
+
+    rounding = ROUNDING_SIGMA
+    if args.array == "tetra":
+        cones = tuple(float(c) for c in args.cones.split(","))
+        net, F, bad = array_network(np.random.default_rng(args.seed), cones=cones, per_cone=args.per_cone)
+        rounding = 0.25 * ROUNDING_SIGMA
+    else:
+        net, F, bad = farfield_network(args.receivers, args.sources, args.gross, args.seed, every=args.every)
+    sigma = rounding if args.sigma else None
     t = time.perf_counter()
     res = calibrate(F, sigma, dim=3, seed=args.seed, options=CalibrationOptions(orientation_given=args.oriented))
     sec = time.perf_counter() - t
-    crb = receiver_crb_rms(net, ~bad, ROUNDING_SIGMA)
+    crb = receiver_cramer_rao_rms(net.receivers, net.transmitters, ~bad, rounding)
     placed = np.isfinite(res.receivers[:, 0])
     if placed.all():
         T = align_rigid(res.receivers, net.receivers)
@@ -129,12 +120,14 @@ def main() -> int:
     measured = np.isfinite(F)
     gross_rej = int((bad & ~res.inliers).sum())
     good_rej = int((measured & ~bad & ~res.inliers).sum())
-    row = dict(receivers=args.receivers, sources=F.shape[1], gross=int(bad.sum()), sigma="given" if args.sigma else
+    row = dict(array=args.array, receivers=F.shape[0], sources=F.shape[1], gross=int(bad.sum()), sigma="given" if args.sigma else
                "estimated", oriented=args.oriented, seed=args.seed, seconds=round(sec, 1), status=res.status, rx_rms_mm=round(1e3 * err, 3),
                crb_mm=round(1e3 * crb, 3), ratio=round(err / crb, 2), gross_rejected=gross_rej,
                good_rejected=good_rej, max_std_err=round(z_max, 2))
     print(" ".join(f"{k}={v}" for k, v in row.items()))
     print(res.message)
+    for w in res.warnings:
+        print("  -", w)
     if args.csv:
         import csv
 

@@ -21,6 +21,7 @@ __all__ = [
     "log10_error",
     "offset_error",
     "position_error",
+    "receiver_cramer_rao_rms",
     "tdoa_jacobian",
 ]
 
@@ -247,3 +248,32 @@ def cramer_rao_position_rms(receivers: np.ndarray, transmitters: np.ndarray, mea
         return float("inf")
     V = Vt[:rank].T[: K * (m + n)]  # the position rows of the range directions
     return float(sigma * np.sqrt(np.sum((V / s[:rank]) ** 2) / (m + n)))
+
+
+def receiver_cramer_rao_rms(receivers: np.ndarray, transmitters: np.ndarray, measured_mask: np.ndarray,
+                            sigma: float) -> float:
+    """Cramer-Rao bound of the receivers' rms position error after a rigid alignment of the receivers.
+
+    The sources are nuisance parameters: each source block (position, offset) is eliminated by its Schur
+    complement, leaving the receivers' Fisher information (K m)^2, singular along the rigid motions;
+    its pseudo-inverse's trace / m, square-rooted (`cramer_rao_position_rms` restricted to the receivers,
+    without forming the whole Jacobian: 48 x 540 in 3D would be 25,920 x 2,304).
+    """
+    R = np.asarray(receivers, dtype=float)
+    S = np.asarray(transmitters, dtype=float)
+    mask = np.asarray(measured_mask, dtype=bool)
+    m, dim = R.shape
+    info = np.zeros((m * dim, m * dim))
+    for j in range(S.shape[0]):
+        rows = np.flatnonzero(mask[:, j])
+        d = R[rows] - S[j]
+        u = d / np.linalg.norm(d, axis=1)[:, None]
+        Jr = np.zeros((len(rows), m * dim))
+        for a in range(dim):
+            Jr[np.arange(len(rows)), dim * rows + a] = u[:, a]
+        Js = np.column_stack([-u, np.ones(len(rows))])
+        C = Js.T @ Js
+        B = Jr.T @ Js
+        info += Jr.T @ Jr - B @ np.linalg.solve(C, B.T)
+    cov = np.linalg.pinv(info / sigma**2, rcond=1e-9, hermitian=True)
+    return float(np.sqrt(np.trace(cov) / m))

@@ -20,8 +20,10 @@ __all__ = [
     "DegenerateNetworkError",
     "Network",
     "corrupt_measurements",
+    "array_network",
     "random_network",
     "room_network",
+    "tetrahedral_array",
     "true_root",
 ]
 
@@ -284,3 +286,75 @@ def corrupt_measurements(
     mask = np.zeros(m * n, bool)
     mask[bad] = True
     return F, mask.reshape(m, n)
+
+
+#: Speed of sound (m/s) and sample rate (Hz) of the simulated arrays (:func:`array_network`).
+SPEED_OF_SOUND = 343.0
+SAMPLE_RATE = 48_000.0
+
+
+def tetrahedral_array(per_edge: int = 8, radius: float = 0.15) -> np.ndarray:
+    """(6 per_edge, 3) microphone positions on the six edges of a regular tetrahedron (circumradius
+    `radius`, centred at the origin, one face horizontal below), `per_edge` evenly spaced on each edge
+    (vertices excluded): the shape of a 48-microphone array built on a tetrahedral frame."""
+    if per_edge < 1 or not radius > 0:
+        raise ValueError(f"need per_edge >= 1 and radius > 0, got {per_edge}, {radius}")
+    top = np.array([0.0, 0.0, 1.0])
+    base = [np.array([np.sqrt(8.0 / 9.0) * np.cos(a), np.sqrt(8.0 / 9.0) * np.sin(a), -1.0 / 3.0])
+            for a in (0.0, 2.0 * np.pi / 3.0, 4.0 * np.pi / 3.0)]
+    vertices = [radius * v for v in [top] + base]
+    t = (np.arange(per_edge) + 0.5) / per_edge
+    edges = [(a, b) for a in range(4) for b in range(a + 1, 4)]
+    return np.vstack([vertices[a][None, :] * (1.0 - t[:, None]) + vertices[b][None, :] * t[:, None] for a, b in edges])
+
+
+def array_network(
+    rng: np.random.Generator,
+    receivers: np.ndarray | None = None,
+    *,
+    cones: tuple[float, ...] = (-12.0, 2.0, 14.0),
+    per_cone: int = 180,
+    distance: tuple[float, float] = (3.5, 4.2),
+    quantum: float = 0.25,
+    outliers: float = 0.015,
+    model_error: float = 3e-4,
+) -> tuple[Network, np.ndarray, np.ndarray]:
+    """A compact microphone array and far loudspeakers, measured as a real recording would be:
+    (network, F, gross mask).
+
+    Sources lie on elevation cones (degrees; `per_cone` azimuths each, uniform, with the cone's elevation
+    jittered by up to 1 degree) at distances uniform in `distance` (m); emission offsets uniform in [0, 1] m.
+    F[i, j] = |r_i - s_j| + o_j + model error, rounded to steps of `quantum` samples at SAMPLE_RATE
+    (SPEED_OF_SOUND m/s; a quarter sample: 1.79 mm, rounding std 0.52 mm). The model error is what a
+    point microphone does not capture (its body, diffraction by the frame): per microphone a smooth
+    function of the direction of arrival u, model_error * u^T A_i u with A_i symmetric, traceless, of unit
+    spectral norm (not a shift of the microphone: no position absorbs it). Then round(outliers x entries)
+    gross errors: an entry moved by a wrong GCC-PHAT peak, a whole number of samples uniform in +-(10..60).
+
+    Draws, in order: source azimuths, elevation jitters, distances, offsets, the A_i, then the gross entries,
+    their shifts and signs. receivers: default :func:`tetrahedral_array` (48 microphones, radius 0.15 m).
+    """
+    R = tetrahedral_array() if receivers is None else np.asarray(receivers, dtype=float)
+    if R.ndim != 2 or R.shape[1] != 3:
+        raise ValueError(f"receivers must be (m, 3), got {R.shape}")
+    if per_cone < 1 or not cones or quantum <= 0 or not 0.0 <= outliers < 1.0 or model_error < 0:
+        raise ValueError("need per_cone >= 1, at least one cone, quantum > 0, 0 <= outliers < 1, model_error >= 0")
+    m, n = R.shape[0], per_cone * len(cones)
+    azimuth = rng.uniform(0.0, 2.0 * np.pi, n)
+    elevation = np.radians(np.repeat(np.asarray(cones, dtype=float), per_cone) + rng.uniform(-1.0, 1.0, n))
+    ranges = rng.uniform(*distance, n)
+    offsets = rng.uniform(0.0, 1.0, n)
+    u = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+    net = Network(R, u * ranges[:, None], offsets)
+    A = rng.standard_normal((m, 3, 3))
+    A = A + A.transpose(0, 2, 1)
+    A -= np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
+    A /= np.abs(np.linalg.eigvalsh(A)).max(axis=1)[:, None, None]
+    step = quantum * SPEED_OF_SOUND / SAMPLE_RATE
+    F = net.measurements() + model_error * np.einsum("ja,iab,jb->ij", u, A, u)
+    F = np.round(F / step) * step
+    bad = np.zeros((m, n), bool)
+    k = rng.choice(m * n, int(round(outliers * m * n)), replace=False)
+    F.flat[k] += rng.integers(10, 61, k.size) * rng.choice([-1.0, 1.0], k.size) * (SPEED_OF_SOUND / SAMPLE_RATE)
+    bad.flat[k] = True
+    return net, F, bad

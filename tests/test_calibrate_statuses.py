@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from solvers.calibration import CalibrationOptions, calibrate
-from solvers.calibration import pipeline
+from solvers.calibration import judge, pipeline
 from solvers.synthetic import corrupt_measurements, random_network
 
 
@@ -72,9 +72,9 @@ def test_messages_never_print_nan():
     _, F, _ = _network(12, 10, seed=3)
     res = calibrate(F, 1e-2, seed=0)
     blank = replace(res, sigma=float("nan"), rms=float("nan"), sigma_estimated=True)
-    msg = pipeline._message("uncontrolled", blank, "why")
+    msg = judge.message("uncontrolled", blank, "why")
     assert "nan" not in msg.lower() and "sigma not estimated" in msg and "no rms" in msg
-    given = pipeline._message("ok", res)
+    given = judge.message("ok", res)
     assert "sigma 0.01 given" in given
 
 

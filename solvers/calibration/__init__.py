@@ -1,6 +1,13 @@
 """Calibrate a real network: missing entries, gross errors, RANSAC over the minimal solvers, and an
 adjustment whose statistics say what can be trusted.
 
+Stages (docs/calibrate.md "Stages"): `diagnose` reads the data alone (degrees of freedom, the robust
+factorization's singular values: plane waves or not, the sources' elevation span); `initialise` starts
+plane waves from the metric-upgraded factorization (`factorization`) and everything else from the
+hypothesis search below; `adjust` adjusts plane waves with every source a direction and an inverse range;
+`judge` gives the status from the final fit, per node kind (a node that keeps fewer than half of its
+entries is judged by them, on every route). `state` holds what the stages pass along.
+
 The package follows the pipeline from a TDOA matrix F (receivers x transmitters, NaN = not measured)
 to one honest answer, after Larsson et al., "Upgrade methods for stratified sensor network
 self-calibration" (EUSIPCO 2021), and geodetic network adjustment (Baarda 1968):
@@ -11,7 +18,7 @@ self-calibration" (EUSIPCO 2021), and geodetic network adjustment (Baarda 1968):
    (`placement`) and scored MSAC-style with sigma given, or by the median squared residual of the
    entries the hypothesis was not solved on (a sample's own entries never count: a minimal sample
    fits them exactly). LO-RANSAC: every new best hypothesis is refined (`robust`).
-2. **The all-data hypothesis** (`pipeline._adjust`): least squares on every entry from the best
+2. **The all-data hypothesis** (`robust._adjust`): least squares on every entry from the best
    hypothesis; if the global test passes (sigma given) and no entry's test statistic exceeds its
    Bonferroni bound, every entry is kept.
 3. **Otherwise, robust classification and data snooping**: robust refinement at threshold_sigmas x

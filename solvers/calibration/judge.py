@@ -1,0 +1,331 @@
+"""Stage 4, judge: the status of a calibration from the final fit's statistics, per node kind, in words.
+
+One rule, read off the final fit (never off an intermediate one):
+- a node is judged by what it kept: a receiver or transmitter whose kept measurements are fewer than
+  KEPT_SHARE of its measured ones rests on the few it kept, whatever their tests say (a shuffled column
+  fits 6 of its 24 entries as well as the truth fits 24): never "ok", the node named;
+- receivers: every coordinate determined; a coordinate whose std is WEAK_ANISOTROPY times that of the
+  best-determined one, or the height when the sources span less than diagnose.WEAK_SPAN_DEGREES of
+  elevation, is weakly determined (plane waves from one elevation: the height rests on the
+  wavefronts' curvature alone, which the model error of a real array swamps): the axis named;
+- transmitters far away (plane waves): their directions must be determined; a range that is not (its
+  interval in 1 / range reaches 0) is reported as a lower bound, never as a failure;
+- the model: sigma given, the global test; sigma estimated, enough redundancy to estimate it; the
+  refinement converged; at least 2/3 of the measurements kept.
+The status is the most severe finding (result.STATUSES); each finding is a warning, the first in the message.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from scipy import stats
+
+from ..recovery import to_gauge
+from .adjust import PlaneWaveFit
+from .adjustment import gauge_order
+from .diagnose import WEAK_SPAN_DEGREES
+from .result import STATUSES, CalibrationOptions, CalibrationResult
+from .scoring import _Search
+from .state import Diagnosis
+
+#: A node that keeps fewer than this share of its measured entries is judged by what it kept.
+KEPT_SHARE = 0.5
+#: A model error in the residuals (direction_lack_of_fit) whose rms reaches this share of the receivers' median
+#: std makes their std no uncertainty: simulated 48 x 540 with 2 mm of directivity, 0.92 mm rms against a median
+#: std of 0.93 mm, a receiver 5.9 std off under "ok" at share 1; the Pyramic array, 540 sources, 0.78 mm against
+#: 0.72 mm (2.8 mm from the makers' calibration); the simulated array's 0.3 mm (0.15 mm rms against 0.43 mm,
+#: nodes within 4.4 std) stays a note.
+MODEL_ERROR_SHARE = 0.5
+#: A receiver coordinate whose std exceeds this many times the best-determined one's is weakly determined.
+WEAK_ANISOTROPY = 10.0
+
+
+def worst(*statuses: str) -> str:
+    """The most severe of the statuses (result.STATUSES order)."""
+    return min(statuses, key=STATUSES.index)
+
+
+def message(status, res: CalibrationResult, why: str = "") -> str:
+    """The one-line summary of a result: counts, rms, sigma, and the first finding."""
+    m, n = res.inliers.shape
+    placed_r, placed_t = np.isfinite(res.receivers[:, 0]), np.isfinite(res.transmitters[:, 0])
+    measured = res.measured
+    n_missing = m * n - int(measured.sum())
+    sig = (f"sigma {res.sigma:.3g} {'estimated' if res.sigma_estimated else 'given'}" if np.isfinite(res.sigma) else
+           "sigma not estimated (no redundancy)")
+    rms = f"rms {res.rms:.3g}" if np.isfinite(res.rms) else "no rms (no inlier)"
+    head = (f"{status}: {int(placed_r.sum())}/{m} receivers, {int(placed_t.sum())}/{n} transmitters placed; "
+            f"{int(res.inliers.sum())} inliers, {int(measured.sum() - res.inliers.sum())} rejected, {n_missing} "
+            f"missing; {rms}; {sig}")
+    return head + (f" - {why}" if why else "")
+
+
+def _names(kind: str, idx) -> str:
+    idx = list(idx)
+    return ", ".join(f"{kind}{k + 1}" for k in idx[:8]) + (", ..." if len(idx) > 8 else "")
+
+
+def kept_findings(measured: np.ndarray, inliers: np.ndarray, placed_r, placed_t) -> list[tuple[str, str]]:
+    """Nodes that keep fewer than KEPT_SHARE of their measured entries: ("uncontrolled", words)."""
+    found = []
+    for kind, axis, placed, word in (("r", 1, placed_r, "receiver"), ("s", 0, placed_t, "transmitter")):
+        had, kept = measured.sum(axis=axis), inliers.sum(axis=axis)
+        few = np.flatnonzero(placed & (had > 0) & (kept < KEPT_SHARE * had))
+        if few.size:
+            k = few[0]
+            found.append(("uncontrolled", f"{few.size} {word}(s) keep fewer than {100 * KEPT_SHARE:g} % of their "
+                          f"measurements ({_names(kind, few)}; {kind}{k + 1} keeps {int(kept[k])} of {int(had[k])}): "
+                          "each is placed from the few it kept, which the rest contradict (a wrong column or row, "
+                          "a swapped label?); their positions are not checked"))
+    return found
+
+
+def judge_kept(result: CalibrationResult) -> CalibrationResult:
+    """Apply the kept-share rule to a finished result (any route): an "ok" (or milder) status with a node
+    that rests on few of its entries becomes "uncontrolled", the finding first in the warnings."""
+    if result.status == "failed" or result.measured is None:
+        return result
+    found = [f for f in kept_findings(result.measured, result.inliers, np.isfinite(result.receivers[:, 0]),
+                                      np.isfinite(result.transmitters[:, 0])) if f[1] not in result.warnings]
+    if not found:
+        return result
+    status = worst(result.status, *(s for s, _ in found))
+    words = tuple(w for _, w in found)
+    return replace(result, status=status, warnings=words + result.warnings,
+                   message=message(status, result, words[0]) if status != result.status else result.message)
+
+
+def _s_transform(cov: np.ndarray, R: np.ndarray, gauge: np.ndarray) -> np.ndarray:
+    """The covariance (mK, mK) of receivers R (in the gauge frame: gauge[0] at 0, gauge[1] on +x, gauge[2] in
+    xy) moved from the minimum-norm gauge to the gauge that fixes those coordinates (an S-transformation:
+    P = I - G (C^T G)^-1 C^T, G the rigid motions at R, C the fixed coordinates)."""
+    m, K = R.shape
+    cols = [np.tile(np.eye(K)[a], m) for a in range(K)]
+    if K == 3:
+        for axis in np.eye(3):
+            cols.append(np.cross(axis[None, :], R).reshape(-1))
+    else:
+        cols.append(np.column_stack([-R[:, 1], R[:, 0]]).reshape(-1))
+    G = np.column_stack(cols)
+    fixed = [gauge[0] * K + a for a in range(K)] + [gauge[1] * K + a for a in range(1, K)]
+    if K == 3:
+        fixed.append(gauge[2] * K + 2)
+    C = np.zeros((m * K, len(fixed)))
+    C[fixed, np.arange(len(fixed))] = 1.0
+    P = np.eye(m * K) - G @ np.linalg.solve(C.T @ G, C.T)
+    return P @ cov @ P.T
+
+
+def _spread_gauge(R: np.ndarray, use: np.ndarray) -> np.ndarray:
+    """Receivers in the order of `adjustment.gauge_order`, its gauge receivers chosen spread out: the first
+    with enough entries, the one farthest from it, then (3D) the one farthest from their line. A compact
+    array's first receivers often sit on one edge (a tetrahedral frame: 0.4 mm off one line), and a gauge
+    on nearly collinear receivers turns the data's precision into a rotation about that line."""
+    order = gauge_order(R, use)
+    K = R.shape[1]
+    first = int(order[0])
+    cand = np.asarray(order)
+    d = np.linalg.norm(R[cand] - R[first], axis=1)
+    second = int(cand[np.argmax(d)])
+    chosen = [first, second]
+    if K == 3:
+        axis = (R[second] - R[first]) / max(float(np.linalg.norm(R[second] - R[first])), 1e-300)
+        off = np.linalg.norm(np.cross(R[cand] - R[first], axis), axis=1)
+        chosen.append(int(cand[np.argmax(off)]))
+    return np.array(chosen + [int(i) for i in order if int(i) not in chosen], dtype=int)
+
+
+def direction_lack_of_fit(fit: PlaneWaveFit, alpha: float) -> tuple[str, float] | None:
+    """(words, rms size) of a model error the residuals show, or None: per receiver, the residuals of its inliers
+    regressed on a constant and the quadratic forms of the direction of arrival (a per-channel delay,
+    directivity, the frame's shadow: what a point microphone does not hold; a part linear in the
+    direction is a shift of the microphone and cannot be seen), pooled in one F test at level alpha."""
+    m, K = fit.R.shape
+    U = fit.U
+    feats = [np.ones(len(U))] + [U[:, a] * U[:, b] for a in range(K) for b in range(a, K)][:-1]
+    X = np.column_stack(feats)                     # (n, p): the last square is 1 minus the others
+    p = X.shape[1]
+    E = np.where(fit.inliers, np.nan_to_num(fit.residuals), 0.0)
+    explained = 0.0
+    for i in range(m):
+        use = fit.inliers[i]
+        if use.sum() <= 2 * p:
+            continue
+        coef, *_ = np.linalg.lstsq(X[use], E[i, use], rcond=None)
+        explained += float(np.sum((X[use] @ coef) ** 2))
+    ssr = float(np.sum(E**2))
+    d1, d2 = p * m, fit.dof - p * m
+    if d2 <= 0 or ssr <= explained:
+        return None
+    F_stat = (explained / d1) / ((ssr - explained) / d2)
+    critical = float(stats.f.isf(alpha, d1, d2))
+    if F_stat <= critical:
+        return None
+    size = math.sqrt(explained / max(int(fit.inliers.sum()), 1))
+    return (f"the residuals depend on the direction of arrival at the receivers (F = {F_stat:.3g} > {critical:.3g}): "
+            f"a model error of rms {size:.2g} that point microphones do not hold (a per-channel delay, directivity, "
+            "the frame's shadow); its part linear in the direction moves each position (an acoustic centre) and is "
+            "not in the reported std, which comes from the noise alone"), size
+
+
+def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, opts: CalibrationOptions,
+                      warnings: list[str], seed) -> CalibrationResult:
+    """The CalibrationResult of a plane-wave adjustment, judged by the rule of the module docstring."""
+    m, n = F.shape
+    K = fit.R.shape[1]
+    mask = np.isfinite(F)
+    inl = fit.inliers
+    # the sources' ranges: determined where the 2-sigma interval in 1 / range stays above 0
+    srho = np.sqrt(np.maximum(fit.source_cov[:, K - 1, K - 1], 0.0))
+    determined = fit.rho > 2.0 * srho
+    lower = 1.0 / (np.maximum(fit.rho, 0.0) + 2.0 * srho)
+    ranges = np.where(determined, 1.0 / np.where(determined, fit.rho, 1.0), lower)
+    S = fit.U * ranges[:, None]
+    O = fit.o - ranges
+    # report in the gauge of the other route (receiver g1 at 0, g2 on +x, g3 in xy)
+    order = _spread_gauge(fit.R, inl)
+    moved = to_gauge(fit.R[order], np.vstack([S, fit.U, np.zeros((1, K))]))
+    R = fit.R.copy()
+    R[order], rest = moved
+    S, Ug = rest[:n], rest[n:2 * n] - rest[2 * n]
+    Q = np.linalg.lstsq(fit.U, Ug, rcond=None)[0].T        # the rotation applied (u -> Q u)
+    QQ = np.kron(np.eye(m), Q)
+    cov = _s_transform(QQ @ fit.cov_rr @ QQ.T, R, order[:K])
+    rcov = np.stack([cov[i * K:(i + 1) * K, i * K:(i + 1) * K] for i in range(m)])
+    rstd = np.sqrt(np.maximum(np.einsum("iaa->i", rcov), 0.0))
+    # transmitters: (angles, rho, o) -> (s, o - 1 / rho), rotated into the gauge frame
+    # (the range's error is skewed: 1 / rho; along the range the std is that of the far side of the 1-sigma
+    # interval in rho, 1 / (rho - s) - 1 / rho = s / (rho (rho - s)), as frame.widen_far_ranges does)
+    along = np.where(determined, 1.0 / np.where(determined, fit.rho * (fit.rho - srho), 1.0), 0.0)
+    J = np.zeros((n, K + 1, K + 1))
+    J[:, :K, :K - 1] = fit.tangents * ranges[:, None, None]
+    J[:, :K, K - 1] = -fit.U * along[:, None]
+    J[:, K, K - 1] = along
+    J[:, K, K] = 1.0
+    Rot = np.eye(K + 1)
+    Rot[:K, :K] = Q
+    tcov = np.einsum("ab,jbc,jcd,jed,fe->jaf", Rot, J, fit.source_cov, J, Rot)
+    tcov[~determined] = np.inf
+    tstd = np.where(determined, np.sqrt(np.maximum(np.einsum("jaa->j", tcov[:, :K, :K]), 0.0)), np.inf)
+    ostd = np.where(determined, np.sqrt(np.maximum(tcov[:, K, K], 0.0)), np.inf)
+    dir_std = np.degrees(np.sqrt(np.maximum(np.einsum("jaa->j", fit.source_cov[:, :K - 1, :K - 1]), 0.0)))
+
+    found: list[tuple[str, str]] = []
+    kept = float(inl.sum()) / max(int(work.sum()), 1)
+    if kept < 2.0 / 3.0:
+        found.append(("inconsistent", f"the model explains only {100 * kept:.0f} % of the measurements"))
+    if not fit.converged:
+        found.append(("unconverged", "the plane-wave adjustment did not converge within its iteration budget"))
+    if sigma is not None:
+        statistic = float(np.nansum(np.where(inl, fit.residuals, 0.0) ** 2)) / sigma**2
+        critical = float(stats.chi2.isf(opts.alpha_global, max(fit.dof, 1)))
+        if statistic > critical:
+            found.append(("inconsistent", f"the global test of the model fails: SSR / sigma^2 = {statistic:.4g} > "
+                          f"{critical:.4g} (chi^2, {fit.dof} degrees of freedom): the residuals are "
+                          f"{math.sqrt(statistic / max(fit.dof, 1)):.2g} x the given sigma; is sigma right, or the model?"))
+        global_test = (statistic, critical, statistic <= critical)
+    else:
+        global_test = None
+        if fit.dof < opts.min_dof_for_sigma:
+            found.append(("uncontrolled", f"too little redundancy to estimate sigma ({fit.dof} degrees of freedom)"))
+    found += kept_findings(mask, inl, np.ones(m, bool), np.ones(n, bool))
+    # receivers, per coordinate: the pooled covariance of their positions after a rigid alignment
+    pooled = np.einsum("iab->ab", fit.receiver_cov) / m
+    lam, vec = np.linalg.eigh(pooled)
+    if not (np.all(np.isfinite(rstd)) and lam[0] > 0):
+        found.append(("uncontrolled", "some receiver coordinates are not determined (std inf)"))
+    elif math.sqrt(lam[-1] / lam[0]) > WEAK_ANISOTROPY or (K == 3 and diagnosis.elevation_span < WEAK_SPAN_DEGREES):
+        # (the geometry decides too: with the sources on one elevation the height rests on the curvature
+        # alone, whatever its std from the noise says; the Pyramic array's middle loudspeaker: 4 x, 9 mm off)
+        axis = Q @ vec[:, -1]
+        axis = axis * np.sign(axis[np.argmax(np.abs(axis))])
+        span = (f"the sources span {diagnosis.elevation_span:.0f} deg of elevation: " if K == 3 and
+                np.isfinite(diagnosis.elevation_span) else "")
+        found.append(("uncontrolled", f"{span}the receivers' coordinate along ({', '.join(f'{a:.2f}' for a in axis)}) "
+                      f"(their height, across the plane of the source directions) is weakly determined: its std "
+                      f"{1e3 * math.sqrt(lam[-1]):.3g}e-3 against {1e3 * math.sqrt(lam[0]):.3g}e-3 across "
+                      f"({math.sqrt(lam[-1] / lam[0]):.0f} x); it rests on the wavefronts' curvature alone, which a model "
+                      "error swamps; sources at more elevations determine it"))
+    if not np.all(np.isfinite(dir_std)):
+        found.append(("uncontrolled", "some source directions are not determined (std inf)"))
+    notes = []
+    lack = direction_lack_of_fit(fit, opts.alpha)
+    if lack is not None and lack[1] >= MODEL_ERROR_SHARE * float(np.median(rstd[rstd > 0])):
+        # an unmodelled shift of the size of the receivers' std: that std is not their uncertainty
+        found.append(("uncontrolled", lack[0] + f"; it reaches {MODEL_ERROR_SHARE:g} x the receivers' median std "
+                      f"({float(np.median(rstd[rstd > 0])):.2g}): their positions are not checked to that std"))
+    elif lack is not None:
+        notes.append(lack[0])
+    if (~determined).any():
+        notes.append(f"{int((~determined).sum())} of {n} source ranges are not determined (plane waves: the 2-sigma "
+                     "interval in 1 / range reaches 0): each such source is placed at the lower bound of its range "
+                     f"(std inf; {_names('s', np.flatnonzero(~determined))}); their directions are determined "
+                     f"(median std {np.median(dir_std[~determined]):.2g} deg)")
+    status = worst("ok", *(s for s, _ in found))
+    warnings = [w for _, w in found] + notes + list(warnings)
+    E = fit.residuals
+    rms = float(np.sqrt(np.mean(E[inl] ** 2))) if inl.any() else float("nan")
+    redundancy = np.where(inl, fit.redundancy, np.nan)
+    res = CalibrationResult(
+        status=status, message="", receivers=R, transmitters=S, offsets=O, inliers=inl, residuals=E, rms=rms,
+        sigma=float(fit.sigma), sigma_estimated=sigma is None, receiver_std=rstd, transmitter_std=tstd,
+        offset_std=ostd, warnings=tuple(warnings), solver="factorization", seed=seed, dof=fit.dof,
+        global_test=global_test, redundancy=redundancy, w_test=fit.w, critical_value=float(fit.critical),
+        uncontrolled=inl & (np.nan_to_num(redundancy, nan=1.0) < opts.min_redundancy), measured=mask,
+        gauge=tuple(int(g) for g in order[:K]), receiver_cov=rcov, transmitter_cov=tcov,
+    )
+    why = found[0][1] if found else (notes[0] if notes else "plane waves: every receiver and direction determined")
+    return replace(res, message=message(status, res, why))
+
+
+#: A search that would need more samples than this for its confidence cannot reach it (at ~3 ms a 3D sample,
+#: hours): its message says so instead of a count of samples short.
+SEARCH_REACH = 1e6
+
+
+def _marginal_rejections(rejected, inl, w_test, redundancy, crit: float, opts: CalibrationOptions) -> list:
+    """Rejected entries (i, j) whose test statistic lies between 1 and 3 critical values, at a receiver or
+    transmitter that keeps an entry of redundancy number below opts.weak_redundancy.
+
+    A gross error is far beyond the critical value; a rejection just beyond it is either a small error
+    or the symptom of an error the fit absorbed at the same node: an entry of small redundancy number
+    pulls its node without showing in its own test, the node's good entries then look wrong (12r/8s,
+    1 mm, 5 % gross errors, sigma estimated 18 x too large: one kept at r 0.047, two good ones rejected
+    at 1.5 and 4 critical values, a receiver 12 std off under status "ok"). With sigma unknown nothing
+    tells the two apart."""
+    if not np.isfinite(crit) or not rejected.any():
+        return []
+    weak = inl & (np.nan_to_num(redundancy, nan=1.0) < opts.weak_redundancy)
+    aw = np.abs(np.nan_to_num(w_test, nan=np.inf))
+    marginal = rejected & (aw > crit) & (aw <= 3.0 * crit) & (weak.any(axis=1)[:, None] | weak.any(axis=0)[None, :])
+    return [(int(i), int(j)) for i, j in np.argwhere(marginal)]
+
+
+def _weak_at(marginal: list, inl, redundancy, opts: CalibrationOptions) -> list:
+    """The kept entries of redundancy number below opts.weak_redundancy at the receivers and transmitters
+    of the marginal rejections (i, j): where an absorbed error would sit."""
+    weak = inl & (np.nan_to_num(redundancy, nan=1.0) < opts.weak_redundancy)
+    rows = np.zeros(weak.shape[0], bool)
+    cols = np.zeros(weak.shape[1], bool)
+    for i, j in marginal:
+        rows[i] = cols[j] = True
+    return [(int(i), int(j)) for i, j in np.argwhere(weak & (rows[:, None] | cols[None, :]))]
+
+
+def _short_search(search: _Search, short_of: int, opts: CalibrationOptions, sigma_unknown: bool) -> str:
+    """The finding of a hypothesis search stopped by its budget before its confidence."""
+    advice = "give sigma, or raise max_samples" if sigma_unknown else "raise max_samples"
+    head = f"the hypothesis search stopped at its budget of {opts.max_samples} samples"
+    if search.needed > SEARCH_REACH:
+        needed = f"about {search.needed:.2g}" if math.isfinite(search.needed) else "no finite number of"
+        return (f"{head} and cannot reach the {opts.confidence:g} confidence of a sample without gross errors at "
+                f"this gross-error rate (its best hypothesis explains {100 * search.share:.0f} % of the measurements: "
+                f"{needed} samples would be needed): a better calibration may exist ({advice})")
+    return (f"{head}, {short_of} short of the {opts.confidence:g} confidence of a sample without gross errors: a "
+            f"better calibration may exist ({advice})")
+
+
+def route_note(route: str) -> str:
+    return "no outlier: every measurement kept" if route == "all data" else "outliers rejected by data snooping"
