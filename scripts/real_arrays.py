@@ -9,7 +9,7 @@ microphone positions and against the array makers' own far-field calibration, af
 error in units of its reported std (inf when a std is infinite: the receiver is reported undetermined).
 
 Committed: statuses and errors rounded to 0.1 mm (results); seconds and load go to
-`tables/real_arrays.meta.json` (run facts).
+`tables/real_arrays.timing.json` (run facts).
 
     python scripts/real_arrays.py [--cases all,every5,...] [--out tables]
 """
@@ -78,7 +78,7 @@ def run_case(name: str) -> tuple[dict, float]:
     row.update(rms_manual_mm=f"{1e3 * rms_m:.1f}", max_manual_mm=f"{1e3 * max_m:.1f}",
                rms_makers_mm=f"{1e3 * rms_c:.1f}",
                median_std_mm=f"{1e3 * float(np.median(std)):.1f}" if np.all(np.isfinite(std)) else "inf",
-               message=result.message.split(" - ")[0])
+               why=result.message.partition(" - ")[2] or result.message)
     return row, seconds
 
 
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
           "| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
     md += ["| " + " | ".join(str(v) for v in r) + " |" for r in table.itertuples(index=False)]
     (args.out / "real_arrays.md").write_text("\n".join(md) + "\n", encoding="utf-8")
-    (args.out / "real_arrays.meta.json").write_text(json.dumps(facts, indent=1) + "\n", encoding="utf-8")
+    (args.out / "real_arrays.timing.json").write_text(json.dumps(facts, indent=1) + "\n", encoding="utf-8")
     print(table.to_string(index=False))
     return 0
 
