@@ -27,12 +27,12 @@ upsampling, so it is written here (scripts/room_simulation.py uses it against th
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 __all__ = ["AUDIO_MAGIC", "GccPeak", "Recording", "RecordingError", "TdoaMatrix", "TdoaOptions", "detect_events",
-           "gcc_phat", "is_recording", "read_recording", "tdoa_matrix"]
+           "frame_power", "gcc_phat", "is_recording", "no_data", "read_recording", "recording_events", "tdoa_matrix"]
 
 #: The first bytes of the audio containers soundfile reads that `calibrate` recognises as a recording.
 AUDIO_MAGIC = (b"RIFF", b"RIFX", b"RF64", b"fLaC", b"FORM", b"OggS", b"caff", b"\x2enb")
@@ -42,26 +42,77 @@ class RecordingError(ValueError):
     """A recording that cannot be read or analysed; the message is one line naming the file."""
 
 
+#: Frames per block when a file is scanned or streamed (16 channels: 8 MB of float64).
+BLOCK_FRAMES = 1 << 16
+
+#: A recording larger than this (bytes of float64 samples) is streamed from its files: only the blocks an
+#: analysis needs are in memory (the frame power, then each event's segment).
+STREAM_ABOVE = 256 << 20
+
+#: Bits of the integer sample formats whose full scale is known (libsndfile's subtype names).
+_PCM_BITS = {"PCM_S8": 8, "PCM_U8": 8, "PCM_16": 16, "PCM_24": 24, "PCM_32": 32}
+
+
 @dataclass(frozen=True)
 class Recording:
     """Samples of every channel on one clock.
 
-    samples : (channels, frames) float64
+    samples : (channels, frames) float64, or None for a recording streamed from its files (`files`)
     rate : sample rate in Hz
     channels : one name per channel (the file's stem per file, or 1, 2, ... within one file)
     source : the file name(s), for messages
-    notes : what the reader did that a user should know (channels trimmed to the shortest file)
+    notes : what the reader found that a user should know (channels trimmed to the shortest file, clipping,
+        8-bit samples)
+    files : a streamed recording's files, (path, channels) each, read block by block (:meth:`read`)
+    length : a streamed recording's frames (every file trimmed to it)
+
+    Every analysis reads through :meth:`read` and :meth:`blocks`, in memory or streamed alike.
     """
 
-    samples: np.ndarray
+    samples: np.ndarray | None
     rate: int
     channels: tuple[str, ...]
     source: str
     notes: tuple[str, ...] = ()
+    files: tuple[tuple[str, int], ...] = ()
+    length: int = 0
+
+    @property
+    def frames(self) -> int:
+        return self.samples.shape[1] if self.samples is not None else self.length
 
     @property
     def seconds(self) -> float:
-        return self.samples.shape[1] / self.rate
+        return self.frames / self.rate
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """(channels, stop - start) float64: the frames start..stop (clipped to the recording)."""
+        start, stop = max(0, int(start)), min(self.frames, int(stop))
+        if self.samples is not None:
+            return self.samples[:, start:stop]
+        import soundfile
+
+        parts = [soundfile.read(path, start=start, stop=stop, dtype="float64", always_2d=True)[0].T
+                 for path, _ in self.files]
+        return np.vstack(parts) if len(parts) > 1 else parts[0]
+
+    def blocks(self, size: int = BLOCK_FRAMES):
+        """(start frame, (channels, <= size) block) over the whole recording, in order (bounded memory)."""
+        if self.samples is not None:
+            for a in range(0, self.frames, size):
+                yield a, self.samples[:, a:a + size]
+            return
+        import soundfile
+
+        handles = [soundfile.SoundFile(path) for path, _ in self.files]
+        try:
+            for a in range(0, self.frames, size):
+                n = min(size, self.frames - a)
+                parts = [h.read(n, dtype="float64", always_2d=True).T for h in handles]
+                yield a, (np.vstack(parts) if len(parts) > 1 else parts[0])
+        finally:
+            for h in handles:
+                h.close()
 
 
 def is_recording(path: str) -> bool:
@@ -76,7 +127,23 @@ def is_recording(path: str) -> bool:
     return head in AUDIO_MAGIC
 
 
-def _read_one(path: str):
+def no_data(source: str, why: str = "empty file") -> str:
+    """The one words for input without data, the same for a recording and a measurement CSV."""
+    return f"{source}: no data ({why})"
+
+
+@dataclass
+class _Scan:
+    """What one pass over a file's blocks found, per channel: samples at full scale, non-finite samples and
+    the first frame of one (-1: none)."""
+
+    clipped: np.ndarray
+    bad: np.ndarray
+    first_bad: int = -1
+
+
+def _open_one(path: str):
+    """(soundfile info) of one file, or RecordingError with the words every verb uses."""
     try:
         import soundfile
     except ImportError:
@@ -86,58 +153,115 @@ def _read_one(path: str):
     if os.path.isdir(path):
         raise RecordingError(f"cannot read {path}: it is a directory")
     try:
-        data, rate = soundfile.read(path, dtype="float64", always_2d=True)
-    except FileNotFoundError:
-        raise RecordingError(f"cannot read {path}: no such file") from None
+        if os.path.getsize(path) == 0:
+            raise RecordingError(no_data(path))
+        info = soundfile.info(path)
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from None
     except (RuntimeError, soundfile.SoundFileError) as exc:  # libsndfile: not an audio file it knows
         raise RecordingError(f"cannot read {path} as audio: {' '.join(str(exc).split())}") from None
-    if data.shape[0] == 0:
-        raise RecordingError(f"{path}: no samples")
-    if not np.all(np.isfinite(data)):
-        raise RecordingError(f"{path}: non-finite samples")
-    return data.T, int(rate)
+    if info.frames == 0:
+        raise RecordingError(no_data(path, "no samples"))
+    return info
 
 
-def read_recording(paths) -> Recording:
+def _full_scale(subtype: str) -> float:
+    """The magnitude at and above which a sample of this format is at full scale: one step below 1 for
+    integer formats (their positive maximum), 1 for float formats and the rest."""
+    bits = _PCM_BITS.get(subtype)
+    return 1.0 - 2.0 ** (1 - bits) if bits else 1.0
+
+
+def _scan(recording: "Recording", full: np.ndarray) -> _Scan:
+    """One pass over the recording's blocks: per channel, the samples at full scale (|x| >= full) and the
+    non-finite ones."""
+    m = len(recording.channels)
+    scan = _Scan(np.zeros(m, np.int64), np.zeros(m, np.int64))
+    for a, block in recording.blocks():
+        finite = np.isfinite(block)
+        if not finite.all():
+            bad = (~finite).sum(axis=1)
+            if scan.first_bad < 0:
+                scan.first_bad = a + int(np.flatnonzero((~finite).any(axis=0))[0])
+            scan.bad += bad
+        with np.errstate(invalid="ignore"):
+            scan.clipped += (np.abs(block) >= full[:, None]).sum(axis=1)
+    return scan
+
+
+def _percent(share: float) -> str:
+    """A share as a percentage that never rounds a non-zero share to 0."""
+    if share == 0:
+        return "0 %"
+    value = 100 * share
+    return f"{value:.2g} %" if value >= 0.01 else "< 0.01 %"
+
+
+def read_recording(paths, *, stream: bool | None = None) -> Recording:
     """Read one multichannel file, or one file per channel (every channel of each file, in order).
 
     Parameters
     ----------
     paths : a path or a sequence of paths (WAV, FLAC, or anything libsndfile reads)
+    stream : True: leave the samples in the files, read block by block when analysed (bounded memory);
+        False: read them into memory; None (default): stream when the samples take more than STREAM_ABOVE
+        bytes as float64
 
     The files must share a sample rate; files of different lengths are trimmed to the shortest (a note
-    says so). Raises RecordingError (one line) for a missing or unreadable file, a rate mismatch, or
-    fewer than two channels in all.
+    says so). Every sample is scanned once, block by block: samples at full scale (clipping) and 8-bit
+    formats are notes (a warning with the share of clipped samples per channel); a missing, unreadable or
+    empty file, a rate mismatch, non-finite samples (NaN) or fewer than two channels in all raise
+    RecordingError (one line).
     """
     paths = [paths] if isinstance(paths, str) else list(paths)
     if not paths:
         raise RecordingError("no recording given")
-    parts = [(p, *_read_one(p)) for p in paths]
-    rates = {rate for _, _, rate in parts}
+    infos = [_open_one(p) for p in paths]
+    rates = {int(info.samplerate) for info in infos}
     if len(rates) > 1:
-        listed = ", ".join(f"{p}: {rate} Hz" for p, _, rate in parts)
+        listed = ", ".join(f"{p}: {int(info.samplerate)} Hz" for p, info in zip(paths, infos))
         raise RecordingError(f"the files have different sample rates ({listed}); resample them to one")
     rate = rates.pop()
-    lengths = [x.shape[1] for _, x, _ in parts]
+    source = paths[0] if len(paths) == 1 else f"{paths[0]} (+{len(paths) - 1} files)"
+    widths = [int(info.channels) for info in infos]
+    if sum(widths) < 2:
+        raise RecordingError(f"{source}: one channel; a time difference needs two or more (a multichannel file, "
+                             "or one file per microphone)")
+    lengths = [int(info.frames) for info in infos]
     frames = min(lengths)
     notes = ()
     if len(set(lengths)) > 1:
         notes = (f"files of {min(lengths)} to {max(lengths)} frames: trimmed to the shortest",)
-    samples = np.vstack([x[:, :frames] for _, x, _ in parts])
-    if len(parts) == 1:
-        names = tuple(str(k + 1) for k in range(samples.shape[0]))
+    if len(paths) == 1:
+        names = tuple(str(k + 1) for k in range(widths[0]))
     else:
-        stems = [os.path.splitext(os.path.basename(p))[0] for p, _, _ in parts]
-        names = tuple(f"{stem}.{c + 1}" if x.shape[0] > 1 else stem for stem, (_, x, _) in zip(stems, parts)
-                      for c in range(x.shape[0]))
+        stems = [os.path.splitext(os.path.basename(p))[0] for p in paths]
+        names = tuple(f"{stem}.{c + 1}" if w > 1 else stem for stem, w in zip(stems, widths) for c in range(w))
         if len(set(names)) < len(names):
             names = tuple(str(k + 1) for k in range(len(names)))
-    source = paths[0] if len(paths) == 1 else f"{paths[0]} (+{len(paths) - 1} files)"
-    if samples.shape[0] < 2:
-        raise RecordingError(f"{source}: one channel; a time difference needs two or more (a multichannel file, "
-                             "or one file per microphone)")
+    streamed = Recording(None, rate, names, source, notes, tuple(zip(paths, widths)), frames)
+    full = np.concatenate([np.full(w, _full_scale(info.subtype)) for w, info in zip(widths, infos)])
+    scan = _scan(streamed, full)
+    if scan.bad.any():
+        which = ", ".join(names[c] for c in np.flatnonzero(scan.bad))
+        raise RecordingError(f"{source}: {int(scan.bad.sum())} samples are NaN or infinite (channel(s) {which}; the "
+                             f"first at {scan.first_bad / rate:.3f} s): a recording needs finite samples")
+    eight = [p for p, info in zip(paths, infos) if _PCM_BITS.get(info.subtype) == 8]
+    if eight:
+        notes += (f"8-bit samples ({', '.join(eight)}): quantisation noise about 48 dB below full scale; quiet "
+                  "sounds' time differences are the noisier",)
+    if scan.clipped.any():
+        shares = ", ".join(f"{names[c]} {_percent(scan.clipped[c] / frames)}" for c in np.flatnonzero(scan.clipped))
+        rest = "" if scan.clipped.all() else "; the other channels none"
+        notes += (f"warning: clipping: samples at full scale, the share per channel: {shares}{rest}; a clipped "
+                  "sound's waveform and timing are distorted (record at a lower gain)",)
+    if stream is None:
+        stream = frames * len(names) * 8 > STREAM_ABOVE
+    if stream:
+        return replace(streamed, notes=notes)
+    samples = np.empty((len(names), frames))
+    for a, block in streamed.blocks():
+        samples[:, a:a + block.shape[1]] = block
     return Recording(samples, rate, names, source, notes)
 
 
@@ -293,14 +417,34 @@ class TdoaOptions:
 
 
 def detect_events(samples: np.ndarray, rate: int, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
-    """(events, 2) sample ranges [start, end) of the sound events: runs of frames whose power (mean
-    over channels) is more than threshold_db above the background, closed by min_gap of quiet
-    (threshold_db - 3 dB: hysteresis), in time order."""
-    hop = max(1, int(round(options.frame * rate)))
-    frames = samples.shape[1] // hop
+    """(events, 2) sample ranges [start, end) of the sound events of (channels, frames) samples: runs of frames
+    whose power (mean over channels) is more than threshold_db above the background, closed by min_gap of quiet
+    (threshold_db - 3 dB: hysteresis), in time order (recording_events of the samples)."""
+    samples = np.asarray(samples, dtype=float)
+    names = tuple(str(k + 1) for k in range(samples.shape[0]))
+    return recording_events(Recording(samples, rate, names, "samples"), options)
+
+
+def frame_power(recording: Recording, hop: int) -> np.ndarray:
+    """(frames,) the power of every whole frame of `hop` samples, averaged over the channels, read block by
+    block (a streamed recording is never in memory whole)."""
+    m = len(recording.channels)
+    size = hop * max(1, BLOCK_FRAMES // hop)
+    parts = []
+    for _, block in recording.blocks(size):
+        whole = block.shape[1] // hop
+        if whole:
+            parts.append(np.mean(block[:, : whole * hop].reshape(m, whole, hop) ** 2, axis=(0, 2)))
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def recording_events(recording: Recording, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
+    """(events, 2) sample ranges [start, end) of the recording's sound events (detect_events says how)."""
+    hop = max(1, int(round(options.frame * recording.rate)))
+    power = frame_power(recording, hop)
+    frames = len(power)
     if frames < 2:
         return np.zeros((0, 2), int)
-    power = np.mean(samples[:, : frames * hop].reshape(samples.shape[0], frames, hop) ** 2, axis=(0, 2))
     floor = max(float(np.percentile(power, 10)), 1e-30)
     level = 10 * np.log10(np.maximum(power, 1e-30) / floor)
     loud, quiet = level > options.threshold_db, level < options.threshold_db - 3.0
@@ -512,22 +656,23 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
     or None (the event left missing) into the matrix: an entry is kept with support >= min_support; an
     event whose channels agree on fewer than that share of the pairs (default options.min_agreement) is
     left missing whole."""
-    x, rate = recording.samples, recording.rate
-    events = detect_events(x, rate, options)
+    rate = recording.rate
+    events = recording_events(recording, options)
     if len(events) == 0:
         raise RecordingError(f"{recording.source}: no sound event found (nothing {options.threshold_db:g} dB above the "
                              "background; lower the threshold, or check the recording)")
     max_lag = max(1, int(np.ceil(options.max_distance / options.speed * rate)))
     length = int(round(options.window * rate))
-    m, n = x.shape[0], len(events)
+    m, n = len(recording.channels), len(events)
     F = np.full((m, n), np.nan)
     conf = np.zeros((m, n))
     ref = np.zeros(n, int)
     onsets = events[:, 0] / rate
     dropped: dict[float, list[int]] = {}
     for j, (start, _end) in enumerate(events):
-        a, b = max(0, start - max_lag), min(x.shape[1], start + length + max_lag)
-        seg = x[:, a:b] - x[:, a:b].mean(axis=1, keepdims=True)
+        a, b = max(0, start - max_lag), min(recording.frames, start + length + max_lag)
+        seg = recording.read(a, b)  # one event's frames: a streamed recording reads them from its files
+        seg = seg - seg.mean(axis=1, keepdims=True)
         after = np.maximum(np.arange(a, b) - start, 0) / rate  # the direct sound weighs more than the tail
         got = arrivals(j, seg, after, max_lag)
         if got is None:

@@ -284,7 +284,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     rate, speed = recording.rate, options.speed
     scale = rate / speed  # metres -> samples of sound travel
     R = np.asarray(receivers, dtype=float)
-    m = recording.samples.shape[0]
+    m = len(recording.channels)
     if R.ndim != 2 or R.shape[0] != m or not np.all(np.isfinite(R)):
         raise ValueError(f"receivers must be ({m}, dim) finite positions, one per channel; got shape {R.shape}")
     dim = R.shape[1]

@@ -44,6 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .audio import no_data
+
 __all__ = ["DELIMITERS", "HEADERS", "MeasurementFileError", "Measurements", "check_output_path", "format_matrix",
            "parse_measurements", "plot_calibration", "plot_formats", "read_input", "read_measurements", "report_dict",
            "write_json", "write_nodes_csv"]
@@ -307,6 +309,8 @@ def read_measurements(path: str, *, delimiter: str | None = None, header: str = 
                 data = handle.read()
     except OSError as exc:
         raise MeasurementFileError(f"cannot read {source}: {exc.strerror or exc}") from None
+    if not data and path != _STDIN:
+        raise MeasurementFileError(no_data(source))  # a 0-byte file: the words a recording's reader uses
     return parse_measurements(_decode(data, source), source, delimiter=delimiter, header=header)
 
 

@@ -211,3 +211,115 @@ def test_a_committed_room_of_tables_audio3d_is_recomputed(seed):
         committed = next(r for r in csv.DictReader(handle) if r["seed"] == str(seed))
     row = script.run(seed, (8, 16), (10, 30), (0.2, 0.6), 20.0)
     assert {k: str(v) for k, v in row.items()} == committed
+
+
+# --------------------------------------------------------------------------------------------------
+# One reader per input kind: clipped, 8-bit, mono, empty, NaN; streamed as read whole
+# --------------------------------------------------------------------------------------------------
+
+
+def test_clipping_is_a_warning_with_the_share_of_clipped_samples_per_channel(tmp_path):
+    rng = np.random.default_rng(4)
+    x = 0.3 * rng.uniform(-1, 1, (3, 10_000))
+    x[1, 1000:1100] = 1.0  # 100 samples at positive full scale
+    x[1, 5000:5050] = -1.0  # and 50 at negative
+    x[2, 7000:7010] = 1.0
+    write_channels(tmp_path / "clip.wav", x, subtype="PCM_16")
+    rec = read_recording(str(tmp_path / "clip.wav"))
+    [note] = [n for n in rec.notes if "clipping" in n]
+    assert note.startswith("warning: clipping") and "\n" not in note
+    listed = note.split("the share per channel: ")[1].split(";")[0]
+    assert listed == "2 1.5 %, 3 0.1 %" and "the other channels none" in note  # 150 / 10000, 10 / 10000
+    for subtype in ("PCM_24", "FLOAT"):  # every format's full scale
+        write_channels(tmp_path / f"clip_{subtype}.wav", x, subtype=subtype)
+        again = read_recording(str(tmp_path / f"clip_{subtype}.wav"))
+        assert any("2 1.5 %" in n for n in again.notes), subtype
+    write_channels(tmp_path / "clean.wav", x * 0.5, subtype="PCM_16")
+    assert not any("clipping" in n for n in read_recording(str(tmp_path / "clean.wav")).notes)
+
+
+def test_8_bit_samples_are_a_note(tmp_path):
+    x = 0.5 * np.random.default_rng(5).uniform(-1, 1, (2, 4000))
+    write_channels(tmp_path / "u8.wav", x, subtype="PCM_U8")
+    rec = read_recording(str(tmp_path / "u8.wav"))
+    assert any(n.startswith("8-bit samples") and "48 dB" in n for n in rec.notes)
+    write_channels(tmp_path / "s16.wav", x, subtype="PCM_16")
+    assert not any("8-bit" in n for n in read_recording(str(tmp_path / "s16.wav")).notes)
+
+
+def test_nan_and_empty_inputs_are_one_line_errors(tmp_path):
+    x = 0.1 * np.random.default_rng(6).standard_normal((3, 4000))
+    x[2, 1600] = np.nan
+    x[2, 1700] = np.inf
+    write_channels(tmp_path / "nan.wav", x, subtype="FLOAT")
+    with pytest.raises(RecordingError, match=r"nan\.wav: 2 samples are NaN or infinite \(channel\(s\) 3; the first at "
+                       r"0\.100 s\)") as info:
+        read_recording(str(tmp_path / "nan.wav"))
+    assert "\n" not in str(info.value)
+    (tmp_path / "empty.wav").write_bytes(b"")
+    with pytest.raises(RecordingError, match=r"empty\.wav: no data \(empty file\)$"):
+        read_recording(str(tmp_path / "empty.wav"))
+    write_channels(tmp_path / "header_only.wav", np.zeros((2, 0)))
+    with pytest.raises(RecordingError, match=r"header_only\.wav: no data \(no samples\)$"):
+        read_recording(str(tmp_path / "header_only.wav"))
+
+
+def _last_error(capsys, argv) -> tuple[int, str]:
+    try:
+        code = main(argv)
+    except SystemExit as e:
+        code = e.code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err.strip().splitlines()[-1]
+
+
+def test_the_verbs_say_the_same_words_for_empty_mono_and_nan_input(tmp_path, capsys):
+    (tmp_path / "empty.wav").write_bytes(b"")
+    write_channels(tmp_path / "mono.wav", 0.1 * np.ones((1, 4000)))
+    x = 0.1 * np.random.default_rng(7).standard_normal((3, 4000))
+    x[0, 10] = np.nan
+    write_channels(tmp_path / "nan.wav", x, subtype="FLOAT")
+    for name, fragment in (("empty.wav", "empty.wav: no data (empty file)"), ("mono.wav", "one channel"),
+                           ("nan.wav", "samples are NaN or infinite")):
+        said = []
+        for verb in ("tdoa", "calibrate"):
+            code, last = _last_error(capsys, [verb, str(tmp_path / name)])
+            assert code == 2 and last.startswith("tdoa-workbench ") and ": error: " in last
+            assert fragment in last, (verb, last)
+            said.append(last.split(": error: ")[1])
+        assert said[0] == said[1], said  # one reader, the same words
+
+
+def test_verbs_warn_of_clipping_on_stderr(tmp_path, capsys):
+    rng = np.random.default_rng(8)
+    delays = rng.uniform(0.0, 40.0, (4, 2))
+    x = 0.3 * synthetic_recording(rng, delays, [0.4, 1.2])
+    x[0] = np.clip(8 * x[0], -1, 1)  # channel 1 driven into clipping
+    write_channels(tmp_path / "rec.wav", x, subtype="PCM_16")
+    assert main(["tdoa", str(tmp_path / "rec.wav"), "--out", str(tmp_path / "m.csv"), "--max-distance", "2",
+                 "--no-guide"]) == 0
+    err = capsys.readouterr().err
+    said = [line for line in err.splitlines() if "warning: clipping" in line]
+    assert len(said) == 1, err
+    line = said[0]
+    assert line.startswith("tdoa: warning: clipping: samples at full scale, the share per channel: 1 ")
+    assert "the other channels none" in line
+
+
+def test_a_streamed_recording_gives_the_matrix_of_one_read_whole(tmp_path):
+    rng = np.random.default_rng(9)
+    delays = rng.uniform(0.0, 40.0, (4, 3))
+    x = 0.3 * synthetic_recording(rng, delays, [0.3, 0.9, 1.5])
+    write_channels(tmp_path / "rec.wav", x)
+    for k in range(4):
+        write_channels(tmp_path / f"mic{k}.flac", x[k : k + 1])
+    options = TdoaOptions(max_distance=2.0)
+    for paths in (str(tmp_path / "rec.wav"), [str(tmp_path / f"mic{k}.flac") for k in range(4)]):
+        whole = read_recording(paths, stream=False)
+        assert whole.samples is not None
+        streamed = read_recording(paths, stream=True)
+        assert streamed.samples is None and streamed.frames == x.shape[1]
+        assert np.array_equal(streamed.read(100, 5000), whole.read(100, 5000))
+        a, b = tdoa_matrix(whole, options), tdoa_matrix(streamed, options)
+        assert np.array_equal(a.F, b.F, equal_nan=True) and np.array_equal(a.confidence, b.confidence)
