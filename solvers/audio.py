@@ -30,9 +30,10 @@ import os
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 __all__ = ["AUDIO_MAGIC", "GccPeak", "Recording", "RecordingError", "TdoaMatrix", "TdoaOptions", "detect_events",
-           "frame_power", "gcc_phat", "is_recording", "no_data", "read_recording", "recording_events", "tdoa_matrix"]
+           "frame_power", "gcc_phat", "matched_filter", "is_recording", "no_data", "read_recording", "read_signal", "recording_events", "tdoa_matrix"]
 
 #: The first bytes of the audio containers soundfile reads that `calibrate` recognises as a recording.
 AUDIO_MAGIC = (b"RIFF", b"RIFX", b"RF64", b"fLaC", b"FORM", b"OggS", b"caff", b"\x2enb")
@@ -197,6 +198,23 @@ def _percent(share: float) -> str:
     return f"{value:.2g} %" if value >= 0.01 else "< 0.01 %"
 
 
+def read_signal(path: str) -> tuple[np.ndarray, int]:
+    """(samples, rate) of an emitted sound (`--signal FILE`): one channel, finite, not silent; the same
+    words as read_recording for a missing, unreadable or empty file. Raises RecordingError (one line)."""
+    import soundfile
+
+    info = _open_one(path)
+    if info.channels != 1:
+        raise RecordingError(f"{path}: {info.channels} channels; the emitted signal is one channel")
+    data, rate = soundfile.read(path, dtype="float64")
+    if not np.all(np.isfinite(data)):
+        raise RecordingError(f"{path}: {int(np.sum(~np.isfinite(data)))} samples are NaN or infinite: a signal needs "
+                             "finite samples")
+    if not np.any(data):
+        raise RecordingError(f"{path}: every sample is zero: no signal to match")
+    return data, int(rate)
+
+
 def read_recording(paths, *, stream: bool | None = None) -> Recording:
     """Read one multichannel file, or one file per channel (every channel of each file, in order).
 
@@ -326,7 +344,7 @@ def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None 
     Reference: Knapp & Carter, The generalized correlation method for estimation of time delay, 1976.
     """
     lo = -max_lag if min_lag is None else min_lag
-    n = len(x) + len(y)
+    n = next_fast_len(len(x) + len(y))  # no wrap-around; a length of small primes (a prime length is slow)
     window = _phat(np.fft.rfft(x, n) * np.conj(np.fft.rfft(y, n)), n, lo, max_lag)
     last = len(window) - 1
     k = top = int(np.argmax(window))
@@ -381,6 +399,12 @@ class TdoaOptions:
         loudest first (a start costs about m^3 x peaks^2 operations; on the simulated rooms 2 or 4
         starts gave the matrices all 14-16 gave; 48 channels: 1.1 s per event with 4, 5.8 s with 16)
     frame : seconds per power frame of the event detection
+    signal : None, or the emitted sound (1-D samples at the recording's rate; `tdoa --signal FILE`): every
+        channel of an event is first correlated with it (a matched filter: a sweep's or any long sound's
+        arrivals compressed into pulses at their times), over the whole sound's length, and the pairs'
+        GCC-PHAT and the taper then see the compressed pulses (the taper weighs the direct pulse, not the
+        sound's first tens of milliseconds)
+    signal_rate : the signal's sample rate (None: the recording's); a recording at another rate is an error
     """
 
     speed: float = 343.0
@@ -398,8 +422,15 @@ class TdoaOptions:
     retry_below: float = 0.7
     starts: int = 4
     frame: float = 0.005
+    signal: np.ndarray | None = field(default=None, compare=False, repr=False)
+    signal_rate: int | None = None
 
     def __post_init__(self) -> None:
+        if self.signal is not None:
+            sig = np.asarray(self.signal, dtype=float)
+            if sig.ndim != 1 or len(sig) < 2 or not np.all(np.isfinite(sig)) or not np.any(sig):
+                raise ValueError("signal must be one channel of finite samples, not all zero")
+            object.__setattr__(self, "signal", sig)
         for name in ("speed", "max_distance", "window", "frame", "min_gap", "threshold_db", "taper"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -490,18 +521,33 @@ class TdoaMatrix:
     notes: tuple[str, ...] = field(default=())
 
 
+def matched_filter(seg: np.ndarray, signal: np.ndarray) -> np.ndarray:
+    """(channels, frames - len(signal) + 1): each channel's correlation with the emitted signal,
+    out[t] = sum_s seg[t + s] signal[s]: a sound emitted at t shows as a pulse at t (zeros when the
+    segment is shorter than the signal: nothing to compress)."""
+    frames, L = seg.shape[1], len(signal)
+    if frames < L:
+        return np.zeros((seg.shape[0], 1))
+    n = next_fast_len(frames + L)
+    out = np.fft.irfft(np.fft.rfft(seg, n, axis=1) * np.conj(np.fft.rfft(signal, n))[None, :], n, axis=1)
+    return out[:, : frames - L + 1]
+
+
 def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int):
     """GCC-PHAT of every channel pair (i < k) of an event's segments: (i, k, lags (pairs, peaks),
     heights (pairs, peaks)), the `peaks` highest local maxima of each correlation over +-max_lag,
     parabolically refined (lag of channel i's sound behind channel k's, in samples)."""
     m, length = seg.shape
-    n = 2 * length
+    n = next_fast_len(2 * length)
     X = np.fft.rfft(seg, n, axis=1)
     i, k = np.triu_indices(m, 1)
     window = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag)
     inner = np.zeros_like(window, dtype=bool)
     inner[:, 1:-1] = (window[:, 1:-1] >= window[:, :-2]) & (window[:, 1:-1] > window[:, 2:])
-    ranked = np.argsort(np.where(inner, window, -np.inf), axis=1)[:, ::-1][:, :peaks]
+    masked = np.where(inner, window, -np.inf)
+    peaks = min(peaks, masked.shape[1])
+    top = np.argpartition(masked, masked.shape[1] - peaks, axis=1)[:, -peaks:]  # the peaks highest, unordered
+    ranked = np.take_along_axis(top, np.argsort(-np.take_along_axis(masked, top, axis=1), axis=1, kind="stable"), axis=1)
     rows = np.arange(len(i))[:, None]
     b = window[rows, ranked]
     shift = _parabola(window[rows, ranked - 1], b, window[rows, ranked + 1])
@@ -669,11 +715,17 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
     ref = np.zeros(n, int)
     onsets = events[:, 0] / rate
     dropped: dict[float, list[int]] = {}
+    emitted = 0 if options.signal is None else len(options.signal)
+    if emitted and options.signal_rate not in (None, rate):
+        raise RecordingError(f"the emitted signal is at {options.signal_rate} Hz, {recording.source} at {rate} Hz: "
+                             "resample the signal to the recording's rate")
     for j, (start, _end) in enumerate(events):
-        a, b = max(0, start - max_lag), min(recording.frames, start + length + max_lag)
+        a, b = max(0, start - max_lag), min(recording.frames, start + length + max_lag + emitted)
         seg = recording.read(a, b)  # one event's frames: a streamed recording reads them from its files
         seg = seg - seg.mean(axis=1, keepdims=True)
-        after = np.maximum(np.arange(a, b) - start, 0) / rate  # the direct sound weighs more than the tail
+        if emitted:
+            seg = matched_filter(seg, options.signal)
+        after = np.maximum(np.arange(a, a + seg.shape[1]) - start, 0) / rate  # the direct sound weighs more than the tail
         got = arrivals(j, seg, after, max_lag)
         if got is None:
             ref[j] = int(np.argmax(np.sum(seg**2, axis=1)))

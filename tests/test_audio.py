@@ -323,3 +323,50 @@ def test_a_streamed_recording_gives_the_matrix_of_one_read_whole(tmp_path):
         assert np.array_equal(streamed.read(100, 5000), whole.read(100, 5000))
         a, b = tdoa_matrix(whole, options), tdoa_matrix(streamed, options)
         assert np.array_equal(a.F, b.F, equal_nan=True) and np.array_equal(a.confidence, b.confidence)
+
+
+def _sweep(seconds: float, rate: int = RATE) -> np.ndarray:
+    from scipy.signal import chirp
+
+    t = np.arange(int(seconds * rate)) / rate
+    return chirp(t, f0=100.0, t1=t[-1], f1=0.4 * rate, method="logarithmic") * np.hanning(len(t)) ** 0.25
+
+
+def test_a_sweep_with_its_signal_given_is_compressed_into_its_arrivals(tmp_path, capsys):
+    """Half-second log sweeps with an echo of 0.8 x their level 2-6 ms later at every channel: with the emitted
+    sweep given (a matched filter) every time difference is within half a sample; the CLI reads --signal and
+    refuses a signal at another rate or with two channels in one line."""
+    rng = np.random.default_rng(11)
+    m, onsets, sweep = 6, [0.3, 1.3], _sweep(0.5)
+    delays = rng.uniform(0.0, 60.0, (m, 2))
+    x = 1e-3 * rng.standard_normal((m, int(2.2 * RATE)))
+    for j, onset in enumerate(onsets):
+        pad = np.zeros(len(sweep) + 2048)
+        pad[512 : 512 + len(sweep)] = sweep
+        start = int(onset * RATE) - 512
+        for i in range(m):
+            echo = delays[i, j] + rng.uniform(32, 96)
+            x[i, start : start + len(pad)] += delayed(pad, delays[i, j]) + 0.8 * delayed(pad, echo)
+    from solvers.audio import Recording
+
+    options = TdoaOptions(max_distance=2.0, signal=sweep)
+    tm = tdoa_matrix(Recording(0.2 * x, RATE, tuple("abcdef"), "synthetic"), options)
+    assert tm.F.shape == (m, 2) and np.all(np.isfinite(tm.F))
+    for j in range(2):
+        r = tm.reference[j]
+        measured = (tm.F[:, j] - tm.F[r, j]) / tm.speed * RATE
+        assert np.max(np.abs(measured - (delays[:, j] - delays[r, j]))) < 0.5
+    write_channels(tmp_path / "rec.wav", 0.2 * x)
+    soundfile.write(str(tmp_path / "sweep.wav"), sweep, RATE, subtype="FLOAT")
+    soundfile.write(str(tmp_path / "sweep48.wav"), sweep, 48_000, subtype="FLOAT")
+    soundfile.write(str(tmp_path / "stereo.wav"), np.column_stack([sweep, sweep]), RATE, subtype="FLOAT")
+    assert main(["tdoa", str(tmp_path / "rec.wav"), "--signal", str(tmp_path / "sweep.wav"), "--max-distance", "2",
+                 "--no-guide", "--out", str(tmp_path / "m.csv")]) == 0
+    assert np.allclose(read_measurements(str(tmp_path / "m.csv")).F, tm.F, atol=1e-3)  # 24-bit file, CSV digits
+    capsys.readouterr()
+    for signal, fragment in (("sweep48.wav", "the emitted signal is at 48000 Hz"), ("stereo.wav", "2 channels"),
+                             ("none.wav", "no such file")):
+        for verb in ("tdoa", "calibrate"):
+            code, last = _last_error(capsys, [verb, str(tmp_path / "rec.wav"), "--signal", str(tmp_path / signal),
+                                              "--max-distance", "2"])
+            assert code == 2 and fragment in last, (verb, last)
