@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .audio import (Recording, TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _measure, _over_tapers,
-                    _pair_candidates, tdoa_matrix)
+                    _pair_candidates, agreeing_pairs, tdoa_matrix)
 
 __all__ = ["GuideOptions", "GuidedTdoa", "guided_tdoa_matrix", "locate_source", "reconcile", "tdoa_and_calibrate",
            "tdoa_guided"]
@@ -253,9 +253,9 @@ def _guided_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, guide:
     m = seg.shape[0]
     i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks, beta)
     inside = np.abs(lags - (pred[i] - pred[k])[:, None]) <= half[i, k][:, None]
-    t, support = _consensus(m, r, i, k, np.where(inside, lags, np.nan), np.where(inside, heights, 0.0),
-                            options.tolerance, options.early, init=pred - pred[r])
-    return r, t, support
+    candidates = (i, k, np.where(inside, lags, np.nan), np.where(inside, heights, 0.0))
+    t, support = _consensus(m, r, *candidates, options.tolerance, options.early, init=pred - pred[r])
+    return r, t, support, agreeing_pairs(m, candidates, t, options.tolerance)
 
 
 def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, options: TdoaOptions = TdoaOptions(), *,

@@ -134,7 +134,7 @@ def test_an_event_that_agrees_poorly_is_analysed_again_with_the_retry_tapers():
     # moved back): the taper's knee then lies within the burst. (Moved back before the burst, an exponential
     # weight only scales each channel's delayed burst, exp(-(t - d) / taper) = exp(d / taper) exp(-t / taper),
     # and even 1 ms finds the delays)
-    late = dict(max_distance=8.0, taper=0.001, retry_weights=(), onset_db=5.0)
+    late = dict(max_distance=8.0, taper=0.001, retry_weights=(), onset_db=5.0, ambiguous=1.0)
     alone = tdoa_matrix(rec, TdoaOptions(retry_tapers=(), **late))
     assert np.isnan(alone.F).any()
     tm = tdoa_matrix(rec, TdoaOptions(retry_tapers=(0.05,), **late))
@@ -375,3 +375,40 @@ def test_a_sweep_with_its_signal_given_is_compressed_into_its_arrivals(tmp_path,
             code, last = _last_error(capsys, [verb, str(tmp_path / "rec.wav"), "--signal", str(tmp_path / signal),
                                               "--max-distance", "2"])
             assert code == 2 and fragment in last, (verb, last)
+
+
+def test_consistent_subset_peels_the_channels_that_disagree():
+    from solvers.audio import consistent_subset
+
+    ok = np.zeros((8, 8), bool)
+    ok[:5, :5] = True  # channels 0-4 agree with each other
+    ok[5, 0] = ok[0, 5] = ok[6, 1] = ok[1, 6] = ok[5, 7] = ok[7, 5] = True  # the others agree by chance, with one or two
+    np.fill_diagonal(ok, False)
+    assert consistent_subset(ok, 2, 0.8).tolist() == [True] * 5 + [False] * 3
+    assert not consistent_subset(np.zeros((4, 4), bool), 2, 0.8).any()
+    noisy = ok.copy()
+    noisy[0, 3] = noisy[3, 0] = False  # one pair of the five disagrees: each still agrees with 3 of 4 >= 0.75
+    assert consistent_subset(noisy, 2, 0.75).tolist() == [True] * 5 + [False] * 3
+
+
+
+
+def test_an_ambiguous_event_is_analysed_whole():
+    """Noise heard 7 samples apart has one correlation peak (ambiguity small; the rooms' periodic sounds measure
+    0.89-0.96, scripts/audio_kinds.py). An event judged ambiguous (here every event: ambiguous = 0.01) is
+    analysed whole, untapered, and says so; its delays hold."""
+    from solvers.audio import Recording, ambiguity
+
+    rng = np.random.default_rng(14)
+    noise = band_noise(rng, 4000)
+    heard = np.vstack([noise, delayed(noise, 7.0)]) + 0.05 * rng.standard_normal((2, 4000))  # every band: some noise
+    assert ambiguity(heard, 60, 8) < 0.6
+    delays = rng.uniform(0.0, 40.0, (5, 2))
+    rec = Recording(synthetic_recording(rng, delays, [0.4, 1.2]), RATE, tuple("abcde"), "synthetic")
+    assert not any("analysed whole" in n for n in tdoa_matrix(rec, TdoaOptions(max_distance=2.0, ambiguous=1.0)).notes)
+    tm = tdoa_matrix(rec, TdoaOptions(max_distance=2.0, ambiguous=0.01))
+    assert any(n.startswith("2 event(s) analysed whole") for n in tm.notes) and np.all(np.isfinite(tm.F))
+    for j in range(2):
+        r = tm.reference[j]
+        measured = (tm.F[:, j] - tm.F[r, j]) / tm.speed * RATE
+        assert np.max(np.abs(measured - (delays[:, j] - delays[r, j]))) < 0.5
