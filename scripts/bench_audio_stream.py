@@ -14,7 +14,8 @@ each in its own process (its peak resident memory from os.wait4, the wall time a
   long_guided `tdoa-workbench tdoa FILE` (the first pass, its calibration and the guided pass) unless
               --no-guided
 
-and prints each run's peak RSS (MB), wall time (s), events and entries, and the ratios of the streamed
+and prints each run's peak RSS (MB), wall time and CPU time (user + system, s: what the run cost whatever
+else the machine ran), events and entries, and the ratios of the streamed
 runs against the reference (memory per minute of audio). The figures go to the untracked
 tables/audio_stream.timing.json (runtimes are run facts, never committed). The machine is shared:
 `uptime`'s load average is recorded beside the times.
@@ -109,7 +110,8 @@ def with_rss(argv: list[str]) -> dict:
         t.join()
     proc.returncode = os.waitstatus_to_exitcode(status)
     out, err = b"".join(out_chunks).decode(), b"".join(err_chunks).decode()
-    return {"seconds": round(seconds, 1), "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "code": proc.returncode,
+    return {"seconds": round(seconds, 1), "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 1),
+            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "code": proc.returncode,
             "out": out.strip().splitlines()[-1] if out.strip() else "",
             "err": err.strip().splitlines()[-1] if err.strip() else ""}
 
