@@ -242,21 +242,70 @@ def main(argv=None) -> int:
     ap.add_argument("--order", type=int, default=20, help="image-source order (default 20)")
     ap.add_argument("--no-signal", action="store_true", help="skip the sweeps' rows with the signal given")
     ap.add_argument("--name", default="audio3d_kinds", help="output tables/NAME.csv and .md")
+    ap.add_argument("--resume", action="store_true", help="append each row to tables/NAME.csv as it is measured and "
+                    "skip the rows already there (several processes can share the runs); the table is rewritten "
+                    "whole, in order, at the end")
+    ap.add_argument("--signal-only", action="store_true", help="only the sweeps' rows with the signal given")
     args = ap.parse_args(argv)
     kinds = [k for k in args.kinds.split(",") if k]
     if any(k not in KINDS for k in kinds):
         ap.error(f"--kinds takes {', '.join(KINDS)}")
     low, _, high = args.conditions.partition(":")
     conditions = range(int(low), int(high or int(low) + 1))
-    jobs = [(k, cond, False) for k in kinds for cond in conditions]
+    jobs = [] if args.signal_only else [(k, cond, False) for k in kinds for cond in conditions]
     if not args.no_signal:
         jobs += [(k, cond, True) for k in kinds if k.endswith("sweep") for cond in conditions]
-    rows = []
-    for n, (kind, cond, given) in enumerate(jobs):
-        t0 = time.perf_counter()
-        rows.append(run(kind, cond, args.events, args.order, given))
-        print(f"room {n + 1}/{len(jobs)} ({time.perf_counter() - t0:.0f} s): {rows[-1]}", file=sys.stderr, flush=True)
     out = os.path.join(ROOT, "tables", args.name)
+    done = _rows_written(out) if args.resume else {}
+    for n, (kind, cond, given) in enumerate(jobs):
+        key = (kind + ("+signal" if given else ""), *CONDITIONS[cond])
+        if key in done:
+            continue
+        t0 = time.perf_counter()
+        row = run(kind, cond, args.events, args.order, given)
+        print(f"room {n + 1}/{len(jobs)} ({time.perf_counter() - t0:.0f} s): {row}", file=sys.stderr, flush=True)
+        if args.resume:  # each row as it comes: several processes may share the file, one row a line
+            fresh = not os.path.exists(out + ".csv")
+            with open(out + ".csv", "a", newline="") as handle:
+                w = csv.DictWriter(handle, fieldnames=list(row))
+                if fresh:
+                    w.writeheader()
+                w.writerow(row)
+        done[key] = row
+    if args.resume:
+        done.update(_rows_written(out))  # another process's rows too
+    write(out, _ordered(list(done.values())))
+    return 0
+
+
+def _rows_written(out: str) -> dict:
+    """The rows in tables/NAME.csv (a stopped or parallel run's: the same seeds give the same rows), by
+    (kind, rate, RT60, SNR)."""
+    if not os.path.exists(out + ".csv"):
+        return {}
+    with open(out + ".csv", newline="") as handle:
+        return {(r["kind"], int(r["rate"]), float(r["rt60_s"]), float(r["snr_db"])): r for r in csv.DictReader(handle)
+                if r["kind"] != "kind"}
+
+
+def _ordered(rows: list[dict]) -> list[dict]:
+    """The rows typed as run() returns them, in the order of KINDS (the signal rows last) and CONDITIONS."""
+    typed = []
+    for r in rows:
+        t = dict(r)
+        for k in ("rate", "seed", "mics", "events"):
+            t[k] = int(t[k])
+        for k in ("rt60_s", "snr_db", "strict", "lenient", "first_strict"):
+            t[k] = float(t[k])
+        for k in ("max_mic_err_m", "max_err_over_std"):
+            t[k] = float(t[k]) if t[k] != "" else ""
+        typed.append(t)
+    order = {k: n for n, k in enumerate([*KINDS, *(f"{k}+signal" for k in KINDS)])}
+    return sorted(typed, key=lambda r: (order[r["kind"]], CONDITIONS.index((r["rate"], r["rt60_s"], r["snr_db"]))))
+
+
+def write(out: str, rows: list[dict]) -> None:
+    """tables/NAME.csv and .md of the rows."""
     keys = list(rows[0])
     with open(out + ".csv", "w", newline="") as handle:
         w = csv.DictWriter(handle, fieldnames=keys)
@@ -268,7 +317,6 @@ def main(argv=None) -> int:
             handle.write("| " + " | ".join(str(r[k]) for k in keys) + " |\n")
         handle.write("\n" + summary(rows) + "\n")
     print(f"wrote {out}.csv and {out}.md", file=sys.stderr)
-    return 0
 
 
 if __name__ == "__main__":
