@@ -409,10 +409,11 @@ class TdoaOptions:
         onset to its end (at most max_window seconds), without a taper. A periodic sound (a tone, a note: peaks
         at every multiple of its period) or a narrow band (a sweep's first tenth of a second) cannot tell the
         lag in a short window; over its whole length more notes, more of the sweep's band, can. Measured on
-        simulated rooms (scripts/audio_kinds.py, RT60 0.55 s, 20 dB, 16 kHz): the median ratio was 0.89-0.93 for
-        three-note phrases, 0.91-0.94 for sweeps, 0.71-0.9 for speech-like sounds, 0.63-0.81 for claps (at
-        RT60 0.8 s and 10 dB claps and speech reach 0.94); analysed whole, phrases went from 8 to 48 % of the
-        entries within 2 samples, log sweeps from 0 to 65 %. 1: never
+        simulated rooms (scripts/audio_kinds.py, RT60 0.55 s, 16 kHz at 20 dB and 48 kHz at 30 dB): the median
+        ratio was 0.89-0.95 for three-note phrases, 0.91-0.96 for sweeps, 0.68-0.9 for speech-like sounds,
+        0.62-0.81 for claps (at RT60 0.8 s and 10 dB claps and speech reach 0.94); analysed whole, one room's
+        phrases (16 kHz, 20 dB) went from 8 to 48 % of the entries within 2 samples, its log sweeps from 0
+        to 65 %. It costs the mixed rooms of tables/audio3d.md (docs/audio.md). 1: never
     max_window : seconds of an event analysed whole (ambiguous)
     onset_db : an event's onset is moved back from where its power crosses threshold_db to the last frame at
         most this many dB above the background (a slowly rising sound, a sweep's fade-in, is heard before it
