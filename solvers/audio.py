@@ -413,12 +413,13 @@ class TdoaOptions:
         ratio was 0.89-0.95 for three-note phrases, 0.91-0.96 for sweeps, 0.68-0.9 for speech-like sounds,
         0.62-0.81 for claps (at RT60 0.8 s and 10 dB claps and speech reach 0.94); analysed whole, one room's
         phrases (16 kHz, 20 dB) went from 8 to 48 % of the entries within 2 samples, its log sweeps from 0
-        to 65 %. It costs the mixed rooms of tables/audio3d.md (docs/audio.md). 1: never
+        to 65 %. Only events lasting whole_after or more (docs/audio.md). 1: never
     max_window : seconds of an event analysed whole (ambiguous)
     whole_after : only an event lasting at least this many seconds from its onset to its end is analysed whole
         when ambiguous: in the mixed rooms of tables/audio3d.md the events judged ambiguous (claps, 0.2 s
-        chirps, speech-like sounds) lasted 0.22-0.6 s, and analysed whole one room's first pass fell from 99.1
-        to 95.5 %; the phrases and sweeps of tables/audio3d_kinds.md lasted 0.85-0.97 s
+        chirps, speech-like sounds) lasted 0.22-0.6 s, and analysed whole, one room's first pass fell from 99.1
+        to 95.5 % and two rooms' first calibrations to "partial"; the phrases and sweeps of
+        tables/audio3d_kinds.md lasted 0.85-0.97 s
     onset_db : an event's onset is moved back from where its power crosses threshold_db to the last frame at
         most this many dB above the background (a slowly rising sound, a sweep's fade-in, is heard before it
         crosses the threshold: measured at 10 dB SNR, sweeps crossed 5 dB 70 ms after they started)
