@@ -27,12 +27,13 @@ upsampling, so it is written here (scripts/room_simulation.py uses it against th
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 __all__ = ["AUDIO_MAGIC", "GccPeak", "Recording", "RecordingError", "TdoaMatrix", "TdoaOptions", "detect_events",
-           "gcc_phat", "is_recording", "read_recording", "tdoa_matrix"]
+           "frame_power", "gcc_phat", "matched_filter", "is_recording", "no_data", "read_recording", "read_signal", "recording_events", "tdoa_matrix", "consistent_subset", "agreeing_pairs", "ambiguity"]
 
 #: The first bytes of the audio containers soundfile reads that `calibrate` recognises as a recording.
 AUDIO_MAGIC = (b"RIFF", b"RIFX", b"RF64", b"fLaC", b"FORM", b"OggS", b"caff", b"\x2enb")
@@ -42,26 +43,77 @@ class RecordingError(ValueError):
     """A recording that cannot be read or analysed; the message is one line naming the file."""
 
 
+#: Frames per block when a file is scanned or streamed (16 channels: 8 MB of float64).
+BLOCK_FRAMES = 1 << 16
+
+#: A recording larger than this (bytes of float64 samples) is streamed from its files: only the blocks an
+#: analysis needs are in memory (the frame power, then each event's segment).
+STREAM_ABOVE = 256 << 20
+
+#: Bits of the integer sample formats whose full scale is known (libsndfile's subtype names).
+_PCM_BITS = {"PCM_S8": 8, "PCM_U8": 8, "PCM_16": 16, "PCM_24": 24, "PCM_32": 32}
+
+
 @dataclass(frozen=True)
 class Recording:
     """Samples of every channel on one clock.
 
-    samples : (channels, frames) float64
+    samples : (channels, frames) float64, or None for a recording streamed from its files (`files`)
     rate : sample rate in Hz
     channels : one name per channel (the file's stem per file, or 1, 2, ... within one file)
     source : the file name(s), for messages
-    notes : what the reader did that a user should know (channels trimmed to the shortest file)
+    notes : what the reader found that a user should know (channels trimmed to the shortest file, clipping,
+        8-bit samples)
+    files : a streamed recording's files, (path, channels) each, read block by block (:meth:`read`)
+    length : a streamed recording's frames (every file trimmed to it)
+
+    Every analysis reads through :meth:`read` and :meth:`blocks`, in memory or streamed alike.
     """
 
-    samples: np.ndarray
+    samples: np.ndarray | None
     rate: int
     channels: tuple[str, ...]
     source: str
     notes: tuple[str, ...] = ()
+    files: tuple[tuple[str, int], ...] = ()
+    length: int = 0
+
+    @property
+    def frames(self) -> int:
+        return self.samples.shape[1] if self.samples is not None else self.length
 
     @property
     def seconds(self) -> float:
-        return self.samples.shape[1] / self.rate
+        return self.frames / self.rate
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """(channels, stop - start) float64: the frames start..stop (clipped to the recording)."""
+        start, stop = max(0, int(start)), min(self.frames, int(stop))
+        if self.samples is not None:
+            return self.samples[:, start:stop]
+        import soundfile
+
+        parts = [soundfile.read(path, start=start, stop=stop, dtype="float64", always_2d=True)[0].T
+                 for path, _ in self.files]
+        return np.vstack(parts) if len(parts) > 1 else parts[0]
+
+    def blocks(self, size: int = BLOCK_FRAMES):
+        """(start frame, (channels, <= size) block) over the whole recording, in order (bounded memory)."""
+        if self.samples is not None:
+            for a in range(0, self.frames, size):
+                yield a, self.samples[:, a:a + size]
+            return
+        import soundfile
+
+        handles = [soundfile.SoundFile(path) for path, _ in self.files]
+        try:
+            for a in range(0, self.frames, size):
+                n = min(size, self.frames - a)
+                parts = [h.read(n, dtype="float64", always_2d=True).T for h in handles]
+                yield a, (np.vstack(parts) if len(parts) > 1 else parts[0])
+        finally:
+            for h in handles:
+                h.close()
 
 
 def is_recording(path: str) -> bool:
@@ -76,7 +128,24 @@ def is_recording(path: str) -> bool:
     return head in AUDIO_MAGIC
 
 
-def _read_one(path: str):
+def no_data(source: str, why: str = "empty file") -> str:
+    """The one words for input without data, the same for a recording and a measurement CSV or system file
+    (:func:`analysis.engine.io.read_input_bytes` says the same of a 0-byte file)."""
+    return f"{source}: no data ({why})"
+
+
+@dataclass
+class _Scan:
+    """What one pass over a file's blocks found, per channel: samples at full scale, non-finite samples and
+    the first frame of one (-1: none)."""
+
+    clipped: np.ndarray
+    bad: np.ndarray
+    first_bad: int = -1
+
+
+def _open_one(path: str):
+    """(soundfile info) of one file, or RecordingError with the words every verb uses."""
     try:
         import soundfile
     except ImportError:
@@ -85,61 +154,133 @@ def _read_one(path: str):
         raise RecordingError(f"cannot read {path}: no such file")
     if os.path.isdir(path):
         raise RecordingError(f"cannot read {path}: it is a directory")
-    if os.path.getsize(path) == 0:  # the words of the measurement reader (solvers.calibrate_io) for the same file
-        raise RecordingError(f"{path}: no data (empty file)")
     try:
-        data, rate = soundfile.read(path, dtype="float64", always_2d=True)
-    except FileNotFoundError:
-        raise RecordingError(f"cannot read {path}: no such file") from None
+        if os.path.getsize(path) == 0:
+            raise RecordingError(no_data(path))
+        info = soundfile.info(path)
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc.strerror or exc}") from None
     except (RuntimeError, soundfile.SoundFileError) as exc:  # libsndfile: not an audio file it knows
         raise RecordingError(f"cannot read {path} as audio: {' '.join(str(exc).split())}") from None
-    if data.shape[0] == 0:
-        raise RecordingError(f"{path}: no samples")
+    if info.frames == 0:
+        raise RecordingError(no_data(path, "no samples"))
+    return info
+
+
+def _full_scale(subtype: str) -> float:
+    """The magnitude at and above which a sample of this format is at full scale: one step below 1 for
+    integer formats (their positive maximum), 1 for float formats and the rest."""
+    bits = _PCM_BITS.get(subtype)
+    return 1.0 - 2.0 ** (1 - bits) if bits else 1.0
+
+
+def _scan(recording: "Recording", full: np.ndarray) -> _Scan:
+    """One pass over the recording's blocks: per channel, the samples at full scale (|x| >= full) and the
+    non-finite ones."""
+    m = len(recording.channels)
+    scan = _Scan(np.zeros(m, np.int64), np.zeros(m, np.int64))
+    for a, block in recording.blocks():
+        finite = np.isfinite(block)
+        if not finite.all():
+            bad = (~finite).sum(axis=1)
+            if scan.first_bad < 0:
+                scan.first_bad = a + int(np.flatnonzero((~finite).any(axis=0))[0])
+            scan.bad += bad
+        with np.errstate(invalid="ignore"):
+            scan.clipped += (np.abs(block) >= full[:, None]).sum(axis=1)
+    return scan
+
+
+def _percent(share: float) -> str:
+    """A share as a percentage that never rounds a non-zero share to 0."""
+    if share == 0:
+        return "0 %"
+    value = 100 * share
+    return f"{value:.2g} %" if value >= 0.01 else "< 0.01 %"
+
+
+def read_signal(path: str) -> tuple[np.ndarray, int]:
+    """(samples, rate) of an emitted sound (`--signal FILE`): one channel, finite, not silent; the same
+    words as read_recording for a missing, unreadable or empty file. Raises RecordingError (one line)."""
+    import soundfile
+
+    info = _open_one(path)
+    if info.channels != 1:
+        raise RecordingError(f"{path}: {info.channels} channels; the emitted signal is one channel")
+    data, rate = soundfile.read(path, dtype="float64")
     if not np.all(np.isfinite(data)):
-        raise RecordingError(f"{path}: non-finite samples")
-    return data.T, int(rate)
+        raise RecordingError(f"{path}: {int(np.sum(~np.isfinite(data)))} samples are NaN or infinite: a signal needs "
+                             "finite samples")
+    if not np.any(data):
+        raise RecordingError(f"{path}: every sample is zero: no signal to match")
+    return data, int(rate)
 
 
-def read_recording(paths) -> Recording:
+def read_recording(paths, *, stream: bool | None = None) -> Recording:
     """Read one multichannel file, or one file per channel (every channel of each file, in order).
 
     Parameters
     ----------
     paths : a path or a sequence of paths (WAV, FLAC, or anything libsndfile reads)
+    stream : True: leave the samples in the files, read block by block when analysed (bounded memory);
+        False: read them into memory; None (default): stream when the samples take more than STREAM_ABOVE
+        bytes as float64
 
     The files must share a sample rate; files of different lengths are trimmed to the shortest (a note
-    says so). Raises RecordingError (one line) for a missing or unreadable file, a rate mismatch, or
-    fewer than two channels in all.
+    says so). Every sample is scanned once, block by block: samples at full scale (clipping) and 8-bit
+    formats are notes (a warning with the share of clipped samples per channel); a missing, unreadable or
+    empty file, a rate mismatch, non-finite samples (NaN) or fewer than two channels in all raise
+    RecordingError (one line).
     """
     paths = [paths] if isinstance(paths, str) else list(paths)
     if not paths:
         raise RecordingError("no recording given")
-    parts = [(p, *_read_one(p)) for p in paths]
-    rates = {rate for _, _, rate in parts}
+    infos = [_open_one(p) for p in paths]
+    rates = {int(info.samplerate) for info in infos}
     if len(rates) > 1:
-        listed = ", ".join(f"{p}: {rate} Hz" for p, _, rate in parts)
+        listed = ", ".join(f"{p}: {int(info.samplerate)} Hz" for p, info in zip(paths, infos))
         raise RecordingError(f"the files have different sample rates ({listed}); resample them to one")
     rate = rates.pop()
-    lengths = [x.shape[1] for _, x, _ in parts]
+    source = paths[0] if len(paths) == 1 else f"{paths[0]} (+{len(paths) - 1} files)"
+    widths = [int(info.channels) for info in infos]
+    if sum(widths) < 2:
+        raise RecordingError(f"{source}: one channel; a time difference needs two or more (a multichannel file, "
+                             "or one file per microphone)")
+    lengths = [int(info.frames) for info in infos]
     frames = min(lengths)
     notes = ()
     if len(set(lengths)) > 1:
         notes = (f"files of {min(lengths)} to {max(lengths)} frames: trimmed to the shortest",)
-    samples = np.vstack([x[:, :frames] for _, x, _ in parts])
-    if len(parts) == 1:
-        names = tuple(str(k + 1) for k in range(samples.shape[0]))
+    if len(paths) == 1:
+        names = tuple(str(k + 1) for k in range(widths[0]))
     else:
-        stems = [os.path.splitext(os.path.basename(p))[0] for p, _, _ in parts]
-        names = tuple(f"{stem}.{c + 1}" if x.shape[0] > 1 else stem for stem, (_, x, _) in zip(stems, parts)
-                      for c in range(x.shape[0]))
+        stems = [os.path.splitext(os.path.basename(p))[0] for p in paths]
+        names = tuple(f"{stem}.{c + 1}" if w > 1 else stem for stem, w in zip(stems, widths) for c in range(w))
         if len(set(names)) < len(names):
             names = tuple(str(k + 1) for k in range(len(names)))
-    source = paths[0] if len(paths) == 1 else f"{paths[0]} (+{len(paths) - 1} files)"
-    if samples.shape[0] < 2:
-        raise RecordingError(f"{source}: one channel; a time difference needs two or more (a multichannel file, "
-                             "or one file per microphone)")
+    streamed = Recording(None, rate, names, source, notes, tuple(zip(paths, widths)), frames)
+    full = np.concatenate([np.full(w, _full_scale(info.subtype)) for w, info in zip(widths, infos)])
+    scan = _scan(streamed, full)
+    if scan.bad.any():
+        which = ", ".join(names[c] for c in np.flatnonzero(scan.bad))
+        raise RecordingError(f"{source}: {int(scan.bad.sum())} samples are NaN or infinite (channel(s) {which}; the "
+                             f"first at {scan.first_bad / rate:.3f} s): a recording needs finite samples")
+    eight = [p for p, info in zip(paths, infos) if _PCM_BITS.get(info.subtype) == 8]
+    if eight:
+        notes += (f"8-bit samples ({', '.join(eight)}): quantisation noise about 48 dB below full scale; quiet "
+                  "sounds' time differences are the noisier",)
+    if scan.clipped.any():
+        shares = ", ".join(f"{names[c]} {_percent(scan.clipped[c] / frames)}" for c in np.flatnonzero(scan.clipped))
+        rest = "" if scan.clipped.all() else "; the other channels none"
+        notes += (f"warning: clipping: samples at full scale, the share per channel: {shares}{rest}; a clipped "
+                  "sound's waveform and timing are distorted (record at a lower gain)",)
+    if stream is None:
+        stream = frames * len(names) * 8 > STREAM_ABOVE
+    if stream:
+        return replace(streamed, notes=notes)
+    samples = np.empty((len(names), frames))
+    for a, block in streamed.blocks():
+        samples[:, a:a + block.shape[1]] = block
     return Recording(samples, rate, names, source, notes)
 
 
@@ -173,10 +314,11 @@ class GccPeak:
         return self.height / self.sidelobe if self.sidelobe > 0 else float("inf")
 
 
-def _phat(cross: np.ndarray, n: int, lo: int, hi: int) -> np.ndarray:
+def _phat(cross: np.ndarray, n: int, lo: int, hi: int, beta: float = 1.0) -> np.ndarray:
     """The GCC-PHAT correlation at lags lo..hi (last axis) of cross-spectra of FFT length n: each
-    frequency's cross-spectrum normalised to unit magnitude."""
-    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12), n, axis=-1)
+    frequency's cross-spectrum divided by its magnitude to the power beta (1: unit magnitude, PHAT; below
+    1 the loud frequencies keep some of their weight: PHAT-beta)."""
+    cc = np.fft.irfft(cross / np.maximum(np.abs(cross), 1e-12) ** beta, n, axis=-1)
     return cc[..., np.arange(lo, hi + 1) % n]
 
 
@@ -204,7 +346,7 @@ def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None 
     Reference: Knapp & Carter, The generalized correlation method for estimation of time delay, 1976.
     """
     lo = -max_lag if min_lag is None else min_lag
-    n = len(x) + len(y)
+    n = next_fast_len(len(x) + len(y))  # no wrap-around; a length of small primes (a prime length is slow)
     window = _phat(np.fft.rfft(x, n) * np.conj(np.fft.rfft(y, n)), n, lo, max_lag)
     last = len(window) - 1
     k = top = int(np.argmax(window))
@@ -255,10 +397,43 @@ class TdoaOptions:
         50 ms 94 % and 85 %; agreement chooses without knowing the sound. Empty: `taper` alone
     retry_below : the share of agreeing pairs below which `retry_tapers` are tried (an event that agrees
         well is not analysed again: no cost where the first taper suffices)
+    retry_weights : PHAT exponents (PHAT-beta, below 1) tried with every taper after them, while the event
+        still agrees on less than `retry_below` of the pairs: PHAT weighs every frequency alike, the empty ones
+        between a periodic sound's harmonics too (noise and reverberation); a beta below 1 keeps some weight on
+        the loud ones. Empty: PHAT alone
+    min_subset, subset_share : an event whose channels agree on less than min_agreement of the pairs is kept
+        when a consistent subset of at least min_subset channels agrees: every channel of it agreeing with at
+        least subset_share of the others in it (consistent_subset); its other channels' entries are left
+        missing. 0: no subset rule (the event left missing whole)
+    ambiguous : an event whose pairs' correlations (over `window`, with `taper`) have their second-highest peak
+        at more than this share of the highest (the median over the pairs) is analysed whole instead: from its
+        onset to its end (at most max_window seconds), without a taper. A periodic sound (a tone, a note: peaks
+        at every multiple of its period) or a narrow band (a sweep's first tenth of a second) cannot tell the
+        lag in a short window; over its whole length more notes, more of the sweep's band, can. Measured on
+        simulated rooms (scripts/audio_kinds.py, RT60 0.55 s, 16 kHz at 20 dB and 48 kHz at 30 dB): the median
+        ratio was 0.89-0.95 for three-note phrases, 0.91-0.96 for sweeps, 0.68-0.9 for speech-like sounds,
+        0.62-0.81 for claps (at RT60 0.8 s and 10 dB claps and speech reach 0.94); analysed whole, one room's
+        phrases (16 kHz, 20 dB) went from 8 to 48 % of the entries within 2 samples, its log sweeps from 0
+        to 65 %. Only events lasting whole_after or more (docs/audio.md). 1: never
+    max_window : seconds of an event analysed whole (ambiguous)
+    whole_after : only an event lasting at least this many seconds from its onset to its end is analysed whole
+        when ambiguous: in the mixed rooms of tables/audio3d.md the events judged ambiguous (claps, 0.2 s
+        chirps, speech-like sounds) lasted 0.22-0.6 s, and analysed whole, one room's first pass fell from 99.1
+        to 95.5 % and two rooms' first calibrations to "partial"; the phrases and sweeps of
+        tables/audio3d_kinds.md lasted 0.85-0.97 s
+    onset_db : an event's onset is moved back from where its power crosses threshold_db to the last frame at
+        most this many dB above the background (a slowly rising sound, a sweep's fade-in, is heard before it
+        crosses the threshold: measured at 10 dB SNR, sweeps crossed 5 dB 70 ms after they started)
     starts : the consensus starts from the highest peaks against each of this many channels, the
         loudest first (a start costs about m^3 x peaks^2 operations; on the simulated rooms 2 or 4
         starts gave the matrices all 14-16 gave; 48 channels: 1.1 s per event with 4, 5.8 s with 16)
     frame : seconds per power frame of the event detection
+    signal : None, or the emitted sound (1-D samples at the recording's rate; `tdoa --signal FILE`): every
+        channel of an event is first correlated with it (a matched filter: a sweep's or any long sound's
+        arrivals compressed into pulses at their times), over the whole sound's length, and the pairs'
+        GCC-PHAT and the taper then see the compressed pulses (the taper weighs the direct pulse, not the
+        sound's first tens of milliseconds)
+    signal_rate : the signal's sample rate (None: the recording's); a recording at another rate is an error
     """
 
     speed: float = 343.0
@@ -274,10 +449,24 @@ class TdoaOptions:
     taper: float = 0.05
     retry_tapers: tuple[float, ...] = (0.02, 0.1)
     retry_below: float = 0.7
+    retry_weights: tuple[float, ...] = (0.5,)
+    onset_db: float = 1.0
+    min_subset: int = 5
+    ambiguous: float = 0.9
+    max_window: float = 1.0
+    whole_after: float = 0.7
+    subset_share: float = 0.8
     starts: int = 4
     frame: float = 0.005
+    signal: np.ndarray | None = field(default=None, compare=False, repr=False)
+    signal_rate: int | None = None
 
     def __post_init__(self) -> None:
+        if self.signal is not None:
+            sig = np.asarray(self.signal, dtype=float)
+            if sig.ndim != 1 or len(sig) < 2 or not np.all(np.isfinite(sig)) or not np.any(sig):
+                raise ValueError("signal must be one channel of finite samples, not all zero")
+            object.__setattr__(self, "signal", sig)
         for name in ("speed", "max_distance", "window", "frame", "min_gap", "threshold_db", "taper"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -286,6 +475,17 @@ class TdoaOptions:
             raise ValueError("peaks, min_support and starts must be >= 1 and tolerance > 0")
         if not 0.0 <= self.min_agreement <= 1.0:
             raise ValueError(f"min_agreement must be in [0, 1], got {self.min_agreement}")
+        if not (np.isfinite(self.whole_after) and self.whole_after >= 0):
+            raise ValueError(f"whole_after must be a finite number >= 0, got {self.whole_after}")
+        if not 0.0 < self.ambiguous <= 1.0 or not (np.isfinite(self.max_window) and self.max_window > 0):
+            raise ValueError(f"ambiguous must be in (0, 1] and max_window > 0, got {self.ambiguous}, {self.max_window}")
+        if self.min_subset < 0 or not 0.0 < self.subset_share <= 1.0:
+            raise ValueError(f"min_subset must be >= 0 and subset_share in (0, 1], got {self.min_subset}, "
+                             f"{self.subset_share}")
+        if not all(np.isfinite(b) and 0 < b <= 1 for b in self.retry_weights):
+            raise ValueError(f"retry_weights must be numbers in (0, 1], got {self.retry_weights}")
+        if not (np.isfinite(self.onset_db) and 0 <= self.onset_db <= self.threshold_db):
+            raise ValueError(f"onset_db must be in [0, threshold_db], got {self.onset_db}")
         if not all(np.isfinite(t) and t > 0 for t in self.retry_tapers):
             raise ValueError(f"retry_tapers must be finite numbers > 0, got {self.retry_tapers}")
         if not 0.0 <= self.retry_below <= 1.0:
@@ -295,14 +495,34 @@ class TdoaOptions:
 
 
 def detect_events(samples: np.ndarray, rate: int, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
-    """(events, 2) sample ranges [start, end) of the sound events: runs of frames whose power (mean
-    over channels) is more than threshold_db above the background, closed by min_gap of quiet
-    (threshold_db - 3 dB: hysteresis), in time order."""
-    hop = max(1, int(round(options.frame * rate)))
-    frames = samples.shape[1] // hop
+    """(events, 2) sample ranges [start, end) of the sound events of (channels, frames) samples: runs of frames
+    whose power (mean over channels) is more than threshold_db above the background, closed by min_gap of quiet
+    (threshold_db - 3 dB: hysteresis), in time order (recording_events of the samples)."""
+    samples = np.asarray(samples, dtype=float)
+    names = tuple(str(k + 1) for k in range(samples.shape[0]))
+    return recording_events(Recording(samples, rate, names, "samples"), options)
+
+
+def frame_power(recording: Recording, hop: int) -> np.ndarray:
+    """(frames,) the power of every whole frame of `hop` samples, averaged over the channels, read block by
+    block (a streamed recording is never in memory whole)."""
+    m = len(recording.channels)
+    size = hop * max(1, BLOCK_FRAMES // hop)
+    parts = []
+    for _, block in recording.blocks(size):
+        whole = block.shape[1] // hop
+        if whole:
+            parts.append(np.mean(block[:, : whole * hop].reshape(m, whole, hop) ** 2, axis=(0, 2)))
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def recording_events(recording: Recording, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
+    """(events, 2) sample ranges [start, end) of the recording's sound events (detect_events says how)."""
+    hop = max(1, int(round(options.frame * recording.rate)))
+    power = frame_power(recording, hop)
+    frames = len(power)
     if frames < 2:
         return np.zeros((0, 2), int)
-    power = np.mean(samples[:, : frames * hop].reshape(samples.shape[0], frames, hop) ** 2, axis=(0, 2))
     floor = max(float(np.percentile(power, 10)), 1e-30)
     level = 10 * np.log10(np.maximum(power, 1e-30) / floor)
     loud, quiet = level > options.threshold_db, level < options.threshold_db - 3.0
@@ -312,6 +532,9 @@ def detect_events(samples: np.ndarray, rate: int, options: TdoaOptions = TdoaOpt
         if start is None:
             if loud[f]:
                 start, quiet_run = f, 0
+                back = events[-1][1] // hop if events else 0  # never into the event before
+                while start > back and level[start - 1] > options.onset_db:
+                    start -= 1  # the sound rose before it crossed the threshold
             continue
         quiet_run = quiet_run + 1 if quiet[f] else 0
         if quiet_run >= gap:
@@ -348,18 +571,33 @@ class TdoaMatrix:
     notes: tuple[str, ...] = field(default=())
 
 
-def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int):
+def matched_filter(seg: np.ndarray, signal: np.ndarray) -> np.ndarray:
+    """(channels, frames - len(signal) + 1): each channel's correlation with the emitted signal,
+    out[t] = sum_s seg[t + s] signal[s]: a sound emitted at t shows as a pulse at t (zeros when the
+    segment is shorter than the signal: nothing to compress)."""
+    frames, L = seg.shape[1], len(signal)
+    if frames < L:
+        return np.zeros((seg.shape[0], 1))
+    n = next_fast_len(frames + L)
+    out = np.fft.irfft(np.fft.rfft(seg, n, axis=1) * np.conj(np.fft.rfft(signal, n))[None, :], n, axis=1)
+    return out[:, : frames - L + 1]
+
+
+def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int, beta: float = 1.0):
     """GCC-PHAT of every channel pair (i < k) of an event's segments: (i, k, lags (pairs, peaks),
     heights (pairs, peaks)), the `peaks` highest local maxima of each correlation over +-max_lag,
     parabolically refined (lag of channel i's sound behind channel k's, in samples)."""
     m, length = seg.shape
-    n = 2 * length
+    n = next_fast_len(2 * length)
     X = np.fft.rfft(seg, n, axis=1)
     i, k = np.triu_indices(m, 1)
-    window = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag)
+    window = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag, beta)
     inner = np.zeros_like(window, dtype=bool)
     inner[:, 1:-1] = (window[:, 1:-1] >= window[:, :-2]) & (window[:, 1:-1] > window[:, 2:])
-    ranked = np.argsort(np.where(inner, window, -np.inf), axis=1)[:, ::-1][:, :peaks]
+    masked = np.where(inner, window, -np.inf)
+    peaks = min(peaks, masked.shape[1])
+    top = np.argpartition(masked, masked.shape[1] - peaks, axis=1)[:, -peaks:]  # the peaks highest, unordered
+    ranked = np.take_along_axis(top, np.argsort(-np.take_along_axis(masked, top, axis=1), axis=1, kind="stable"), axis=1)
     rows = np.arange(len(i))[:, None]
     b = window[rows, ranked]
     shift = _parabola(window[rows, ranked - 1], b, window[rows, ranked + 1])
@@ -414,6 +652,23 @@ def _consensus(m: int, ref: int, i, k, lags, heights, tol: float, early: float =
     return t, support
 
 
+def consistent_subset(ok: np.ndarray, min_support: int, share: float) -> np.ndarray:
+    """(m,) bool: the largest set of channels found by peeling in which every channel agrees with at least
+    `share` of the others in it (ok (m, m): the agreeing pairs of a consensus, each pair's candidate within
+    the tolerance of the two arrivals' difference, so that tau_ij + tau_jk = tau_ik holds within twice
+    it on every triangle of agreeing pairs). Starts from the channels with min_support agreeing pairs and
+    drops the channel agreeing with the fewest others in the set until every one agrees with enough."""
+    inside = ok.sum(axis=1) >= min_support
+    while inside.any():
+        within = (ok & inside[None, :]).sum(axis=1)
+        need = share * (inside.sum() - 1)
+        worst = int(np.argmin(np.where(inside, within - need, np.inf)))
+        if within[worst] >= need:
+            break
+        inside[worst] = False
+    return inside
+
+
 def _component(ok: np.ndarray, ref: int) -> np.ndarray:
     """(m,) bool: the channels connected to `ref` by agreeing pairs (ok, symmetric)."""
     seen = np.zeros(len(ok), bool)
@@ -459,7 +714,7 @@ def _supported(P, t, tol: float):
     return ok, np.take_along_axis(P, pick[:, :, None], axis=2)[:, :, 0]
 
 
-def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions):
+def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, beta: float = 1.0):
     """(reference channel, arrival times relative to it in samples, support) of one event's weighted
     segments (channels, samples): the loudest channel is the reference; _consensus of the pairs'
     GCC-PHAT candidates."""
@@ -467,9 +722,24 @@ def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions):
     r = int(np.argmax(energy))
     m = seg.shape[0]
     starts = None if options.starts >= m else np.argsort(energy)[::-1][: options.starts]
-    t, support = _consensus(m, r, *_pair_candidates(seg, max_lag, options.peaks), options.tolerance, options.early,
-                            starts=starts)
-    return r, t, support
+    candidates = _pair_candidates(seg, max_lag, options.peaks, beta)
+    t, support = _consensus(m, r, *candidates, options.tolerance, options.early, starts=starts)
+    return r, t, support, agreeing_pairs(m, candidates, t, options.tolerance)
+
+
+def ambiguity(seg: np.ndarray, max_lag: int, peaks: int) -> float:
+    """The median over the channel pairs of their GCC-PHAT correlation's second-highest peak over its highest
+    (near 1: peaks at every multiple of a period, the lag undecided)."""
+    if seg.shape[0] < 2 or peaks < 2:
+        return 0.0
+    heights = _pair_candidates(seg, max_lag, peaks)[3]
+    return float(np.median(heights[:, 1] / np.maximum(heights[:, 0], 1e-12)))
+
+
+def agreeing_pairs(m: int, candidates, t: np.ndarray, tol: float) -> np.ndarray:
+    """(m, m) bool: the channel pairs with a candidate (i, k, lags, heights of _pair_candidates) within tol
+    samples of the difference of the arrival times t."""
+    return _supported(_candidate_tensor(m, *candidates)[0], t, tol)[0]
 
 
 def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), progress=None) -> TdoaMatrix:
@@ -488,19 +758,21 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     Raises RecordingError when no event is found.
     """
     return _measure(recording, options, lambda j, seg, after, max_lag: _over_tapers(
-        seg, after, options, lambda weighted: _event_arrivals(weighted, max_lag, options)), progress)
+        seg, after, options, lambda weighted, beta: _event_arrivals(weighted, max_lag, options, beta)), progress)
 
 
 def _over_tapers(seg: np.ndarray, after: np.ndarray, options: TdoaOptions, analyse):
-    """(reference, times, support) of the taper (options.taper, then options.retry_tapers while fewer than
-    retry_below of the pairs agree) whose analysis agrees on the most pairs; analyse(weighted segment)
-    -> (reference, times, support)."""
+    """(reference, times, support, agreeing pairs) of the taper and weight (options.taper with PHAT, then options.retry_tapers,
+    then every taper with each of options.retry_weights, while fewer than retry_below of the pairs agree)
+    whose analysis agrees on the most pairs; analyse(weighted segment, PHAT exponent) -> (reference, times,
+    support, agreeing pairs)."""
     m = seg.shape[0]
     best = None
-    for taper in (options.taper, *options.retry_tapers):
-        r, t, support = analyse(seg * np.exp(-after / taper))
-        if best is None or support.sum() > best[2].sum():
-            best = (r, t, support)
+    tapers = (options.taper, *options.retry_tapers) if np.any(after) else (options.taper,)  # no taper: one analysis
+    for taper, beta in [(t, 1.0) for t in tapers] + [(t, b) for b in options.retry_weights for t in tapers]:
+        got = analyse(seg * np.exp(-after / taper), beta)
+        if best is None or got[2].sum() > best[2].sum():
+            best = got
         if best[2].sum() >= options.retry_below * m * (m - 1):
             break  # enough pairs agree: no other taper tried
     return best
@@ -510,45 +782,75 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
     """The event loop both passes share (tdoa_matrix, solvers.audio_guided): detect the events, cut each
     event's segment (the lag range either side of `options.window` after its onset; `after`: seconds
     after the onset of each sample, 0 before it), and turn arrivals(j, segment, after, max_lag) ->
-    (reference, times in samples relative to it, support[, the share of agreeing pairs the event needs])
+    (reference, times in samples relative to it, support, agreeing pairs[, the share of agreeing pairs the event
+    needs])
     or None (the event left missing) into the matrix: an entry is kept with support >= min_support; an
     event whose channels agree on fewer than that share of the pairs (default options.min_agreement) is
     left missing whole."""
-    x, rate = recording.samples, recording.rate
-    events = detect_events(x, rate, options)
+    rate = recording.rate
+    events = recording_events(recording, options)
     if len(events) == 0:
         raise RecordingError(f"{recording.source}: no sound event found (nothing {options.threshold_db:g} dB above the "
                              "background; lower the threshold, or check the recording)")
     max_lag = max(1, int(np.ceil(options.max_distance / options.speed * rate)))
     length = int(round(options.window * rate))
-    m, n = x.shape[0], len(events)
+    m, n = len(recording.channels), len(events)
     F = np.full((m, n), np.nan)
     conf = np.zeros((m, n))
     ref = np.zeros(n, int)
     onsets = events[:, 0] / rate
     dropped: dict[float, list[int]] = {}
-    for j, (start, _end) in enumerate(events):
-        a, b = max(0, start - max_lag), min(x.shape[1], start + length + max_lag)
-        seg = x[:, a:b] - x[:, a:b].mean(axis=1, keepdims=True)
-        after = np.maximum(np.arange(a, b) - start, 0) / rate  # the direct sound weighs more than the tail
+    subsets: list[int] = []
+    emitted = 0 if options.signal is None else len(options.signal)
+    if emitted and options.signal_rate not in (None, rate):
+        raise RecordingError(f"the emitted signal is at {options.signal_rate} Hz, {recording.source} at {rate} Hz: "
+                             "resample the signal to the recording's rate")
+    whole: list[int] = []
+    for j, (start, end) in enumerate(events):
+        a, b = max(0, start - max_lag), min(recording.frames, start + length + max_lag + emitted)
+        seg = recording.read(a, b)  # one event's frames: a streamed recording reads them from its files
+        seg = seg - seg.mean(axis=1, keepdims=True)
+        if emitted:
+            seg = matched_filter(seg, options.signal)
+        after = np.maximum(np.arange(a, a + seg.shape[1]) - start, 0) / rate  # the direct sound weighs more than the tail
+        if (not emitted and options.ambiguous < 1.0 and end - start >= options.whole_after * rate
+                and ambiguity(seg * np.exp(-after / options.taper), max_lag, options.peaks) > options.ambiguous):
+            b = min(recording.frames, start + max(length, min(end - start, int(options.max_window * rate))) + max_lag)
+            seg = recording.read(a, b)
+            seg = seg - seg.mean(axis=1, keepdims=True)
+            after = np.zeros(seg.shape[1])  # no taper: every part of the sound weighs alike
+            whole.append(j)
         got = arrivals(j, seg, after, max_lag)
         if got is None:
             ref[j] = int(np.argmax(np.sum(seg**2, axis=1)))
         else:
-            r, t, support = got[:3]
-            needed = got[3] if len(got) > 3 else options.min_agreement
+            r, t, support, ok = got[:4]
+            needed = got[4] if len(got) > 4 else options.min_agreement
             ref[j] = r
             conf[:, j] = support
             keep = support >= options.min_support
             keep[r] = support[r] >= 1
             if support.sum() < needed * m * (m - 1):
-                keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
-                dropped.setdefault(needed, []).append(j)
+                subset = consistent_subset(ok, options.min_support, options.subset_share)
+                if options.min_subset and subset.sum() >= options.min_subset:
+                    keep &= subset  # a consistent subset agrees: its channels' entries, the others missing
+                    subsets.append(j)
+                else:
+                    keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
+                    dropped.setdefault(needed, []).append(j)
             F[keep, j] = options.speed * (onsets[j] + t[keep] / rate)
         if progress is not None and (j + 1) % 10 == 0:
             progress(f"{label}: {j + 1}/{n} events")
     names = tuple(f"e{j + 1}" for j in range(n))
     notes = recording.notes
+    if whole:
+        notes += (f"{len(whole)} event(s) analysed whole without a taper, their pairs' correlations over "
+                  f"{1000 * options.window:g} ms ambiguous (a periodic or narrow-band sound): "
+                  f"{', '.join(names[j] for j in whole)}",)
+    if subsets:
+        notes += (f"{len(subsets)} event(s) kept on a consistent subset of their channels (each agreeing with "
+                  f"{100 * options.subset_share:g} % of the others in it, {options.min_subset} or more), the other "
+                  f"channels missing: {', '.join(names[j] for j in subsets)}",)
     for needed, events_dropped in sorted(dropped.items(), reverse=True):
         notes += (f"{len(events_dropped)} event(s) left missing, their channels agreeing on fewer than "
                   f"{100 * needed:g} % of the pairs: {', '.join(names[j] for j in events_dropped)}",)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .audio import (Recording, TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _measure, _over_tapers,
-                    _pair_candidates, tdoa_matrix)
+                    _pair_candidates, agreeing_pairs, tdoa_matrix)
 
 __all__ = ["GuideOptions", "GuidedTdoa", "guided_tdoa_matrix", "locate_source", "reconcile", "tdoa_and_calibrate",
            "tdoa_guided"]
@@ -245,17 +245,17 @@ def _windows(receivers: np.ndarray, s: np.ndarray, receiver_std: np.ndarray, sou
 
 
 def _guided_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, guide: GuideOptions, pred: np.ndarray,
-                     half: np.ndarray):
+                     half: np.ndarray, beta: float = 1.0):
     """(reference, times relative to it in samples, support) of one event's weighted segments: the first
     pass's consensus, started from the predicted arrivals, on the candidates within each pair's window."""
     energy = np.sum(seg**2, axis=1)
     r = int(np.argmax(energy))
     m = seg.shape[0]
-    i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks)
+    i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks, beta)
     inside = np.abs(lags - (pred[i] - pred[k])[:, None]) <= half[i, k][:, None]
-    t, support = _consensus(m, r, i, k, np.where(inside, lags, np.nan), np.where(inside, heights, 0.0),
-                            options.tolerance, options.early, init=pred - pred[r])
-    return r, t, support
+    candidates = (i, k, np.where(inside, lags, np.nan), np.where(inside, heights, 0.0))
+    t, support = _consensus(m, r, *candidates, options.tolerance, options.early, init=pred - pred[r])
+    return r, t, support, agreeing_pairs(m, candidates, t, options.tolerance)
 
 
 def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, options: TdoaOptions = TdoaOptions(), *,
@@ -284,7 +284,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     rate, speed = recording.rate, options.speed
     scale = rate / speed  # metres -> samples of sound travel
     R = np.asarray(receivers, dtype=float)
-    m = recording.samples.shape[0]
+    m = len(recording.channels)
     if R.ndim != 2 or R.shape[0] != m or not np.all(np.isfinite(R)):
         raise ValueError(f"receivers must be ({m}, dim) finite positions, one per channel; got shape {R.shape}")
     dim = R.shape[1]
@@ -319,7 +319,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             s_std = _source_std(R, s, pairs, max(noise, rms))
             located.append(j)
         pred, half = _windows(R, s, rstd, s_std, noise, options, guide)
-        best = _over_tapers(seg, after, options, lambda w: _guided_arrivals(w, max_lag, options, guide, pred, half))
+        best = _over_tapers(seg, after, options, lambda w, beta: _guided_arrivals(w, max_lag, options, guide, pred, half, beta))
         return (*best, guide.min_agreement)
 
     tm = _measure(recording, options, arrivals, progress, label="tdoa (guided)")

@@ -1188,15 +1188,19 @@ def _add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-support", type=_integer_at_least("--min-support", 1), default=d.min_support, metavar="N",
                    help="an entry is kept when at least N other channels agree with its arrival time "
                    f"(default {d.min_support})")
+    g.add_argument("--signal", metavar="FILE", help="the emitted sound (one channel, the recording's rate; a sweep, "
+                   "say): every channel is first correlated with it (a matched filter), so that long sounds' arrivals "
+                   "are compressed into pulses (default: none, the sound is not known)")
     g.add_argument("--no-guide", action="store_true", help="keep the first pass's matrix: no calibration of it "
                    "guiding a second pass (solvers.audio_guided)")
 
 
 def _tdoa_options(args: argparse.Namespace):
-    from solvers.audio import TdoaOptions
+    from solvers.audio import TdoaOptions, read_signal
 
+    signal, rate = read_signal(args.signal) if args.signal else (None, None)
     return TdoaOptions(speed=args.speed, max_distance=args.max_distance, threshold_db=args.threshold,
-                       min_support=args.min_support)
+                       min_support=args.min_support, signal=signal, signal_rate=rate)
 
 
 def _guide(args: argparse.Namespace):
@@ -1211,8 +1215,10 @@ def _recording_reader(args: argparse.Namespace):
     by a calibration in --dim with --seed (solvers.audio_guided.tdoa_guided)."""
     from solvers.audio_guided import tdoa_guided
 
+    options = _tdoa_options(args)  # --signal read before the recording's analysis
+
     def analyse(recording):
-        return tdoa_guided(recording, _tdoa_options(args), dim=args.dim, seed=args.seed, guide=_guide(args),
+        return tdoa_guided(recording, options, dim=args.dim, seed=args.seed, guide=_guide(args),
                            progress=_progress).matrix
 
     return analyse
@@ -1289,9 +1295,10 @@ def cmd_tdoa(args: argparse.Namespace) -> int:
     from solvers.calibrate_io import Measurements, format_matrix, recording_measurements
 
     _check_outputs({"--out": (args.out, None), "--confidence": (args.confidence, None)}, args.recording)
+    options = _tdoa_options(args)
     recording = read_recording(args.recording)
     with _progress_on_stderr("solvers.calibration", after=2.0 if sys.stderr.isatty() else 30.0):
-        tm = tdoa_guided(recording, _tdoa_options(args), dim=args.dim, guide=_guide(args), progress=_progress).matrix
+        tm = tdoa_guided(recording, options, dim=args.dim, guide=_guide(args), progress=_progress).matrix
     for note in tm.notes:  # the reader's and the analysis's
         _progress(f"tdoa: {note}")
     meas = recording_measurements(tm)
