@@ -30,7 +30,6 @@ import os
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.fft import next_fast_len
 
 __all__ = ["AUDIO_MAGIC", "GccPeak", "Recording", "RecordingError", "TdoaMatrix", "TdoaOptions", "detect_events",
            "frame_power", "gcc_phat", "matched_filter", "is_recording", "no_data", "read_recording", "read_signal", "recording_events", "tdoa_matrix", "consistent_subset", "agreeing_pairs", "ambiguity"]
@@ -126,6 +125,30 @@ def is_recording(path: str) -> bool:
     except OSError:
         return False
     return head in AUDIO_MAGIC
+
+
+def _fast_length(n: int) -> int:
+    """The smallest 11-smooth number >= n (prime factors 2, 3, 5, 7, 11: FFT lengths pocketfft transforms fast; a
+    prime length is several times slower). The value of scipy.fft.next_fast_len(n), without importing scipy at
+    start-up (the CLI builds its parser from this module's options)."""
+    if n <= 1:
+        return 1
+    best = 1 << (n - 1).bit_length()  # a power of two >= n
+    p11 = 1
+    while p11 < best:
+        p7 = p11
+        while p7 < best:
+            p5 = p7
+            while p5 < best:
+                p3 = p5
+                while p3 < best:
+                    p2 = p3 << max(0, (-(-n // p3) - 1).bit_length())  # p3 times the power of two reaching n
+                    best = min(best, p2)
+                    p3 *= 3
+                p5 *= 5
+            p7 *= 7
+        p11 *= 11
+    return best
 
 
 def no_data(source: str, why: str = "empty file") -> str:
@@ -346,7 +369,7 @@ def gcc_phat(x: np.ndarray, y: np.ndarray, *, max_lag: int, min_lag: int | None 
     Reference: Knapp & Carter, The generalized correlation method for estimation of time delay, 1976.
     """
     lo = -max_lag if min_lag is None else min_lag
-    n = next_fast_len(len(x) + len(y))  # no wrap-around; a length of small primes (a prime length is slow)
+    n = _fast_length(len(x) + len(y))  # no wrap-around; a length of small primes (a prime length is slow)
     window = _phat(np.fft.rfft(x, n) * np.conj(np.fft.rfft(y, n)), n, lo, max_lag)
     last = len(window) - 1
     k = top = int(np.argmax(window))
@@ -578,7 +601,7 @@ def matched_filter(seg: np.ndarray, signal: np.ndarray) -> np.ndarray:
     frames, L = seg.shape[1], len(signal)
     if frames < L:
         return np.zeros((seg.shape[0], 1))
-    n = next_fast_len(frames + L)
+    n = _fast_length(frames + L)
     out = np.fft.irfft(np.fft.rfft(seg, n, axis=1) * np.conj(np.fft.rfft(signal, n))[None, :], n, axis=1)
     return out[:, : frames - L + 1]
 
@@ -588,7 +611,7 @@ def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int, beta: float = 1.
     heights (pairs, peaks)), the `peaks` highest local maxima of each correlation over +-max_lag,
     parabolically refined (lag of channel i's sound behind channel k's, in samples)."""
     m, length = seg.shape
-    n = next_fast_len(2 * length)
+    n = _fast_length(2 * length)
     X = np.fft.rfft(seg, n, axis=1)
     i, k = np.triu_indices(m, 1)
     window = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag, beta)

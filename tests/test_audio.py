@@ -432,3 +432,14 @@ def test_a_committed_room_of_tables_audio3d_kinds_is_recomputed():
                          and r["rt60_s"] == "0.3")
     row = script.run("lin_sweep", 0, 10, 20, given=True)
     assert {k: str(v) for k, v in row.items()} == committed
+
+
+def test_the_fft_length_is_scipys_next_fast_len():
+    """solvers.audio picks FFT lengths without importing scipy (the CLI's start-up): the same lengths."""
+    from scipy.fft import next_fast_len
+
+    from solvers.audio import _fast_length
+
+    rng = np.random.default_rng(0)
+    sizes = list(range(1, 3000)) + [int(v) for v in rng.integers(3000, 10**7, 500)]
+    assert [_fast_length(n) for n in sizes] == [next_fast_len(n) for n in sizes]
