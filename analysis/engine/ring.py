@@ -297,10 +297,14 @@ class MonomialCodes:
             return codes.tolist()
         placed = self._fields(codes) << self._key_shifts
         words = [np.bitwise_or.reduce(placed[:, j : j + _PER_WORD], axis=1) for j in range(0, placed.shape[1], _PER_WORD)]
-        keys = words[-1].tolist()
-        for word in reversed(words[:-1]):
-            keys = [k << 64 | w for k, w in zip(keys, word.tolist())]
-        return keys
+        if len(words) == 1:
+            return words[0].tolist()
+        # a key is its words, least significant first: one int.from_bytes per key (twice as fast as
+        # shifting word by word)
+        raw = np.stack(words, axis=1).astype("<u8").tobytes()
+        size = 8 * len(words)
+        from_bytes = int.from_bytes
+        return [from_bytes(raw[i : i + size], "little") for i in range(0, len(raw), size)]
 
     def _fields(self, codes: np.ndarray) -> np.ndarray:
         """Field values of narrow codes (N x rows, uint64), least significant first."""
