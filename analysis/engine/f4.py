@@ -292,11 +292,6 @@ class _State:
         self.pairs, self.pL = self.pairs[~sel], self.pL[~sel]
         return out
 
-    def add(self, h: Poly) -> None:
-        """Insert h (monic, lm not divisible by any lm of G) and update the pairs (see :meth:`insert`)."""
-        codes = self.codes.from_keys(h.mons)
-        self.insert(codes, np.array(h.coeffs, dtype=np.int64), np.array([0, len(codes)]), [h])
-
     def store_minimal(self, polys: Sequence[Poly]) -> None:
         """Store the elements of a minimal basis (monic, leading monomials decreasing, none dividing
         another's), all active, without pairs: the state :func:`_reduce_basis` needs, in one pass (one
