@@ -12,6 +12,11 @@ in msolve's input format, then:
   thread: ``-g 2`` (its reduced grevlex basis) for grevlex systems, its default rational
   parametrization for lex ones (msolve prints no lex basis). ``msolve_s`` is the process's wall time
   minus the start-up of a trivial run, ``msolve_process_s`` the raw wall time;
+* ``--task leading`` compares what a degree needs, the leading ideal: the own engine's minimal basis
+  (``F4Options(reduced=False)``: no final tail reduction) against msolve ``-g 1`` (it prints the leading
+  monomials), ``match`` comparing the two lists of leading monomials; grevlex systems only;
+* the two engines take turns (own, msolve, own, msolve, ...: ``--repeat`` rounds), so that both see
+  the same load of the machine; ``ratio_range`` is the least and largest own / msolve ratio of a round;
 * peak memory: the maximum resident set size of each child process (``os.wait4``), in MB; the own
   engine's includes the interpreter and numpy (``own_baseline_mb`` in the metadata: the same child
   stopped before the computation).
@@ -26,13 +31,13 @@ pairs, at least 3), so that both sides of a speedup see the same load; the speed
 times, its spread the least and largest ratio of a pair (``own_speedup_range``); ``threads_match``: the
 basis on N threads has the digest of the one-thread basis.
 
-Writes tables/bench_engine.csv, .md and .meta.json (date, commit, dirty flag, machine, versions); at another
-prime than 65521 tables/bench_engine-p<prime>.*, with --threads N tables/bench_engine-t<N>.* (both:
--p<prime>-t<N>).
+Writes tables/bench_engine.csv, .md and .meta.json (date, commit, dirty flag, machine, versions, the
+load average at the start and the end); at another prime than 65521 tables/bench_engine-p<prime>.*, with
+--threads N tables/bench_engine-t<N>.* (both: -p<prime>-t<N>), with --task leading a -leading suffix.
 
 Usage: python scripts/bench_engine.py [--suite default|small|large|lex|tdoa|primes|threads|all]
        [--systems NAME ...] [--skip NAME ...] [--repeat 3] [--cap 300] [--no-msolve] [--prime P] [--threads N]
-       [--csv PATH]
+       [--task reduced|leading] [--csv PATH]
 """
 from __future__ import annotations
 
@@ -74,8 +79,14 @@ SUITES = {
 }
 SUITES["all"] = tuple(name for suite in ("small", "large", "lex", "tdoa") for name in SUITES[suite])
 SUITES["default"] = SUITES["all"]
-SUITES["primes"] = ("katsura-9", "katsura-10", "eco-10", "eco-11")  # issue 35: <= 1x msolve at 30/31-bit primes
+SUITES["primes"] = ("katsura-9", "katsura-10", "eco-10", "eco-11", "positions-6r3s")  # <= 1x msolve at 30/31-bit primes
 SUITES["threads"] = ("katsura-10", "eco-11", "quadrics-10", "positions-6r3s")  # issue 35: speedup on 2 cores
+TASKS = {
+    "reduced": "the reduced grevlex basis: the own engine's (F4Options(reduced=True)) against msolve -g 2",
+    "leading": "the leading ideal, what a degree needs: the own engine's minimal basis (F4Options(reduced=False), "
+               "no final tail reduction) against msolve -g 1 (its leading monomials); match compares the leading "
+               "monomials",
+}
 PATHS = {ext: ROOT / "tables" / f"bench_engine.{ext}" for ext in ("csv", "md", "meta.json")}
 REPEAT_BELOW_S = 2.0
 """Runs shorter than this are repeated (up to --repeat times); longer ones run once."""
@@ -102,6 +113,7 @@ class Row:
     ratio_s: float | None = None
     ratio_process: float | None = None
     ratio_mb: float | None = None
+    ratio_range: str = ""
     match: bool | None = None
     max_matrix: str = ""
     status: str = "ok"
@@ -131,14 +143,16 @@ from analysis.engine.degree import groebner_in_order
 from analysis.engine.f4 import F4Options
 from analysis.sweeps.benchmarks import basis_digest
 from analysis.engine.quotient import NotZeroDimensional, degree, dimension
+from analysis.engine.ring import Poly
 ring, polys = read_system(sys.argv[1]).to_ring({prime}, sys.argv[2])
 threads = int(sys.argv[4]) if len(sys.argv) > 4 else 1
+leading = len(sys.argv) > 5 and sys.argv[5] == "leading"
 if sys.argv[3] == "baseline":
     sys.exit(0)
 from analysis.engine.linalg import MatrixTooLarge
 t0 = time.perf_counter()
 try:
-    gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10, threads=threads))
+    gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10, threads=threads, reduced=not leading))
 except MatrixTooLarge as e:
     print(json.dumps(dict(error=str(e), seconds=time.perf_counter() - t0)))
     sys.exit(0)
@@ -148,7 +162,8 @@ try:
 except NotZeroDimensional:
     deg = "dim " + str(dimension(gb))
 rows, cols = gb.max_matrix
-print(json.dumps(dict(seconds=seconds, degree=deg, size=len(gb.basis), digest=basis_digest(gb.basis),
+basis = [Poly(gb.ring, [g.lm], [1]) for g in gb.basis] if leading else gb.basis
+print(json.dumps(dict(seconds=seconds, degree=deg, size=len(gb.basis), digest=basis_digest(basis),
                       max_matrix=f"{{rows}}x{{cols}}")))
 """
 
@@ -209,17 +224,6 @@ def run_child(argv: list[str], cap: float) -> Run:
         return Run(wall, peak_kb / 1024, text, capped.is_set(), proc.returncode)
 
 
-def repeated(argv: list[str], repeat: int, cap: float) -> tuple[Run, list[Run]]:
-    """Best run (least wall time) of up to repeat runs (SHORT_REPEAT while the best is under SHORT_S),
-    stopping after one that takes REPEAT_BELOW_S."""
-    runs: list[Run] = []
-    while len(runs) < repeat or (len(runs) < SHORT_REPEAT and min(r.wall for r in runs) < SHORT_S):
-        runs.append(run_child(argv, cap))
-        if runs[-1].capped or runs[-1].wall >= REPEAT_BELOW_S:
-            break
-    return min(runs, key=lambda r: r.wall), runs
-
-
 def alternating(argvs: list[list[str]], repeat: int, cap: float) -> list[list[Run]]:
     """Runs of every argv, taking turns (argv 0, 1, ..., 0, 1, ...), repeat rounds or until a run is capped:
     the runs of a round see about the same load of the machine."""
@@ -232,12 +236,14 @@ def alternating(argvs: list[list[str]], repeat: int, cap: float) -> list[list[Ru
     return runs
 
 
-def own_argv(path: Path, order: str, prime: int, mode: str = "run", threads: int = 1) -> list[str]:
-    return [sys.executable, "-c", _OWN_CHILD.format(root=str(ROOT), prime=prime), str(path), order, mode, str(threads)]
+def own_argv(path: Path, order: str, prime: int, mode: str = "run", threads: int = 1, task: str = "reduced") -> list[str]:
+    return [sys.executable, "-c", _OWN_CHILD.format(root=str(ROOT), prime=prime), str(path), order, mode, str(threads),
+            task]
 
 
-def msolve_argv(exe: str, path: Path, out: Path, order: str, threads: int = 1) -> list[str]:
-    basis = ["-g", "2"] if order == "grevlex" else []  # lex: msolve's parametrization
+def msolve_argv(exe: str, path: Path, out: Path, order: str, threads: int = 1, task: str = "reduced") -> list[str]:
+    # grevlex: -g 2 prints the reduced basis, -g 1 the leading ideal; lex: msolve's parametrization
+    basis = ["-g", "1" if task == "leading" else "2"] if order == "grevlex" else []
     # OMP_NUM_THREADS as well as -t (as analysis.engine.msolve does): this script sets it to 1 for its children;
     # env execs msolve in the same process, so its time and memory are msolve's
     return ["env", f"OMP_NUM_THREADS={threads}", exe, *basis, "-t", str(threads), "-f", str(path), "-o", str(out)]
@@ -256,8 +262,8 @@ def bench_threads(row: Row, name: str, path: Path, order: str, args, exe: str | 
     repeat = max(args.repeat, 3)
     if row.own_s is not None:
         print(f"[{name}] own, 1 and {args.threads} threads ...", flush=True)
-        runs = alternating([own_argv(path, order, args.prime), own_argv(path, order, args.prime, threads=args.threads)],
-                           repeat, args.cap)
+        runs = alternating([own_argv(path, order, args.prime, task=args.task),
+                            own_argv(path, order, args.prime, threads=args.threads, task=args.task)], repeat, args.cap)
         if not any(r.capped for side in runs for r in side):
             one, many = ([json.loads(r.stdout.strip().splitlines()[-1]) for r in side] for side in runs)
             if all("seconds" in r and "error" not in r for r in one + many):
@@ -269,8 +275,8 @@ def bench_threads(row: Row, name: str, path: Path, order: str, args, exe: str | 
     if exe and row.msolve_s is not None:
         print(f"[{name}] msolve, -t 1 and -t {args.threads} ...", flush=True)
         out = tmp / f"{name}.out"
-        runs = alternating([msolve_argv(exe, path, out, order), msolve_argv(exe, path, out, order, args.threads)],
-                           repeat, args.cap)
+        runs = alternating([msolve_argv(exe, path, out, order, task=args.task),
+                            msolve_argv(exe, path, out, order, args.threads, args.task)], repeat, args.cap)
         if not any(r.capped for side in runs for r in side):
             one, many = ([max(r.wall - startup, 1e-9) for r in side] for side in runs)
             row.msolve_one_thread_s = min(one)
@@ -279,18 +285,38 @@ def bench_threads(row: Row, name: str, path: Path, order: str, args, exe: str | 
 
 
 # ----------------------------------------------------------------------------------------------
+def paired(argvs: list[list[str]], repeat: int, cap: float) -> list[list[Run]]:
+    """Runs of the own engine and msolve taking turns (:func:`alternating`): ``repeat`` rounds, SHORT_REPEAT
+    when the first round's processes both take under SHORT_S (start-up and jitter are most of their wall time
+    there), one when a run of the first round takes REPEAT_BELOW_S * 10 or more."""
+    runs = alternating(argvs, 1, cap)
+    if any(r.capped for side in runs for r in side):
+        return runs
+    walls = [side[0].wall for side in runs]
+    rounds = (SHORT_REPEAT if max(walls) < SHORT_S else 1 if max(walls) >= 10 * REPEAT_BELOW_S else repeat)
+    more = alternating(argvs, rounds - 1, cap)
+    return [side + extra for side, extra in zip(runs, more)]
+
+
 def bench_system(name: str, args, exe: str | None, startup: float | None, tmp: Path) -> Row:
     polys = benchmark_system(name, args.prime)
     ring = polys[0].ring
     order = ring.order.name
+    if args.task == "leading" and order != "grevlex":
+        return Row(name, order, ring.nvars, status="skipped: --task leading compares grevlex leading ideals")
     path = tmp / f"{name}.ms"
     path.write_text(to_msolve_input(polys), encoding="ascii")
     row = Row(name, order, ring.nvars)
-    print(f"[{name}] own ...", flush=True)
-    best, runs = repeated(own_argv(path, order, args.prime), args.repeat, args.cap)
-    if best.capped:
+    out = tmp / f"{name}.out"
+    argvs = [own_argv(path, order, args.prime, task=args.task)]
+    if exe:
+        argvs.append(msolve_argv(exe, path, out, order, task=args.task))
+    print(f"[{name}] own{' and msolve, taking turns' if exe else ''} ...", flush=True)
+    sides = paired(argvs, args.repeat, args.cap)
+    runs = sides[0]
+    own = None
+    if any(r.capped for r in runs):
         row.status = f"own capped at {args.cap:g} s"
-        own = None
     else:
         results = [json.loads(r.stdout.strip().splitlines()[-1]) for r in runs]
         own = results[0]
@@ -299,16 +325,17 @@ def bench_system(name: str, args, exe: str | None, startup: float | None, tmp: P
         own = None
     elif own is not None:
         row.own_s = min(r["seconds"] for r in results)
-        row.own_process_s = best.wall
+        row.own_process_s = min(r.wall for r in runs)
         row.own_peak_mb = max(r.peak_mb for r in runs)
         row.degree, row.basis_size, row.max_matrix = own["degree"], own["size"], own["max_matrix"]
     if exe:
-        print(f"[{name}] msolve ...", flush=True)
-        out = tmp / f"{name}.out"
-        best, runs = repeated(msolve_argv(exe, path, out, order), max(args.repeat, 5), args.cap)
-        if best.capped:
+        runs = sides[1]
+        if not runs:  # the own engine's first run was capped: msolve did not run
+            pass
+        elif any(r.capped for r in runs) or len(runs) < len(sides[0]):
             row.status = ("" if row.status == "ok" else row.status + "; ") + f"msolve capped at {args.cap:g} s"
         else:
+            best = min(runs, key=lambda r: r.wall)
             row.msolve_process_s = best.wall
             if best.wall < SHORT_S:  # the start-up measured again beside this system's runs
                 trivial = msolve_argv(exe, tmp / "trivial.ms", tmp / "trivial.out", "grevlex")
@@ -326,6 +353,8 @@ def bench_system(name: str, args, exe: str | None, startup: float | None, tmp: P
             if own is not None:
                 if row.msolve_s > 0:
                     row.ratio_s = row.own_s / row.msolve_s
+                    ratios = [r["seconds"] / max(m.wall - startup, 1e-9) for r, m in zip(results, runs)]
+                    row.ratio_range = f"{min(ratios):.2f}-{max(ratios):.2f}"
                 row.ratio_process = row.own_process_s / row.msolve_process_s
                 row.ratio_mb = row.own_peak_mb / row.msolve_peak_mb
     if args.threads > 1:
@@ -370,15 +399,18 @@ def metadata(args, exe: str | None, startup: float | None, baseline: float | Non
         "cap_s": args.cap,
         "run_s": round(seconds, 1),
         "timing": (
-            "each engine in a fresh process per run, up to repeat runs while a run takes < 2 s, best wall time; "
+            "each engine in a fresh process per run, the own engine and msolve taking turns (repeat rounds; "
+            f"{SHORT_REPEAT} when both take < {SHORT_S} s, one when a run takes >= {10 * REPEAT_BELOW_S:g} s), best wall time; "
             "own_s: the engine alone inside its process; own_process_s: the whole process; msolve_s: msolve's "
             "process minus the start-up of a trivial run; msolve_process_s: raw; ratio_s = own_s / msolve_s, "
-            "ratio_process = own_process_s / msolve_process_s; peak MB: maximum RSS of the child by GNU time (largest run)"
+            "ratio_process = own_process_s / msolve_process_s; ratio_range: least and largest own_s / msolve_s of a "
+            "round; peak MB: maximum RSS of the child by GNU time (largest run)"
         ),
         "lex": "msolve prints no lex basis: its default rational parametrization is timed for lex systems (no match)",
+        "task": TASKS[args.task],
         "own_baseline_mb": baseline,
         "msolve": {"path": exe, "version": msolve_version(exe), "startup_s": startup,
-                   "options": "-t 1 (-g 2 for grevlex)" + (f"; -t {args.threads} in the threads table"
+                   "options": f"-t 1 (-g {1 if args.task == 'leading' else 2} for grevlex)" + (f"; -t {args.threads} in the threads table"
                                                             if args.threads > 1 else "")},
         "versions": {
             "python": platform.python_version(),
@@ -426,15 +458,18 @@ def markdown(rows: list[Row], meta: dict) -> str:
     lines = [
         f"Engine against msolve {meta['msolve']['version'] or '(absent)'} over GF({meta['prime']}), one thread, "
         f"commit {meta['commit'][:10]}{' (dirty)' if meta['worktree_dirty'] else ''}, {meta['date']}; "
+        f"load average {meta['load_average_at_start'][0]:.1f} at the start, "
+        f"{meta['machine']['load_average_at_end'][0]:.1f} at the end ({meta['machine']['cpus']} cores); "
+        f"{meta['task']}; the two taking turns, best of each, round ratios in 'range'; "
         f"each engine in a fresh process; own MB includes the interpreter and numpy "
         f"({_f(meta['own_baseline_mb'], '.0f')} MB before any computation).",
         "",
     ]
     lines += _md_table(
-        "| system | order | degree | own s | msolve s | ratio | own process s | msolve process s | ratio | "
+        "| system | order | degree | own s | msolve s | ratio | range | own process s | msolve process s | ratio | "
         "own MB | msolve MB | ratio | match | largest matrix | status |",
         [f"| {r.system} | {r.order} | {r.degree} | {_f(r.own_s, '.3f')} | {_f(r.msolve_s, '.3f')} | "
-         f"{_f(r.ratio_s, '.2f')} | {_f(r.own_process_s, '.3f')} | {_f(r.msolve_process_s, '.3f')} | "
+         f"{_f(r.ratio_s, '.2f')} | {r.ratio_range} | {_f(r.own_process_s, '.3f')} | {_f(r.msolve_process_s, '.3f')} | "
          f"{_f(r.ratio_process, '.2f')} | {_f(r.own_peak_mb, '.0f')} | {_f(r.msolve_peak_mb, '.0f')} | "
          f"{_f(r.ratio_mb, '.2f')} | {'' if r.match is None else r.match} | {r.max_matrix} | {r.status} |" for r in rows])
     n = meta["threads_compared"]
@@ -485,6 +520,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--prime", type=int, default=PRIME)
     parser.add_argument("--threads", type=int, default=1,
                         help="also run each system on this many threads (own engine and msolve -t), alternating")
+    parser.add_argument("--task", choices=sorted(TASKS), default="reduced",
+                        help="what is compared: the reduced basis (msolve -g 2) or the leading ideal a degree needs "
+                             "(the own engine's minimal basis against msolve -g 1)")
     parser.add_argument("--csv", type=Path, help="output CSV (.md and .meta.json beside it; default tables/"
                         "bench_engine.csv, -p<prime> at another prime than 65521, -t<N> with --threads N)")
     args = parser.parse_args(argv)
@@ -492,7 +530,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--threads must be >= 1")
     if args.csv is None:
         args.csv = PATHS["csv"].with_name("bench_engine" + (f"-p{args.prime}" if args.prime != PRIME else "")
-                                          + (f"-t{args.threads}" if args.threads > 1 else "") + ".csv")
+                                          + (f"-t{args.threads}" if args.threads > 1 else "")
+                                          + ("-leading" if args.task == "leading" else "") + ".csv")
     names = [s for s in (args.systems or SUITES[args.suite]) if s not in args.skip]
     unknown = [s for s in names if s not in BENCHMARK_SYSTEMS]
     if unknown:

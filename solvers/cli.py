@@ -98,9 +98,10 @@ def _default_max_memory() -> str | None:
     return os.environ.get(MAX_MEMORY_ENV) or None
 
 
-def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
+def _f4_options(args: argparse.Namespace, linear_substitution: bool = False, reduced: bool = True):
     """F4 options of the command line; ``linear_substitution`` for system files (analysis.engine.f4.F4Options: the
-    TDOA formulations keep F4 on their inputs, whose matrix statistics the tables record)."""
+    TDOA formulations keep F4 on their inputs, whose matrix statistics the tables record); ``reduced`` False
+    where only leading monomials are read (a degree without --gb: a minimal basis, no final tail reduction)."""
     from analysis.engine.f4 import F4Options
 
     if args.verbose and args.backend in ("auto", "sparse"):
@@ -108,7 +109,8 @@ def _f4_options(args: argparse.Namespace, linear_substitution: bool = False):
 
         print(f"[f4] {native.describe()}", file=sys.stderr)
     return F4Options(backend=args.backend, max_matrix_cells=args.max_cells, max_memory=args.max_memory,
-                     verbose=args.verbose, threads=args.threads, linear_substitution=linear_substitution)
+                     verbose=args.verbose, threads=args.threads, linear_substitution=linear_substitution,
+                     reduced=reduced)
 
 
 def _export(system, fmt: str, path: str) -> None:
@@ -332,7 +334,7 @@ def cmd_degree(args: argparse.Namespace) -> int:
                 f"the file has characteristic {system.characteristic}; --prime {','.join(map(str, primes))} conflicts"
             )
         primes = (system.characteristic,)
-    options = _f4_options(args, linear_substitution=True)
+    options = _f4_options(args, linear_substitution=True, reduced=bool(args.gb))
 
     def polys(p: int):
         try:

@@ -527,3 +527,38 @@ def test_threads_give_the_same_basis_on_racing_systems(name, prime):
     one = groebner(polys, F4Options(threads=1))
     for _ in range(3):
         assert groebner(polys, F4Options(threads=2)).basis == one.basis
+
+
+@pytest.mark.parametrize("prime,kind,seed", [(p, kind, seed) for p in (32003, 2147483647) for kind in SYSTEM_KINDS
+                                             for seed in range(3)])
+def test_minimal_basis_has_the_leading_ideal_of_the_reduced_one(prime, kind, seed):
+    """F4Options(reduced=False): a minimal Gröbner basis of the same ideal (monic, no leading monomial dividing
+    another's), with the reduced basis's leading monomials, whose tail reduction (interreduce) is the reduced
+    basis; with and without the linear substitution, on the C kernels and the numpy path."""
+    from analysis.engine.f4 import interreduce
+
+    _, polys = random_small_system(seed, prime, kind, nvars=case_nvars(seed))
+    for substitute in (False, True):
+        for backend in ("auto", "numpy"):
+            reduced = groebner(polys, F4Options(backend=backend, linear_substitution=substitute))
+            minimal = groebner(polys, F4Options(backend=backend, linear_substitution=substitute, reduced=False))
+            assert reduced.reduced and not minimal.reduced
+            assert minimal.leading_monomials == reduced.leading_monomials
+            assert all(g.coeffs[0] == 1 for g in minimal.basis)
+            ring = minimal.ring
+            assert not any(ring.divides(a, b) for a in minimal.leading_monomials for b in minimal.leading_monomials
+                           if a != b)
+            assert set(interreduce(list(minimal.basis))) == set(reduced.basis)
+            assert dimension(minimal) == dimension(reduced)
+            if is_zero_dimensional(reduced):
+                assert degree(minimal) == degree(reduced)
+
+
+def test_minimal_basis_keeps_unreduced_tails():
+    """katsura-6's minimal basis is not its reduced basis (the tails F4 left are not fully reduced): the option
+    skips a real step."""
+    from analysis.engine.f4 import interreduce
+
+    minimal = groebner(katsura(6), F4Options(reduced=False))
+    assert set(minimal.basis) != set(groebner(katsura(6)).basis)
+    assert set(interreduce(list(minimal.basis))) == set(groebner(katsura(6)).basis)

@@ -6,10 +6,11 @@ eigenvectors of the action matrices can be checked exactly; normal forms are com
 """
 from __future__ import annotations
 
-from itertools import combinations
+from itertools import combinations, product
 
 import flint
 import numpy as np
+
 import pytest
 import sympy
 
@@ -79,6 +80,12 @@ def test_standard_monomials_count_is_the_degree(name, polys, expected):
     ring = gb.ring
     for b in basis:
         assert not any(ring.divides(lm, b) for lm in gb.leading_monomials)
+    # complete: every monomial of the box of the pure powers that no leading monomial divides is listed
+    leads = [ring.exps(lm) for lm in gb.leading_monomials]
+    box = [min(e[i] for e in leads if sum(e) == e[i]) for i in range(ring.nvars)]
+    outside = [e for e in product(*map(range, box))
+               if not any(all(a <= b for a, b in zip(lead, e)) for lead in leads)]
+    assert sorted(outside) == sorted(ring.exps(b) for b in basis)
     # closed under division: every divisor of a standard monomial is standard
     keys = set(basis)
     for b in basis:
@@ -368,6 +375,11 @@ def test_count_standard_monomials_without_listing():
         with pytest.MonkeyPatch.context() as mp:  # by the memoised split
             mp.setattr(quotient, "WAVE_COUNT_LIMIT", 0)
             assert count_standard_monomials(gb) == listed
+        # a box larger than the limit: waves while the count stays within it, else the memoised split
+        for limit in (listed, listed - 1):
+            with pytest.MonkeyPatch.context() as mp:
+                mp.setattr(quotient, "WAVE_COUNT_LIMIT", limit)
+                assert count_standard_monomials(gb) == listed
     ring = Ring([f"x{i}" for i in range(40)], 65521)
     gb = groebner([x**2 - 1 for x in ring.gens()])
     assert count_standard_monomials(gb) == 2**40

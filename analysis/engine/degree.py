@@ -150,6 +150,9 @@ def analyse_prime(polys: Sequence[Poly], options: F4Options = F4Options(), satur
     """
     if saturation not in ("rank", "rabinowitsch"):
         raise ValueError(f"unknown saturation method {saturation!r}; valid: rank, rabinowitsch")
+    if saturate_by is not None or polys[0].ring.order.name != "grevlex":
+        # normal forms (saturation, FGLM) read the tails: those need the reduced basis
+        options = dataclasses.replace(options, reduced=True)
     t0 = time.perf_counter()
     gb = None
     if saturate_by is None or saturation == "rank":
@@ -259,7 +262,8 @@ def analyse_by_msolve(
     if not check:
         results += [_analyse_one(system, p, options, saturate_by, saturation, "msolve", msolve) for p in primes[len(head):]]
         return _agreed(results, "none (not requested)")
-    capped = dataclasses.replace(options, max_matrix_cells=tighter_cells(check_cells, options.max_matrix_cells))
+    capped = dataclasses.replace(options, max_matrix_cells=tighter_cells(check_cells, options.max_matrix_cells),
+                                 reduced=options.reduced and len(primes) > 1)  # one prime: bases compared
     p = primes[-1]
     try:
         own = _analyse_one(system, p, capped, saturate_by, saturation, "own", None)

@@ -98,27 +98,65 @@ def _lead_exponents(gb: GroebnerResult) -> np.ndarray:
     return np.array([gb.ring.exps(k) for k in gb.leading_monomials], dtype=np.int64).reshape(-1, n)
 
 
-def _standard_waves(lm_exps: np.ndarray):
+class _TooMany(Exception):
+    """More standard monomials than a wave enumeration was allowed to list."""
+
+
+def _standard_waves(lm_exps: np.ndarray, limit: int | None = None):
     """The standard monomials of a zero-dimensional leading ideal degree by degree (exponent arrays, one
     per degree): the multiples x_i s of the standard monomials s of degree d are all of degree d + 1, so
-    each wave is deduplicated on its own; those no leading monomial divides are the next wave."""
+    each wave is deduplicated on its own; those no leading monomial divides are the next wave. Raises
+    :class:`_TooMany` once the count passes ``limit`` (or a wave's candidates would).
+
+    A candidate m = x_i s is standard iff it is not itself a leading monomial and every m / x_j (x_j | m)
+    is standard: a leading monomial properly dividing m divides one of the m / x_j. Where the exponents
+    fit one int64 code (mixed radix, each variable up to its largest leading exponent, which bounds the
+    candidates' exponents) that is a few sorted lookups per candidate; otherwise every leading monomial
+    is tested against every candidate."""
     n = lm_exps.shape[1]
+    radix = lm_exps.max(axis=0, initial=0) + 1
+    coded = math.prod(int(r) for r in radix) < 1 << 62
+    strides = np.cumprod(np.concatenate([[1], radix[:-1]])).astype(np.int64) if coded else None
+    lm_codes = np.sort(lm_exps @ strides) if coded else None
     frontier = np.zeros((1, n), dtype=np.int64)
+    codes = np.zeros(1, dtype=np.int64)
+    total = 1
     yield frontier
     step = np.eye(n, dtype=np.int64)
     chunk = max(1, (1 << 20) // max(1, len(lm_exps) * n))
     while len(frontier):
+        if limit is not None and len(frontier) * n > limit:  # the candidates alone: memory bound
+            raise _TooMany
         candidates = (frontier[:, None, :] + step[None, :, :]).reshape(-1, n)
-        candidates = candidates[np.lexsort(candidates.T)]  # np.unique(axis=0) would import numpy.ma (12 ms)
-        fresh = np.ones(len(candidates), dtype=bool)
-        fresh[1:] = (candidates[1:] != candidates[:-1]).any(axis=1)
-        candidates = candidates[fresh]
-        divisible = np.concatenate([
-            (lm_exps[None, :, :] <= candidates[s : s + chunk, None, :]).all(axis=2).any(axis=1)
-            for s in range(0, len(candidates), chunk)
-        ])
-        frontier = candidates[~divisible]
+        if coded:
+            cand_codes = (codes[:, None] + strides[None, :]).ravel()
+            cand_codes, first = np.unique(cand_codes, return_index=True)
+            candidates = candidates[first]
+            keep = ~_member(cand_codes, lm_codes)
+            for j in range(n):
+                has = candidates[:, j] > 0
+                keep[has] &= _member(cand_codes[has] - strides[j], codes)
+            frontier, codes = candidates[keep], cand_codes[keep]
+        else:
+            candidates = candidates[np.lexsort(candidates.T)]  # np.unique(axis=0) would import numpy.ma (12 ms)
+            fresh = np.ones(len(candidates), dtype=bool)
+            fresh[1:] = (candidates[1:] != candidates[:-1]).any(axis=1)
+            candidates = candidates[fresh]
+            divisible = np.concatenate([
+                (lm_exps[None, :, :] <= candidates[s : s + chunk, None, :]).all(axis=2).any(axis=1)
+                for s in range(0, len(candidates), chunk)
+            ])
+            frontier = candidates[~divisible]
+        total += len(frontier)
+        if limit is not None and total > limit:
+            raise _TooMany
         yield frontier
+
+
+def _member(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """values[k] in sorted_set, element by element."""
+    at = np.searchsorted(sorted_set, values)
+    return sorted_set[np.minimum(at, len(sorted_set) - 1)] == values
 
 
 WAVE_COUNT_LIMIT = 200_000
@@ -337,8 +375,12 @@ def count_standard_monomials(gb: GroebnerResult) -> int:
     lm_exps = _lead_exponents(gb)
     single = (lm_exps > 0).sum(axis=1) == 1  # pure powers x_i^a (each variable has one: zero-dimensional)
     pure = np.where(lm_exps[single] > 0, lm_exps[single], np.iinfo(np.int64).max).min(axis=0)
-    if math.prod(int(a) for a in pure) <= WAVE_COUNT_LIMIT and int(pure.sum()) <= WAVE_DEGREE_LIMIT:  # B in the box
-        return sum(len(wave) for wave in _standard_waves(lm_exps))
+    if int(pure.sum()) <= WAVE_DEGREE_LIMIT:  # B listed wave by wave while it stays small
+        in_box = math.prod(int(a) for a in pure) <= WAVE_COUNT_LIMIT
+        try:
+            return sum(len(wave) for wave in _standard_waves(lm_exps, None if in_box else WAVE_COUNT_LIMIT))
+        except _TooMany:
+            pass
     memo: dict[tuple, int] = {}
 
     def minimal(gens: list[tuple[int, ...]]) -> tuple[tuple[int, ...], ...]:
