@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from analysis.sweeps.executors import ExecutorError, make_executor  # noqa: E402
 from analysis.sweeps.search import SearchBound, SearchLimits, cached_cell, run_search  # noqa: E402
 from analysis.sweeps.tables import parse_cells  # noqa: E402
-from solvers.cli import _memory_size  # noqa: E402  (the CLI's --max-memory parser)
+from solvers.cli.common import _memory_size  # noqa: E402  (the CLI's --max-memory parser)
 
 
 def build_parser() -> argparse.ArgumentParser:
