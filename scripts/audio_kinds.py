@@ -54,7 +54,8 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from solvers.audio import TdoaOptions, read_recording  # noqa: E402
+from solvers.audio import TdoaOptions  # noqa: E402
+from solvers.recording import read_recording  # noqa: E402
 from solvers.audio_guided import tdoa_and_calibrate  # noqa: E402
 from solvers.metrics import align_rigid, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402

@@ -7,7 +7,7 @@ apart); each event a clap (a 20 ms exponentially decaying noise burst), a chirp 
 or a speech-like sound (0.4 s of noise with a speech-like spectrum and a 4 Hz syllabic envelope), drawn
 at random; white noise at the microphones for the given SNR (noise power = the mean power of the
 noise-free recording while the events sound x 10^(-SNR/10)). The recording is written as a 24-bit
-multichannel WAV file and read back by `solvers.audio.read_recording`, then
+multichannel WAV file and read back by `solvers.recording.read_recording`, then
 `solvers.audio_guided.tdoa_and_calibrate(recording, dim=3)` (what `tdoa-workbench calibrate --dim 3 room.wav`
 runs, default options: the emitted signals are not used): the first pass `solvers.audio.tdoa_matrix`,
 `calibrate(F, dim=3)` of it (sigma estimated), the guided second pass at that calibration's positions when
@@ -54,7 +54,8 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from solvers.audio import TdoaOptions, read_recording  # noqa: E402
+from solvers.audio import TdoaOptions  # noqa: E402
+from solvers.recording import read_recording  # noqa: E402
 from solvers.audio_guided import tdoa_and_calibrate  # noqa: E402
 from solvers.metrics import align_rigid, cramer_rao_position_rms, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402

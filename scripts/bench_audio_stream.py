@@ -81,7 +81,8 @@ def synthesise(path: str, minutes: float, channels: int, rate: int, spacing: flo
 LIBRARY = """
 import sys, json
 import numpy as np
-from solvers.audio import read_recording, tdoa_matrix
+from solvers.audio import tdoa_matrix
+from solvers.recording import read_recording
 rec = read_recording(sys.argv[1], stream=sys.argv[2] == "stream")
 tm = tdoa_matrix(rec)
 print(json.dumps({"events": len(tm.events), "entries": int(np.isfinite(tm.F).sum()), "size": int(tm.F.size),

@@ -25,8 +25,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .audio import (Recording, TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _measure, _over_tapers,
+from .audio import (TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _measure, _over_tapers,
                     _pair_candidates, agreeing_pairs, tdoa_matrix)
+from .recording import Recording
 
 __all__ = ["GuideOptions", "GuidedTdoa", "guided_tdoa_matrix", "locate_source", "reconcile", "tdoa_and_calibrate",
            "tdoa_guided"]

@@ -366,14 +366,14 @@ def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdo
                progress=None) -> Measurements:
     """The one reader of every verb that takes measurements: a measurement CSV (one path, ``-`` for
     standard input), or a recording (one multichannel audio file, or one file per channel: recognised
-    by their first bytes, solvers.audio.is_recording), turned into the matrix by
+    by their first bytes, solvers.recording.is_recording), turned into the matrix by
     solvers.audio.tdoa_matrix with `tdoa_options` (a solvers.audio.TdoaOptions; None: the defaults), or by
-    `analyse` (a callable taking the solvers.audio.Recording and returning its solvers.audio.TdoaMatrix: the CLI
+    `analyse` (a callable taking the solvers.recording.Recording and returning its solvers.audio.TdoaMatrix: the CLI
     passes the guided pass, solvers.audio_guided.tdoa_guided; this module imports nothing of the calibration,
     which reads its anchor files through it).
     progress: None, or a callable taking one line (the analysis's progress and notes).
 
-    Raises MeasurementFileError or solvers.audio.RecordingError (one line) for what cannot be read.
+    Raises MeasurementFileError or solvers.recording.RecordingError (one line) for what cannot be read.
     """
     paths = [paths] if isinstance(paths, str) else list(paths)
     audio = [p for p in paths if p != _STDIN and _is_audio(p)]
@@ -382,7 +382,8 @@ def read_input(paths, *, delimiter: str | None = None, header: str = "auto", tdo
             other = next(p for p in paths if p not in audio)
             raise MeasurementFileError(f"{other} is not a recording, but {audio[0]} is: give recordings only (one "
                                        "multichannel file or one file per channel), or one measurement CSV")
-        from .audio import TdoaOptions, read_recording, tdoa_matrix
+        from .audio import TdoaOptions, tdoa_matrix
+        from .recording import read_recording
 
         recording = read_recording(paths)
         tm = (analyse(recording) if analyse is not None else
@@ -403,7 +404,7 @@ def recording_measurements(tm) -> "Measurements":
 
 
 def _is_audio(path: str) -> bool:
-    from .audio import is_recording
+    from .recording import is_recording
 
     return is_recording(path)
 

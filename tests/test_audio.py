@@ -8,9 +8,9 @@ import pytest
 
 soundfile = pytest.importorskip("soundfile")
 
-from solvers.audio import (GccPeak, RecordingError, TdoaOptions, detect_events, gcc_phat,  # noqa: E402
-                           is_recording, read_recording, tdoa_matrix)
+from solvers.audio import GccPeak, TdoaOptions, detect_events, gcc_phat, tdoa_matrix  # noqa: E402
 from solvers.calibrate_io import read_input, read_measurements  # noqa: E402
+from solvers.recording import RecordingError, is_recording, read_recording  # noqa: E402
 from solvers.cli import main  # noqa: E402
 
 RATE = 16_000
@@ -110,7 +110,7 @@ def test_events_and_time_differences_of_a_synthetic_recording():
     x = synthetic_recording(rng, delays, onsets)
     events = detect_events(x, RATE)
     assert len(events) == 3 and np.allclose(events[:, 0] / RATE, onsets, atol=0.01)
-    from solvers.audio import Recording
+    from solvers.recording import Recording
 
     tm = tdoa_matrix(Recording(x, RATE, tuple("abcde"), "synthetic"), TdoaOptions(max_distance=2.0))
     assert tm.F.shape == (m, 3) and np.all(np.isfinite(tm.F))
@@ -125,7 +125,7 @@ def test_an_event_that_agrees_poorly_is_analysed_again_with_the_retry_tapers():
     """Arrivals spread over 19 ms and a taper of 1 ms: the weight leaves the late channels' sound out, the
     channels agree on too few pairs and the events are left missing; with a 50 ms taper to retry, the
     agreement picks it and every time difference comes out within half a sample."""
-    from solvers.audio import Recording
+    from solvers.recording import Recording
 
     rng = np.random.default_rng(1)
     delays = rng.uniform(0.0, 300.0, (6, 2))
@@ -352,7 +352,7 @@ def test_a_sweep_with_its_signal_given_is_compressed_into_its_arrivals(tmp_path,
         for i in range(m):
             echo = delays[i, j] + rng.uniform(32, 96)
             x[i, start : start + len(pad)] += delayed(pad, delays[i, j]) + 0.8 * delayed(pad, echo)
-    from solvers.audio import Recording
+    from solvers.recording import Recording
 
     options = TdoaOptions(max_distance=2.0, signal=sweep)
     tm = tdoa_matrix(Recording(0.2 * x, RATE, tuple("abcdef"), "synthetic"), options)
@@ -397,7 +397,8 @@ def test_an_ambiguous_event_is_analysed_whole():
     """Noise heard 7 samples apart has one correlation peak (ambiguity small; the rooms' periodic sounds measure
     0.89-0.96, scripts/audio_kinds.py). An event judged ambiguous (here every event: ambiguous = 0.01) is
     analysed whole, untapered, and says so; its delays hold."""
-    from solvers.audio import Recording, ambiguity
+    from solvers.audio import ambiguity
+    from solvers.recording import Recording
 
     rng = np.random.default_rng(14)
     noise = band_noise(rng, 4000)

@@ -10,7 +10,8 @@ import pytest
 
 soundfile = pytest.importorskip("soundfile")
 
-from solvers.audio import Recording, TdoaOptions, tdoa_matrix  # noqa: E402
+from solvers.audio import TdoaOptions, tdoa_matrix  # noqa: E402
+from solvers.recording import Recording  # noqa: E402
 from solvers.audio_guided import (GuideOptions, guided_tdoa_matrix, locate_source, reconcile,  # noqa: E402
                                   tdoa_guided)
 from solvers.cli import main  # noqa: E402

@@ -44,7 +44,8 @@ def _add_recording_options(p: argparse.ArgumentParser) -> None:
 
 
 def _tdoa_options(args: argparse.Namespace):
-    from solvers.audio import TdoaOptions, read_signal
+    from solvers.audio import TdoaOptions
+    from solvers.recording import read_signal
 
     signal, rate = read_signal(args.signal) if args.signal else (None, None)
     return TdoaOptions(speed=args.speed, max_distance=args.max_distance, threshold_db=args.threshold,
@@ -100,7 +101,7 @@ def _add_tdoa(sub: argparse._SubParsersAction) -> None:
 def cmd_tdoa(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from solvers.audio import read_recording
+    from solvers.recording import read_recording
     from solvers.audio_guided import tdoa_guided
     from solvers.calibrate_io import Measurements, format_matrix, recording_measurements
 
@@ -216,7 +217,7 @@ class _progress_on_stderr:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from solvers.audio import is_recording
+    from solvers.recording import is_recording
     from solvers.calibrate_io import (MeasurementFileError, plot_calibration, plot_formats, read_input, report_dict,
                                       write_json, write_nodes_csv)
 
@@ -241,7 +242,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     if args.transpose:
         meas = meas.transposed()
-    if args.units is None and is_recording(args.file[0]):
+    recorded = is_recording(args.file[0])
+    if args.units is None and recorded:
         args.units = "m"  # tdoa_matrix's unit
     m, n = meas.F.shape
 
@@ -260,7 +262,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     layout = (f"{count(m, 'row')} (receivers) x {count(n, 'column')} (transmitters)" if not args.transpose else
               f"with --transpose, {count(m, 'column')} (receivers) x {count(n, 'row')} (transmitters)")
     short = _too_few(m, n, int(np.isfinite(meas.F).sum()), args.dim)
-    if short and not solvable(n, m):  # the shape, before any computing
+    # a file's shape is refused before any computing; a recording's matrix is what its analysis found (too few
+    # events is a result: the calibration says "failed" and why, exit 1, as tdoa's guided pass does)
+    if short and not recorded and not solvable(n, m):
         raise UserError(f"{meas.source}: {layout} cannot be calibrated in {args.dim}D: {short}")
     if not solvable(m, n) and solvable(n, m):
         advice = ("the file looks transposed: if its rows are transmitters, give --transpose" if not args.transpose
