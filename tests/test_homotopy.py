@@ -417,7 +417,7 @@ def test_add_new_by_sorted_projections_decides_as_the_full_comparison():
     """monodromy.add_new compares each endpoint only with the roots whose projection on a fixed direction is
     within reach; its result is the same as comparing with every root and image, in order (random roots,
     endpoints near roots or their images at 1e-9..1e-5, new points, repeats among the new ones)."""
-    from solvers.generate import gauge_reflections
+    from solvers.instances import gauge_reflections
 
     def reference(roots, xs, group=None):
         images = np.ones((1, roots.shape[1])) if group is None else np.asarray(group)
@@ -443,7 +443,7 @@ def test_duplicated_by_projection_decides_as_the_gram_matrix():
     """Above GRAM_ROWS finite rows tracking._duplicated compares by sorted projections (a 10^5-point trace test
     would need a 10^10-entry Gram matrix); on random sets with near copies and images of rows, and NaN rows,
     it marks the same rows as the Gram-matrix test."""
-    from solvers.generate import gauge_reflections
+    from solvers.instances import gauge_reflections
 
     rng = np.random.default_rng(3)
     group = gauge_reflections(["r2x", "r3x", "r3y", "s1x", "s1y", "s2x", "s2y", "o1", "o2"])

@@ -16,8 +16,8 @@ from analysis.formulations.parametric import from_formulation
 from solvers import api
 from solvers.continuation import monodromy as md
 from solvers.continuation import tracking as tk
-from solvers.generate import (GENERATED_DIR, MONODROMY_CHECKPOINTS, SETTLED_LOOPS, SOLVERS, GenerationError,
-                              complex_instance, gauge_reflections, generate)
+from solvers.generate import GENERATED_DIR, MONODROMY_CHECKPOINTS, SETTLED_LOOPS, SOLVERS, GenerationError, generate
+from solvers.instances import complex_instance, gauge_reflections
 from solvers.metrics import position_error
 from solvers.synthetic import ROOM, room_network
 

@@ -12,7 +12,8 @@ from analysis.formulations.tdoa import Formulation
 from solvers.continuation import monodromy as md
 from solvers.continuation import graph, slp, trace
 from solvers.continuation import tracking as tk
-from solvers.generate import SOLVERS, complex_instance
+from solvers.generate import SOLVERS
+from solvers.instances import complex_instance
 
 
 def _roots(key: str, count: int):
