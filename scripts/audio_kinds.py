@@ -51,6 +51,7 @@ from dataclasses import replace  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
 
 import numpy as np  # noqa: E402
 
@@ -59,6 +60,7 @@ from solvers.recording import read_recording  # noqa: E402
 from solvers.audio_guided import tdoa_and_calibrate  # noqa: E402
 from solvers.metrics import align_rigid, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
+from audio_room import render  # noqa: E402  (scripts/audio_room.py: the one room simulation)
 
 KINDS = ("speech", "music", "log_sweep", "lin_sweep", "clap")
 #: (rate, nominal RT60 s, SNR dB)
@@ -128,21 +130,8 @@ def simulate(rng: np.random.Generator, kind: str, rate: int, mics: int, events: 
     lengths = np.array([len(s) / rate for s in signals])
     emit = 0.2 + np.concatenate([[0.0], np.cumsum(lengths[:-1] + rt60 + rng.uniform(0.4, 0.7, events - 1))])
     noise_seed = int(rng.integers(2**31))
-    room = pra.ShoeBox(size, fs=rate, materials=pra.Material(absorption), max_order=order)
-    for j in range(events):
-        room.add_source(src_pos[j], signal=signals[j], delay=emit[j])
-    room.add_microphone_array(pra.MicrophoneArray(mic_pos.T, rate))
-    room.simulate()
-    rec = room.mic_array.signals
-    sounding = np.zeros(rec.shape[1], bool)
-    for j in range(events):
-        a = int(emit[j] * rate)
-        sounding[a: a + len(signals[j]) + int(0.03 * rate)] = True
-    noise_power = np.mean(rec[:, sounding[: rec.shape[1]]] ** 2) * 10 ** (-snr_db / 10)
-    rec = rec + np.sqrt(noise_power) * np.random.default_rng(noise_seed).standard_normal(rec.shape)
-    emit = np.floor(emit * rate) / rate  # the simulator starts a source at floor(delay * fs)
-    filter_delay = (pra.constants.get("frac_delay_length") // 2) / rate
-    return rec, Network(mic_pos, src_pos, c * (emit + filter_delay)), c
+    rec, net = render(size, rate, absorption, order, mic_pos, src_pos, signals, emit, snr_db, noise_seed, c)
+    return rec, net, c
 
 
 def _matched(tm, net: Network, c: float):

@@ -100,21 +100,32 @@ def simulate(rng: np.random.Generator, mics: int, events: int, rt60: float, snr_
     signals = [event_signal(rng, k) for k in kinds]
     emit = 0.2 + np.concatenate([[0.0], np.cumsum(rt60 + rng.uniform(0.4, 0.7, events - 1))])
     noise_seed = int(rng.integers(2**31))
-    room = pra.ShoeBox(size, fs=FS, materials=pra.Material(absorption), max_order=min(max_order, 25))
-    for j in range(events):
+    rec, net = render(size, FS, absorption, min(max_order, 25), mic_pos, src_pos, signals, emit, snr_db, noise_seed, c)
+    return rec, net, kinds, c
+
+
+def render(size, rate: int, absorption: float, order: int, mic_pos: np.ndarray, src_pos: np.ndarray, signals, emit,
+           snr_db: float, noise_seed: int, c: float):
+    """The image-source recording of ``signals`` emitted at times ``emit`` (s) from ``src_pos`` in a shoebox room,
+    with white noise ``snr_db`` below the sounding stretches' power, and the Network in metres (each event's offset
+    = c x its emission time, as the simulator starts it, plus its fractional-delay filter's half length)."""
+    import pyroomacoustics as pra
+
+    room = pra.ShoeBox(size, fs=rate, materials=pra.Material(absorption), max_order=order)
+    for j in range(len(signals)):
         room.add_source(src_pos[j], signal=signals[j], delay=emit[j])
-    room.add_microphone_array(pra.MicrophoneArray(mic_pos.T, FS))
+    room.add_microphone_array(pra.MicrophoneArray(mic_pos.T, rate))
     room.simulate()
     rec = room.mic_array.signals
     sounding = np.zeros(rec.shape[1], bool)
-    for j in range(events):
-        a = int(emit[j] * FS)
-        sounding[a : a + len(signals[j]) + int(0.03 * FS)] = True
+    for j in range(len(signals)):
+        a = int(emit[j] * rate)
+        sounding[a : a + len(signals[j]) + int(0.03 * rate)] = True
     noise_power = np.mean(rec[:, sounding[: rec.shape[1]]] ** 2) * 10 ** (-snr_db / 10)
     rec = rec + np.sqrt(noise_power) * np.random.default_rng(noise_seed).standard_normal(rec.shape)
-    emit = np.floor(emit * FS) / FS  # the simulator starts a source at floor(delay * fs)
-    filter_delay = (pra.constants.get("frac_delay_length") // 2) / FS
-    return rec, Network(mic_pos, src_pos, c * (emit + filter_delay)), kinds, c
+    emit = np.floor(emit * rate) / rate  # the simulator starts a source at floor(delay * fs)
+    filter_delay = (pra.constants.get("frac_delay_length") // 2) / rate
+    return rec, Network(mic_pos, src_pos, c * (emit + filter_delay))
 
 
 def record(seed: int, mics: tuple[int, int], events: tuple[int, int], rt60: tuple[float, float], snr_db: float):
