@@ -14,15 +14,15 @@ from dataclasses import replace
 import numpy as np
 
 from . import crosscheck, search
+from .adjust import adjust_plane_waves
 from .diagnose import diagnose
-from .judge import judge_kept
+from .initialise import plane_wave_start
+from .judge import judge_kept, plane_wave_result
 from .result import CalibrationOptions, CalibrationResult
+from .state import Diagnosis
 
 #: Progress of long calls (stage by stage, each snooping round), at INFO; the CLI shows it on stderr.
 log = logging.getLogger("solvers.calibration")
-
-#: The solver label of a calibration started from the plane-wave factorization (initialise.plane_wave_start).
-FACTORIZATION = "factorization"
 
 
 def _check_input(F) -> np.ndarray:
@@ -75,11 +75,33 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
     diagnosis = diagnose(F, dim)
     log.info("diagnosis: %d entries, %d unknowns, %d degrees of freedom; wavefronts %s (curvature %.3g)",
              diagnosis.entries, diagnosis.unknowns, diagnosis.dof, diagnosis.wavefront, diagnosis.curvature)
-    result = search._calibrate_once(F, sigma, seed, opts, t0, dim, diagnosis=diagnosis)
-    if result.solver == FACTORIZATION:
-        # a start from the data's own structure, no sampling: a second seed gives the same answer, and the
-        # factorization has already compared the two orientations (diagnosis.orientation_ratio)
-        result = crosscheck._judge_route(F, diagnosis, result, opts)
-    else:
-        result = crosscheck.recheck(F, sigma, seed, opts, t0, dim, result)
+    if diagnosis.wavefront == "plane":
+        result = _plane_waves(F, sigma, seed, opts, t0, dim, diagnosis)
+        if result is not None:
+            # a start from the data's own structure, no sampling: a second seed gives the same answer, and the
+            # factorization has already compared the two orientations (diagnosis.orientation_ratio)
+            result = crosscheck._judge_route(F, diagnosis, result, opts)
+            return replace(judge_kept(result), seconds=time.perf_counter() - t0, seed=seed)
+    result = search._calibrate_once(F, sigma, seed, opts, t0, dim)
+    result = crosscheck.recheck(F, sigma, seed, opts, t0, dim, result)
     return replace(judge_kept(result), seconds=time.perf_counter() - t0, seed=seed)
+
+
+def _plane_waves(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, diagnosis: Diagnosis) -> CalibrationResult | None:
+    """The route the diagnosis chose for plane waves: initialise from the factorization
+    (`initialise.plane_wave_start`), adjust every source as a direction and an inverse range
+    (`adjust.adjust_plane_waves`), judge (`judge.plane_wave_result`). None when too few entries are usable
+    (the search route then says so)."""
+    work, warnings, failure = search._usable(F, dim)
+    if failure is not None:
+        return None
+    m, n = F.shape
+    log.info("calibrate %dD, %d x %d, %d measured, sigma %s: plane-wave factorization", dim, m, n,
+             int(np.isfinite(F).sum()), "estimated" if sigma is None else f"{sigma:g} given")
+    start = plane_wave_start(F, work, diagnosis)
+    fit = adjust_plane_waves(F, work, start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
+                             max_iter=opts.max_iterations)
+    log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)", int(fit.inliers.sum()),
+             int(work.sum()), fit.rounds, time.perf_counter() - t0)
+    res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, warnings + list(diagnosis.notes) + list(start.notes), seed)
+    return replace(res, seconds=time.perf_counter() - t0)
