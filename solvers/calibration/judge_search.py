@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -87,11 +87,10 @@ def judge_search(fit: SearchFit, sigma, seed, opts: CalibrationOptions, t0,
     """The CalibrationResult of a searched fit, judged by the findings of the module docstring. probe(suspects,
     sigma, dof, (R, S, rstd, tstd)): the absorbed-error probe (None: not run); its verdict "absorbed" returns
     the answer of the search restarted from the better fit."""
-    F, work, mask, dim, R, S, O, E = fit.F, fit.work, fit.mask, fit.dim, fit.R, fit.S, fit.O, fit.E
-    inl, rms, converged, route, search, data_scale, order, gauged = fit.inl, fit.rms, fit.converged, fit.route, fit.search, fit.data_scale, fit.order, fit.gauged
-    placed_r, placed_t, st, sig, rstd, tstd, ostd, rcov = fit.placed_r, fit.placed_t, fit.st, fit.sig, fit.rstd, fit.tstd, fit.ostd, fit.rcov
-    tcov, rrel, trel, crit, redundancy, w_test, mdb, uncontrolled = fit.tcov, fit.rrel, fit.trel, fit.crit, fit.redundancy, fit.w_test, fit.mdb, fit.uncontrolled
-    deficient, undecided, other_minimum, unresolved, exact = fit.deficient, fit.undecided, fit.other_minimum, fit.unresolved, fit.exact
+    # every field but the warnings, in the order of SearchFit
+    (F, work, mask, dim, R, S, O, E, inl, rms, converged, route, search, data_scale, order, gauged, placed_r,
+     placed_t, st, sig, rstd, tstd, ostd, rcov, tcov, rrel, trel, crit, redundancy, w_test, mdb, uncontrolled,
+     deficient, undecided, other_minimum, unresolved, exact) = (getattr(fit, f.name) for f in fields(fit)[:-1])
     m, n = F.shape
     warnings = list(fit.warnings)
     # Status: the most severe finding; each one also becomes the first warnings, in order.

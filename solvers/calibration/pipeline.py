@@ -19,7 +19,7 @@ from .diagnose import diagnose
 from .initialise import plane_wave_start
 from .judge import judge_kept, plane_wave_result
 from .result import CalibrationOptions, CalibrationResult
-from .state import Diagnosis
+from .state import CalibrationState
 
 #: Progress of long calls (stage by stage, each snooping round), at INFO; the CLI shows it on stderr.
 log = logging.getLogger("solvers.calibration")
@@ -72,11 +72,12 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
                          f"None estimates it), got {sigma}")
     if dim not in (2, 3) or isinstance(dim, bool):
         raise ValueError(f"dim must be 2 or 3, got {dim!r}")
-    diagnosis = diagnose(F, dim)
+    state = CalibrationState(F, np.isfinite(F), dim, sigma, diagnosis=diagnose(F, dim))
+    diagnosis = state.diagnosis
     log.info("diagnosis: %d entries, %d unknowns, %d degrees of freedom; wavefronts %s (curvature %.3g)",
              diagnosis.entries, diagnosis.unknowns, diagnosis.dof, diagnosis.wavefront, diagnosis.curvature)
     if diagnosis.wavefront == "plane":
-        result = _plane_waves(F, sigma, seed, opts, t0, dim, diagnosis)
+        result = _plane_waves(state, seed, opts, t0)
         if result is not None:
             # a start from the data's own structure, no sampling: a second seed gives the same answer, and the
             # factorization has already compared the two orientations (diagnosis.orientation_ratio)
@@ -87,21 +88,23 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
     return replace(judge_kept(result), seconds=time.perf_counter() - t0, seed=seed)
 
 
-def _plane_waves(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, diagnosis: Diagnosis) -> CalibrationResult | None:
+def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0) -> CalibrationResult | None:
     """The route the diagnosis chose for plane waves: initialise from the factorization
-    (`initialise.plane_wave_start`), adjust every source as a direction and an inverse range
-    (`adjust.adjust_plane_waves`), judge (`judge.plane_wave_result`). None when too few entries are usable
-    (the search route then says so)."""
+    (`initialise.plane_wave_start`, recorded in the state), adjust every source as a direction and an
+    inverse range (`adjust.adjust_plane_waves`), judge (`judge.plane_wave_result`). None when too few
+    entries are usable (the search route then says so)."""
+    F, dim, sigma, diagnosis = state.F, state.dim, state.sigma, state.diagnosis
     work, warnings, failure = search._usable(F, dim)
     if failure is not None:
         return None
     m, n = F.shape
     log.info("calibrate %dD, %d x %d, %d measured, sigma %s: plane-wave factorization", dim, m, n,
-             int(np.isfinite(F).sum()), "estimated" if sigma is None else f"{sigma:g} given")
-    start = plane_wave_start(F, work, diagnosis)
-    fit = adjust_plane_waves(F, work, start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
+             int(state.mask.sum()), "estimated" if sigma is None else f"{sigma:g} given")
+    state = replace(state, start=plane_wave_start(F, work, diagnosis))
+    fit = adjust_plane_waves(F, work, state.start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
                              max_iter=opts.max_iterations)
-    log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)", int(fit.inliers.sum()),
-             int(work.sum()), fit.rounds, time.perf_counter() - t0)
-    res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, warnings + list(diagnosis.notes) + list(start.notes), seed)
+    log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)",
+             int(fit.inliers.sum()), int(work.sum()), fit.rounds, time.perf_counter() - t0)
+    notes = warnings + list(diagnosis.notes) + list(state.start.notes)
+    res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, notes, seed)
     return replace(res, seconds=time.perf_counter() - t0)
