@@ -157,7 +157,8 @@ def test_sigma_given_search_that_missed_the_basin_restarts_from_the_sigma_estima
     entry, as with the full budget."""
     import time
 
-    from solvers.calibration.pipeline import _calibrate_once, _restart_from
+    from solvers.calibration.crosscheck import _restart_from
+    from solvers.calibration.search import _calibrate_once
     from solvers.calibration.result import CalibrationOptions
 
     rng = np.random.default_rng(2006)

@@ -348,11 +348,11 @@ def test_an_unconverged_search_gets_a_second_search_whose_usable_answer_is_kept(
     fail by cutting its refinement short)."""
     from dataclasses import replace
 
-    from solvers.calibration import pipeline
+    from solvers.calibration import search
 
     net, F, bad = corrupted(7, 4, 3, sigma=1e-3, outliers=1)
     calls = []
-    original = pipeline._calibrate_once
+    original = search._calibrate_once
 
     def once(F, sigma, seed, opts, t0, dim, **kw):
         res = original(F, sigma, seed, opts, t0, dim, **kw)
@@ -361,7 +361,7 @@ def test_an_unconverged_search_gets_a_second_search_whose_usable_answer_is_kept(
             res = replace(res, status="unconverged", receivers=res.receivers + 1.0, residuals=res.residuals + 0.5)
         return res
 
-    monkeypatch.setattr(pipeline, "_calibrate_once", once)
+    monkeypatch.setattr(search, "_calibrate_once", once)
     res = calibrate(F, sigma=1e-3, seed=0)
     assert len(calls) >= 2 and calls[-1] != 0  # (sigma given: the sigma check searches with seed 0 too)
     assert res.status != "unconverged" and res.status in ("ok", "uncontrolled")

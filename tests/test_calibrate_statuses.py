@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from solvers.calibration import CalibrationOptions, calibrate
-from solvers.calibration import judge, pipeline
+from solvers.calibration import crosscheck, judge, search
 from solvers.synthetic import corrupt_measurements, random_network
 
 
@@ -29,15 +29,15 @@ def test_a_transposed_fit_as_good_is_ambiguous_unless_the_orientation_was_given(
     def transposed(F_t, sigma, seed, opts, t0, dim, hint=None):
         return replace(res, sigma=1.1 * res.sigma)
 
-    monkeypatch.setattr(pipeline, "_calibrate_once", transposed)
-    undecided = pipeline._check_orientation(F, 0, CalibrationOptions(), 0.0, 2, res)
+    monkeypatch.setattr(search, "_calibrate_once", transposed)
+    undecided = crosscheck._check_orientation(F, 0, CalibrationOptions(), 0.0, 2, res)
     assert undecided.status == "ambiguous" and "--oriented" in undecided.message
-    given = pipeline._check_orientation(F, 0, CalibrationOptions(orientation_given=True), 0.0, 2, res)
+    given = crosscheck._check_orientation(F, 0, CalibrationOptions(orientation_given=True), 0.0, 2, res)
     assert given.status == res.status and given.message == res.message
     assert any("given orientation is used" in w for w in given.warnings)
     # a transposed fit far better still contradicts the given orientation
-    monkeypatch.setattr(pipeline, "_calibrate_once", lambda *a, **k: replace(res, sigma=0.1 * res.sigma))
-    worse = pipeline._check_orientation(F, 0, CalibrationOptions(orientation_given=True), 0.0, 2, res)
+    monkeypatch.setattr(search, "_calibrate_once", lambda *a, **k: replace(res, sigma=0.1 * res.sigma))
+    worse = crosscheck._check_orientation(F, 0, CalibrationOptions(orientation_given=True), 0.0, 2, res)
     assert worse.status == "inconsistent"
 
 
@@ -49,8 +49,8 @@ def test_with_the_orientation_given_a_much_larger_transposed_matrix_is_not_fitte
     def never(*a, **k):
         raise AssertionError("the transposed matrix was fitted")
 
-    monkeypatch.setattr(pipeline, "_calibrate_once", never)
-    out = pipeline._check_orientation(F_wide, 0, CalibrationOptions(orientation_given=True), 0.0, 2, res)
+    monkeypatch.setattr(search, "_calibrate_once", never)
+    out = crosscheck._check_orientation(F_wide, 0, CalibrationOptions(orientation_given=True), 0.0, 2, res)
     assert out.status == res.status and "was not fitted" in out.warnings[-1]
 
 
@@ -135,7 +135,7 @@ def test_the_given_sigma_is_not_blamed_when_an_answer_fits_it():
 def test_sigma_blamed_only_when_no_answer_fits_it(monkeypatch):
     # the same data, with every sigma-given answer made to fail its global test: then the sigma is blamed
     _, F, _ = _room(10, 6, 7007, gross=0.05)
-    once = pipeline._calibrate_once
+    once = search._calibrate_once
 
     def failing(F_, sigma, *a, **k):
         res = once(F_, sigma, *a, **k)
@@ -143,7 +143,7 @@ def test_sigma_blamed_only_when_no_answer_fits_it(monkeypatch):
             return res
         return replace(res, global_test=res.global_test[:2] + (False,), status="inconsistent")
 
-    monkeypatch.setattr(pipeline, "_calibrate_once", failing)
+    monkeypatch.setattr(search, "_calibrate_once", failing)
     res = calibrate(F, 1e-2, dim=3, seed=7007, options=CalibrationOptions(stability_check=False))
     assert res.status == "inconsistent" and "too small" in res.message and "give --sigma" in res.message
 
@@ -167,10 +167,10 @@ def test_a_search_short_of_a_reachable_confidence_says_how_many_samples():
     from solvers.calibration.scoring import _Search
 
     opts = CalibrationOptions()
-    near = pipeline._short_search(_Search(needed=260.0, share=0.9), 60, opts, sigma_unknown=True)
+    near = judge._short_search(_Search(needed=260.0, share=0.9), 60, opts, sigma_unknown=True)
     assert "60 short of the 0.99 confidence" in near and "give sigma" in near
     for needed in (float("inf"), 4e13):
-        far = pipeline._short_search(_Search(needed=needed, share=0.45), 999999800, opts, sigma_unknown=False)
+        far = judge._short_search(_Search(needed=needed, share=0.45), 999999800, opts, sigma_unknown=False)
         assert "cannot reach the 0.99 confidence" in far and "45 %" in far and "999" not in far
         assert "give sigma" not in far and "nan" not in far.lower() and "inf" not in far
 
@@ -179,15 +179,15 @@ def test_a_fit_explaining_under_two_thirds_is_inconsistent_and_its_nonconvergenc
     # the fast companion of the test above: the adjustment is made to return a fit that keeps 55 % of
     # the entries and did not converge; the finding is the fit that explains too little, not the budget
     _, F, _ = _room(12, 8, 3, sigma=1e-3)
-    adjust = pipeline._adjust
+    adjust = search._adjust
 
     def half_kept(F_, work, *a, **k):
         R, S, O, inl, _, route = adjust(F_, work, *a, **k)
         i, j = np.indices(inl.shape)
         return R, S, O, inl & (((i + j) % 2 == 0) | (j == 0)), False, route
 
-    monkeypatch.setattr(pipeline, "_adjust", half_kept)
-    res = pipeline._calibrate_once(F, 1e-3, 0, CalibrationOptions(stability_check=False), 0.0, 3)
+    monkeypatch.setattr(search, "_adjust", half_kept)
+    res = search._calibrate_once(F, 1e-3, 0, CalibrationOptions(stability_check=False), 0.0, 3)
     assert res.status == "inconsistent" and "explains only" in res.message, res.message
     assert "did not converge" in " ".join(res.warnings) and _no_nan(res)
 
@@ -200,11 +200,11 @@ def test_rejections_look_gross_beyond_doubt_not_as_the_cut_tail_of_a_larger_nois
     inliers[0, :4] = False
     w[0, :4] = [60.0, 40.0, 5.0, 2.0]  # two far beyond 3 x 3.29, one marginal, one below the critical value
     gross = replace(res, inliers=inliers, w_test=w, critical_value=3.29)
-    assert pipeline._rejections_look_gross(gross) == (True, 2, 1)
+    assert crosscheck._rejections_look_gross(gross) == (True, 2, 1)
     w[0, :4] = [9.0, 7.5, 5.0, 4.0]  # a sigma 3x too small: every rejection just above the critical value
-    assert pipeline._rejections_look_gross(replace(gross, w_test=w)) == (False, 0, 4)
-    failed = pipeline._failed(F, "no hypothesis", 0.0, 0)
-    assert pipeline._rejections_look_gross(failed)[0] is False
+    assert crosscheck._rejections_look_gross(replace(gross, w_test=w)) == (False, 0, 4)
+    failed = search._failed(F, "no hypothesis", 0.0, 0)
+    assert crosscheck._rejections_look_gross(failed)[0] is False
 
 
 @pytest.mark.slow  # 6-12 s: three 12r/8s searches (fast companions: the probe's decisions, the test after)
@@ -252,26 +252,26 @@ def test_absorbed_error_probe_decides_by_the_f_test_of_the_two_sigmas(monkeypatc
     fit = (res.receivers, res.transmitters, res.receiver_std, res.transmitter_std)
 
     def probe(suspects_=suspects):
-        return pipeline._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects_, 0.01, dof, fit)
+        return search._absorbed_error_probe(F, 0, opts, 0.0, 2, suspects_, 0.01, dof, fit)
 
     same = replace(res, sigma=0.011, dof=58)
-    monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(same, None))
+    monkeypatch.setattr(search, "_calibrate_once", stand_in(same, None))
     verdict = probe()
     assert verdict[0] == "refuted" and "r1-s2, r5-s3" in verdict[2] and len(calls) == 1
     moved = res.transmitters.copy()
     moved[3] += 10.0 * np.hypot(res.transmitter_std[3], res.transmitter_std[3])  # 10 combined std
-    monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(replace(same, transmitters=moved), None))
+    monkeypatch.setattr(search, "_calibrate_once", stand_in(replace(same, transmitters=moved), None))
     verdict = probe()
     assert verdict[0] == "undecided" and "another calibration" in verdict[2]
     better = replace(res, sigma=0.002, dof=58, receivers=res.receivers + 1.0)
     restarted = replace(res, sigma=0.0021)
-    monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(better, restarted))
+    monkeypatch.setattr(search, "_calibrate_once", stand_in(better, restarted))
     verdict = probe()
     assert verdict[0] == "absorbed" and verdict[1] is restarted and "absorbed an error" in verdict[2]
     assert np.array_equal(calls[-1][0], better.receivers)  # restarted from the better fit
-    monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(better, replace(res, sigma=0.02)))
+    monkeypatch.setattr(search, "_calibrate_once", stand_in(better, replace(res, sigma=0.02)))
     assert probe()[0] == "undecided"
-    monkeypatch.setattr(pipeline, "_calibrate_once", stand_in(replace(better, status="partial"), restarted))
+    monkeypatch.setattr(search, "_calibrate_once", stand_in(replace(better, status="partial"), restarted))
     assert probe()[0] == "undecided"
     assert probe([]) is None
 
@@ -312,7 +312,7 @@ def test_absorbed_error_probe_refutes_on_a_network_without_gross_errors():
     suspects = [(int(i), int(j)) for i, j in np.argwhere(res.redundancy < 0.1)][:3]
     assert suspects, "the room has entries of small redundancy number"
     fit = (res.receivers, res.transmitters, res.receiver_std, res.transmitter_std)
-    verdict = pipeline._absorbed_error_probe(F, 2007, opts, 0.0, 3, suspects, res.sigma, res.dof, fit)
+    verdict = search._absorbed_error_probe(F, 2007, opts, 0.0, 3, suspects, res.sigma, res.dof, fit)
     assert verdict[0] == "refuted", verdict[2]
 
 
@@ -342,8 +342,8 @@ def test_marginal_rejections_count_only_at_nodes_that_keep_a_weak_entry():
     redundancy[1, 0] = 0.05  # weak entry kept: receiver 2, transmitter 1
     w = np.zeros((4, 3))
     w[0, 0], w[2, 2], w[3, 1] = 5.0, 5.0, 40.0  # crit 3.3: two marginal, one gross
-    found = pipeline._marginal_rejections(~inl, inl, w, redundancy, 3.3, opts)
+    found = judge._marginal_rejections(~inl, inl, w, redundancy, 3.3, opts)
     assert found == [(0, 0)]  # (2, 2) is marginal at nodes without weak entries, (3, 1) beyond 3 critical values
-    assert pipeline._marginal_rejections(~inl, inl, w, redundancy, float("inf"), opts) == []
+    assert judge._marginal_rejections(~inl, inl, w, redundancy, float("inf"), opts) == []
     with pytest.raises(ValueError):
         CalibrationOptions(weak_redundancy=1.0)

@@ -72,7 +72,7 @@ class CalibrationOptions:
         5 % gross errors, 1 cm: one kept at r 0.034, |w| 2.95, exact t 6.9); an entry that test rejects
         makes the status "uncontrolled"; a rejection only 1-3 critical values out at a node that keeps
         such an entry (an error the fit absorbed there pushes the node's good entries out instead) is
-        tested by a search without those entries (pipeline._absorbed_error_probe)
+        tested by a search without those entries (search._absorbed_error_probe)
     unknown_sigma_outliers : with sigma unknown, the RANSAC sample count assumes at least this share of
         gross errors (the inlier ratio on a hypothesis's own scale cannot be trusted), unless the
         network has trusted_ratio_redundancy measured entries per unknown or more and the hypothesis
