@@ -110,6 +110,15 @@ def test_single_cone_is_never_ok_and_says_the_height_is_weakly_determined():
     assert "--dim 2" not in text and "dim=2" not in text
 
 
+def test_few_sources_on_one_cone_are_a_status_not_a_crash():
+    """20 sources on one elevation cone: the plane-wave fit's normal matrix is singular (numpy raised
+    LinAlgError out of calibrate); now no calibration, said with the elevation span, in about a second."""
+    _, F, _ = array_network(np.random.default_rng(0), cones=(2.0,), per_cone=20)
+    result = calibrate(F, None, dim=3, seed=0)
+    assert result.status == "failed"
+    assert "deg of elevation" in result.message and "undetermined" in result.message
+
+
 def test_a_node_that_keeps_few_of_its_entries_is_judged_by_them():
     net = room_network(10, 8, np.random.default_rng(6))
     F = net.measurements(1e-3, np.random.default_rng(7))

@@ -101,10 +101,20 @@ def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0) ->
     log.info("calibrate %dD, %d x %d, %d measured, sigma %s: plane-wave factorization", dim, m, n,
              int(state.mask.sum()), "estimated" if sigma is None else f"{sigma:g} given")
     state = replace(state, start=plane_wave_start(F, work, diagnosis))
-    fit = adjust_plane_waves(F, work, state.start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
-                             max_iter=opts.max_iterations)
-    log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)",
-             int(fit.inliers.sum()), int(work.sum()), fit.rounds, time.perf_counter() - t0)
     notes = warnings + list(diagnosis.notes) + list(state.start.notes)
-    res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, notes, seed)
+    try:
+        fit = adjust_plane_waves(F, work, state.start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
+                                 max_iter=opts.max_iterations)
+        log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)",
+                 int(fit.inliers.sum()), int(work.sum()), fit.rounds, time.perf_counter() - t0)
+        res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, notes, seed)
+    except np.linalg.LinAlgError:
+        # a source block of the normal matrix is singular: the data leave part of the network free (a few sources
+        # on one elevation cone). No calibration rather than a guessed one; the point-source search is no way
+        # out here (20 sources on one cone: 516 s, "unconverged")
+        span = (f"the sources span {diagnosis.elevation_span:.0f} deg of elevation; "
+                if np.isfinite(diagnosis.elevation_span) else "")
+        return search._failed(F, "the plane-wave adjustment is singular: the data leave part of the network "
+                              f"undetermined ({span}sources at more elevations, or more sources, determine it)",
+                              t0, seed, warnings=tuple(notes), dim=dim)
     return replace(res, seconds=time.perf_counter() - t0)
