@@ -60,7 +60,7 @@ from solvers.recording import read_recording  # noqa: E402
 from solvers.audio_guided import tdoa_and_calibrate  # noqa: E402
 from solvers.metrics import align_rigid, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
-from audio_room import render  # noqa: E402  (scripts/audio_room.py: the one room simulation)
+from audio_room import render, write_table  # noqa: E402  (scripts/audio_room.py: the one room simulation)
 
 KINDS = ("speech", "music", "log_sweep", "lin_sweep", "clap")
 #: (rate, nominal RT60 s, SNR dB)
@@ -296,17 +296,7 @@ def _ordered(rows: list[dict]) -> list[dict]:
 
 def write(out: str, rows: list[dict]) -> None:
     """tables/NAME.csv and .md of the rows."""
-    keys = list(rows[0])
-    with open(out + ".csv", "w", newline="") as handle:
-        w = csv.DictWriter(handle, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
-    with open(out + ".md", "w") as handle:
-        handle.write("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys) + "\n")
-        for r in rows:
-            handle.write("| " + " | ".join(str(r[k]) for k in keys) + " |\n")
-        handle.write("\n" + summary(rows) + "\n")
-    print(f"wrote {out}.csv and {out}.md", file=sys.stderr)
+    write_table(out, rows, summary(rows))
 
 
 if __name__ == "__main__":

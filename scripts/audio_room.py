@@ -286,7 +286,12 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         rows.append(run(args.seed + k, mics, events, rt60, args.snr))
         print(f"room {k + 1}/{args.rooms} ({time.perf_counter() - t0:.0f} s): {rows[-1]}", file=sys.stderr, flush=True)
-    out = os.path.join(ROOT, "tables", args.name)
+    write_table(os.path.join(ROOT, "tables", args.name), rows, summary(rows))
+    return 0
+
+
+def write_table(out: str, rows: list[dict], summary_text: str) -> None:
+    """OUT.csv and OUT.md of the rows (one column per key of the first row), the summary under the table."""
     keys = list(rows[0])
     with open(out + ".csv", "w", newline="") as handle:
         w = csv.DictWriter(handle, fieldnames=keys)
@@ -296,9 +301,8 @@ def main(argv=None) -> int:
         handle.write("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys) + "\n")
         for r in rows:
             handle.write("| " + " | ".join(str(r[k]) for k in keys) + " |\n")
-        handle.write("\n" + summary(rows) + "\n")
+        handle.write("\n" + summary_text + "\n")
     print(f"wrote {out}.csv and {out}.md", file=sys.stderr)
-    return 0
 
 
 if __name__ == "__main__":
