@@ -60,7 +60,7 @@ from solvers.recording import read_recording  # noqa: E402
 from solvers.audio_guided import tdoa_and_calibrate  # noqa: E402
 from solvers.metrics import align_rigid, standardised_node_errors  # noqa: E402
 from solvers.synthetic import Network  # noqa: E402
-from audio_room import render, write_table  # noqa: E402  (scripts/audio_room.py: the one room simulation)
+from audio_room import render, room_geometry, write_table  # noqa: E402  (scripts/audio_room.py: the one room simulation)
 
 KINDS = ("speech", "music", "log_sweep", "lin_sweep", "clap")
 #: (rate, nominal RT60 s, SNR dB)
@@ -118,14 +118,7 @@ def event_signal(rng: np.random.Generator, kind: str, rate: int) -> np.ndarray:
 def simulate(rng: np.random.Generator, kind: str, rate: int, mics: int, events: int, rt60: float, snr_db: float,
              order: int):
     """(recording (mics, frames), Network in metres with each event's offset = c x its emission time, c)."""
-    import pyroomacoustics as pra
-
-    size = [rng.uniform(6.0, 9.0), rng.uniform(5.0, 7.0), rng.uniform(2.7, 3.5)]
-    absorption, _ = pra.inverse_sabine(rt60, size)
-    c = pra.constants.get("c")
-    margin = 0.5
-    mic_pos = np.column_stack([rng.uniform(margin, side - margin, mics) for side in size])
-    src_pos = np.column_stack([rng.uniform(margin, side - margin, events) for side in size])
+    size, absorption, _, c, mic_pos, src_pos = room_geometry(rng, mics, events, rt60)
     signals = [event_signal(rng, kind, rate) for _ in range(events)]
     lengths = np.array([len(s) / rate for s in signals])
     emit = 0.2 + np.concatenate([[0.0], np.cumsum(lengths[:-1] + rt60 + rng.uniform(0.4, 0.7, events - 1))])

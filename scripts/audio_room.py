@@ -86,16 +86,22 @@ def event_signal(rng: np.random.Generator, kind: str) -> np.ndarray:
     return s / np.sqrt(np.mean(s**2))
 
 
-def simulate(rng: np.random.Generator, mics: int, events: int, rt60: float, snr_db: float):
-    """(recording (mics, frames), Network in metres with each event's offset = c x its emission time, kinds)."""
+def room_geometry(rng: np.random.Generator, mics: int, events: int, rt60: float):
+    """A seeded shoebox room 6-9 x 5-7 x 2.7-3.5 m: (size, wall absorption and image order for ``rt60`` by Sabine,
+    the speed of sound, microphone positions, source positions), every node 0.5 m from the walls."""
     import pyroomacoustics as pra
 
     size = [rng.uniform(6.0, 9.0), rng.uniform(5.0, 7.0), rng.uniform(2.7, 3.5)]
     absorption, max_order = pra.inverse_sabine(rt60, size)
-    c = pra.constants.get("c")
     margin = 0.5
     mic_pos = np.column_stack([rng.uniform(margin, side - margin, mics) for side in size])
     src_pos = np.column_stack([rng.uniform(margin, side - margin, events) for side in size])
+    return size, absorption, max_order, pra.constants.get("c"), mic_pos, src_pos
+
+
+def simulate(rng: np.random.Generator, mics: int, events: int, rt60: float, snr_db: float):
+    """(recording (mics, frames), Network in metres with each event's offset = c x its emission time, kinds)."""
+    size, absorption, max_order, c, mic_pos, src_pos = room_geometry(rng, mics, events, rt60)
     kinds = [KINDS[int(k)] for k in rng.integers(len(KINDS), size=events)]
     signals = [event_signal(rng, k) for k in kinds]
     emit = 0.2 + np.concatenate([[0.0], np.cumsum(rt60 + rng.uniform(0.4, 0.7, events - 1))])
