@@ -529,6 +529,32 @@ def test_threads_give_the_same_basis_on_racing_systems(name, prime):
         assert groebner(polys, F4Options(threads=2)).basis == one.basis
 
 
+@pytest.mark.parametrize("name", ["cyclic-7", "katsura-8", "tdoa-6r3s-A1B2C5"])
+@pytest.mark.parametrize("prime", [65521, 2147483647])
+def test_threaded_preprocessing_and_pair_update_give_the_same_rounds(name, prime):
+    """The symbolic preprocessing (the codes seen shared among the threads, reducer search shared out) and
+    the pair update (activity spans, the new pairs of each element, criterion B: each pass shared out) on
+    2 and 3 threads, forced onto the threaded paths however small the work (native.share_small_work), give
+    the rounds and basis of one thread, minimal and reduced."""
+    from analysis.engine import native
+    from analysis.sweeps.benchmarks import benchmark_system
+
+    if native.kernel() is None:
+        pytest.skip("no C compiler here: the C kernels cannot be built")
+    polys = benchmark_system(name, prime)
+
+    def rounds(gb):
+        return [(r.degree, r.pairs, r.rows, r.cols, r.new, r.zero_reductions) for r in gb.rounds]
+
+    for reduced in (False, True):
+        one = groebner(polys, F4Options(threads=1, reduced=reduced))
+        with native.share_small_work():
+            for threads in (1, 2, 3):
+                many = groebner(polys, F4Options(threads=threads, reduced=reduced))
+                assert rounds(many) == rounds(one), f"{name} p {prime} threads {threads}"
+                assert many.basis == one.basis
+
+
 @pytest.mark.parametrize("prime,kind,seed", [(p, kind, seed) for p in (32003, 2147483647) for kind in SYSTEM_KINDS
                                              for seed in range(3)])
 def test_minimal_basis_has_the_leading_ideal_of_the_reduced_one(prime, kind, seed):

@@ -253,8 +253,9 @@ class _State:
     array operations; ``polys`` gives the elements as polynomials.
     """
 
-    def __init__(self, ring: Ring, codes: MonomialCodes | None = None):
+    def __init__(self, ring: Ring, codes: MonomialCodes | None = None, threads: int = 1):
         self.ring = ring
+        self.threads = threads  # of the C pair update
         self.codes = codes or MonomialCodes(ring)
         self.polys = _Elements(self)
         self.field = _exponent_field(0)
@@ -351,19 +352,21 @@ class _State:
         is active at time t (inserted before t, made inactive at t or later), so the new pairs of all t
         follow from these activity spans, and criterion B drops a pair as soon as any later h_t
         qualifies. Degrees decide the equalities: for monomials a | c and b | c, lcm(a, b) = c iff their
-        degrees agree. Where the C kernels are built (:mod:`analysis.engine.native`) the same update runs there,
-        h_t after h_t, without numpy's per-call overhead (cyclic-7: 93 -> 16 ms); the arrays below are the
-        fallback and the reference it is tested against.
+        degrees agree. Where the C kernels are built (:mod:`analysis.engine.native`) the same update runs there
+        in the same three passes (activity spans; the new pairs of each h_t; criterion B pair by pair), each
+        shared among ``threads`` threads, without numpy's per-call overhead (cyclic-7: 93 -> 16 ms); the
+        arrays below are the fallback and the reference it is tested against.
         """
         m = len(polys)
         k = len(self.polys)
         leads = self.codes.decode(codes[indptr[:-1]])
         self._store(codes, coeffs, indptr, leads)
         self.polys.extend(polys)
-        if native.kernel() is not None:  # the same update, one element after the other, in C
+        if native.kernel() is not None:  # the same update in C (the same passes, on up to self.threads threads)
             n = self.ring.nvars
             keep, new, new_lcms, active = native.pair_update(
-                self.E[: k + m, :n], self.lm_degrees[: k + m], self.active[:k], k, m, self.pairs, self.pL[:, :n])
+                self.E[: k + m, :n], self.lm_degrees[: k + m], self.active[:k], k, m, self.pairs, self.pL[:, :n],
+                self.threads)
             self.pairs = np.vstack([self.pairs[keep], new])
             self.pL = np.vstack([self.pL[keep], _pack(new_lcms, self.field)])
             self.active[: k + m] = active
@@ -602,7 +605,7 @@ def _graded(codes: MonomialCodes) -> bool:
     return not codes.wide and list(codes._degree_fields) == [top] and int(codes._degree_weights[0]) == 1
 
 
-def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_Rows, np.ndarray]:
+def _preprocess(state: _State, rows: _Rows, leads_done: bool = True, threads: int = 1) -> tuple[_Rows, np.ndarray]:
     """Symbolic preprocessing on arrays: add a reducer row for every matrix monomial divisible by a lead.
 
     Works in waves: the monomials first seen in one wave are tested for divisibility against all active
@@ -610,14 +613,15 @@ def _preprocess(state: _State, rows: _Rows, leads_done: bool = True) -> tuple[_R
     monomial divides it. With leads_done=False the leading monomials of the given rows get reducers too
     (tail reduction). Returns all rows, the given ones first and then the reducers wave by wave (within
     a wave by increasing monomial: the matrix and its reduction do not depend on that order), and the
-    column codes ascending.
+    column codes ascending. The C kernel (narrow codes, graded order) shares the work among up to threads
+    threads; the result is the same on any count.
     """
     codes = state.codes
     if native.kernel() is not None and _graded(codes):  # the same waves in C, one call
         act = _by_length(state)
         mult, index, columns = native.preprocess(
             state.pool_codes, state.starts, state.lengths, state.lm_codes, act, state.lead_exponents(act),
-            codes._code_shifts, codes.max_degree, codes.ring._winv_t, rows.mult, rows.index, leads_done)
+            codes._code_shifts, codes.max_degree, codes.ring._winv_t, rows.mult, rows.index, leads_done, threads)
         return _Rows.concat([rows, _Rows(mult, index, state.lengths[index])]), columns
     done = _distinct(state.lm_codes[rows.index] + rows.mult) if leads_done else state.pool_codes[:0]
     frontier = _new_terms(state, rows, done)
@@ -789,7 +793,7 @@ def _f4(
     """The F4 loop of :func:`groebner`: (reduced basis, round statistics)."""
     p = ring.prime
     max_memory = default_max_memory() if options.max_memory is None else options.max_memory
-    state = _State(ring, codes)
+    state = _State(ring, codes, options.threads)
     rounds: list[RoundStats] = []
 
     # in a degree order the terms of the pair rows are of degree at most the pairs' (checked by
@@ -812,7 +816,8 @@ def _f4(
         t0 = time.perf_counter()
         d, pi, pj, lcms = state.pop_pairs()
         npairs = len(pi)
-        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms), graded))
+        rows, columns = _preprocess(state, _Rows.of(state, *_pair_rows(state, d, pi, pj, lcms), graded),
+                                    threads=options.threads)
         nrows, ncols = len(rows.index), len(columns)
         if options.max_matrix_cells is not None and nrows * ncols > options.max_matrix_cells:
             raise MatrixTooLarge(
@@ -929,7 +934,7 @@ def _reduce_basis(state: _State, backend: Backend, threads: int = 1) -> list[Pol
     ring = state.ring
     idx = np.flatnonzero(state.active[: len(state.polys)])
     elements = _Rows.of(state, np.zeros(len(idx), dtype=state.codes.dtype), idx, checked=True)  # the elements
-    rows, columns = _preprocess(state, elements, leads_done=False)
+    rows, columns = _preprocess(state, elements, leads_done=False, threads=threads)
     pivots = _assemble(state, rows, columns, np.arange(len(idx), len(rows.index)), threads)
     heads = _assemble(state, rows, columns, np.arange(len(idx))).compact()
     del rows

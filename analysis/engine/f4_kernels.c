@@ -36,6 +36,11 @@ int f4_openmp(void)
 #endif
 }
 
+/* Nonzero: every step that can share its work among threads does so, however small (the steps below
+ * stay on one thread under a size where waking a second costs more than it saves). Set by the tests
+ * (analysis/engine/native.py: share_small_work), so that small systems run the threaded code paths. */
+int f4_share_small = 0;
+
 /* The pivot rows, known and new, by index k: columns cols[k][0 .. len[k]) and values vals[k][...], the
  * leading entry 1 at cols[k][0]; at[c] is the pivot whose leading column is c, or -1. A new pivot is
  * published by a compare-and-swap on at[lead] after its row is written (release; readers load at[c] with
@@ -651,12 +656,6 @@ done:
     return oom ? -1 : 0;
 }
 
-/* Gebauer-Moeller pair update of analysis/engine/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
- * one after the other. E: exponents (k + m rows of nvars), deg: their degrees, active: flags of the k old
- * elements (updated in place, k + m entries). Existing pairs: npairs rows (i, j, lcm degree) with lcm
- * exponents lcm; keep[q] is cleared for those criterion B drops. The new pairs (g, h_t, lcm degree), in
- * order of t and then g, and their lcm exponents, go to malloc'ed arrays whose addresses and count are
- * result[0..2] (free with f4_free); born[q] of each new pair is t. Returns 0, or -1 when memory ran out. */
 static int divides(const int32_t *a, const int32_t *b, int64_t n)
 {
     for (int64_t v = 0; v < n; v++)
@@ -720,156 +719,235 @@ static int64_t lcm_degree(const int32_t *a, const int32_t *b, int64_t n)
     return d;
 }
 
-int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *active, int64_t k, int64_t m,
-              int64_t npairs, const int64_t *pairs, const int32_t *lcm, uint8_t *keep, int64_t *result)
+/* Gebauer-Moeller pair update of analysis/engine/f4.py (_State.insert), for new elements h_t = k + t, t < m, inserted
+ * one after the other. E: exponents (k + m rows of nvars), deg: their degrees, active: flags of the k old
+ * elements (updated in place, k + m entries). Existing pairs: npairs rows (i, j, lcm degree) with lcm
+ * exponents lcm; keep[q] is cleared for those criterion B drops. The new pairs (g, h_t, lcm degree), in
+ * order of t and then g, and their lcm exponents, go to malloc'ed arrays whose addresses and count are
+ * result[0..2] (free with f4_free); born[q] of each new pair is t, or -1 where a later h_u dropped it by
+ * criterion B. Returns 0, or -1 when memory ran out.
+ *
+ * The m insertions are done as three passes with the outcome of inserting h_0, h_1, ... in turn, each pass
+ * shared among up to threads threads: (1) the activity spans: g is a partner of h_t when it was active
+ * before t (born) and no h_u with born < u < t divides lm(g) (dies: the first such u); (2) the new pairs of
+ * every h_t from its partners (criteria M and F), each t on its own into its own list, the lists then
+ * joined in order of t; (3) criterion B on every pair, old (born -1) and new, by the h_u inserted after
+ * it. No step depends on a pair another step drops, so the pairs are those of the one-by-one update. */
+#define UPDATE_PARALLEL_TESTS 200000 /* below this many partner tests (m x (k + m)), one thread */
+
+typedef struct { /* one thread's scratch for the new pairs of one h_t */
+    int64_t *partners, *pdeg, *by_degree, *minimal, *bucket, bucket_cap;
+    int32_t *L;
+    uint8_t *coprime, *dropped;
+    uint64_t *lmask;
+} update_scratch_t;
+
+/* The new pairs of h = k + t among its partners (the elements g < h with born[g] < t <= dies[g]): rows
+ * (g, h, lcm degree, t) to *out and lcm exponents to *out_lcm (malloc'ed), their number to *count.
+ * Returns 0, or -1 when memory ran out. */
+static int new_pairs_of(int64_t t, int64_t k, int64_t n, const int32_t *E, const int64_t *deg, const int64_t *born,
+                        const int64_t *dies, const uint64_t *emask, update_scratch_t *w, int64_t **out,
+                        int32_t **out_lcm, int64_t *count)
 {
-    int64_t n = nvars, total = k + m;
-    int64_t *partners = malloc((total + 1) * sizeof(int64_t));
-    int64_t *pdeg = malloc((total + 1) * sizeof(int64_t));
-    int32_t *L = malloc((total + 1) * n * sizeof(int32_t));
-    uint8_t *coprime = malloc(total + 1), *dropped = malloc(total + 1);
-    uint64_t *emask = malloc((total + 1) * sizeof(uint64_t)), *lmask = malloc((total + 1) * sizeof(uint64_t));
-    uint64_t *qmask = malloc((npairs + 1) * sizeof(uint64_t));
-    int64_t *by_degree = malloc((total + 1) * sizeof(int64_t)), *minimal = malloc((total + 1) * sizeof(int64_t));
-    int64_t bucket_cap = 0, *bucket = NULL;
-    int64_t cap = 64, count = 0, *out = malloc(cap * 4 * sizeof(int64_t));
-    int32_t *out_lcm = malloc(cap * n * sizeof(int32_t) + 4);
-    uint64_t *out_mask = malloc(cap * sizeof(uint64_t));
-    divmask_t dm = {0};
-    int status = -1;
-    if (!partners || !pdeg || !L || !coprime || !dropped || !emask || !lmask || !qmask || !by_degree || !minimal ||
-        !out || !out_lcm ||
-        !out_mask || divmask_init(&dm, E, total, n))
-        goto done;
-    for (int64_t g = 0; g < total; g++)
-        emask[g] = divmask(&dm, E + g * n, n);
-    for (int64_t q = 0; q < npairs; q++) {
-        keep[q] = 1;
-        qmask[q] = divmask(&dm, lcm + q * n, n);
+    int64_t h = k + t, np = 0;
+    const int32_t *eh = E + h * n;
+    const uint64_t hmask = emask[h];
+    for (int64_t g = 0; g < h; g++) {
+        if (born[g] >= t || dies[g] < t)
+            continue;
+        w->partners[np] = g;
+        int32_t *l = w->L + np * n;
+        const int32_t *eg = E + g * n;
+        int64_t d = 0;
+        for (int64_t v = 0; v < n; v++) {
+            l[v] = eg[v] > eh[v] ? eg[v] : eh[v];
+            d += l[v];
+        }
+        w->pdeg[np] = d;
+        w->coprime[np] = d == deg[g] + deg[h];
+        w->lmask[np] = emask[g] | hmask; /* the mask of a max is the union of the masks */
+        np++;
     }
-    for (int64_t t = 0; t < m; t++) {
-        int64_t h = k + t;
-        const int32_t *eh = E + h * n;
-        const uint64_t hmask = emask[h];
-        /* criterion B on the existing pairs and those of earlier t */
-        for (int64_t q = 0; q < npairs; q++) {
-            if (!keep[q] || (hmask & ~qmask[q]) || !divides(eh, lcm + q * n, n))
+    *out = NULL;
+    *out_lcm = NULL;
+    *count = 0;
+    if (!np)
+        return 0;
+    /* criterion M (a partner's lcm properly divides this one's: dropped) and F (of the partners with
+     * equal lcms the first is kept, none if one of them is coprime). The partners go by increasing lcm
+     * degree; M is tested against one partner per distinct lcm that M kept (minimal[0 .. nmin), all of
+     * lower degree): a proper divisor that M dropped has a kept one dividing it in turn. So the test is
+     * against the few minimal lcms, not all the partners. */
+    int64_t low = INT64_MAX, high = 0; /* counting sort: the lcm degrees span a short range */
+    for (int64_t c = 0; c < np; c++) {
+        low = w->pdeg[c] < low ? w->pdeg[c] : low;
+        high = w->pdeg[c] > high ? w->pdeg[c] : high;
+    }
+    if (high - low + 2 > w->bucket_cap) {
+        int64_t cap = 2 * (high - low + 2), *bucket = realloc(w->bucket, cap * sizeof(int64_t));
+        if (!bucket)
+            return -1;
+        w->bucket = bucket;
+        w->bucket_cap = cap;
+    }
+    int64_t *bucket = w->bucket, *by_degree = w->by_degree, *minimal = w->minimal;
+    uint8_t *dropped = w->dropped;
+    memset(bucket, 0, (high - low + 2) * sizeof(int64_t));
+    for (int64_t c = 0; c < np; c++)
+        bucket[w->pdeg[c] - low + 1]++;
+    for (int64_t d = 1; d <= high - low + 1; d++)
+        bucket[d] += bucket[d - 1];
+    for (int64_t c = 0; c < np; c++) /* stable: by degree, then by partner */
+        by_degree[bucket[w->pdeg[c] - low]++] = (w->pdeg[c] << 32) | c;
+    int64_t nmin = 0, kept = 0;
+    for (int64_t s = 0; s < np;) {
+        int64_t e = s; /* by_degree[s .. e): one lcm degree */
+        while (e < np && by_degree[e] >> 32 == by_degree[s] >> 32)
+            e++;
+        for (int64_t i = s; i < e; i++) {
+            int64_t c = by_degree[i] & 0xFFFFFFFF;
+            dropped[c] = 0;
+            for (int64_t j = 0; j < nmin && !dropped[c]; j++)
+                dropped[c] = !(w->lmask[minimal[j]] & ~w->lmask[c]) && divides(w->L + minimal[j] * n, w->L + c * n, n);
+        }
+        for (int64_t i = s; i < e; i++) { /* F among the partners of this degree that M kept */
+            int64_t c = by_degree[i] & 0xFFFFFFFF;
+            if (dropped[c] == 1 || dropped[c] == 2)
                 continue;
-            int64_t d = pairs[3 * q + 2];
-            if (lcm_degree(E + pairs[3 * q] * n, eh, n) != d && lcm_degree(E + pairs[3 * q + 1] * n, eh, n) != d)
-                keep[q] = 0;
-        }
-        for (int64_t q = 0; q < count; q++) {
-            if (out[4 * q + 3] < 0 || (hmask & ~out_mask[q]) || !divides(eh, out_lcm + q * n, n))
-                continue;
-            int64_t d = out[4 * q + 2];
-            if (lcm_degree(E + out[4 * q] * n, eh, n) != d && lcm_degree(E + out[4 * q + 1] * n, eh, n) != d)
-                out[4 * q + 3] = -1;
-        }
-        /* the partners: the active elements before h_t, with their lcms against h_t */
-        int64_t np = 0;
-        for (int64_t g = 0; g < h; g++) {
-            if (!active[g])
-                continue;
-            partners[np] = g;
-            int32_t *l = L + np * n;
-            const int32_t *eg = E + g * n;
-            int64_t d = 0;
-            for (int64_t v = 0; v < n; v++) {
-                l[v] = eg[v] > eh[v] ? eg[v] : eh[v];
-                d += l[v];
-            }
-            pdeg[np] = d;
-            coprime[np] = d == deg[g] + deg[h];
-            lmask[np] = emask[g] | hmask; /* the mask of a max is the union of the masks */
-            np++;
-        }
-        /* criterion M (a partner's lcm properly divides this one's: dropped) and F (of the partners with
-         * equal lcms the first is kept, none if one of them is coprime). The partners go by increasing lcm
-         * degree; M is tested against one partner per distinct lcm that M kept (minimal[0 .. nmin), all of
-         * lower degree): a proper divisor that M dropped has a kept one dividing it in turn. So the test is
-         * against the few minimal lcms, not all the partners. */
-        int64_t low = INT64_MAX, high = 0; /* counting sort: the lcm degrees span a short range */
-        for (int64_t c = 0; c < np; c++) {
-            low = pdeg[c] < low ? pdeg[c] : low;
-            high = pdeg[c] > high ? pdeg[c] : high;
-        }
-        if (np && high - low + 2 > bucket_cap) {
-            bucket_cap = 2 * (high - low + 2);
-            int64_t *b = realloc(bucket, bucket_cap * sizeof(int64_t));
-            if (!b)
-                goto done;
-            bucket = b;
-        }
-        if (np) {
-            memset(bucket, 0, (high - low + 2) * sizeof(int64_t));
-            for (int64_t c = 0; c < np; c++)
-                bucket[pdeg[c] - low + 1]++;
-            for (int64_t d = 1; d <= high - low + 1; d++)
-                bucket[d] += bucket[d - 1];
-            for (int64_t c = 0; c < np; c++) /* stable: by degree, then by partner */
-                by_degree[bucket[pdeg[c] - low]++] = (pdeg[c] << 32) | c;
-        }
-        int64_t nmin = 0;
-        for (int64_t s = 0; s < np;) {
-            int64_t e = s; /* by_degree[s .. e): one lcm degree */
-            while (e < np && by_degree[e] >> 32 == by_degree[s] >> 32)
-                e++;
-            for (int64_t i = s; i < e; i++) {
-                int64_t c = by_degree[i] & 0xFFFFFFFF;
-                dropped[c] = 0;
-                for (int64_t j = 0; j < nmin && !dropped[c]; j++)
-                    dropped[c] = !(lmask[minimal[j]] & ~lmask[c]) && divides(L + minimal[j] * n, L + c * n, n);
-            }
-            for (int64_t i = s; i < e; i++) { /* F among the partners of this degree that M kept */
-                int64_t c = by_degree[i] & 0xFFFFFFFF;
-                if (dropped[c] == 1 || dropped[c] == 2)
+            int64_t has_coprime = w->coprime[c];
+            for (int64_t i2 = i + 1; i2 < e; i2++) {
+                int64_t c2 = by_degree[i2] & 0xFFFFFFFF;
+                if (dropped[c2] || w->lmask[c2] != w->lmask[c] ||
+                    memcmp(w->L + c2 * n, w->L + c * n, n * sizeof(int32_t)))
                     continue;
-                int64_t has_coprime = coprime[c];
-                for (int64_t i2 = i + 1; i2 < e; i2++) {
-                    int64_t c2 = by_degree[i2] & 0xFFFFFFFF;
-                    if (dropped[c2] || lmask[c2] != lmask[c] || memcmp(L + c2 * n, L + c * n, n * sizeof(int32_t)))
-                        continue;
-                    dropped[c2] = 2; /* same lcm: c (the first, by index) speaks for it */
-                    has_coprime |= coprime[c2];
-                }
-                minimal[nmin++] = c;
-                dropped[c] = has_coprime ? 3 : 0;
+                dropped[c2] = 2; /* same lcm: c (the first, by index) speaks for it */
+                has_coprime |= w->coprime[c2];
             }
-            s = e;
+            minimal[nmin++] = c;
+            dropped[c] = has_coprime ? 3 : 0;
         }
-        for (int64_t c = 0; c < np; c++) {
-            if (dropped[c])
-                continue;
-            if (count == cap) {
-                cap *= 2;
-                int64_t *o = realloc(out, cap * 4 * sizeof(int64_t));
-                if (!o)
-                    goto done;
-                out = o;
-                int32_t *ol = realloc(out_lcm, cap * n * sizeof(int32_t) + 4);
-                if (!ol)
-                    goto done;
-                out_lcm = ol;
-                uint64_t *om = realloc(out_mask, cap * sizeof(uint64_t));
-                if (!om)
-                    goto done;
-                out_mask = om;
-            }
-            out_mask[count] = lmask[c];
-            out[4 * count] = partners[c];
-            out[4 * count + 1] = h;
-            out[4 * count + 2] = pdeg[c];
-            out[4 * count + 3] = t;
-            memcpy(out_lcm + count * n, L + c * n, n * sizeof(int32_t));
-            count++;
-        }
-        /* h_t makes the partners whose lm it divides inactive */
-        for (int64_t c = 0; c < np; c++)
-            if (divides(eh, E + partners[c] * n, n))
-                active[partners[c]] = 0;
-        active[h] = 1;
+        s = e;
     }
+    for (int64_t c = 0; c < np; c++)
+        kept += !dropped[c];
+    if (!kept)
+        return 0;
+    *out = malloc(kept * 4 * sizeof(int64_t));
+    *out_lcm = malloc(kept * n * sizeof(int32_t) + 4);
+    if (!*out || !*out_lcm)
+        return -1;
+    for (int64_t c = 0, q = 0; c < np; c++) {
+        if (dropped[c])
+            continue;
+        (*out)[4 * q] = w->partners[c];
+        (*out)[4 * q + 1] = h;
+        (*out)[4 * q + 2] = w->pdeg[c];
+        (*out)[4 * q + 3] = t;
+        memcpy(*out_lcm + q * n, w->L + c * n, n * sizeof(int32_t));
+        q++;
+    }
+    *count = kept;
+    return 0;
+}
+
+/* Whether a later h_u (born < u < m) drops the pair (i, j) of lcm degree d and lcm exponents l (mask lm) by
+ * criterion B: lm(h_u) divides the lcm and lcm(g, h_u) differs from it for both g = i and g = j. */
+static int dropped_by_b(int64_t born, int64_t k, int64_t m, int64_t n, const int32_t *E, const uint64_t *emask,
+                        int64_t i, int64_t j, int64_t d, const int32_t *l, uint64_t lm)
+{
+    for (int64_t u = born + 1; u < m; u++) {
+        const int32_t *eh = E + (k + u) * n;
+        if ((emask[k + u] & ~lm) || !divides(eh, l, n))
+            continue;
+        if (lcm_degree(E + i * n, eh, n) != d && lcm_degree(E + j * n, eh, n) != d)
+            return 1;
+    }
+    return 0;
+}
+
+int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *active, int64_t k, int64_t m,
+              int64_t npairs, const int64_t *pairs, const int32_t *lcm, uint8_t *keep, int64_t *result, int threads)
+{
+    int64_t n = nvars, total = k + m, count = 0;
+    int64_t *born = malloc((total + 1) * sizeof(int64_t)), *dies = malloc((total + 1) * sizeof(int64_t));
+    uint64_t *emask = malloc((total + 1) * sizeof(uint64_t));
+    int64_t **lists = calloc(m + 1, sizeof(int64_t *)), *counts = calloc(m + 1, sizeof(int64_t));
+    int32_t **list_lcms = calloc(m + 1, sizeof(int32_t *));
+    int64_t *out = NULL;
+    int32_t *out_lcm = NULL;
+    divmask_t dm = {0};
+    int status = -1, oom = 0;
+    if (threads < 1 || ((double)m * total < UPDATE_PARALLEL_TESTS && !f4_share_small))
+        threads = 1;
+    if (!born || !dies || !emask || !lists || !counts || !list_lcms || divmask_init(&dm, E, total, n))
+        goto done;
+    for (int64_t g = 0; g < total; g++) {
+        emask[g] = divmask(&dm, E + g * n, n);
+        born[g] = g < k ? (active[g] ? -1 : m) : g - k; /* an inactive old element is never a partner */
+    }
+    /* (1) activity spans; (2) the new pairs of each h_t; both shared out (t by t: dynamic, their costs grow) */
+#pragma omp parallel num_threads(threads) if (threads > 1)
+    {
+        update_scratch_t w = {malloc((total + 1) * sizeof(int64_t)), malloc((total + 1) * sizeof(int64_t)),
+                              malloc((total + 1) * sizeof(int64_t)), malloc((total + 1) * sizeof(int64_t)), NULL, 0,
+                              malloc((total + 1) * n * sizeof(int32_t)), malloc(total + 1), malloc(total + 1),
+                              malloc((total + 1) * sizeof(uint64_t))};
+        if (!w.partners || !w.pdeg || !w.by_degree || !w.minimal || !w.L || !w.coprime || !w.dropped || !w.lmask)
+            __atomic_store_n(&oom, 1, __ATOMIC_RELAXED);
+#pragma omp for schedule(static)
+        for (int64_t g = 0; g < total; g++) {
+            dies[g] = m;
+            for (int64_t u = born[g] + 1; u < m; u++) /* a new lead cannot divide an earlier, larger one */
+                if (!(emask[k + u] & ~emask[g]) && divides(E + (k + u) * n, E + g * n, n)) {
+                    dies[g] = u;
+                    break;
+                }
+        }
+#pragma omp for schedule(dynamic, 1)
+        for (int64_t t = 0; t < m; t++)
+            if (!__atomic_load_n(&oom, __ATOMIC_RELAXED) &&
+                new_pairs_of(t, k, n, E, deg, born, dies, emask, &w, &lists[t], &list_lcms[t], &counts[t]))
+                __atomic_store_n(&oom, 1, __ATOMIC_RELAXED);
+        free(w.partners);
+        free(w.pdeg);
+        free(w.by_degree);
+        free(w.minimal);
+        free(w.bucket);
+        free(w.L);
+        free(w.coprime);
+        free(w.dropped);
+        free(w.lmask);
+    }
+    if (oom)
+        goto done;
+    for (int64_t t = 0; t < m; t++)
+        count += counts[t];
+    out = malloc((count + 1) * 4 * sizeof(int64_t));
+    out_lcm = malloc((count + 1) * n * sizeof(int32_t));
+    if (!out || !out_lcm)
+        goto done;
+    for (int64_t t = 0, q = 0; t < m; q += counts[t], t++) {
+        if (!counts[t])
+            continue;
+        memcpy(out + 4 * q, lists[t], counts[t] * 4 * sizeof(int64_t));
+        memcpy(out_lcm + q * n, list_lcms[t], counts[t] * n * sizeof(int32_t));
+    }
+    /* (3) criterion B, pair by pair */
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) if (threads > 1)
+    for (int64_t q = 0; q < npairs + count; q++) {
+        if (q < npairs) {
+            const int64_t *pq = pairs + 3 * q;
+            keep[q] = !dropped_by_b(-1, k, m, n, E, emask, pq[0], pq[1], pq[2], lcm + q * n,
+                                    divmask(&dm, lcm + q * n, n));
+        } else {
+            int64_t *pq = out + 4 * (q - npairs);
+            const int32_t *l = out_lcm + (q - npairs) * n;
+            if (dropped_by_b(pq[3], k, m, n, E, emask, pq[0], pq[1], pq[2], l, divmask(&dm, l, n)))
+                pq[3] = -1;
+        }
+    }
+    for (int64_t g = 0; g < total; g++)
+        active[g] = born[g] < m && dies[g] == m;
     result[0] = (int64_t)(intptr_t)out;
     result[1] = (int64_t)(intptr_t)out_lcm;
     result[2] = count;
@@ -877,18 +955,17 @@ int f4_update(int64_t nvars, const int32_t *E, const int64_t *deg, uint8_t *acti
     out_lcm = NULL;
     status = 0;
 done:
-    free(partners);
-    free(pdeg);
-    free(L);
-    free(coprime);
-    free(dropped);
+    if (lists)
+        for (int64_t t = 0; t < m; t++) {
+            free(lists[t]);
+            free(list_lcms[t]);
+        }
+    free(lists);
+    free(list_lcms);
+    free(counts);
+    free(born);
+    free(dies);
     free(emask);
-    free(lmask);
-    free(qmask);
-    free(by_degree);
-    free(minimal);
-    free(bucket);
-    free(out_mask);
     free(dm.thr);
     free(out);
     free(out_lcm);
@@ -1032,7 +1109,7 @@ int f4_columns(const uint64_t *pool, const int64_t *starts, const int64_t *lengt
     offset[0] = 0;
     for (int64_t r = 0; r < nrows; r++)
         offset[r + 1] = offset[r] + lengths[r];
-#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1 && offset[nrows] > 100000)
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1 && (offset[nrows] > 100000 || f4_share_small))
     for (int64_t r = 0; r < nrows; r++) {
         const uint64_t *terms = pool + starts[r];
         for (int64_t k = 0; k < lengths[r]; k++)
@@ -1117,6 +1194,14 @@ static int ascending_u64(const void *x, const void *y)
     return (a > b) - (a < b);
 }
 
+static void set_clear(codeset_t *s)
+{
+    s->n = 0;
+    memset(s->t.slot, 0xFF, ((size_t)s->t.mask + 1) * sizeof(int64_t)); /* every slot -1 */
+}
+
+#define PREPROCESS_PARALLEL_TERMS 20000 /* below this many terms in a wave's rows, one thread walks them */
+
 /* Symbolic preprocessing of analysis/engine/f4.py (_preprocess) for narrow codes of a graded order: the terms of
  * the rows mult[r] * g[index[r]] (element g's term codes pool[el_start[g] : el_start[g] + el_len[g]],
  * leading code lm[g]) are walked wave by wave; every code first seen (not a leading term of a given row when
@@ -1125,20 +1210,29 @@ static int ascending_u64(const void *x, const void *y)
  * ascending order. A code's exponents: its fields (code >> shift[f]) & field_mask times winv_t (nfields x
  * nvars). Results (free each array with f4_free): result[0..2] the reducers' multipliers, elements and
  * count, result[3..4] all codes seen (the matrix columns), ascending, and their count. Returns 0, or -1
- * when memory ran out. */
+ * when memory ran out.
+ *
+ * The work of a wave is shared among up to threads threads: each walks some of the rows and keeps, in a
+ * set of its own, the codes that are not among those seen before the wave (read only while the threads
+ * walk); one thread then adds these few codes to the codes seen, each once, and the reducer search over
+ * the wave's new codes is shared out again. A wave's new codes are sorted, so the waves and reducers are
+ * the same on any number of threads. */
 int f4_preprocess(const uint64_t *pool, const int64_t *el_start, const int64_t *el_len, const uint64_t *lm,
                   const int64_t *act, int64_t nact, const int32_t *act_exps, int64_t nvars, int64_t nfields,
                   const uint64_t *shift, uint64_t field_mask, const int64_t *winv_t, const uint64_t *mult,
-                  const int64_t *index, int64_t nrows, int leads_done, int64_t *result)
+                  const int64_t *index, int64_t nrows, int leads_done, int threads, int64_t *result)
 {
-    codeset_t seen = {0};
+    enum { MAX_THREADS = 64 };
+    int nlocal = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads, ready = 0;
+    codeset_t seen = {0}, local[MAX_THREADS];
     int64_t fcap = 1024, nfront = 0, rcap = 1024, nred = 0;
     uint64_t *front = malloc(fcap * sizeof(uint64_t)), *red_mult = malloc(rcap * sizeof(uint64_t));
-    int64_t *red_index = malloc(rcap * sizeof(int64_t));
+    int64_t *red_index = malloc(rcap * sizeof(int64_t)), *best = malloc(fcap * sizeof(int64_t));
     uint64_t *masks = malloc((nact + 1) * sizeof(uint64_t));
-    int32_t *x = malloc((nvars + 1) * sizeof(int32_t));
-    int status = -1;
-    if (!front || !red_mult || !red_index || !masks || !x || set_init(&seen, 4096))
+    int status = -1, oom = 0;
+    for (; ready < nlocal && !set_init(&local[ready], 4096); ready++)
+        ;
+    if (ready < nlocal || !front || !red_mult || !red_index || !best || !masks || set_init(&seen, 4096))
         goto done;
     for (int64_t a = 0; a < nact; a++)
         masks[a] = support_mask(act_exps + a * nvars, nvars);
@@ -1148,14 +1242,41 @@ int f4_preprocess(const uint64_t *pool, const int64_t *el_start, const int64_t *
                 goto done;
     int64_t from = 0; /* the rows whose terms are walked next: the given ones, then each wave's reducers */
     for (int wave = 0;; wave++) {
+        const int64_t upto = wave ? nred : nrows;
+        const int64_t *rows_index = wave ? red_index : index;
+        const uint64_t *rows_mult = wave ? red_mult : mult;
+        int64_t terms_walked = 0;
+        for (int64_t r = from; r < upto; r++)
+            terms_walked += el_len[rows_index[r]];
+        int walkers = terms_walked < PREPROCESS_PARALLEL_TERMS && !f4_share_small ? 1 : nlocal;
+#pragma omp parallel num_threads(walkers) if (walkers > 1)
+        {
+#if defined(_OPENMP)
+            codeset_t *mine = &local[omp_get_thread_num()];
+#else
+            codeset_t *mine = &local[0];
+#endif
+            set_clear(mine);
+#pragma omp for schedule(dynamic, 64)
+            for (int64_t r = from; r < upto; r++) {
+                int64_t g = rows_index[r];
+                uint64_t m = rows_mult[r];
+                const uint64_t *terms = pool + el_start[g];
+                for (int64_t t = 0; t < el_len[g] && !__atomic_load_n(&oom, __ATOMIC_RELAXED); t++) {
+                    uint64_t code = terms[t] + m;
+                    if (seen.t.slot[table_find(&seen.t, seen.keys, code)] >= 0) /* seen before the wave */
+                        continue;
+                    if (set_add(mine, code) < 0)
+                        __atomic_store_n(&oom, 1, __ATOMIC_RELAXED);
+                }
+            }
+        }
+        if (oom)
+            goto done;
         nfront = 0;
-        int64_t upto = wave ? nred : nrows;
-        for (int64_t r = from; r < upto; r++) {
-            int64_t g = wave ? red_index[r] : index[r];
-            uint64_t m = wave ? red_mult[r] : mult[r];
-            const uint64_t *terms = pool + el_start[g];
-            for (int64_t t = 0; t < el_len[g]; t++) {
-                int added = set_add(&seen, terms[t] + m);
+        for (int j = 0; j < walkers; j++) /* the wave's new codes into the codes seen, each once */
+            for (int64_t i = 0; i < local[j].n; i++) {
+                int added = set_add(&seen, local[j].keys[i]);
                 if (added < 0)
                     goto done;
                 if (!added)
@@ -1163,46 +1284,66 @@ int f4_preprocess(const uint64_t *pool, const int64_t *el_start, const int64_t *
                 if (nfront == fcap) {
                     fcap *= 2;
                     uint64_t *f = realloc(front, fcap * sizeof(uint64_t));
-                    if (!f)
+                    if (f)
+                        front = f;
+                    int64_t *b = f ? realloc(best, fcap * sizeof(int64_t)) : NULL;
+                    if (!b)
                         goto done;
-                    front = f;
+                    best = b;
                 }
-                front[nfront++] = terms[t] + m;
+                front[nfront++] = local[j].keys[i];
             }
-        }
         if (!nfront || !nact)
             break;
         qsort(front, nfront, sizeof(uint64_t), ascending_u64);
+        /* the first active element dividing each new code, shared out among the threads */
+#pragma omp parallel num_threads(nlocal) if (nlocal > 1 && (nfront * nact > 1000000 || f4_share_small))
+        {
+            int32_t *x = malloc((nvars + 1) * sizeof(int32_t));
+            if (!x)
+                __atomic_store_n(&oom, 1, __ATOMIC_RELAXED);
+#pragma omp for schedule(dynamic, 64)
+            for (int64_t i = 0; i < nfront; i++) {
+                if (!x)
+                    continue;
+                uint64_t code = front[i];
+                for (int64_t v = 0; v < nvars; v++)
+                    x[v] = 0;
+                for (int64_t f = 0; f < nfields; f++) {
+                    int64_t value = (int64_t)((code >> shift[f]) & field_mask);
+                    if (value)
+                        for (int64_t v = 0; v < nvars; v++)
+                            x[v] += (int32_t)(value * winv_t[f * nvars + v]);
+                }
+                uint64_t mask = support_mask(x, nvars);
+                best[i] = -1;
+                for (int64_t a = 0; a < nact; a++)
+                    if (!(masks[a] & ~mask) && divides(act_exps + a * nvars, x, nvars)) {
+                        best[i] = a;
+                        break;
+                    }
+            }
+            free(x);
+        }
+        if (oom)
+            goto done;
         int64_t wave_start = nred;
         for (int64_t i = 0; i < nfront; i++) {
-            uint64_t code = front[i];
-            for (int64_t v = 0; v < nvars; v++)
-                x[v] = 0;
-            for (int64_t f = 0; f < nfields; f++) {
-                int64_t value = (int64_t)((code >> shift[f]) & field_mask);
-                if (value)
-                    for (int64_t v = 0; v < nvars; v++)
-                        x[v] += (int32_t)(value * winv_t[f * nvars + v]);
+            if (best[i] < 0)
+                continue;
+            if (nred == rcap) {
+                rcap *= 2;
+                uint64_t *rm = realloc(red_mult, rcap * sizeof(uint64_t));
+                if (!rm)
+                    goto done;
+                red_mult = rm;
+                int64_t *ri = realloc(red_index, rcap * sizeof(int64_t));
+                if (!ri)
+                    goto done;
+                red_index = ri;
             }
-            uint64_t mask = support_mask(x, nvars);
-            for (int64_t a = 0; a < nact; a++) {
-                if ((masks[a] & ~mask) || !divides(act_exps + a * nvars, x, nvars))
-                    continue;
-                if (nred == rcap) {
-                    rcap *= 2;
-                    uint64_t *rm = realloc(red_mult, rcap * sizeof(uint64_t));
-                    if (!rm)
-                        goto done;
-                    red_mult = rm;
-                    int64_t *ri = realloc(red_index, rcap * sizeof(int64_t));
-                    if (!ri)
-                        goto done;
-                    red_index = ri;
-                }
-                red_mult[nred] = code - lm[act[a]];
-                red_index[nred++] = act[a];
-                break;
-            }
+            red_mult[nred] = front[i] - lm[act[best[i]]];
+            red_index[nred++] = act[best[i]];
         }
         if (nred == wave_start)
             break;
@@ -1219,11 +1360,13 @@ int f4_preprocess(const uint64_t *pool, const int64_t *el_start, const int64_t *
     seen.keys = NULL;
     status = 0;
 done:
+    for (int j = 0; j < ready; j++)
+        set_free(&local[j]);
+    set_free(&seen);
     free(front);
+    free(best);
     free(red_mult);
     free(red_index);
     free(masks);
-    free(x);
-    set_free(&seen);
     return status;
 }

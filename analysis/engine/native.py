@@ -11,6 +11,7 @@ kernel.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import threading
@@ -127,7 +128,7 @@ def kernel():
                 lib.f4_free.argtypes = [ctypes.c_void_p]
                 lib.f4_update.restype = ctypes.c_int
                 lib.f4_update.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 3 + [ctypes.c_int64] * 3 + [
-                    ctypes.c_void_p] * 4
+                    ctypes.c_void_p] * 4 + [ctypes.c_int]
                 lib.f4_openmp.restype = ctypes.c_int
                 lib.f4_openmp.argtypes = []
                 lib.f4_reducers.restype = ctypes.c_int
@@ -142,12 +143,26 @@ def kernel():
                 lib.f4_preprocess.restype = ctypes.c_int
                 lib.f4_preprocess.argtypes = [ctypes.c_void_p] * 5 + [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                               ctypes.c_int64, ctypes.c_void_p, ctypes.c_uint64] + [
-                    ctypes.c_void_p] * 3 + [ctypes.c_int64, ctypes.c_int, ctypes.c_void_p]
+                    ctypes.c_void_p] * 3 + [ctypes.c_int64, ctypes.c_int, ctypes.c_int, ctypes.c_void_p]
                 lib.f4_index_of.restype = ctypes.c_int
                 lib.f4_index_of.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
                                             ctypes.c_void_p]
             _LOADED.append(lib)
     return _LOADED[0]
+
+
+@contextlib.contextmanager
+def share_small_work():
+    """Within the block, every C step that can share its work among threads does so however small its
+    input (the library's ``f4_share_small``): the tests run the threaded code paths on small systems.
+    Not thread-safe; for tests."""
+    lib = kernel()
+    flag = ctypes.c_int.in_dll(lib, "f4_share_small")
+    before, flag.value = flag.value, 1
+    try:
+        yield
+    finally:
+        flag.value = before
 
 
 def describe() -> str:
@@ -212,11 +227,12 @@ def index_of(keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
 
 
 def pair_update(E: np.ndarray, degrees: np.ndarray, active: np.ndarray, k: int, m: int, pairs: np.ndarray,
-                lcms: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                lcms: np.ndarray, threads: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The Gebauer-Möller update of :meth:`analysis.engine.f4._State.insert` for the new elements k, ..., k + m - 1
     (E: int32 exponents of all k + m elements, degrees int64, active: bool flags of the k old ones; pairs
-    (i, j, lcm degree) int64 with int32 lcm exponents lcms). Returns (keep mask of the existing pairs,
-    new pairs, their lcm exponents, active flags of all k + m elements)."""
+    (i, j, lcm degree) int64 with int32 lcm exponents lcms), on up to ``threads`` threads (the same pairs on
+    any count). Returns (keep mask of the existing pairs, new pairs, their lcm exponents, active flags of all
+    k + m elements)."""
     lib = kernel()
     n = E.shape[1]
     E, degrees = np.ascontiguousarray(E, dtype=np.int32), np.ascontiguousarray(degrees, dtype=np.int64)
@@ -226,7 +242,7 @@ def pair_update(E: np.ndarray, degrees: np.ndarray, active: np.ndarray, k: int, 
     keep = np.empty(len(pairs), dtype=np.uint8)
     result = np.zeros(3, dtype=np.int64)
     if lib.f4_update(n, E.ctypes.data, degrees.ctypes.data, flags.ctypes.data, k, m, len(pairs), pairs.ctypes.data,
-                     lcms.ctypes.data, keep.ctypes.data, result.ctypes.data):
+                     lcms.ctypes.data, keep.ctypes.data, result.ctypes.data, int(threads)):
         raise MemoryError("the C pair update ran out of memory")
     count = int(result[2])
     try:
@@ -292,11 +308,13 @@ def column_indices(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, mu
 
 def preprocess(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lm_codes: np.ndarray, act: np.ndarray,
                act_exps: np.ndarray, shifts: np.ndarray, field_mask: int, winv_t: np.ndarray, mult: np.ndarray,
-               index: np.ndarray, leads_done: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               index: np.ndarray, leads_done: bool, threads: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Symbolic preprocessing of :func:`analysis.engine.f4._preprocess` in C, for narrow codes of a graded order
     (per element: term pool offsets and lengths, leading codes; the active elements in order of preference
-    with their lead exponents; the codes' field shifts, mask and inverse weights). Returns the reducers'
-    multipliers (uint64) and elements (int64), wave by wave, and the matrix columns (codes, ascending)."""
+    with their lead exponents; the codes' field shifts, mask and inverse weights), on up to ``threads``
+    threads (the set of codes seen split by a hash among them; the same result on any count). Returns the
+    reducers' multipliers (uint64) and elements (int64), wave by wave, and the matrix columns (codes,
+    ascending)."""
     lib = kernel()
     arrays = [np.ascontiguousarray(pool), np.ascontiguousarray(starts, dtype=np.int64),
               np.ascontiguousarray(lengths, dtype=np.int64), np.ascontiguousarray(lm_codes),
@@ -308,7 +326,7 @@ def preprocess(pool: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lm_cod
     if lib.f4_preprocess(pool.ctypes.data, starts.ctypes.data, lengths.ctypes.data, lm_codes.ctypes.data,
                          act.ctypes.data, len(act), act_exps.ctypes.data, act_exps.shape[1], len(shifts),
                          shifts.ctypes.data, field_mask, winv_t.ctypes.data, mult.ctypes.data, index.ctypes.data,
-                         len(index), int(leads_done), result.ctypes.data):
+                         len(index), int(leads_done), int(threads), result.ctypes.data):
         raise MemoryError("the C symbolic preprocessing ran out of memory")
     addresses = [int(result[0]), int(result[1]), int(result[3])]
     try:
