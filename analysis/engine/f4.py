@@ -911,16 +911,19 @@ def _minimal_basis(state: _State) -> list[Poly]:
     """The active elements as they are (monic, tails as F4 left them): a minimal Gröbner basis, sorted by
     leading monomial. Each distinct monomial is decoded once and its key shared by the terms that have
     it (katsura-10 at 2^31 - 1: peak memory 150 -> 75 MB; the reduced basis 68 MB), then split element by
-    element."""
+    element. The keys are spread over the terms by one take from an object array (katsura-10, 383k terms:
+    2 ms against 15 ms for a Python lookup per term): this step runs on one thread whatever ``threads``."""
     ring = state.ring
     idx = np.flatnonzero(state.active[: len(state.polys)])
     starts, lengths = state.starts[idx], state.lengths[idx]
     terms = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(int(lengths.sum()))
     distinct, inverse = np.unique(state.pool_codes[terms], return_inverse=True)
-    keys = list(map(state.codes.to_keys(distinct).__getitem__, inverse.ravel().tolist()))
+    distinct_keys = np.empty(len(distinct), dtype=object)
+    distinct_keys[:] = state.codes.to_keys(distinct)
+    keys = distinct_keys[inverse.ravel()]
     coeffs = state.pool_coeffs[terms].tolist()
     bounds = np.concatenate([[0], np.cumsum(lengths)]).tolist()
-    basis = [Poly(ring, keys[a:b], coeffs[a:b]) for a, b in zip(bounds, bounds[1:])]
+    basis = [Poly(ring, keys[a:b].tolist(), coeffs[a:b]) for a, b in zip(bounds, bounds[1:])]
     basis.sort(key=lambda g: g.lm)
     return basis
 
