@@ -540,6 +540,9 @@ def main(argv: list[str] | None = None) -> int:
     paths = {"csv": args.csv, "md": stem.with_suffix(".md"), "meta.json": stem.with_suffix(".meta.json")}
     prov = provenance()
     t_start = time.perf_counter()
+    busy = busy_warning()
+    if busy:
+        print(busy, file=sys.stderr)
 
     exe = None if args.no_msolve else find_msolve()
     if exe is None and not args.no_msolve:
@@ -565,7 +568,26 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nwrote {paths['csv']}, {paths['md'].name} and {paths['meta.json'].name}")
     if any(r.match is False for r in rows):
         print("WARNING: the engine's reduced basis differs from msolve's for some system (see match)")
+    busy = busy_warning()
+    if busy:
+        print(busy, file=sys.stderr)
     return 0
+
+
+BUSY_LOAD = 0.5
+"""Load average per core above which a run's timings, and above all its thread speedups, are not those
+of a free machine (a second thread gets a second core only when one is free)."""
+
+
+def busy_warning() -> str:
+    """A warning when the machine is busy (load average above BUSY_LOAD per core), else empty."""
+    cpus = os.cpu_count() or 1
+    load = os.getloadavg()[0]
+    if load <= BUSY_LOAD * cpus:
+        return ""
+    return (f"WARNING: load average {load:.1f} on {cpus} cores: other processes share the cores, so the seconds "
+            f"are inflated and thread speedups depressed (own and msolve alike); rerun on an idle machine for "
+            f"figures of free cores")
 
 
 if __name__ == "__main__":
