@@ -29,7 +29,10 @@ With ``--threads N`` (N > 1) every system is also run on N threads: the own engi
 ``F4Options(threads=N)`` and msolve with ``-t N``, each alternating with its one-thread run (``--repeat``
 pairs, at least 3), so that both sides of a speedup see the same load; the speedup is the ratio of the best
 times, its spread the least and largest ratio of a pair (``own_speedup_range``); ``threads_match``: the
-basis on N threads has the digest of the one-thread basis.
+basis on N threads has the digest of the one-thread basis; ``own_threads_cores`` / ``msolve_threads_cores``:
+CPU seconds over wall seconds of the best N-thread run, which says whether the threads had free cores
+(under Linux's autogroup scheduling a busy session's threads share one session's part of the machine: on
+2 cores at load average 15 both the 1- and the 2-thread runs of the engine got 0.46-0.50 of a core).
 
 Writes tables/bench_engine.csv, .md and .meta.json (date, commit, dirty flag, machine, versions, the
 load average at the start and the end); at another prime than 65521 tables/bench_engine-p<prime>.*, with
@@ -127,6 +130,8 @@ class Row:
     msolve_threads_s: float | None = None
     msolve_speedup: float | None = None
     msolve_speedup_range: str = ""
+    own_threads_cores: float | None = None
+    msolve_threads_cores: float | None = None
 
 
 COLUMNS = tuple(f.name for f in fields(Row))
@@ -151,19 +156,21 @@ if sys.argv[3] == "baseline":
     sys.exit(0)
 from analysis.engine.linalg import MatrixTooLarge
 t0 = time.perf_counter()
+c0 = time.process_time()
 try:
     gb = groebner_in_order(polys, F4Options(max_matrix_cells=10**10, threads=threads, reduced=not leading))
 except MatrixTooLarge as e:
     print(json.dumps(dict(error=str(e), seconds=time.perf_counter() - t0)))
     sys.exit(0)
 seconds = time.perf_counter() - t0
+cpu = time.process_time() - c0
 try:
     deg = str(degree(gb))
 except NotZeroDimensional:
     deg = "dim " + str(dimension(gb))
 rows, cols = gb.max_matrix
 basis = [Poly(gb.ring, [g.lm], [1]) for g in gb.basis] if leading else gb.basis
-print(json.dumps(dict(seconds=seconds, degree=deg, size=len(gb.basis), digest=basis_digest(basis),
+print(json.dumps(dict(seconds=seconds, cpu=cpu, degree=deg, size=len(gb.basis), digest=basis_digest(basis),
                       max_matrix=f"{{rows}}x{{cols}}")))
 """
 
@@ -175,6 +182,8 @@ class Run:
     stdout: str
     capped: bool
     returncode: int
+    cpu: float = 0.0
+    """user + system CPU seconds of the child (and of what it waited for)"""
 
 
 TIME = "/usr/bin/time"
@@ -221,7 +230,7 @@ def run_child(argv: list[str], cap: float) -> Run:
         peak_kb = usage.ru_maxrss
         if timed and not capped.is_set():
             peak_kb = int(report.read_text().split()[-1])
-        return Run(wall, peak_kb / 1024, text, capped.is_set(), proc.returncode)
+        return Run(wall, peak_kb / 1024, text, capped.is_set(), proc.returncode, usage.ru_utime + usage.ru_stime)
 
 
 def alternating(argvs: list[list[str]], repeat: int, cap: float) -> list[list[Run]]:
@@ -269,6 +278,8 @@ def bench_threads(row: Row, name: str, path: Path, order: str, args, exe: str | 
             if all("seconds" in r and "error" not in r for r in one + many):
                 row.own_one_thread_s = min(r["seconds"] for r in one)
                 row.own_threads_s = min(r["seconds"] for r in many)
+                best = min(many, key=lambda r: r["seconds"])
+                row.own_threads_cores = best["cpu"] / max(best["seconds"], 1e-9)
                 row.own_speedup, row.own_speedup_range = _speedup([r["seconds"] for r in one],
                                                                   [r["seconds"] for r in many])
                 row.threads_match = all(r["digest"] == one[0]["digest"] for r in one + many)
@@ -281,6 +292,8 @@ def bench_threads(row: Row, name: str, path: Path, order: str, args, exe: str | 
             one, many = ([max(r.wall - startup, 1e-9) for r in side] for side in runs)
             row.msolve_one_thread_s = min(one)
             row.msolve_threads_s = min(many)
+            best = min(runs[1], key=lambda r: r.wall)
+            row.msolve_threads_cores = best.cpu / max(best.wall, 1e-9)
             row.msolve_speedup, row.msolve_speedup_range = _speedup(one, many)
 
 
@@ -478,17 +491,19 @@ def markdown(rows: list[Row], meta: dict) -> str:
             "",
             f"On {n} threads ({meta['machine']['cpus']} cores; load average {meta['load_average_at_start'][0]:.1f} at "
             f"the start, {meta['machine']['load_average_at_end'][0]:.1f} at the end): one-thread and {n}-thread runs "
-            f"alternating, best of each; spread: the least and largest ratio of an alternating pair.",
+            f"alternating, best of each; spread: the least and largest ratio of an alternating pair; cores: CPU "
+            f"seconds over wall seconds of the best {n}-thread run (the own engine's computation; msolve's whole "
+            f"process), near {n} when the threads had free cores, near 1 or below when other processes held them.",
             "",
         ]
         lines += _md_table(
-            f"| system | own 1 thread s | own {n} threads s | speedup | spread | same basis | msolve -t 1 s | "
-            f"msolve -t {n} s | speedup | spread |",
+            f"| system | own 1 thread s | own {n} threads s | speedup | spread | cores | same basis | msolve -t 1 s | "
+            f"msolve -t {n} s | speedup | spread | cores |",
             [f"| {r.system} | {_f(r.own_one_thread_s, '.3f')} | {_f(r.own_threads_s, '.3f')} | "
-             f"{_f(r.own_speedup, '.2f')} | {r.own_speedup_range} | "
+             f"{_f(r.own_speedup, '.2f')} | {r.own_speedup_range} | {_f(r.own_threads_cores, '.2f')} | "
              f"{'' if r.threads_match is None else r.threads_match} | "
              f"{_f(r.msolve_one_thread_s, '.3f')} | {_f(r.msolve_threads_s, '.3f')} | {_f(r.msolve_speedup, '.2f')} | "
-             f"{r.msolve_speedup_range} |" for r in rows])
+             f"{r.msolve_speedup_range} | {_f(r.msolve_threads_cores, '.2f')} |" for r in rows])
     return "\n".join(lines) + "\n"
 
 
@@ -503,7 +518,8 @@ def print_table(rows: list[Row]) -> None:
               f"{_f(r.ratio_mb, '.2f'):>7}  {'-' if r.match is None else r.match!s:5}  {r.status}")
         if r.threads > 1:
             print(f"{'':<20}on {r.threads} threads: own {_f(r.own_threads_s, '.3f')} s, speedup "
-                  f"{_f(r.own_speedup, '.2f')} ({r.own_speedup_range}), same basis {r.threads_match}; msolve "
+                  f"{_f(r.own_speedup, '.2f')} ({r.own_speedup_range}, {_f(r.own_threads_cores, '.2f')} cores), same "
+                  f"basis {r.threads_match}; msolve "
                   f"{_f(r.msolve_threads_s, '.3f')} s, speedup {_f(r.msolve_speedup, '.2f')} "
                   f"({r.msolve_speedup_range})")
 
