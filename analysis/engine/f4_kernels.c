@@ -733,7 +733,9 @@ static int64_t lcm_degree(const int32_t *a, const int32_t *b, int64_t n)
  * every h_t from its partners (criteria M and F), each t on its own into its own list, the lists then
  * joined in order of t; (3) criterion B on every pair, old (born -1) and new, by the h_u inserted after
  * it. No step depends on a pair another step drops, so the pairs are those of the one-by-one update. */
-#define UPDATE_PARALLEL_TESTS 200000 /* below this many partner tests (m x (k + m)), one thread */
+/* Below this many partner tests (m x (k + m), a few nanoseconds each) the update stays on one thread: waking
+ * a sleeping one costs tens of microseconds. */
+#define UPDATE_PARALLEL_TESTS 200000
 
 typedef struct { /* one thread's scratch for the new pairs of one h_t */
     int64_t *partners, *pdeg, *by_degree, *minimal, *bucket, bucket_cap;
@@ -1200,7 +1202,9 @@ static void set_clear(codeset_t *s)
     memset(s->t.slot, 0xFF, ((size_t)s->t.mask + 1) * sizeof(int64_t)); /* every slot -1 */
 }
 
-#define PREPROCESS_PARALLEL_TERMS 20000 /* below this many terms in a wave's rows, one thread walks them */
+/* Below this many terms in a wave's rows one thread walks them: a wave of 50,000 terms is about 0.15 ms of
+ * work, against the tens of microseconds it takes to wake a sleeping thread (OMP_WAIT_POLICY=PASSIVE). */
+#define PREPROCESS_PARALLEL_TERMS 50000
 
 /* Symbolic preprocessing of analysis/engine/f4.py (_preprocess) for narrow codes of a graded order: the terms of
  * the rows mult[r] * g[index[r]] (element g's term codes pool[el_start[g] : el_start[g] + el_len[g]],
