@@ -25,8 +25,9 @@
 #include <omp.h>
 #endif
 
-/* Built with -fopenmp where the compiler has it (analysis/engine/native.py): the row reduction and the pair update
- * then share their independent work among the threads asked for; without it every pragma is ignored. */
+/* Built with -fopenmp where the compiler has it (analysis/engine/native.py): the row reduction, the symbolic
+ * preprocessing, the column lookup and the pair update then share their independent work among the threads
+ * asked for; without it every pragma is ignored. */
 int f4_openmp(void)
 {
 #if defined(_OPENMP)

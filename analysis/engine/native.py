@@ -23,8 +23,9 @@ import numpy as np
 SOURCE = Path(__file__).with_name("f4_kernels.c")
 FLAGS = ("-O3", "-funroll-loops", "-shared", "-fPIC", "-std=c99")
 OPENMP = ("-fopenmp",)
-"""Added to FLAGS where the compiler has OpenMP (gcc, clang with libomp): the row reduction and the pair
-update then run on ``threads`` threads; without it the library is built single-threaded (same results)."""
+"""Added to FLAGS where the compiler has OpenMP (gcc, clang with libomp): the row reduction, the symbolic
+preprocessing, the column lookup and the pair update then run on ``threads`` threads; without it the library
+is built single-threaded (same results)."""
 
 _LOCK = threading.Lock()
 _LOADED: list = []  # [library or None] once tried
