@@ -102,7 +102,7 @@ def _add_degree(sub: argparse._SubParsersAction) -> None:
                    "system's C compiler; without one numba's sparse kernel on large sparse matrices, else numpy; -v "
                    "names the one in use), numpy, sparse or python (reference)")
     p.add_argument("--threads", type=_integer_at_least("--threads", 1), default=1, metavar="N",
-                   help="threads of the C kernel's row reduction (default 1; the same basis for every N; one where "
+                   help="threads of the C kernel (row reduction, symbolic preprocessing, pair update; default 1; the same basis for every N; one where "
                    "the kernel was built without OpenMP: -v says)")
     p.add_argument("--engine", default="own", choices=("auto", "own", "msolve"),
                    help="Groebner engine: own (default), msolve (an msolve executable, run as an external program, "
