@@ -383,12 +383,17 @@ def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, d
     """`tdoa` as the verb runs it: the first pass; with a guide, `calibrate(F, dim=dim, seed=seed)` of it
     (sigma estimated) and, when that calibration is trusted (GuideOptions.trusted, every receiver placed),
     the guided pass at its positions, each event checked against the first pass's entries that calibration
-    accepted (reconcile); notes say what was done. guide None: the first pass only."""
+    accepted (reconcile); notes say what was done. guide None, or the emitted signal given (options.signal:
+    each channel's arrival its own pulse, no pair correlation to narrow): the first pass only."""
     from .calibration import calibrate
 
     first = tdoa_matrix(recording, options, progress=progress)
     if guide is None:
         return GuidedTdoa(first, None, first, False)
+    if options.signal is not None:  # every channel measured against the emitted signal: no pair to search again
+        note = ("no guided pass: every channel's arrival measured against the emitted signal, its own direct pulse "
+                "(the guide narrows pairs' correlations); the matrix is the first pass's")
+        return GuidedTdoa(first, None, replace(first, notes=first.notes + (note,)), False)
     if progress is not None:
         progress(f"tdoa: calibrating the first pass ({dim}D, sigma estimated) to guide a second pass")
     cal = calibrate(first.F, dim=dim, seed=seed)
