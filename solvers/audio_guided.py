@@ -339,8 +339,9 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     sigma : noise std of one entry in metres (the calibration's)
     guide : GuideOptions
     entries : None, or (channels, events) entries in metres of the first pass (same options, F; NaN columns for
-        none): an event without a position is first located from its entries (locate_from_entries), and only
-        when they do not fit from its candidates (locate_source). tdoa_guided gives those of the events its
+        none): an event without a position is first located from its entries (locate_from_entries, checked on
+        the candidates of options.taper), and only when they do not fit from its candidates (locate_source, those
+        of every taper). tdoa_guided gives those of the events its
         calibration was not given (an event given and not placed has entries the calibration did not accept)
     progress : None, or a callable taking one line
 
@@ -370,17 +371,18 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             placed.append(j)
         else:
             energy = np.sum(seg**2, axis=1)
-            pooled = [_pair_candidates(seg * np.exp(-after / taper), max_lag, options.peaks)
-                      for taper in (options.taper, *options.retry_tapers)]
-            i, k = pooled[0][:2]
-            lags, heights = np.hstack([p[2] for p in pooled]), np.hstack([p[3] for p in pooled])
             found = None
-            if entries is not None and j < entries.shape[1]:
+            if entries is not None and j < entries.shape[1] and np.sum(np.isfinite(entries[:, j])) >= dim + 2:
+                i, k, lags, heights = _pair_candidates(seg * np.exp(-after / options.taper), max_lag, options.peaks)
                 found = locate_from_entries(R, entries[:, j] * scale, i, k, lags, heights, tol=guide.locate_tolerance,
                                             min_support=options.min_support, min_share=guide.locate_share)
                 if found is not None:
                     from_entries.append(j)
-            if found is None:
+            if found is None:  # the candidates of every taper searched
+                pooled = [_pair_candidates(seg * np.exp(-after / taper), max_lag, options.peaks)
+                          for taper in (options.taper, *options.retry_tapers)]
+                i, k = pooled[0][:2]
+                lags, heights = np.hstack([p[2] for p in pooled]), np.hstack([p[3] for p in pooled])
                 found = locate_source(R, i, k, lags, heights, references=np.argsort(energy)[::-1][:3],
                                       tol=guide.locate_tolerance, samples=guide.locate_samples,
                                       min_support=options.min_support, min_share=guide.locate_share,
