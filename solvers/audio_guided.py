@@ -307,13 +307,14 @@ def _windows(receivers: np.ndarray, s: np.ndarray, receiver_std: np.ndarray, sou
 
 
 def _guided_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, guide: GuideOptions, pred: np.ndarray,
-                     half: np.ndarray, beta: float = 1.0):
+                     half: np.ndarray, beta: float = 1.0, known=None):
     """(reference, times relative to it in samples, support) of one event's weighted segments: the first
-    pass's consensus, started from the predicted arrivals, on the candidates within each pair's window."""
+    pass's consensus, started from the predicted arrivals, on the candidates within each pair's window.
+    known : None, or the segments' candidates already computed (_pair_candidates(seg, max_lag, guide.peaks, beta))."""
     energy = np.sum(seg**2, axis=1)
     r = int(np.argmax(energy))
     m = seg.shape[0]
-    i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks, beta)
+    i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks, beta) if known is None else known
     inside = np.abs(lags - (pred[i] - pred[k])[:, None]) <= half[i, k][:, None]
     candidates = (i, k, np.where(inside, lags, np.nan), np.where(inside, heights, 0.0))
     t, support = _consensus(m, r, *candidates, options.tolerance, options.early, init=pred - pred[r])
@@ -363,6 +364,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     placed, located, missing, from_entries = [], [], [], []
 
     def arrivals(j, seg, after, max_lag):
+        taper_candidates = None  # of options.taper with PHAT, when computed to locate the source
         if S is not None and j >= len(S):
             raise ValueError(f"transmitters has {len(S)} rows, but the recording has more events")
         if S is not None and np.all(np.isfinite(S[j])):
@@ -373,7 +375,8 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             energy = np.sum(seg**2, axis=1)
             found = None
             if entries is not None and j < entries.shape[1] and np.sum(np.isfinite(entries[:, j])) >= dim + 2:
-                i, k, lags, heights = _pair_candidates(seg * np.exp(-after / options.taper), max_lag, options.peaks)
+                taper_candidates = _pair_candidates(seg * np.exp(-after / options.taper), max_lag, options.peaks)
+                i, k, lags, heights = taper_candidates
                 found = locate_from_entries(R, entries[:, j] * scale, i, k, lags, heights, tol=guide.locate_tolerance,
                                             min_support=options.min_support, min_share=guide.locate_share)
                 if found is not None:
@@ -383,6 +386,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
                           for taper in (options.taper, *options.retry_tapers)]
                 i, k = pooled[0][:2]
                 lags, heights = np.hstack([p[2] for p in pooled]), np.hstack([p[3] for p in pooled])
+                taper_candidates = pooled[0]
                 found = locate_source(R, i, k, lags, heights, references=np.argsort(energy)[::-1][:3],
                                       tol=guide.locate_tolerance, samples=guide.locate_samples,
                                       min_support=options.min_support, min_share=guide.locate_share,
@@ -394,7 +398,14 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             s_std = _source_std(R, s, pairs, max(noise, rms))
             located.append(j)
         pred, half = _windows(R, s, rstd, s_std, noise, options, guide)
-        best = _over_tapers(seg, after, options, lambda w, beta: _guided_arrivals(w, max_lag, options, guide, pred, half, beta))
+        # _over_tapers analyses options.taper with PHAT first: the candidates the source was located on, when they are those
+        memo = {"first": taper_candidates} if taper_candidates is not None and guide.peaks == options.peaks else {}
+
+        def analyse(w, beta):
+            known = memo.pop("first", None) if beta == 1.0 else None
+            return _guided_arrivals(w, max_lag, options, guide, pred, half, beta, known)
+
+        best = _over_tapers(seg, after, options, analyse)
         return (*best, guide.min_agreement)
 
     tm = _measure(recording, options, arrivals, progress, label="tdoa (guided)")
