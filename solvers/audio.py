@@ -543,15 +543,17 @@ def _supported(P, t, tol: float):
     return ok, np.take_along_axis(P, pick[:, :, None], axis=2)[:, :, 0]
 
 
-def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, beta: float = 1.0):
+def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, beta: float = 1.0, candidates=None):
     """(reference channel, arrival times relative to it in samples, support) of one event's weighted
     segments (channels, samples): the loudest channel is the reference; _consensus of the pairs'
-    GCC-PHAT candidates."""
+    GCC-PHAT candidates (candidates: None, or those already computed, _pair_candidates(seg, max_lag,
+    options.peaks, beta))."""
     energy = np.sum(seg**2, axis=1)
     r = int(np.argmax(energy))
     m = seg.shape[0]
     starts = None if options.starts >= m else np.argsort(energy)[::-1][: options.starts]
-    candidates = _pair_candidates(seg, max_lag, options.peaks, beta)
+    if candidates is None:
+        candidates = _pair_candidates(seg, max_lag, options.peaks, beta)
     t, support = _consensus(m, r, *candidates, options.tolerance, options.early, starts=starts)
     return r, t, support, agreeing_pairs(m, candidates, t, options.tolerance)
 
@@ -571,7 +573,12 @@ def agreeing_pairs(m: int, candidates, t: np.ndarray, tol: float) -> np.ndarray:
     return _supported(_candidate_tensor(m, *candidates)[0], t, tol)[0]
 
 
-def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), progress=None) -> TdoaMatrix:
+#: floats (lags and heights) of the first analyses tdoa_matrix keeps for a second pass at most (160 MB)
+KEEP_FLOATS = 20_000_000
+
+
+def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), progress=None,
+                keep: dict | None = None) -> TdoaMatrix:
     """Detect the events of a recording and measure every channel's arrival time in each event, relative
     to the event's reference channel (the one with the most energy in the event's window), by GCC-PHAT
     of every channel pair and their consensus.
@@ -584,13 +591,26 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     of other channels that agree with it; below `options.min_support` it is left missing.
 
     progress : None, or a callable taking one line (called every 10 events)
+    keep : None, or a dict that receives, event by event (index -> (i, k, lags, heights)), the candidates of each
+        event's first analysis (options.taper with PHAT: the guided pass's first analysis too,
+        solvers.audio_guided), until they hold KEEP_FLOATS floats
     Raises RecordingError when no event is found.
     """
     if options.signal is not None:  # each channel against the emitted signal (TdoaOptions.signal)
         return _measure(recording, options, lambda j, seg, after, max_lag: _signal_arrivals(seg, max_lag, options),
                         progress)
-    return _measure(recording, options, lambda j, seg, after, max_lag: _over_tapers(
-        seg, after, options, lambda weighted, beta: _event_arrivals(weighted, max_lag, options, beta)), progress)
+    kept = [0]
+
+    def arrivals(j, seg, after, max_lag):
+        def analyse(weighted, beta):
+            candidates = _pair_candidates(weighted, max_lag, options.peaks, beta)
+            if keep is not None and j not in keep and kept[0] + 2 * candidates[2].size <= KEEP_FLOATS:
+                keep[j] = candidates  # _over_tapers' first analysis
+                kept[0] += 2 * candidates[2].size
+            return _event_arrivals(weighted, max_lag, options, beta, candidates)
+        return _over_tapers(seg, after, options, analyse)
+
+    return _measure(recording, options, arrivals, progress)
 
 
 def _over_tapers(seg: np.ndarray, after: np.ndarray, options: TdoaOptions, analyse):

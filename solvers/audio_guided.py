@@ -323,7 +323,7 @@ def _guided_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, guide:
 
 def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, options: TdoaOptions = TdoaOptions(), *,
                        receiver_std=None, transmitter_std=None, sigma: float = 0.0, guide: GuideOptions = GuideOptions(),
-                       entries=None, progress=None) -> TdoaMatrix:
+                       entries=None, known: dict | None = None, progress=None) -> TdoaMatrix:
     """The second pass: every channel's arrival per event, searched within a window around the arrival
     differences that known positions predict (module docstring).
 
@@ -344,6 +344,8 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
         the candidates of options.taper), and only when they do not fit from its candidates (locate_source, those
         of every taper). tdoa_guided gives those of the events its
         calibration was not given (an event given and not placed has entries the calibration did not accept)
+    known : None, or the first pass's candidates of its events' first analyses (tdoa_matrix's `keep`, same
+        recording and options): used instead of computing them again
     progress : None, or a callable taking one line
 
     Returns a TdoaMatrix whose notes say what guided it. Raises ValueError for positions of the wrong
@@ -364,7 +366,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     placed, located, missing, from_entries = [], [], [], []
 
     def arrivals(j, seg, after, max_lag):
-        taper_candidates = None  # of options.taper with PHAT, when computed to locate the source
+        taper_candidates = None if known is None else known.get(j)  # of options.taper with PHAT
         if S is not None and j >= len(S):
             raise ValueError(f"transmitters has {len(S)} rows, but the recording has more events")
         if S is not None and np.all(np.isfinite(S[j])):
@@ -375,14 +377,16 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             energy = np.sum(seg**2, axis=1)
             found = None
             if entries is not None and j < entries.shape[1] and np.sum(np.isfinite(entries[:, j])) >= dim + 2:
-                taper_candidates = _pair_candidates(seg * np.exp(-after / options.taper), max_lag, options.peaks)
+                if taper_candidates is None:
+                    taper_candidates = _pair_candidates(seg * np.exp(-after / options.taper), max_lag, options.peaks)
                 i, k, lags, heights = taper_candidates
                 found = locate_from_entries(R, entries[:, j] * scale, i, k, lags, heights, tol=guide.locate_tolerance,
                                             min_support=options.min_support, min_share=guide.locate_share)
                 if found is not None:
                     from_entries.append(j)
             if found is None:  # the candidates of every taper searched
-                pooled = [_pair_candidates(seg * np.exp(-after / taper), max_lag, options.peaks)
+                pooled = [taper_candidates if taper == options.taper and taper_candidates is not None
+                          else _pair_candidates(seg * np.exp(-after / taper), max_lag, options.peaks)
                           for taper in (options.taper, *options.retry_tapers)]
                 i, k = pooled[0][:2]
                 lags, heights = np.hstack([p[2] for p in pooled]), np.hstack([p[3] for p in pooled])
@@ -398,7 +402,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             s_std = _source_std(R, s, pairs, max(noise, rms))
             located.append(j)
         pred, half = _windows(R, s, rstd, s_std, noise, options, guide)
-        # _over_tapers analyses options.taper with PHAT first: the candidates the source was located on, when they are those
+        # _over_tapers analyses options.taper with PHAT first: the candidates of the first pass or of the localisation
         memo = {"first": taper_candidates} if taper_candidates is not None and guide.peaks == options.peaks else {}
 
         def analyse(w, beta):
@@ -483,7 +487,8 @@ def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, d
     each channel's arrival its own pulse, no pair correlation to narrow): the first pass only."""
     from .calibration import calibrate
 
-    first = tdoa_matrix(recording, options, progress=progress)
+    known: dict = {}
+    first = tdoa_matrix(recording, options, progress=progress, keep=None if guide is None else known)
     if guide is None:
         return GuidedTdoa(first, None, first, False)
     if options.signal is not None:  # every channel measured against the emitted signal: no pair to search again
@@ -509,7 +514,7 @@ def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, d
     untested[:, chosen] = np.nan  # the events the calibration was given: placed, or their entries not accepted
     matrix = guided_tdoa_matrix(recording, cal.receivers, transmitters, options, receiver_std=cal.receiver_std,
                                 transmitter_std=transmitter_std, sigma=float(cal.sigma), guide=guide,
-                                entries=untested, progress=progress)
+                                entries=untested, known=known, progress=progress)
     matrix = reconcile(first, matrix, inliers, options.tolerance)
     before, after = int(np.isfinite(first.F).sum()), int(np.isfinite(matrix.F).sum())
     own = tuple(f"first pass: {n}" for n in first.notes[len(recording.notes):])  # the recording's notes are in both

@@ -68,6 +68,10 @@ def test_the_guided_pass_measures_the_direct_sound_the_first_pass_missed():
         assert guided.reference[j] == r
         assert np.max(np.abs(differences(guided, j) - truth)) < 0.3  # every entry, channel 3's direct sound too
     assert "guided pass (3D positions): 2 event(s) at their given source" in guided.notes[-1]
+    known: dict = {}  # the first pass's first analyses, kept: the guided pass the same without computing them again
+    assert np.array_equal(tdoa_matrix(rec, OPTIONS, keep=known).F, first.F, equal_nan=True) and sorted(known) == [0, 1]
+    again = guided_tdoa_matrix(rec, receivers, sources, OPTIONS, sigma=1e-3, known=known)
+    assert np.array_equal(again.F, guided.F, equal_nan=True)
 
 
 def test_guided_entries_are_measured_peaks_and_a_wrong_guide_is_caught():
