@@ -204,10 +204,23 @@ class TdoaOptions:
         starts gave the matrices all 14-16 gave; 48 channels: 1.1 s per event with 4, 5.8 s with 16)
     frame : seconds per power frame of the event detection
     signal : None, or the emitted sound (1-D samples at the recording's rate; `tdoa --signal FILE`): every
-        channel of an event is first correlated with it (a matched filter: a sweep's or any long sound's
-        arrivals compressed into pulses at their times), over the whole sound's length, and the pairs'
-        GCC-PHAT and the taper then see the compressed pulses (the taper weighs the direct pulse, not the
-        sound's first tens of milliseconds)
+        channel of an event is correlated with it over the whole sound's length, with the phase transform
+        (matched_filter: a sweep's or any long sound's arrivals compressed into pulses at their times, the
+        channel's room response), and each channel's arrival is its own direct pulse (_signal_arrivals), not
+        a pair's correlation: between two channels' responses the correlation peaks wherever one's
+        reflection meets the other's direct sound, and under GCC-PHAT the matched filter's |S|^2 cancels
+        (measured on the sweep rooms of tables/audio3d_kinds.md: a pair's highest peak at the true lag for
+        7-89 % of the pairs of an event, a channel's earliest pulse (signal_share) at its arrival within 2
+        samples for 99.2-100 % of the channels of every room)
+    signal_share : with a signal, a channel's arrival is the earliest pulse of at least this share of its
+        highest, within the lag range before it (its reflections come after the direct sound and can be
+        louder): on the same rooms 0.3 put 99.2-100 % of the channels within 2 samples, 0.5 96.7-100 %, the
+        highest pulse alone 52-100 %
+    signal_psr : with a signal, a channel whose highest pulse is lower than this many times the rms of its
+        correlation has no arrival (its entry left missing: nothing of the signal heard above the noise). The
+        phase-transformed correlation of noise alone peaks at about sqrt(2 ln N) times its rms (4-5 over an
+        event's 10^4-10^5 lags); on the sweep rooms every channel of every event reached 5.5-21 (the lowest in
+        the RT60 0.8 s rooms at 10 dB): 5 is a thin margin on both sides
     signal_rate : the signal's sample rate (None: the recording's); a recording at another rate is an error
     """
 
@@ -235,6 +248,8 @@ class TdoaOptions:
     frame: float = 0.005
     signal: np.ndarray | None = field(default=None, compare=False, repr=False)
     signal_rate: int | None = None
+    signal_share: float = 0.3
+    signal_psr: float = 5.0
 
     def __post_init__(self) -> None:
         if self.signal is not None:
@@ -267,6 +282,9 @@ class TdoaOptions:
             raise ValueError(f"retry_below must be in [0, 1], got {self.retry_below}")
         if not 0.0 < self.early <= 1.0:
             raise ValueError(f"early must be in (0, 1], got {self.early}")
+        if not 0.0 < self.signal_share <= 1.0 or not (np.isfinite(self.signal_psr) and self.signal_psr >= 0):
+            raise ValueError(f"signal_share must be in (0, 1] and signal_psr >= 0, got {self.signal_share}, "
+                             f"{self.signal_psr}")
 
 
 def detect_events(samples: np.ndarray, rate: int, options: TdoaOptions = TdoaOptions()) -> np.ndarray:
@@ -346,16 +364,52 @@ class TdoaMatrix:
     notes: tuple[str, ...] = field(default=())
 
 
-def matched_filter(seg: np.ndarray, signal: np.ndarray) -> np.ndarray:
+def matched_filter(seg: np.ndarray, signal: np.ndarray, beta: float = 0.0) -> np.ndarray:
     """(channels, frames - len(signal) + 1): each channel's correlation with the emitted signal,
     out[t] = sum_s seg[t + s] signal[s]: a sound emitted at t shows as a pulse at t (zeros when the
-    segment is shorter than the signal: nothing to compress)."""
+    segment is shorter than the signal: nothing to compress). beta > 0: each frequency of the
+    cross-spectrum divided by its magnitude to that power (1: the phase transform, every frequency of
+    the signal voting alike: the pulse sharpened to the channel's room response)."""
     frames, L = seg.shape[1], len(signal)
     if frames < L:
         return np.zeros((seg.shape[0], 1))
     n = _fast_length(frames + L)
-    out = np.fft.irfft(np.fft.rfft(seg, n, axis=1) * np.conj(np.fft.rfft(signal, n))[None, :], n, axis=1)
+    cross = np.fft.rfft(seg, n, axis=1) * np.conj(np.fft.rfft(signal, n))[None, :]
+    if beta > 0:
+        cross = cross / np.maximum(np.abs(cross), 1e-30) ** beta
+    out = np.fft.irfft(cross, n, axis=1)
     return out[:, : frames - L + 1]
+
+
+def _signal_arrivals(pulses: np.ndarray, max_lag: int, options: TdoaOptions):
+    """(reference, arrival times relative to it in samples, support, agreeing pairs) of one event from each
+    channel's correlation with the emitted signal (pulses (channels, frames), matched_filter with the phase
+    transform): a channel's arrival is the earliest local maximum of at least options.signal_share of its
+    highest, within max_lag samples before it (parabolic sub-sample), kept when its height is at least
+    options.signal_psr x the rms of the channel's correlation. Every kept channel's arrival is measured
+    against the signal itself, so every pair of kept channels is a measured difference: support is the
+    number of other kept channels. The reference is the kept channel of the highest pulse."""
+    m, frames = pulses.shape
+    t = np.zeros(m)
+    height = np.zeros(m)
+    kept = np.zeros(m, bool)
+    rms = np.sqrt(np.mean(pulses**2, axis=1))
+    for ch in range(m):
+        x = pulses[ch]
+        if frames < 3:
+            break
+        top = int(np.argmax(x[1:-1])) + 1
+        lo = max(1, top - max_lag)
+        near = np.arange(lo, top + 1)
+        local = near[(x[near] >= x[near - 1]) & (x[near] > x[near + 1]) & (x[near] >= options.signal_share * x[top])]
+        k = int(local[0]) if len(local) else top
+        t[ch] = k + float(_parabola(x[k - 1], x[k], x[k + 1]))
+        height[ch] = x[k]
+        kept[ch] = x[top] > 0 and x[top] >= options.signal_psr * rms[ch]
+    r = int(np.argmax(np.where(kept, height, -np.inf))) if kept.any() else int(np.argmax(height))
+    ok = np.outer(kept, kept)
+    np.fill_diagonal(ok, False)
+    return r, t - t[r], ok.sum(axis=1), ok
 
 
 def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int, beta: float = 1.0):
@@ -489,15 +543,17 @@ def _supported(P, t, tol: float):
     return ok, np.take_along_axis(P, pick[:, :, None], axis=2)[:, :, 0]
 
 
-def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, beta: float = 1.0):
+def _event_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, beta: float = 1.0, candidates=None):
     """(reference channel, arrival times relative to it in samples, support) of one event's weighted
     segments (channels, samples): the loudest channel is the reference; _consensus of the pairs'
-    GCC-PHAT candidates."""
+    GCC-PHAT candidates (candidates: None, or those already computed, _pair_candidates(seg, max_lag,
+    options.peaks, beta))."""
     energy = np.sum(seg**2, axis=1)
     r = int(np.argmax(energy))
     m = seg.shape[0]
     starts = None if options.starts >= m else np.argsort(energy)[::-1][: options.starts]
-    candidates = _pair_candidates(seg, max_lag, options.peaks, beta)
+    if candidates is None:
+        candidates = _pair_candidates(seg, max_lag, options.peaks, beta)
     t, support = _consensus(m, r, *candidates, options.tolerance, options.early, starts=starts)
     return r, t, support, agreeing_pairs(m, candidates, t, options.tolerance)
 
@@ -517,7 +573,12 @@ def agreeing_pairs(m: int, candidates, t: np.ndarray, tol: float) -> np.ndarray:
     return _supported(_candidate_tensor(m, *candidates)[0], t, tol)[0]
 
 
-def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), progress=None) -> TdoaMatrix:
+#: floats (lags and heights) of the first analyses tdoa_matrix keeps for a second pass at most (160 MB)
+KEEP_FLOATS = 20_000_000
+
+
+def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), progress=None,
+                keep: dict | None = None) -> TdoaMatrix:
     """Detect the events of a recording and measure every channel's arrival time in each event, relative
     to the event's reference channel (the one with the most energy in the event's window), by GCC-PHAT
     of every channel pair and their consensus.
@@ -530,10 +591,26 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
     of other channels that agree with it; below `options.min_support` it is left missing.
 
     progress : None, or a callable taking one line (called every 10 events)
+    keep : None, or a dict that receives, event by event (index -> (i, k, lags, heights)), the candidates of each
+        event's first analysis (options.taper with PHAT: the guided pass's first analysis too,
+        solvers.audio_guided), until they hold KEEP_FLOATS floats
     Raises RecordingError when no event is found.
     """
-    return _measure(recording, options, lambda j, seg, after, max_lag: _over_tapers(
-        seg, after, options, lambda weighted, beta: _event_arrivals(weighted, max_lag, options, beta)), progress)
+    if options.signal is not None:  # each channel against the emitted signal (TdoaOptions.signal)
+        return _measure(recording, options, lambda j, seg, after, max_lag: _signal_arrivals(seg, max_lag, options),
+                        progress)
+    kept = [0]
+
+    def arrivals(j, seg, after, max_lag):
+        def analyse(weighted, beta):
+            candidates = _pair_candidates(weighted, max_lag, options.peaks, beta)
+            if keep is not None and j not in keep and kept[0] + 2 * candidates[2].size <= KEEP_FLOATS:
+                keep[j] = candidates  # _over_tapers' first analysis
+                kept[0] += 2 * candidates[2].size
+            return _event_arrivals(weighted, max_lag, options, beta, candidates)
+        return _over_tapers(seg, after, options, analyse)
+
+    return _measure(recording, options, arrivals, progress)
 
 
 def _over_tapers(seg: np.ndarray, after: np.ndarray, options: TdoaOptions, analyse):
@@ -586,7 +663,7 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
         seg = recording.read(a, b)  # one event's frames: a streamed recording reads them from its files
         seg = seg - seg.mean(axis=1, keepdims=True)
         if emitted:
-            seg = matched_filter(seg, options.signal)
+            seg = matched_filter(seg, options.signal, beta=1.0)  # the compressed pulses, sharpened
         after = np.maximum(np.arange(a, a + seg.shape[1]) - start, 0) / rate  # the direct sound weighs more than the tail
         if (not emitted and options.ambiguous < 1.0 and end - start >= options.whole_after * rate
                 and ambiguity(seg * np.exp(-after / options.taper), max_lag, options.peaks) > options.ambiguous):

@@ -29,8 +29,8 @@ from .audio import (TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _mea
                     _pair_candidates, agreeing_pairs, tdoa_matrix)
 from .recording import Recording
 
-__all__ = ["GuideOptions", "GuidedTdoa", "guided_tdoa_matrix", "locate_source", "reconcile", "tdoa_and_calibrate",
-           "tdoa_guided"]
+__all__ = ["GuideOptions", "GuidedTdoa", "guided_tdoa_matrix", "locate_from_entries", "locate_source", "reconcile",
+           "tdoa_and_calibrate", "tdoa_guided"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,12 @@ class GuideOptions:
         position that fits only a few pairs' candidates can be a reflection's or chance's (on the
         simulated rooms, located sources 4-27 m off had 19-26 % of the pairs agree, right ones 49-67 %)
     seed : of the localisation's sampling (each event its own stream)
+    calibrate_events : the first calibration (tdoa_guided) uses at most this many of the first pass's events,
+        those with the most entries (the earliest on a tie): its receivers guide every event, and an event
+        outside them is located from its own first-pass entries (locate_from_entries), or, when those do not
+        fit, from its candidates (locate_source). A calibration's cost grows faster than its events (on the
+        10-minute file of scripts/bench_audio_stream.py, 300 events, `tdoa` stopped at 483 s, the first pass
+        taking 45 s); a guide needs the receivers, which 40 events of 16 channels place
     """
 
     trusted: tuple[str, ...] = ("ok", "uncontrolled")
@@ -67,12 +73,15 @@ class GuideOptions:
     locate_tolerance: float = 1.5
     locate_share: float = 0.4
     seed: int = 0
+    calibrate_events: int = 40
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.window_sigmas) and self.window_sigmas >= 0):
             raise ValueError(f"window_sigmas must be a finite number >= 0, got {self.window_sigmas}")
         if not 0.0 <= self.min_agreement <= 1.0:
             raise ValueError(f"min_agreement must be in [0, 1], got {self.min_agreement}")
+        if self.calibrate_events < 1:
+            raise ValueError(f"calibrate_events must be >= 1, got {self.calibrate_events}")
         if self.peaks < 1 or self.locate_samples < 1 or not (np.isfinite(self.locate_tolerance) and self.locate_tolerance > 0):
             raise ValueError("peaks and locate_samples must be >= 1 and locate_tolerance > 0")
 
@@ -189,6 +198,58 @@ def locate_source(receivers: np.ndarray, i, k, lags, heights, *, references, tol
     return s, pairs, rms
 
 
+def locate_from_entries(receivers: np.ndarray, arrivals: np.ndarray, i, k, lags, heights, *, tol: float = 1.5,
+                        min_support: int = 2, min_share: float = 0.0):
+    """A source position from an event's measured arrivals with the receivers known, checked against the event's
+    pair candidates, or None (then locate_source searches the candidates).
+
+    receivers : (m, dim) positions in samples of sound travel; arrivals : (m,) the first pass's arrival times
+    in samples (any constant; NaN: not measured). The linearised range differences of every measured channel
+    against the earliest (locate_source's equations, least squares; twice the fit without one channel that puts
+    the most channels within tol of their entries, refitted on those: a wrong entry pulls a fit of all) give a
+    start (None unless dim + 2 channels' entries fit it within tol), refined by
+    Gauss-Newton on the pairs whose candidates agree with it (_refine, three rounds). Returns (position,
+    agreeing pairs, rms residual) as locate_source does when at least dim + 2 channels have min_support
+    agreeing pairs and min_share of all pairs agree, else None."""
+    receivers = np.asarray(receivers, dtype=float)
+    m, dim = receivers.shape
+    seen = np.flatnonzero(np.isfinite(arrivals))
+    if len(seen) < dim + 2:
+        return None
+    r = int(seen[np.argmin(arrivals[seen])])
+    sq = np.sum(receivers**2, axis=1)
+
+    def fit(used):
+        d = arrivals[used] - arrivals[r]
+        A = np.hstack([2.0 * (receivers[used] - receivers[r]), 2.0 * d[:, None]])
+        sol = np.linalg.lstsq(A, sq[used] - sq[r] - d * d, rcond=None)[0]
+        dist = np.linalg.norm(sol[:dim] - receivers, axis=1)
+        with np.errstate(invalid="ignore"):
+            inside = np.abs(dist - dist[r] - (arrivals - arrivals[r])) <= tol  # NaN arrivals: outside
+        return sol, np.flatnonzero(inside & (np.arange(m) != r))
+
+    used = seen[seen != r]
+    sol, inside = fit(used)
+    for _ in range(2):  # a wrong entry pulls the fit: the fit without one channel that agrees with the most
+        trials = [(sol, inside)] + [fit(np.delete(used, o)) for o in range(len(used))] if len(used) > dim + 1 else []
+        best = max(trials, key=lambda t: len(t[1]), default=(sol, inside))
+        if len(best[1]) < dim + 1:
+            break
+        used = best[1]
+        sol, inside = fit(used)
+    if not np.all(np.isfinite(sol)) or len(inside) < dim + 1:
+        return None  # fewer than dim + 2 channels' entries fit one source
+    P, _ = _candidate_tensor(m, i, k, lags, heights)
+    s, pairs, rms = sol[:dim], None, np.inf
+    for _ in range(3):
+        s, pairs, rms = _refine(receivers, P, s, tol)
+        if pairs is None:
+            return None
+    if np.sum(pairs.sum(axis=1) >= min_support) < dim + 2 or pairs.sum() < min_share * m * (m - 1):
+        return None
+    return s, pairs, rms
+
+
 def _refine(receivers: np.ndarray, P: np.ndarray, s: np.ndarray, tol: float):
     """Gauss-Newton steps of the position s on the pairs agreeing with it (each its nearest candidate):
     (s, agreeing pairs after the steps, rms residual in samples); pairs None when fewer than dim + 1 agree."""
@@ -246,13 +307,14 @@ def _windows(receivers: np.ndarray, s: np.ndarray, receiver_std: np.ndarray, sou
 
 
 def _guided_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, guide: GuideOptions, pred: np.ndarray,
-                     half: np.ndarray, beta: float = 1.0):
+                     half: np.ndarray, beta: float = 1.0, known=None):
     """(reference, times relative to it in samples, support) of one event's weighted segments: the first
-    pass's consensus, started from the predicted arrivals, on the candidates within each pair's window."""
+    pass's consensus, started from the predicted arrivals, on the candidates within each pair's window.
+    known : None, or the segments' candidates already computed (_pair_candidates(seg, max_lag, guide.peaks, beta))."""
     energy = np.sum(seg**2, axis=1)
     r = int(np.argmax(energy))
     m = seg.shape[0]
-    i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks, beta)
+    i, k, lags, heights = _pair_candidates(seg, max_lag, guide.peaks, beta) if known is None else known
     inside = np.abs(lags - (pred[i] - pred[k])[:, None]) <= half[i, k][:, None]
     candidates = (i, k, np.where(inside, lags, np.nan), np.where(inside, heights, 0.0))
     t, support = _consensus(m, r, *candidates, options.tolerance, options.early, init=pred - pred[r])
@@ -261,7 +323,7 @@ def _guided_arrivals(seg: np.ndarray, max_lag: int, options: TdoaOptions, guide:
 
 def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, options: TdoaOptions = TdoaOptions(), *,
                        receiver_std=None, transmitter_std=None, sigma: float = 0.0, guide: GuideOptions = GuideOptions(),
-                       progress=None) -> TdoaMatrix:
+                       entries=None, known: dict | None = None, progress=None) -> TdoaMatrix:
     """The second pass: every channel's arrival per event, searched within a window around the arrival
     differences that known positions predict (module docstring).
 
@@ -277,6 +339,13 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     receiver_std, transmitter_std : (channels,), (events,) position std in metres (None: 0)
     sigma : noise std of one entry in metres (the calibration's)
     guide : GuideOptions
+    entries : None, or (channels, events) entries in metres of the first pass (same options, F; NaN columns for
+        none): an event without a position is first located from its entries (locate_from_entries, checked on
+        the candidates of options.taper), and only when they do not fit from its candidates (locate_source, those
+        of every taper). tdoa_guided gives those of the events its
+        calibration was not given (an event given and not placed has entries the calibration did not accept)
+    known : None, or the first pass's candidates of its events' first analyses (tdoa_matrix's `keep`, same
+        recording and options): used instead of computing them again
     progress : None, or a callable taking one line
 
     Returns a TdoaMatrix whose notes say what guided it. Raises ValueError for positions of the wrong
@@ -294,9 +363,10 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     noise = np.sqrt(2.0) * sigma * scale
     S = None if transmitters is None else np.asarray(transmitters, dtype=float)
     sstd = None if transmitter_std is None else np.asarray(transmitter_std, dtype=float)
-    placed, located, missing = [], [], []
+    placed, located, missing, from_entries = [], [], [], []
 
     def arrivals(j, seg, after, max_lag):
+        taper_candidates = None if known is None else known.get(j)  # of options.taper with PHAT
         if S is not None and j >= len(S):
             raise ValueError(f"transmitters has {len(S)} rows, but the recording has more events")
         if S is not None and np.all(np.isfinite(S[j])):
@@ -305,14 +375,26 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             placed.append(j)
         else:
             energy = np.sum(seg**2, axis=1)
-            pooled = [_pair_candidates(seg * np.exp(-after / taper), max_lag, options.peaks)
-                      for taper in (options.taper, *options.retry_tapers)]
-            i, k = pooled[0][:2]
-            found = locate_source(R, i, k, np.hstack([p[2] for p in pooled]), np.hstack([p[3] for p in pooled]),
-                                  references=np.argsort(energy)[::-1][:3], tol=guide.locate_tolerance,
-                                  samples=guide.locate_samples, min_support=options.min_support,
-                                  min_share=guide.locate_share,
-                                  seed=int(np.random.SeedSequence([guide.seed, j]).generate_state(1)[0]))
+            found = None
+            if entries is not None and j < entries.shape[1] and np.sum(np.isfinite(entries[:, j])) >= dim + 2:
+                if taper_candidates is None:
+                    taper_candidates = _pair_candidates(seg * np.exp(-after / options.taper), max_lag, options.peaks)
+                i, k, lags, heights = taper_candidates
+                found = locate_from_entries(R, entries[:, j] * scale, i, k, lags, heights, tol=guide.locate_tolerance,
+                                            min_support=options.min_support, min_share=guide.locate_share)
+                if found is not None:
+                    from_entries.append(j)
+            if found is None:  # the candidates of every taper searched
+                pooled = [taper_candidates if taper == options.taper and taper_candidates is not None
+                          else _pair_candidates(seg * np.exp(-after / taper), max_lag, options.peaks)
+                          for taper in (options.taper, *options.retry_tapers)]
+                i, k = pooled[0][:2]
+                lags, heights = np.hstack([p[2] for p in pooled]), np.hstack([p[3] for p in pooled])
+                taper_candidates = pooled[0]
+                found = locate_source(R, i, k, lags, heights, references=np.argsort(energy)[::-1][:3],
+                                      tol=guide.locate_tolerance, samples=guide.locate_samples,
+                                      min_support=options.min_support, min_share=guide.locate_share,
+                                      seed=int(np.random.SeedSequence([guide.seed, j]).generate_state(1)[0]))
             if found is None:
                 missing.append(j)
                 return None
@@ -320,14 +402,22 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             s_std = _source_std(R, s, pairs, max(noise, rms))
             located.append(j)
         pred, half = _windows(R, s, rstd, s_std, noise, options, guide)
-        best = _over_tapers(seg, after, options, lambda w, beta: _guided_arrivals(w, max_lag, options, guide, pred, half, beta))
+        # _over_tapers analyses options.taper with PHAT first: the candidates of the first pass or of the localisation
+        memo = {"first": taper_candidates} if taper_candidates is not None and guide.peaks == options.peaks else {}
+
+        def analyse(w, beta):
+            known = memo.pop("first", None) if beta == 1.0 else None
+            return _guided_arrivals(w, max_lag, options, guide, pred, half, beta, known)
+
+        best = _over_tapers(seg, after, options, analyse)
         return (*best, guide.min_agreement)
 
     tm = _measure(recording, options, arrivals, progress, label="tdoa (guided)")
     if S is not None and len(S) != len(tm.events):
         raise ValueError(f"transmitters has {len(S)} rows for the recording's {len(tm.events)} events")
     note = (f"guided pass ({dim}D positions): {len(placed)} event(s) at their given source, {len(located)} located "
-            f"from their pair candidates")
+            + (f"({len(from_entries)} from their first-pass entries, the others from their pair candidates)"
+               if from_entries else "from their pair candidates"))
     if missing:
         note += (f", {len(missing)} left missing (no position with {dim + 2} channels and {100 * guide.locate_share:g} % "
                  f"of the pairs agreeing: {', '.join(tm.events[j] for j in missing)})")
@@ -378,32 +468,59 @@ def _trust(result, guide: GuideOptions) -> str:
     return ""
 
 
+def guide_events(first: TdoaMatrix, limit: int) -> np.ndarray:
+    """(events,) indices, in time order, of at most `limit` events of the first pass for the guiding calibration:
+    those with the most entries, the earliest first on a tie (GuideOptions.calibrate_events)."""
+    n = first.F.shape[1]
+    if n <= limit:
+        return np.arange(n)
+    entries = np.isfinite(first.F).sum(axis=0)
+    return np.sort(np.argsort(-entries, kind="stable")[:limit])
+
+
 def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, dim: int = 3, seed: int | None = 0,
                 guide: GuideOptions | None = GuideOptions(), progress=None) -> GuidedTdoa:
     """`tdoa` as the verb runs it: the first pass; with a guide, `calibrate(F, dim=dim, seed=seed)` of it
     (sigma estimated) and, when that calibration is trusted (GuideOptions.trusted, every receiver placed),
     the guided pass at its positions, each event checked against the first pass's entries that calibration
-    accepted (reconcile); notes say what was done. guide None: the first pass only."""
+    accepted (reconcile); notes say what was done. guide None, or the emitted signal given (options.signal:
+    each channel's arrival its own pulse, no pair correlation to narrow): the first pass only."""
     from .calibration import calibrate
 
-    first = tdoa_matrix(recording, options, progress=progress)
+    known: dict = {}
+    first = tdoa_matrix(recording, options, progress=progress, keep=None if guide is None else known)
     if guide is None:
         return GuidedTdoa(first, None, first, False)
+    if options.signal is not None:  # every channel measured against the emitted signal: no pair to search again
+        note = ("no guided pass: every channel's arrival measured against the emitted signal, its own direct pulse "
+                "(the guide narrows pairs' correlations); the matrix is the first pass's")
+        return GuidedTdoa(first, None, replace(first, notes=first.notes + (note,)), False)
+    n = first.F.shape[1]
+    chosen = guide_events(first, guide.calibrate_events)
     if progress is not None:
-        progress(f"tdoa: calibrating the first pass ({dim}D, sigma estimated) to guide a second pass")
-    cal = calibrate(first.F, dim=dim, seed=seed)
+        progress(f"tdoa: calibrating the first pass ({dim}D, sigma estimated"
+                 + (f", {len(chosen)} of its {n} events" if len(chosen) < n else "") + ") to guide a second pass")
+    cal = calibrate(first.F[:, chosen], dim=dim, seed=seed)
     why = _trust(cal, guide)
     if why:
         note = f"no guided pass: the first pass's calibration cannot guide it, {why}; the matrix is the first pass's"
         return GuidedTdoa(first, cal, replace(first, notes=first.notes + (note,)), False)
-    matrix = guided_tdoa_matrix(recording, cal.receivers, cal.transmitters, options, receiver_std=cal.receiver_std,
-                                transmitter_std=cal.transmitter_std, sigma=float(cal.sigma), guide=guide,
-                                progress=progress)
-    matrix = reconcile(first, matrix, cal.inliers, options.tolerance)
+    transmitters = np.full((n, cal.transmitters.shape[1]), np.nan)
+    transmitter_std = np.full(n, np.nan)
+    inliers = np.zeros(first.F.shape, bool)
+    transmitters[chosen], transmitter_std[chosen] = cal.transmitters, cal.transmitter_std
+    inliers[:, chosen] = cal.inliers
+    untested = first.F.copy()
+    untested[:, chosen] = np.nan  # the events the calibration was given: placed, or their entries not accepted
+    matrix = guided_tdoa_matrix(recording, cal.receivers, transmitters, options, receiver_std=cal.receiver_std,
+                                transmitter_std=transmitter_std, sigma=float(cal.sigma), guide=guide,
+                                entries=untested, known=known, progress=progress)
+    matrix = reconcile(first, matrix, inliers, options.tolerance)
     before, after = int(np.isfinite(first.F).sum()), int(np.isfinite(matrix.F).sum())
     own = tuple(f"first pass: {n}" for n in first.notes[len(recording.notes):])  # the recording's notes are in both
-    note = (f"first pass: {before}/{first.F.size} entries, calibrated {cal.status!r} (sigma {cal.sigma:.3g} m); "
-            f"guided pass: {after}/{matrix.F.size}")
+    note = (f"first pass: {before}/{first.F.size} entries, calibrated {cal.status!r} (sigma {cal.sigma:.3g} m"
+            + (f", {len(chosen)} of its {n} events, those with the most entries" if len(chosen) < n else "")
+            + f"); guided pass: {after}/{matrix.F.size}")
     return GuidedTdoa(first, cal, replace(matrix, notes=matrix.notes + own + (note,)), True)
 
 

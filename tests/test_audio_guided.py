@@ -5,6 +5,8 @@ peaks, not the prediction, and a wrong guide is caught against the first pass; a
 and the verbs say what they did."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -66,6 +68,10 @@ def test_the_guided_pass_measures_the_direct_sound_the_first_pass_missed():
         assert guided.reference[j] == r
         assert np.max(np.abs(differences(guided, j) - truth)) < 0.3  # every entry, channel 3's direct sound too
     assert "guided pass (3D positions): 2 event(s) at their given source" in guided.notes[-1]
+    known: dict = {}  # the first pass's first analyses, kept: the guided pass the same without computing them again
+    assert np.array_equal(tdoa_matrix(rec, OPTIONS, keep=known).F, first.F, equal_nan=True) and sorted(known) == [0, 1]
+    again = guided_tdoa_matrix(rec, receivers, sources, OPTIONS, sigma=1e-3, known=known)
+    assert np.array_equal(again.F, guided.F, equal_nan=True)
 
 
 def test_guided_entries_are_measured_peaks_and_a_wrong_guide_is_caught():
@@ -112,6 +118,34 @@ def test_an_event_without_a_position_is_located_from_its_candidates():
     junk = (i >= 4) | (k >= 4)  # channels 4-6 agree with nothing: 4 channels cannot fix a position and a time
     lags[junk] = np.random.default_rng(0).uniform(-90, 90, (junk.sum(), 3))
     assert locate_source(receivers * scale, i, k, lags, heights, references=[0, 1, 2], samples=500, seed=1) is None
+
+
+def test_an_event_outside_the_guiding_calibration_is_located_from_its_entries():
+    """An event without a position but with first-pass entries is located from them (the linearised range
+    differences, refined on its candidates): the same matrix as at its true source, no RANSAC; entries that fit
+    no source (shuffled) fall back to the candidates' search. guide_events keeps the events with the most entries."""
+    from solvers.audio_guided import guide_events, locate_from_entries
+    from solvers.audio import _pair_candidates
+
+    rec, receivers, sources, delays = room()
+    first = tdoa_matrix(rec, OPTIONS)
+    given = guided_tdoa_matrix(rec, receivers, sources, OPTIONS, sigma=1e-3)
+    one = np.vstack([sources[0], [np.nan] * 3])
+    entries = first.F.copy()
+    entries[:, 0] = np.nan
+    located = guided_tdoa_matrix(rec, receivers, one, OPTIONS, sigma=1e-3, entries=entries)
+    assert np.allclose(located.F, given.F, equal_nan=True, atol=1e-9)
+    assert "1 located (1 from their first-pass entries" in located.notes[-1]
+    scale = RATE / SPEED
+    seg = rec.samples[:, int(0.9 * RATE) - 400: int(0.9 * RATE) + 2000]
+    i, k, lags, heights = _pair_candidates(seg, 120, 8)
+    exact = delays[:, 1] + 17.0  # any constant
+    s, pairs, rms = locate_from_entries(receivers * scale, exact, i, k, lags, heights, min_share=0.4)
+    assert np.linalg.norm(s / scale - sources[1]) < 0.02 and pairs.sum() >= 0.6 * 7 * 6
+    shuffled = exact[np.random.default_rng(2).permutation(7)]
+    assert locate_from_entries(receivers * scale, shuffled, i, k, lags, heights, min_share=0.4) is None
+    F = np.array([[1.0, np.nan, 1.0, 1.0], [1.0, 1.0, np.nan, 1.0], [np.nan, 1.0, np.nan, 1.0]])
+    assert list(guide_events(replace(first, F=F), 2)) == [0, 3] and list(guide_events(replace(first, F=F), 9)) == [0, 1, 2, 3]
 
 
 def test_tdoa_guided_says_why_it_did_not_guide(tmp_path, capsys):
