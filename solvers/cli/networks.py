@@ -38,7 +38,8 @@ def _add_recording_options(p: argparse.ArgumentParser) -> None:
                    f"(default {d.min_support})")
     g.add_argument("--signal", metavar="FILE", help="the emitted sound (one channel, the recording's rate; a sweep, "
                    "say): every channel is first correlated with it (a matched filter), so that long sounds' arrivals "
-                   "are compressed into pulses (default: none, the sound is not known)")
+                   "are compressed into pulses; each channel's arrival is then its own earliest strong pulse, and no guided "
+                   "pass follows (default: none, the sound is not known)")
     g.add_argument("--no-guide", action="store_true", help="keep the first pass's matrix: no calibration of it "
                    "guiding a second pass (solvers.audio_guided)")
 
