@@ -32,7 +32,7 @@ sys.path.insert(0, ROOT)
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-from solvers.continuation import tape_kernel, tape_native  # noqa: E402
+from solvers.continuation import tape_jit, tape_kernel, tape_native  # noqa: E402
 from solvers.continuation.tracking import HomotopySolver  # noqa: E402
 from solvers.generate import GENERATED_DIR  # noqa: E402
 from solvers.methods import homotopy  # noqa: E402
@@ -68,8 +68,8 @@ def _lu_loop(lin, J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P, reps, facto
             bi[:, :] = b0i
             if factor:
                 if k == 0:
-                    tape_kernel._factor(lin, Or, Oi, N, N, piv, ok, P)
-                tape_kernel._back(lin, Or, Oi, N, N, piv, br, bi, P)
+                    tape_jit._factor(lin, Or, Oi, N, N, piv, ok, P)
+                tape_jit._back(lin, Or, Oi, N, N, piv, br, bi, P)
 
 
 def _kernel_costs(solver, P: int, rng, native=None) -> tuple[float, float, float, float]:
