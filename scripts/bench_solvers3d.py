@@ -216,8 +216,8 @@ def _network_record(module, spec: dict, seed: int, eig: bool) -> dict:
 
 #: The homotopy runtime's sources: a cached network record is valid for one spec and one version of these.
 KERNELS = ("solvers/methods/homotopy.py", "solvers/continuation/tracking.py", "solvers/continuation/tracker.py",
-           "solvers/continuation/tape_kernel.py", "solvers/continuation/tape_native.py", "solvers/continuation/slp.py",
-           "solvers/api.py")
+           "solvers/continuation/tape_kernel.py", "solvers/continuation/tape_jit.py", "solvers/continuation/tape_native.py",
+           "solvers/continuation/slp.py", "solvers/api.py")
 
 
 def _kernel_sha() -> str:

@@ -26,7 +26,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-from solvers.continuation import slp, tape_kernel, tape_native, tracker  # noqa: E402
+from solvers.continuation import slp, tape_jit, tape_kernel, tape_native, tracker  # noqa: E402
 
 
 @njit(cache=False)  # calls kernels of another file: a disk cache would go stale with them
@@ -46,7 +46,7 @@ def _tape_loop(code, imm, Rr, Ri, Or, Oi, P, reps):
 def _native_loop(fn, Rr, Ri, Or, Oi, P, reps):
     """reps runs of a tape's compiled code (solvers.continuation.tape_native) at address fn, as the tracker calls it."""
     for r in range(reps):
-        tape_kernel._call_native(fn, P, Rr.shape[1], Rr.ctypes.data, Ri.ctypes.data, Or.ctypes.data, Oi.ctypes.data)
+        tape_jit._call_native(fn, P, Rr.shape[1], Rr.ctypes.data, Ri.ctypes.data, Or.ctypes.data, Oi.ctypes.data)
 
 
 def best(f, repeat: int = 5) -> float:

@@ -7,7 +7,8 @@ evaluator ("monomials": tracker.track; "tape": tape_kernel.track) solves every n
 generated module's solve path (solve_scaled: scaling, tracking, retracking, detours, Newton on the
 target); reported: median ms of one solve (best of three rounds over the first ``--single`` networks),
 its ratio to numpy's complex eig of the root count's size (one BLAS thread) timed in this process,
-microseconds per path, failures (no candidate within 1e-6 of the true root) and log10 error quantiles
+microseconds per path (wall, and CPU time of the same solves: the steadier figure on a loaded machine),
+failures (no candidate within 1e-6 of the true root) and log10 error quantiles
 of the raw endpoints, and where the tape solver's time goes (tape evaluations, LU + solves, the rest;
 the kernels as the solver runs them: its compiled code where solvers.continuation.tape_native builds it)
 from the steps the tracker took and the kernels' per-path costs measured here.
@@ -32,7 +33,7 @@ sys.path.insert(0, ROOT)
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-from solvers.continuation import tape_kernel, tape_native  # noqa: E402
+from solvers.continuation import tape_jit, tape_kernel, tape_native  # noqa: E402
 from solvers.continuation.tracking import HomotopySolver  # noqa: E402
 from solvers.generate import GENERATED_DIR  # noqa: E402
 from solvers.methods import homotopy  # noqa: E402
@@ -68,8 +69,8 @@ def _lu_loop(lin, J0r, J0i, Or, Oi, N, piv, ok, b0r, b0i, br, bi, P, reps, facto
             bi[:, :] = b0i
             if factor:
                 if k == 0:
-                    tape_kernel._factor(lin, Or, Oi, N, N, piv, ok, P)
-                tape_kernel._back(lin, Or, Oi, N, N, piv, br, bi, P)
+                    tape_jit._factor(lin, Or, Oi, N, N, piv, ok, P)
+                tape_jit._back(lin, Or, Oi, N, N, piv, br, bi, P)
 
 
 def _kernel_costs(solver, P: int, rng, native=None) -> tuple[float, float, float, float]:
@@ -127,16 +128,23 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
         first[evaluator] = time.perf_counter() - t0
     # rounds interleave the evaluators and eig (this shared machine's speed drifts by 2x in minutes)
     medians = {ev: [] for ev in solvers}
-    eig = []
+    cpu = {ev: [] for ev in solvers}  # CPU time of the same solves: steadier than wall time under load
+    eig, eig_cpu = [], []
     for _ in range(ROUNDS):
         for evaluator, solver in solvers.items():
-            times = []
+            times, cpus = [], []
             for k in range(min(single, trials)):
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.process_time()
                 homotopy.solve_scaled(solver, F[k:k + 1], module.CONFIG, module.SCALE_POWERS)
                 times.append(time.perf_counter() - t)
+                cpus.append(time.process_time() - c)
             medians[evaluator].append(float(np.median(times)))
+            cpu[evaluator].append(float(np.median(cpus)))
         eig.append(_best(lambda: np.linalg.eig(A), 5))
+        c = time.process_time()
+        for _ in range(5):
+            np.linalg.eig(A)
+        eig_cpu.append((time.process_time() - c) / 5)
     eig_ms = 1e3 * min(eig)
     rows = []
     for evaluator, solver in solvers.items():
@@ -147,7 +155,8 @@ def bench(label: str, trials: int, seed: int, single: int, evaluators=("monomial
         err = np.where(np.isfinite(err), err, np.inf)
         log = np.log10(np.maximum(err, 1e-17))
         row = {"solver": label, "evaluator": evaluator, "paths": K, "ms_single": ms, "eig_ms": eig_ms,
-               "ratio_eig": ms / eig_ms, "us_per_path": 1e3 * ms / K, "first_s": first[evaluator],
+               "ratio_eig": ms / eig_ms, "us_per_path": 1e3 * ms / K,
+               "us_per_path_cpu": 1e6 * min(cpu[evaluator]) / K, "ratio_eig_cpu": min(cpu[evaluator]) / min(eig_cpu), "first_s": first[evaluator],
                "failures": int(np.sum(err > FAIL_TOL)), "trials": trials, "failed": np.flatnonzero(err > FAIL_TOL).tolist(),
                "median_log10_err": float(np.median(log)), "p90_log10_err": float(np.percentile(log, 90)),
                "p99_log10_err": float(np.percentile(log, 99))}
@@ -201,7 +210,7 @@ def main(argv=None) -> None:
         rows = bench(label, args.trials, args.seed, args.single, args.evaluators)
         for r in rows:
             print(f"{r['solver']} {r['evaluator']:9s}: {r['ms_single']:.2f} ms single = {r['ratio_eig']:.2f}x eig{r['paths']} "
-                  f"({r['eig_ms']:.2f} ms), {r['us_per_path']:.0f} us/path, first call {r['first_s']:.1f} s; "
+                  f"({r['eig_ms']:.2f} ms), {r['us_per_path']:.0f} us/path ({r['us_per_path_cpu']:.1f} CPU, {r['ratio_eig_cpu']:.2f}x eig's CPU), first call {r['first_s']:.1f} s; "
                   f"failures {r['failures']}/{r['trials']} {r['failed']}, log10 err median {r['median_log10_err']:.2f} "
                   f"p90 {r['p90_log10_err']:.2f} p99 {r['p99_log10_err']:.2f}")
         t = rows[-1]

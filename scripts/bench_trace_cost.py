@@ -31,6 +31,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from solvers import count as counting  # noqa: E402
+from solvers import count_evidence as evidence  # noqa: E402
 from solvers.continuation import graph, tape_kernel, trace  # noqa: E402
 
 #: Solutions (orbits) of each cell, as `count` proved them (tables/monodromy3d.csv), for the estimate.
@@ -46,7 +47,7 @@ def measure(cell: str, paths: int) -> dict:
     system, q0, _, group = counting._start(target, 0)
     _, q_star, x_star, _ = counting._start(target, 1000)
     equations, unknowns, parameters = trace.system_equations(system)
-    coordinates, words = counting._pencil(system, group, lambda msg: print(f"  {cell}: {msg}", file=sys.stderr))
+    coordinates, words = evidence.pencil_coordinates(system, group, lambda msg: print(f"  {cell}: {msg}", file=sys.stderr))
     pencil = trace.Pencil.build(equations, unknowns, parameters, q0, (q_star, x_star),
                                 trace.TraceOptions(coordinates=coordinates), group)
     rng = np.random.default_rng(7)

@@ -30,19 +30,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import re
 import time
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
-from analysis.engine.degree import DEFAULT_PRIMES, PrimeDisagreement, analyse
-from analysis.engine.f4 import F4Options
-from analysis.engine.linalg import MatrixTooLarge
-from analysis.engine.ring import Ring
-from analysis.formulations import tdoa as tf
-from analysis.formulations.base import as_formulation
 from analysis.formulations.parametric import ParametricSystem
 from analysis.formulations.tdoa import Formulation
 
@@ -709,7 +702,7 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
         from .continuation.dask_tracks import trace_stand_in
 
         stand_in = trace_stand_in(options.dask, *_source(system), chunk=options.dask_chunk)
-    coordinates, pencil = _pencil(system, group, say)
+    coordinates, pencil = count_evidence.pencil_coordinates(system, group, say)
 
     def run(coordinates):
         # the witnesses belong to one pencil: its coordinates name the file (another pencil's run does not overwrite it)
@@ -729,75 +722,6 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
         pencil = f"every unknown (on {pencil}: {test.failed_paths} slice paths lost on every route, base points)"
         test = run(None)
     return {**test.record(), "pencil": pencil}
-
-
-def _pencil(system: ParametricSystem, group, say: Callable[[str], None]) -> tuple[tuple[int, ...] | None, str]:
-    """The trace test's pencil coordinates (None: every unknown) and the words that justify them.
-
-    The compaction formulations': b alone. b goes to infinity wherever a root escapes (no base point on the curve),
-    and it has fewer witnesses than all unknowns (2D 9r/3s: 1290 against 2045 for 75 roots).
-
-    The direct TDOA parametrization's: the fewest offsets that determine the network up to the group. The witnesses
-    are the poles of the pencil's form, about as many per offset (2D 6r/3s direct, 180 orbits: 734, 1,256 and 1,778
-    witness orbits on one, two and three offsets, 7,384 on every unknown), and the test is then the trace test of
-    the curve's image in (those offsets, lam) (trace.py), sound when that image is birational to the curve up to
-    the group: exactly when the system with those offsets fixed has |G| solutions at a random consistent instance,
-    which F4 decides over GF(p). With every offset fixed the data are TOA data (7r/5s, 6r/6s, 5r/9s: 8 solutions in
-    0.1-0.5 s); each offset freed makes F4's work larger, so offsets are freed one at a time while the basis stays
-    within :data:`PENCIL_CELLS` (6r/6s: three offsets fixed, 12,605 x 12,500, about a minute; one fixed, not
-    finished for 7r/5s in 15 minutes). Where F4 does not give |G| with every offset fixed, every unknown."""
-    names = system.unknowns
-    b = tuple(k for k, u in enumerate(names) if re.fullmatch(r"b\d", u))
-    if b:
-        return b, "b"
-    offsets = tuple(k for k, u in enumerate(names) if re.fullmatch(r"o\d+", u))
-    if not offsets or group is None or not re.fullmatch(r"\d+r\d+s-tdoa[23]d-direct:all", system.name or ""):
-        return None, "every unknown"
-    chosen = None
-    for k in range(len(offsets), 0, -1):
-        fixed = tuple(names[j] for j in offsets[:k])
-        degree = _fixed_degree(system.name, fixed)
-        say(f"trace test: with {', '.join(fixed)} fixed, {degree if degree is not None else 'no degree within F4 budget'}"
-            f" (group order {len(group)})")
-        if degree != len(group):
-            break
-        chosen = k
-    if chosen is None:
-        say("trace test: pencil on every unknown (the offsets do not determine each orbit over GF(p))")
-        return None, "every unknown"
-    fixed = [names[j] for j in offsets[:chosen]]
-    words = (f"{', '.join(fixed)} (with {'it' if chosen == 1 else 'them'} fixed the system has {len(group)} solutions "
-             f"over GF(p), the group's order: {'it determines' if chosen == 1 else 'they determine'} each orbit)")
-    say(f"trace test: pencil on {words}")
-    return offsets[:chosen], words
-
-
-#: F4's budget (rows x columns of its largest matrix) for :func:`_pencil`'s checks.
-PENCIL_CELLS = 200_000_000
-
-
-def _fixed_degree(label: str, fixed: tuple[str, ...]) -> int | None:
-    """The degree of a formulation with the unknowns ``fixed`` set to their values at the known root of a consistent
-    random instance, modulo two primes (the root checked), or None when the primes disagree, the ideal is not
-    zero-dimensional or F4 exceeds :data:`PENCIL_CELLS`."""
-    formulation = as_formulation(label)
-    unknowns = list(formulation.config.unknowns)
-
-    def polys(p: int):
-        instance = tf.sample_gf_instance(formulation.config, p, 0)
-        tf.check_root(formulation, instance)
-        ring = Ring(unknowns, p)
-        eqs = [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
-        for name in fixed:
-            k = unknowns.index(name)
-            eqs.append(ring.from_terms({tuple(int(j == k) for j in range(len(unknowns))): 1,
-                                        (0,) * len(unknowns): (-int(instance.root[k])) % p}))
-        return eqs
-
-    try:
-        return analyse(polys, DEFAULT_PRIMES, F4Options(max_matrix_cells=PENCIL_CELLS)).degree
-    except (PrimeDisagreement, MatrixTooLarge):
-        return None
 
 
 def write_record(result: CountResult, path: str) -> None:

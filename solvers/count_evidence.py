@@ -4,25 +4,29 @@ F4's degree over GF(p) at random parameters (within a budget), Bezout's bound, a
 irreducible (a bundle of affine parameter spaces over the unknowns' space), and from these the scope of the
 count's completeness ("whole solution set", "component reached", "lower bound") in the words docs/count.md
 explains; and what the roots Krawczyk's test did not prove are (singular: a multiple root or a point of a
-positive-dimensional component). Nothing here tracks a path or counts: it judges what :func:`solvers.count.count`
-found.
+positive-dimensional component); and which coordinates the trace test's pencil may take (F4 over GF(p) with some
+unknowns fixed). Nothing here tracks a path or counts: it judges what :func:`solvers.count.count` found.
 """
 from __future__ import annotations
 
+import re
 from typing import Callable
 
 import numpy as np
 import sympy
 
-from analysis.engine.degree import PrimeDisagreement
+from analysis.engine.degree import DEFAULT_PRIMES, PrimeDisagreement, analyse
 from analysis.engine.f4 import F4Options
 from analysis.engine.linalg import MatrixTooLarge
+from analysis.engine.ring import Ring
+from analysis.formulations import tdoa as tf
+from analysis.formulations.base import as_formulation
 from analysis.formulations.parametric import ParametricError, ParametricSystem
 
 from .continuation import certify as certify_mod
 
-__all__ = ["DEGREE_CELLS", "bezout", "gf_degree", "gf_words", "linear_bundle", "orbit_total", "scope_of",
-           "unproven_words"]
+__all__ = ["DEGREE_CELLS", "PENCIL_CELLS", "bezout", "fixed_degree", "gf_degree", "gf_words", "linear_bundle",
+           "orbit_total", "pencil_coordinates", "scope_of", "unproven_words"]
 
 
 #: F4's budget (rows x columns of its largest matrix) for the GF(p) degree count compares with (count's scope): the
@@ -162,3 +166,72 @@ def unproven_words(system: ParametricSystem, solver, q0: np.ndarray, xs: np.ndar
     if len(xs) - singular:
         parts.append(f"{len(xs) - singular} regular but not proven")
     return "; ".join(parts) + "; none counted"
+
+
+def pencil_coordinates(system: ParametricSystem, group, say: Callable[[str], None]) -> tuple[tuple[int, ...] | None, str]:
+    """The trace test's pencil coordinates (None: every unknown) and the words that justify them.
+
+    The compaction formulations': b alone. b goes to infinity wherever a root escapes (no base point on the curve),
+    and it has fewer witnesses than all unknowns (2D 9r/3s: 1290 against 2045 for 75 roots).
+
+    The direct TDOA parametrization's: the fewest offsets that determine the network up to the group. The witnesses
+    are the poles of the pencil's form, about as many per offset (2D 6r/3s direct, 180 orbits: 734, 1,256 and 1,778
+    witness orbits on one, two and three offsets, 7,384 on every unknown), and the test is then the trace test of
+    the curve's image in (those offsets, lam) (trace.py), sound when that image is birational to the curve up to
+    the group: exactly when the system with those offsets fixed has |G| solutions at a random consistent instance,
+    which F4 decides over GF(p). With every offset fixed the data are TOA data (7r/5s, 6r/6s, 5r/9s: 8 solutions in
+    0.1-0.5 s); each offset freed makes F4's work larger, so offsets are freed one at a time while the basis stays
+    within :data:`PENCIL_CELLS` (6r/6s: three offsets fixed, 12,605 x 12,500, about a minute; one fixed, not
+    finished for 7r/5s in 15 minutes). Where F4 does not give |G| with every offset fixed, every unknown."""
+    names = system.unknowns
+    b = tuple(k for k, u in enumerate(names) if re.fullmatch(r"b\d", u))
+    if b:
+        return b, "b"
+    offsets = tuple(k for k, u in enumerate(names) if re.fullmatch(r"o\d+", u))
+    if not offsets or group is None or not re.fullmatch(r"\d+r\d+s-tdoa[23]d-direct:all", system.name or ""):
+        return None, "every unknown"
+    chosen = None
+    for k in range(len(offsets), 0, -1):
+        fixed = tuple(names[j] for j in offsets[:k])
+        degree = fixed_degree(system.name, fixed)
+        say(f"trace test: with {', '.join(fixed)} fixed, {degree if degree is not None else 'no degree within F4 budget'}"
+            f" (group order {len(group)})")
+        if degree != len(group):
+            break
+        chosen = k
+    if chosen is None:
+        say("trace test: pencil on every unknown (the offsets do not determine each orbit over GF(p))")
+        return None, "every unknown"
+    fixed = [names[j] for j in offsets[:chosen]]
+    words = (f"{', '.join(fixed)} (with {'it' if chosen == 1 else 'them'} fixed the system has {len(group)} solutions "
+             f"over GF(p), the group's order: {'it determines' if chosen == 1 else 'they determine'} each orbit)")
+    say(f"trace test: pencil on {words}")
+    return offsets[:chosen], words
+
+
+#: F4's budget (rows x columns of its largest matrix) for :func:`pencil_coordinates`' checks.
+PENCIL_CELLS = 200_000_000
+
+
+def fixed_degree(label: str, fixed: tuple[str, ...]) -> int | None:
+    """The degree of a formulation with the unknowns ``fixed`` set to their values at the known root of a consistent
+    random instance, modulo two primes (the root checked), or None when the primes disagree, the ideal is not
+    zero-dimensional or F4 exceeds :data:`PENCIL_CELLS`."""
+    formulation = as_formulation(label)
+    unknowns = list(formulation.config.unknowns)
+
+    def polys(p: int):
+        instance = tf.sample_gf_instance(formulation.config, p, 0)
+        tf.check_root(formulation, instance)
+        ring = Ring(unknowns, p)
+        eqs = [ring.from_terms(eq) for eq in tf.gf_equations(formulation, instance, p)]
+        for name in fixed:
+            k = unknowns.index(name)
+            eqs.append(ring.from_terms({tuple(int(j == k) for j in range(len(unknowns))): 1,
+                                        (0,) * len(unknowns): (-int(instance.root[k])) % p}))
+        return eqs
+
+    try:
+        return analyse(polys, DEFAULT_PRIMES, F4Options(max_matrix_cells=PENCIL_CELLS)).degree
+    except (PrimeDisagreement, MatrixTooLarge):
+        return None

@@ -12,6 +12,7 @@ import pytest
 
 from analysis.formulations.parametric import parse
 from solvers import count as counting
+from solvers import count_evidence as evidence
 from solvers.continuation import certify, graph, monodromy, trace
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -258,7 +259,7 @@ def test_the_trace_witness_checkpoint_is_named_by_its_pencil(tmp_path):
                                                              checkpoints=str(tmp_path)))
     assert result.trace["status"] == "passed", result.trace
     names = sorted(p.name for p in tmp_path.iterdir() if "witnesses" in p.name)
-    # the compaction formulation's pencil is b (count._pencil)
+    # the compaction formulation's pencil is b (count_evidence.pencil_coordinates)
     assert names == ["3r3s_toa2d_A_B2_B3_C2_C3-seed0-witnesses-b1-b2.json"], names
 
 
@@ -269,7 +270,7 @@ def test_the_direct_tdoa_pencil_is_on_the_offsets_where_they_determine_each_orbi
     of every unknown's (734 against 7,384), passes on the whole set and fails with one orbit removed."""
     label = "6r3s-tdoa2d-direct:all"
     system, q0, x0, group = counting._start(label, 0)
-    coordinates, words = counting._pencil(system, group, lambda msg: None)
+    coordinates, words = evidence.pencil_coordinates(system, group, lambda msg: None)
     assert [system.unknowns[k] for k in coordinates] == ["o1"] and "4 solutions" in words
     solver, x0 = monodromy.start_solver(system, q0, x0, 0)
     roots = graph.graph_monodromy(solver, q0, x0, graph.GraphOptions(), group=group,

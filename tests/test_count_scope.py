@@ -4,6 +4,7 @@ otherwise; the headline is the proven number; double roots and curves never rais
 one given pair. Each test can fail: a missing component called complete, a singular point counted."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -258,3 +259,22 @@ def test_a_pencil_with_base_points_is_retried_on_every_unknown():
     2026-12-02). About 90 s."""
     r = counting.count("4r6s3dtoa", counting.CountOptions(seeds=(0,), trace=True, degree=False, certify=False))
     assert r.trace["status"] == "passed" and r.trace["pencil"].startswith("every unknown (on b"), r.trace
+
+
+def test_alts_start_pair_solves_its_system_and_is_the_scripts_output(tmp_path):
+    """examples/alt9.start.json (Alt's nine-point problem) is what scripts/alt9_start.py draws, byte for byte, and
+    every equation of examples/alt9.sys vanishes there: a wrong equation or a stale pair fails."""
+    out = tmp_path / "alt9.start.json"
+    done = subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "alt9_start.py"), "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    with open(os.path.join(ROOT, "examples", "alt9.start.json"), encoding="utf-8") as fh:
+        assert out.read_text(encoding="utf-8") == fh.read()
+    pair = json.loads(out.read_text(encoding="utf-8"))
+    with open(os.path.join(ROOT, "examples", "alt9.sys"), encoding="utf-8") as fh:
+        system = parse(fh.read(), "alt9.sys")
+    values = {s: complex(*v) for s, v in zip(system.q_symbols + system.x_symbols, pair["parameters"] + pair["root"])}
+    residuals = [abs(complex(f.evalf(subs=values))) for f in system.exprs]
+    assert len(residuals) == 24 and max(residuals) < 1e-12, max(residuals)
+    values[system.q_symbols[0]] += 1e-3  # a moved parameter: the pair no longer solves the dyad equations
+    assert max(abs(complex(f.evalf(subs=values))) for f in system.exprs) > 1e-6

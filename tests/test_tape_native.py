@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from solvers.continuation import tape_kernel, tape_native
+from solvers.continuation import tape_jit, tape_kernel, tape_native
 
 from analysis.engine.native import disabled
 
@@ -53,7 +53,7 @@ def test_compiled_tapes_equal_the_interpreter_bit_for_bit(name):
         expected = (Or[:, :P].copy(), Oi[:, :P].copy())
         Or[:], Oi[:] = np.nan, np.nan
         x_r, x_i, s = Rr[:N].copy(), Ri[:N].copy(), Rr[N].copy()
-        tape_kernel._eval(tape.code, tape.imm, fn, Rr, Ri, Or, Oi, N, x_r, x_i, s, P)
+        tape_jit._eval(tape.code, tape.imm, fn, Rr, Ri, Or, Oi, N, x_r, x_i, s, P)
         np.testing.assert_array_equal(Or[:, :P], expected[0])
         np.testing.assert_array_equal(Oi[:, :P], expected[1])
     for seed in (0, 1):
@@ -98,8 +98,8 @@ def test_compiled_lu_equals_batched():
         Ar, Ai = np.ascontiguousarray(A.real), np.ascontiguousarray(A.imag)
         br, bi = np.ascontiguousarray(b.real), np.ascontiguousarray(b.imag)
         piv, ok = np.zeros((N, cap), dtype=np.int64), np.zeros(cap, dtype=np.bool_)
-        tape_kernel._factor(addresses, Ar, Ai, N, N, piv, ok, P)
-        tape_kernel._back(addresses, Ar, Ai, N, N, piv, br, bi, P)
+        tape_jit._factor(addresses, Ar, Ai, N, N, piv, ok, P)
+        tape_jit._back(addresses, Ar, Ai, N, N, piv, br, bi, P)
         return (Ar + 1j * Ai)[:, :P], (br + 1j * bi)[:, :P], piv[:, :P], ok[:P]
 
     compiled, batched = factor_solve(lin), factor_solve(np.zeros(2, dtype=np.int64))
@@ -130,7 +130,7 @@ def test_reference_interpreter_equals_the_compiled_interpreter():
 @pytest.mark.skipif(not COMPILED, reason="no C compiler, or TDOA_WORKBENCH_NATIVE=off")
 @pytest.mark.parametrize("predictor, corrector", [("rk4", "newton"), ("pade", "newton"), ("pade", "chord")])
 def test_compiled_tracker_equals_numba_tracker(predictor, corrector):
-    """The compiled tracker (tape_native.tracker_source) and numba's (tape_kernel._track_batch), both on the
+    """The compiled tracker (tape_native.tracker_source) and numba's (tape_jit._track_batch), both on the
     compiled tapes, give the same statuses, step counts and endpoints bit for bit: plain tracks with either
     predictor and corrector and tight retracks on three seeded 9r/3s networks at once (paths compacted as they
     end), and Newton steps alone."""

@@ -13,8 +13,9 @@ Modules, from the kernels up:
 * :mod:`~solvers.continuation.tracker`: the compiled predictor-corrector on an expanded monomial system
   (numba), :class:`~solvers.continuation.tracker.TrackerOptions`;
 * :mod:`~solvers.continuation.slp`: straight-line programs of a system and of its homotopy (tapes);
-* :mod:`~solvers.continuation.tape_kernel` and :mod:`~solvers.continuation.tape_native`: the batched
-  tracker on those tapes (numba, and the tapes written out as C);
+* :mod:`~solvers.continuation.tape_kernel`, :mod:`~solvers.continuation.tape_jit` and
+  :mod:`~solvers.continuation.tape_native`: the batched tracker on those tapes (its Python calls, threads and
+  batches; everything numba compiles; the tapes written out as C);
 * :mod:`~solvers.continuation.tracking`: :class:`~solvers.continuation.tracking.HomotopySolver`, which
   tracks a complete root set from start parameters to targets (retracks, detours, pooled routes), and
   the structure and coefficient code of a parametric system;

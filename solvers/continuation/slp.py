@@ -9,8 +9,8 @@ time, creating new nodes in the same program (so derivative nodes share subexpre
 other and with the values). :meth:`Program.compile` keeps what the outputs need, fuses a product read
 by one sum into it, schedules the outputs in a given order (depth first) and allocates registers by
 liveness: the :class:`Tape` is an array of instructions ``(opcode, destination, a, b, c)`` with a real
-immediate, run for many points at once by :mod:`solvers.continuation.tape_kernel` (which owns the
-instruction set).
+immediate, run for many points at once by :mod:`solvers.continuation.tape_kernel` (its kernels, in
+:mod:`solvers.continuation.tape_jit`, own the instruction set).
 
 :func:`homotopy_program` builds, for a parameter homotopy H(x, s) = F(x; q0 + s (q1 - q0)), the
 program of H, its Jacobian in x and dH/ds; :func:`homotopy_tapes` compiles its three tapes
@@ -36,7 +36,7 @@ __all__ = ["OPCODES", "HomotopyTapes", "Program", "Tape", "Value", "derivative",
            "homotopy_program", "homotopy_tapes", "positions_equations", "squared_equations", "system_equations",
            "system_homotopy_tapes", "kd_equations", "tdoa_equations", "tdoa_homotopy_tapes"]
 
-from .tape_kernel import ADD, AXPY, CADD, CMUL, CONST, MUL, MULADD, NEG, OPCODES, OUT, SQR, SUB  # noqa: F401
+from .tape_jit import ADD, AXPY, CADD, CMUL, CONST, MUL, MULADD, NEG, OPCODES, OUT, SQR, SUB  # noqa: F401
 
 _INPUT = -1
 

@@ -1,6 +1,6 @@
 """Straight-line C code of a solver's tapes, its LU and the batched tracker, compiled once per machine.
 
-The tape interpreter (:func:`tape_kernel.run_tape`) pays a few ns of dispatch per instruction and
+The tape interpreter (:func:`tape_jit.run_tape`) pays a few ns of dispatch per instruction and
 keeps every register in memory; the same tape written out as C (every register write a new local,
 four paths per pass in vector registers) runs 2.5-3x faster for a full batch of paths and 5-10x
 faster for the few paths of the lock step's tail (``scripts/bench_tracker_floor.py``). The code does
@@ -9,7 +9,7 @@ the interpreter's operations in the same order and is compiled without contracti
 roots with or without it. The same library holds the LU with partial pivoting of the N x N Jacobians
 and its solves (:func:`lu_source`: the batched kernel's operations, four paths per pass in vector
 registers; 1.3-1.4x the batched kernel for a full batch, 3-5x for a handful of paths), and the batched
-tracker itself (:func:`tracker_source`: :func:`tape_kernel._track_batch` line for line, the same bits),
+tracker itself (:func:`tracker_source`: :func:`tape_jit._track_batch` line for line, the same bits),
 so that a fresh environment compiles one C file (about a second) where numba took 13-90 s to compile
 the tracker.
 
@@ -36,7 +36,7 @@ import numpy as np
 from analysis.engine.native import DISABLE_ENV, disabled
 from analysis.sweeps.paths import cache_dir
 
-from .tape_kernel import OPCODES, WIDTH
+from .tape_jit import OPCODES, WIDTH
 
 __all__ = ["DISABLE_ENV", "ENTRIES", "FLAGS", "WIDTH", "addresses", "describe", "lu_source", "source"]
 
@@ -111,7 +111,7 @@ def source(tape, name: str, width: int = WIDTH) -> str:
 def lu_source(N: int) -> str:
     """C source of ``lu_factor(P, C, Ar, Ai, base, piv, ok)`` and ``lu_solve(P, C, Ar, Ai, base, piv, br, bi)``
     for N x N matrices at rows base + i N + j of Ar, Ai (point p at column p, row stride C), four points
-    per pass: :func:`tape_kernel._lu` and :func:`tape_kernel._solve` with the same operations in the same
+    per pass: :func:`tape_jit._lu` and :func:`tape_jit._solve` with the same operations in the same
     order. The row interchanges, which differ from lane to lane, are vector selects (lanes whose pivot row is i
     exchange rows k and i), and the solve holds its right-hand side in registers: interchanges written lane by
     lane and then read back as vectors stalled on store forwarding (a whole 9r/3s solve took 0.88x the time with selects,
@@ -220,7 +220,7 @@ void lu_solve(long P, long C, const double *restrict Ar, const double *restrict 
 
 
 def tracker_source() -> str:
-    """C source of ``track_batch``: :func:`tape_kernel._track_batch` (the batched tracker: RK4 or Pade
+    """C source of ``track_batch``: :func:`tape_jit._track_batch` (the batched tracker: RK4 or Pade
     predictor, Newton or chord corrector, step control, compaction of the ended paths, the final Newton
     steps) with the same operations in the same order, calling the library's tapes and LU directly. It is
     appended to the tapes' and LU's source (:func:`lu_source` defines N), so a first solve in a fresh

@@ -125,7 +125,7 @@ class TraceOptions:
     witnesses (the witnesses are the poles of a . x on C), but the test is then the trace test of C's image in
     those coordinates and lam, sound only when they tell the fibre's points apart (up to the group): two roots with
     the same coordinates cannot be told apart, and a set holding one of them would pass. The caller decides that
-    (``solvers.count._pencil``: the direct TDOA parametrization's offsets, where F4 shows that they determine each
+    (``solvers.count_evidence.pencil_coordinates``: the direct TDOA parametrization's offsets, where F4 shows that they determine each
     orbit; 2D 6r/3s direct: 1,778 witness orbits against 7,384). A pencil can also have base points on C, and
     its paths are lost, an inconclusive test (2D 9r/3s compaction with the offsets; H or b are fine)."""
 
