@@ -29,7 +29,13 @@ Columns per (cell, sigma, condition, mode):
   status counts (ok / uncontrolled / partial / inconsistent / ambiguous / unconverged / failed)
   sec_med, sec_p95   seconds per call
 
+Wrong inputs (conditions "shuffled column", "transposed", "squared", sigma 1e-3, `--wrong-networks` a
+cell, both modes; `wrong_input`): the clean matrix of the same seeded networks handed in wrongly. No
+network fits them: the honest answer is never "ok".
+
 Usage: python scripts/bench_calibrate.py [--networks 200] [--jobs 2] [--quick] [--only 9r3s,8r5s]
+       [--conditions clean,gross,missing,shuffled,transposed,squared] [--wrong-networks 10]
+       python scripts/bench_calibrate.py --compare OLD.csv [--dim 3]   (the rows whose results moved)
        python scripts/bench_calibrate.py --render   (calibration.md from calibration.csv, no computing)
 """
 from __future__ import annotations
@@ -188,8 +194,14 @@ def markdown(rows: list[dict]) -> str:
     out = ["# calibrate: sigma given and estimated (scripts/bench_calibrate.py)", "",
            "Columns: see the script's docstring. err_ratio: position error over the sigma-given call's on the "
            "same networks; over3std: share of nodes with error > 3 reported std; ok_over5std: share of networks "
-           "reported \"ok\" with a node > 5 std off.", "",
-           "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+           "reported \"ok\" with a node > 5 std off.", ""]
+    if any(r["condition"] in WRONG for r in rows):
+        out += ["Wrong inputs (conditions " + ", ".join(WRONG) + f"; sigma {WRONG_SIGMA:g}): each network's clean matrix "
+                "handed in wrongly: one transmitter's column cycled across the receivers (every entry moved; "
+                "gross_rejected is the share of that column rejected), the matrix transposed (the offsets then run "
+                "along the rows: no network has them; no truth to compare with, err inf), every entry squared. No "
+                "network fits such data: every network's status is counted, and any \"ok\" is a wrong answer.", ""]
+    out += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         out.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
     out += ["", "## Summary at sigma 1e-2 (the table of docs/calibrate.md)", "", summary(rows)]
@@ -253,6 +265,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="10 networks a cell, 1 per scale row, into tables/quick/")
     ap.add_argument("--out", help="output directory (default tables/, or tables/quick/ with --quick)")
     ap.add_argument("--render", action="store_true", help="only rewrite calibration.md from calibration.csv")
+    ap.add_argument("--compare", metavar="OLD_CSV", help="only print the rows of the table (in --out or tables/) "
+                    "whose results moved against OLD_CSV, each said better or worse")
     ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="3: the 3D grid into calibration3d.* "
                     "(see the docstring)")
     args = ap.parse_args(argv)
@@ -263,6 +277,10 @@ def main(argv=None) -> int:
     os.makedirs(out_dir, exist_ok=True)
     if args.render:
         render(out_dir, name)
+        return 0
+    if args.compare:
+        for line in compare(_read(args.compare), _read(os.path.join(out_dir, f"{name}.csv"))):
+            print(line)
         return 0
     only = set(args.only.split(",")) if args.only else None
 
@@ -354,6 +372,44 @@ def main(argv=None) -> int:
         handle.write("\n")
     print(f"wrote {out_dir}/{name}.csv, {name}.md, {meta_name} in {meta['seconds']} s", file=sys.stderr)
     return 0
+
+
+def _read(path: str) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+#: (column, +1 when more is better): what makes a row worse than before (ok_over5std: a confident wrong answer)
+JUDGED = (("ok_over5std", -1), ("ok", +1), ("placed", +1), ("kept", +1), ("gross_rejected", +1))
+
+
+def compare(old: list[dict], new: list[dict]) -> list[str]:
+    """One line per row of `new` whose results moved against `old` (same cell, sigma, condition, mode): the
+    status counts before -> after and which judged columns (JUDGED) got better or worse; rows with other
+    network counts are said, not compared. A row only in `new` is said new."""
+    before = {_key(r): r for r in old}
+    lines = []
+    for r in new:
+        o = before.get(_key(r))
+        label = f"{r['cell']} {r['sigma']} {r['condition']} {r['sigma_mode']}"
+        if o is None:
+            lines.append(f"{label}: new, " + " ".join(f"{s} {r[s]}" for s in STATUSES if int(r[s])))
+            continue
+        if o["networks"] != r["networks"]:
+            lines.append(f"{label}: {o['networks']} -> {r['networks']} networks, not compared")
+            continue
+        moved = [s for s in STATUSES if o[s] != r[s]]
+        worse, better = [], []
+        for col, sign in JUDGED:
+            a, b = o.get(col, ""), r.get(col, "")
+            if a in ("", "inf", "nan") or b in ("", "inf", "nan") or float(a) == float(b):
+                continue
+            (better if sign * (float(b) - float(a)) > 0 else worse).append(f"{col} {a} -> {b}")
+        if moved or worse or better:
+            counts = ", ".join(f"{s} {o[s]} -> {r[s]}" for s in moved)
+            verdict = "WORSE" if worse else "better" if better else "moved"
+            lines.append(f"{label}: {verdict}: " + "; ".join(x for x in (counts, ", ".join(worse + better)) if x))
+    return lines
 
 
 def _results_only(rows: list[dict], dim: int) -> list[dict]:
