@@ -366,6 +366,15 @@ def main(argv=None) -> int:
         meta["corruption"] = meta["corruption"].replace(">= 3 per receiver, >= 4", ">= 4 per receiver, >= 5")
         meta["seconds_per_call"] = seconds  # median, p95 (wall)
         meta["cpu_seconds_per_call"] = cpu_seconds  # median, p95 (the process's CPU time)
+    if old_meta and (only or args.conditions):
+        # a partial run: the record of the run that made the other rows stays, this one is added to its reruns
+        rerun = {k: meta[k] for k in ("date", "commit", "worktree_dirty", "seconds", "jobs", "seed")}
+        rerun.update(only=args.only, conditions=args.conditions, networks_per_cell=networks,
+                     gross_networks_per_cell=args.gross_networks or networks,
+                     wrong_networks_per_cell=args.wrong_networks or networks, scale_networks=scale_networks)
+        kept = {k: v for k, v in old_meta.items() if k not in ("seconds_per_call", "cpu_seconds_per_call")}
+        meta = {**kept, **{k: meta[k] for k in ("seconds_per_call", "cpu_seconds_per_call") if k in meta},
+                "reruns": old_meta.get("reruns", []) + [rerun]}
     meta_name = f"{name}.meta.json" if args.dim == 2 else f"{name}.timing.json"
     with open(os.path.join(out_dir, meta_name), "w") as handle:
         json.dump(meta, handle, indent=2)

@@ -116,7 +116,7 @@ def test_plane_wave_parameter_shifts_match_refits_with_a_biased_entry():
     for i, j in ((0, 0), (3, 5), (6, 11)):
         bias = np.full((m, n), np.inf)
         bias[i, j] = b
-        (_, dR, _), = parameter_shifts(F, fit, bias)
+        (_, dR, _), = parameter_shifts(F, fit, bias, np.broadcast_to(np.eye(4), (n, 4, 4)))
         Fb = F.copy()
         Fb[i, j] += b
         refit = _plane_wave_fit(fit.R, fit.U, fit.rho, fit.o, Fb, use)

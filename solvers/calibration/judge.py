@@ -144,18 +144,20 @@ def _plane_wave_reliability(F, fit: PlaneWaveFit, R, S, Q, gauge, determined, op
     fix = _gauge_fix(R, gauge)
     G_r, G_s = _rigid_motions(R), _rigid_motions(S)
     rng = np.where(determined, 1.0 / np.where(determined, fit.rho, 1.0), 0.0)
+    # source positions s = u / rho: ds = (tangent axes . d angles) / rho - u d rho / rho^2, rotated by Q
+    readout = np.zeros((n, K, K + 1))
+    readout[:, :, :K - 1] = fit.tangents * rng[:, None, None]
+    readout[:, :, K - 1] = -fit.U * (rng**2)[:, None]
+    readout = np.einsum("ab,jbq->jaq", Q, readout)
     rel_r, rel_t = np.zeros(m), np.zeros(n)
-    for _, dR, dS in parameter_shifts(F, fit, mdb):
+    for _, dR, dSg in parameter_shifts(F, fit, mdb, readout):
         k = len(dR)
-        # source positions s = u / rho: ds = (tangent axes . d angles) / rho - u d rho / rho^2, then rotated
-        dpos = (np.einsum("jal,kjl->kja", fit.tangents, dS[:, :, :K - 1]) * rng[None, :, None]
-                - fit.U[None] * (dS[:, :, K - 1] * rng[None, :] ** 2)[..., None])
-        dRg, dSg = dR @ Q.T, dpos @ Q.T
+        dRg = dR @ Q.T
         c = dRg.reshape(k, -1) @ fix.T                      # the rigid motion the gauge removes
         dRg = dRg - (c @ G_r.T).reshape(k, m, K)
         dSg = dSg - (c @ G_s.T).reshape(k, n, K)
-        rel_r = np.maximum(rel_r, np.linalg.norm(dRg, axis=2).max(axis=0))
-        rel_t = np.maximum(rel_t, np.linalg.norm(dSg, axis=2).max(axis=0))
+        rel_r = np.maximum(rel_r, np.sqrt((dRg * dRg).sum(axis=2).max(axis=0)))
+        rel_t = np.maximum(rel_t, np.sqrt((dSg * dSg).sum(axis=2).max(axis=0)))
     return rel_r, np.where(determined, rel_t, np.inf)
 
 
