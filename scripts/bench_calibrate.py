@@ -29,7 +29,13 @@ Columns per (cell, sigma, condition, mode):
   status counts (ok / uncontrolled / partial / inconsistent / ambiguous / unconverged / failed)
   sec_med, sec_p95   seconds per call
 
+Wrong inputs (conditions "shuffled column", "transposed", "squared", sigma 1e-3, `--wrong-networks` a
+cell, both modes; `wrong_input`): the clean matrix of the same seeded networks handed in wrongly. No
+network fits them: the honest answer is never "ok".
+
 Usage: python scripts/bench_calibrate.py [--networks 200] [--jobs 2] [--quick] [--only 9r3s,8r5s]
+       [--conditions clean,gross,missing,shuffled,transposed,squared] [--wrong-networks 10]
+       python scripts/bench_calibrate.py --compare OLD.csv [--dim 3]   (the rows whose results moved)
        python scripts/bench_calibrate.py --render   (calibration.md from calibration.csv, no computing)
 """
 from __future__ import annotations
@@ -64,6 +70,11 @@ CELLS_3D = ((9, 5), (10, 6), (12, 8), (16, 10), (24, 16))
 SCALE_3D = ((100, 60),)
 SIGMAS = (1e-4, 1e-3, 1e-2)
 CONDITIONS = {"clean": (0.0, 0.0), "gross 5%": (0.0, 0.05), "missing 30%": (0.3, 0.0)}
+#: wrong inputs (`wrong_input`): the clean matrix of each network handed in wrongly, at one sigma; no
+#: network fits such data, so the honest answer is never "ok" (a shuffled column: the rest may be placed
+#: and the column's source said to rest on few entries)
+WRONG = ("shuffled column", "transposed", "squared")
+WRONG_SIGMA = 1e-3
 SCALE = ((100, 100), (200, 150))
 SCALE_CONDITION = ("missing 20%", 0.2, 0.0)
 #: 3D scale cell with gross errors, sigma given only (sigma estimated takes minutes a call at 100r/60s)
@@ -84,14 +95,38 @@ def network(m, n, sigma, missing, gross, seed, dim=2):
     return net, F, bad
 
 
+def wrong_input(kind: str, F: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(F handed in wrongly, mask of the wrong entries) for one of WRONG; seeded by the network's seed.
+
+    "shuffled column": one transmitter's column cycled along a random order of the receivers (every entry
+    moves; the moved entries are the mask); "transposed": F.T (offsets then run along the rows, which
+    no network has; empty mask); "squared": every entry squared (empty mask).
+    """
+    if kind == "transposed":
+        return F.T.copy(), np.zeros(F.T.shape, dtype=bool)
+    if kind == "squared":
+        return F * F, np.zeros(F.shape, dtype=bool)
+    if kind != "shuffled column":
+        raise ValueError(f"unknown wrong input {kind!r}; valid: {', '.join(WRONG)}")
+    rng = np.random.default_rng([seed, 52])
+    j = int(rng.integers(F.shape[1]))
+    order = rng.permutation(F.shape[0])
+    out = F.copy()
+    out[order, j] = F[np.roll(order, 1), j]
+    bad = np.zeros(F.shape, dtype=bool)
+    bad[:, j] = True
+    return out, bad
+
+
 def one_call(net, F, bad, sigma_true, given: bool, seed: int) -> dict:
     cpu = time.process_time()
     res = calibrate(F, sigma=sigma_true if given else None, dim=net.dim, seed=seed)
     cpu = time.process_time() - cpu
     good = np.isfinite(F) & ~bad
     placed = bool(np.isfinite(res.receivers).all() and np.isfinite(res.transmitters).all())
-    err = calibration_errors(res, net).position if placed else np.inf
-    z = standardised_node_errors(res, net)
+    truth = F.shape == (len(net.receivers), len(net.transmitters))  # a transposed matrix has no true network
+    err = calibration_errors(res, net).position if placed and truth else np.inf
+    z = standardised_node_errors(res, net) if truth else np.array([])
     return {
         "kept": int((res.inliers & good).sum()), "good": int(good.sum()),
         "rejected_bad": int((~res.inliers & bad).sum()), "bad": int(bad.sum()),
@@ -112,6 +147,8 @@ def warm_up(dim: int = 2) -> None:
 def trial(args) -> dict:
     (m, n), sigma, cond, missing, gross, seed, dim, modes = args
     net, F, bad = network(m, n, sigma, missing, gross, seed, dim)
+    if cond in WRONG:
+        F, bad = wrong_input(cond, F, seed)
     return {mode: one_call(net, F, bad, sigma, mode == "given", seed) for mode in modes}
 
 
@@ -157,8 +194,14 @@ def markdown(rows: list[dict]) -> str:
     out = ["# calibrate: sigma given and estimated (scripts/bench_calibrate.py)", "",
            "Columns: see the script's docstring. err_ratio: position error over the sigma-given call's on the "
            "same networks; over3std: share of nodes with error > 3 reported std; ok_over5std: share of networks "
-           "reported \"ok\" with a node > 5 std off.", "",
-           "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+           "reported \"ok\" with a node > 5 std off.", ""]
+    if any(r["condition"] in WRONG for r in rows):
+        out += ["Wrong inputs (conditions " + ", ".join(WRONG) + f"; sigma {WRONG_SIGMA:g}): each network's clean matrix "
+                "handed in wrongly: one transmitter's column cycled across the receivers (every entry moved; "
+                "gross_rejected is the share of that column rejected), the matrix transposed (the offsets then run "
+                "along the rows: no network has them; no truth to compare with, err inf), every entry squared. No "
+                "network fits such data: every network's status is counted, and any \"ok\" is a wrong answer.", ""]
+    out += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         out.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
     out += ["", "## Summary at sigma 1e-2 (the table of docs/calibrate.md)", "", summary(rows)]
@@ -218,9 +261,12 @@ def main(argv=None) -> int:
     ap.add_argument("--only", help="comma-separated cells, e.g. 9r3s,8r5s (default all; 'scale' for the scale rows)")
     ap.add_argument("--conditions", help="comma-separated conditions (clean, gross, missing; default all)")
     ap.add_argument("--gross-networks", type=int, help="networks per gross-error cell (default: --networks)")
+    ap.add_argument("--wrong-networks", type=int, help="networks per wrong-input row (default: --networks)")
     ap.add_argument("--quick", action="store_true", help="10 networks a cell, 1 per scale row, into tables/quick/")
     ap.add_argument("--out", help="output directory (default tables/, or tables/quick/ with --quick)")
     ap.add_argument("--render", action="store_true", help="only rewrite calibration.md from calibration.csv")
+    ap.add_argument("--compare", metavar="OLD_CSV", help="only print the rows of the table (in --out or tables/) "
+                    "whose results moved against OLD_CSV, each said better or worse")
     ap.add_argument("--dim", type=int, choices=(2, 3), default=2, help="3: the 3D grid into calibration3d.* "
                     "(see the docstring)")
     args = ap.parse_args(argv)
@@ -231,6 +277,10 @@ def main(argv=None) -> int:
     os.makedirs(out_dir, exist_ok=True)
     if args.render:
         render(out_dir, name)
+        return 0
+    if args.compare:
+        for line in compare(_read(args.compare), _read(os.path.join(out_dir, f"{name}.csv"))):
+            print(line)
         return 0
     only = set(args.only.split(",")) if args.only else None
 
@@ -244,6 +294,9 @@ def main(argv=None) -> int:
                     continue
                 count = args.gross_networks if gross and args.gross_networks else networks
                 jobs.append(((m, n), sigma, cond, missing, gross, count, MODES))
+        for cond in WRONG:
+            if not args.conditions or cond.split()[0] in args.conditions.split(","):
+                jobs.append(((m, n), WRONG_SIGMA, cond, 0.0, 0.0, args.wrong_networks or networks, MODES))
     if not only or "scale" in only:
         for (m, n) in (SCALE if args.dim == 2 else SCALE_3D):
             scale_jobs = [(SCALE_CONDITION, MODES)] + ([(SCALE_GROSS_3D, ("given",))] if args.dim == 3 else [])
@@ -276,24 +329,19 @@ def main(argv=None) -> int:
                       f"{row['ok']} unc {row['uncontrolled']} inc {row['inconsistent']} amb {row['ambiguous']} "
                       f"part {row['partial']} {row['sec_med']:.2f}s/{row['sec_p95']:.2f}s", file=sys.stderr, flush=True)
             print(f"  ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+            if only or args.conditions:  # a partial run keeps each finished row (a stopped run resumes by cell)
+                _write_rows(out_dir, name, _merge(out_dir, name, _results_only(rows, args.dim), args.dim)[0])
 
     seconds = {f"{r['cell']} {r['sigma']} {r['condition']} {r['sigma_mode']}": [r["sec_med"], r["sec_p95"]]
                for r in rows}
     cpu_seconds = {f"{r['cell']} {r['sigma']} {r['condition']} {r['sigma_mode']}": [r["cpu_med"], r["cpu_p95"]]
                    for r in rows}
-    rows = [{k: v for k, v in r.items() if k not in ("cpu_med", "cpu_p95")} for r in rows]
-    if args.dim == 3:  # results only: the seconds are run facts (calibration3d.timing.json)
-        rows = [{k: v for k, v in r.items() if k not in ("sec_med", "sec_p95")} for r in rows]
+    rows = _results_only(rows, args.dim)
     old_meta = {}
     if only or args.conditions:
         # a partial run replaces its rows in the existing table and keeps the others (in grid order)
         rows, old_meta = _merge(out_dir, name, rows, args.dim)
-    with open(os.path.join(out_dir, f"{name}.csv"), "w", newline="") as handle:
-        w = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    with open(os.path.join(out_dir, f"{name}.md"), "w") as handle:
-        handle.write(markdown(rows))
+    _write_rows(out_dir, name, rows)
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "commit": commit, "worktree_dirty": dirty, "networks_per_cell": networks, "scale_networks": scale_networks,
@@ -318,12 +366,74 @@ def main(argv=None) -> int:
         meta["corruption"] = meta["corruption"].replace(">= 3 per receiver, >= 4", ">= 4 per receiver, >= 5")
         meta["seconds_per_call"] = seconds  # median, p95 (wall)
         meta["cpu_seconds_per_call"] = cpu_seconds  # median, p95 (the process's CPU time)
+    if old_meta and (only or args.conditions):
+        # a partial run: the record of the run that made the other rows stays, this one is added to its reruns
+        rerun = {k: meta[k] for k in ("date", "commit", "worktree_dirty", "seconds", "jobs", "seed")}
+        rerun.update(only=args.only, conditions=args.conditions, networks_per_cell=networks,
+                     gross_networks_per_cell=args.gross_networks or networks,
+                     wrong_networks_per_cell=args.wrong_networks or networks, scale_networks=scale_networks)
+        kept = {k: v for k, v in old_meta.items() if k not in ("seconds_per_call", "cpu_seconds_per_call")}
+        meta = {**kept, **{k: meta[k] for k in ("seconds_per_call", "cpu_seconds_per_call") if k in meta},
+                "reruns": old_meta.get("reruns", []) + [rerun]}
     meta_name = f"{name}.meta.json" if args.dim == 2 else f"{name}.timing.json"
     with open(os.path.join(out_dir, meta_name), "w") as handle:
         json.dump(meta, handle, indent=2)
         handle.write("\n")
     print(f"wrote {out_dir}/{name}.csv, {name}.md, {meta_name} in {meta['seconds']} s", file=sys.stderr)
     return 0
+
+
+def _read(path: str) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+#: (column, +1 when more is better): what makes a row worse than before (ok_over5std: a confident wrong answer)
+JUDGED = (("ok_over5std", -1), ("ok", +1), ("placed", +1), ("kept", +1), ("gross_rejected", +1))
+
+
+def compare(old: list[dict], new: list[dict]) -> list[str]:
+    """One line per row of `new` whose results moved against `old` (same cell, sigma, condition, mode): the
+    status counts before -> after and which judged columns (JUDGED) got better or worse; rows with other
+    network counts are said, not compared. A row only in `new` is said new."""
+    before = {_key(r): r for r in old}
+    lines = []
+    for r in new:
+        o = before.get(_key(r))
+        label = f"{r['cell']} {r['sigma']} {r['condition']} {r['sigma_mode']}"
+        if o is None:
+            lines.append(f"{label}: new, " + " ".join(f"{s} {r[s]}" for s in STATUSES if int(r[s])))
+            continue
+        if o["networks"] != r["networks"]:
+            lines.append(f"{label}: {o['networks']} -> {r['networks']} networks, not compared")
+            continue
+        moved = [s for s in STATUSES if o[s] != r[s]]
+        worse, better = [], []
+        for col, sign in JUDGED:
+            a, b = o.get(col, ""), r.get(col, "")
+            if a in ("", "inf", "nan") or b in ("", "inf", "nan") or float(a) == float(b):
+                continue
+            (better if sign * (float(b) - float(a)) > 0 else worse).append(f"{col} {a} -> {b}")
+        if moved or worse or better:
+            counts = ", ".join(f"{s} {o[s]} -> {r[s]}" for s in moved)
+            verdict = "WORSE" if worse else "better" if better else "moved"
+            lines.append(f"{label}: {verdict}: " + "; ".join(x for x in (counts, ", ".join(worse + better)) if x))
+    return lines
+
+
+def _results_only(rows: list[dict], dim: int) -> list[dict]:
+    """The rows without run facts: CPU seconds never, wall seconds not in 3D (calibration3d.timing.json)."""
+    drop = ("cpu_med", "cpu_p95") + (("sec_med", "sec_p95") if dim == 3 else ())
+    return [{k: v for k, v in r.items() if k not in drop} for r in rows]
+
+
+def _write_rows(out_dir: str, name: str, rows: list[dict]) -> None:
+    with open(os.path.join(out_dir, f"{name}.csv"), "w", newline="") as handle:
+        w = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    with open(os.path.join(out_dir, f"{name}.md"), "w") as handle:
+        handle.write(markdown(rows))
 
 
 def _key(row) -> tuple:
@@ -341,7 +451,7 @@ def _merge(out_dir: str, name: str, rows: list[dict], dim: int) -> tuple[list[di
     fresh = {_key(r): r for r in rows}
     merged = [fresh.pop(_key(r), None) or r for r in old] + list(fresh.values())  # old rows as read (text)
     cells = [f"{m}r/{n}s" for m, n in (CELLS if dim == 2 else CELLS_3D) + (SCALE if dim == 2 else SCALE_3D)]
-    conds = list(CONDITIONS) + [SCALE_CONDITION[0]]
+    conds = list(CONDITIONS) + list(WRONG) + [SCALE_CONDITION[0]]
     merged.sort(key=lambda r: (cells.index(r["cell"]), float(r["sigma"]), conds.index(r["condition"]),
                                ("given", "estimated").index(r["sigma_mode"])))
     record = os.path.join(out_dir, f"{name}.meta.json" if dim == 2 else f"{name}.timing.json")

@@ -284,7 +284,8 @@ def test_a_hint_never_beaten_is_counted_at_its_own_inlier_share():
     solver that never gives a hypothesis leave the hint (the truth) the best."""
     import math
 
-    from solvers.calibration.sampling import MinimalSolver, _needed, _ransac
+    from solvers.calibration.ransac import _needed, _ransac
+    from solvers.calibration.sampling import MinimalSolver
 
     net, F, bad = _room(16, 10, 7007, sigma=1e-3, gross=0.05)
     mask = np.isfinite(F)

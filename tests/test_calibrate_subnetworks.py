@@ -8,7 +8,8 @@ import pytest
 
 from solvers.calibration import calibrate, robust_refine
 from solvers.calibration.adjustment import MIN_RECEIVER_MEASUREMENTS, MIN_TRANSMITTER_MEASUREMENTS
-from solvers.calibration.sampling import _better, _sample_subnetwork
+from solvers.calibration.ransac import _better
+from solvers.calibration.sampling import _sample_subnetwork
 from solvers.calibration.scoring import _Model
 from solvers.metrics import calibration_errors
 from solvers.recovery import to_gauge

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from solvers.calibration import CalibrationOptions, calibrate
-from solvers.calibration.adjust import predict, tangent_basis
+from solvers.calibration.adjust import PlaneWaveFit, levenberg_marquardt, parameter_shifts, predict, tangent_basis
 from solvers.calibration.diagnose import FAR_FIELD_CURVATURE, diagnose
 from solvers.calibration.factorization import metric_upgrade, robust_low_rank
 from solvers.calibration.judge import judge_kept
@@ -87,6 +87,54 @@ def test_inverse_range_model_matches_distances_and_its_jacobian_finite_differenc
     Up = U + eps * T[:, :, 0]
     Up /= np.linalg.norm(Up, axis=1)[:, None]
     assert np.allclose((predict(R, Up, rho, o, T)[0] - P) / eps, ds[:, :, 0], atol=1e-5)
+
+
+def _plane_wave_fit(R, U, rho, o, F, inliers) -> PlaneWaveFit:
+    """A least-squares fit on `inliers` wrapped as the adjustment's result (only what parameter_shifts reads)."""
+    (R, U, rho, o), converged = levenberg_marquardt(F, inliers, (R, U, rho, o), max_iter=200, tol=1e-15)
+    assert converged
+    nan = np.full(F.shape, np.nan)
+    return PlaneWaveFit(R, U, rho, o, inliers, nan, 1.0, 0, True, nan, nan, None, None, None, tangent_basis(U), 3.3, 0)
+
+
+def test_plane_wave_parameter_shifts_match_refits_with_a_biased_entry():
+    """The external reliability's shifts N^+ j_k b_k (Schur-reduced) against least-squares refits of the
+    plane-wave model with entry k biased by b: the receivers' shifts agree after removing a rigid motion."""
+    rng = np.random.default_rng(3)
+    m, n = 7, 12
+    R = 0.2 * rng.standard_normal((m, 3))
+    U = rng.standard_normal((n, 3))
+    U /= np.linalg.norm(U, axis=1)[:, None]
+    rho, o = rng.uniform(0.2, 0.4, n), rng.uniform(0, 1, n)
+    F = predict(R, U, rho, o, tangent_basis(U))[0] + 1e-4 * rng.standard_normal((m, n))
+    use = np.ones((m, n), bool)
+    fit = _plane_wave_fit(R, U, rho, o, F, use)
+    G = np.column_stack([np.tile(np.eye(3)[a], m) for a in range(3)]
+                        + [np.cross(axis[None, :], fit.R).reshape(-1) for axis in np.eye(3)])
+    shape = np.eye(3 * m) - G @ np.linalg.pinv(G)  # removes the rigid motions the gauge leaves free
+    b = 1e-6
+    for i, j in ((0, 0), (3, 5), (6, 11)):
+        bias = np.full((m, n), np.inf)
+        bias[i, j] = b
+        (_, dR, _), = parameter_shifts(F, fit, bias, np.broadcast_to(np.eye(4), (n, 4, 4)))
+        Fb = F.copy()
+        Fb[i, j] += b
+        refit = _plane_wave_fit(fit.R, fit.U, fit.rho, fit.o, Fb, use)
+        moved = shape @ (refit.R - fit.R).reshape(-1)
+        assert np.linalg.norm(moved) > 0.1 * b
+        assert np.allclose(shape @ dR[0].reshape(-1), moved, atol=0.02 * np.abs(moved).max())
+
+
+def test_plane_wave_route_reports_external_reliabilities():
+    """The far-field route once left them None (the CLI printed nan): every receiver has a finite one (the
+    gauge receiver 0), every source whose range is determined a finite one, the others inf (an unbounded range)."""
+    net, F, bad = array_network(np.random.default_rng(0), per_cone=30)
+    res = calibrate(F, None, dim=3, seed=0, options=CalibrationOptions(orientation_given=True))
+    assert res.solver == "factorization"
+    rel_r, rel_t = res.receiver_reliability, res.transmitter_reliability
+    assert np.all(np.isfinite(rel_r)) and rel_r[res.gauge[0]] == 0.0 and np.all(rel_r[rel_r > 0] > 1e-5)
+    assert np.array_equal(np.isfinite(rel_t), np.isfinite(res.transmitter_std))
+    assert np.all(rel_t[np.isfinite(rel_t)] > 0)
 
 
 def test_tetrahedral_array_receivers_ok_within_the_cramer_rao_bound():

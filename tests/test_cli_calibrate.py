@@ -349,3 +349,17 @@ def test_oriented_and_transpose_give_the_orientation(capsys, monkeypatch, one_re
         Path(path).write_text(text + "\n")
     run(capsys, "calibrate", path, *flags)
     assert seen["options"].orientation_given is given
+
+
+def test_plane_wave_route_prints_reliabilities_not_nan(capsys, tmp_path):
+    """Issue 52: the far-field route left the reliabilities out and the table printed nan for every node."""
+    from solvers.synthetic import array_network
+
+    _, F, _ = array_network(np.random.default_rng(0), per_cone=30)
+    path = tmp_path / "array.csv"
+    np.savetxt(path, F, delimiter=",")
+    code, out, _ = run(capsys, "calibrate", str(path), "--dim", "3", "--seed", "0")
+    table = [line.split() for line in out.splitlines() if line.startswith(("r ", "s "))]
+    assert "hypotheses from factorization" in out and len(table) == F.shape[0] + F.shape[1]
+    assert not any("nan" in row[-1] for row in table)
+    assert all(float(row[-1]) < math.inf for row in table if row[0] == "r")

@@ -17,7 +17,7 @@ self-calibration" (EUSIPCO 2021), and geodetic network adjustment (Baarda 1968):
    blocks are too few; each extended to the network by batched robust multilateration
    (`placement`) and scored MSAC-style with sigma given, or by the median squared residual of the
    entries the hypothesis was not solved on (a sample's own entries never count: a minimal sample
-   fits them exactly). LO-RANSAC: every new best hypothesis is refined (`robust`).
+   fits them exactly). LO-RANSAC (`ransac`): every new best hypothesis is refined (`robust`).
 2. **The all-data hypothesis** (`robust._adjust`): least squares on every entry from the best
    hypothesis; if the global test passes (sigma given) and no entry's test statistic exceeds its
    Bonferroni bound, every entry is kept.

@@ -229,3 +229,36 @@ def adjust_plane_waves(F, work, start, sigma, scale0, alpha=0.001, max_rounds=30
                         redundancy=r, w=np.where(work, w, np.nan), receiver_cov=st["sigma"] ** 2 * st["Pb"],
                         cov_rr=cov_rr, source_cov=st["sigma"] ** 2 * st["Q"], tangents=st["T_ax"], critical=crit,
                         rounds=rounds)
+
+
+def parameter_shifts(F, fit: PlaneWaveFit, bias: np.ndarray, readout: np.ndarray, chunk: int = 1024):
+    """The parameters' shifts that a bias in one entry causes, entry by entry, for the inlier entries whose
+    `bias` (m, n) is finite (an MDB: the external reliability): yields (entries (k, 2), dR (k, m, K) in the
+    fit's minimum-norm gauge, dX (k, n, c)), by chunks of entries; dX_j = readout_j dS_j reads each source's
+    shift dS_j over (direction angles, rho, o) through `readout` (n, c, K + 1) (the identity: dS itself).
+
+    The shift is N^+ j_k b_k, with N the normal matrix of the least-squares fit on the inliers, solved by the
+    Schur complement of `statistics`: dR = P^+ (j_r - T Y j_s), then every source dS_j = Y_j (g_j - T_j^T dR)
+    (g_j = j_s for the entry's own source, 0 for the others); readout_j Y_j T_j^T is formed once, so that
+    every entry's effect on every source is one matrix product."""
+    R, U, rho, o = fit.R, fit.U, fit.rho, fit.o
+    T_ax = tangent_basis(U)
+    _, dr, ds = predict(R, U, rho, o, T_ax)
+    m, n, K = dr.shape
+    red, T, Y, TY = _reduced(fit.inliers.astype(float), dr, ds, 0.0)
+    Pinv = np.linalg.pinv(red, rcond=1e-10, hermitian=True)
+    AY = np.einsum("jcq,jqp->jcp", readout, Y)                                      # (n, c, q)
+    c = AY.shape[1]
+    B = np.einsum("jcq,ajq->jca", AY, T).reshape(n * c, m * K)                      # readout_j Y_j T_j^T
+    entries = np.argwhere(fit.inliers & np.isfinite(bias))
+    for start in range(0, len(entries), chunk):
+        ii, jj = entries[start:start + chunk].T
+        k = len(ii)
+        gs = ds[ii, jj] * bias[ii, jj][:, None]                                      # (k, q)
+        rhs = -np.einsum("akq,kq->ak", TY[:, jj, :], gs)                             # (mK, k)
+        rows = ii[:, None] * K + np.arange(K)[None, :]
+        rhs[rows, np.arange(k)[:, None]] += dr[ii, jj] * bias[ii, jj][:, None]
+        dR = Pinv @ rhs                                                               # (mK, k)
+        dX = -(dR.T @ B.T).reshape(k, n, c)
+        dX[np.arange(k), jj] += np.einsum("kcq,kq->kc", AY[jj], gs)
+        yield np.column_stack([ii, jj]), dR.T.reshape(k, m, K), dX

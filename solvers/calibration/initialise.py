@@ -5,7 +5,7 @@ the source directions; each source's range comes from the wavefront's curvature 
 second-order term of |r - s| in 1 / range), a source whose curvature is not measurable is put at
 FAR_RANGES x the array's extent along its direction (the adjustment then finds its range, or reports it
 as weakly determined); the offsets follow. Otherwise the hypothesis search over the minimal solvers
-(`sampling`), run by the driver.
+(`ransac` over `sampling`), run by the driver.
 
 Reference: Thrun (2005), Kuang and Astrom (2013), see `factorization`.
 """

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import stats
 
 from ..recovery import to_gauge
-from .adjust import PlaneWaveFit
+from .adjust import PlaneWaveFit, parameter_shifts
 from .adjustment import gauge_order
 from .diagnose import WEAK_SPAN_DEGREES
 from .result import STATUSES, CalibrationOptions, CalibrationResult
@@ -97,25 +97,68 @@ def judge_kept(result: CalibrationResult) -> CalibrationResult:
                    message=message(status, result, words[0]) if status != result.status else result.message)
 
 
-def _s_transform(cov: np.ndarray, R: np.ndarray, gauge: np.ndarray) -> np.ndarray:
-    """The covariance (mK, mK) of receivers R (in the gauge frame: gauge[0] at 0, gauge[1] on +x, gauge[2] in
-    xy) moved from the minimum-norm gauge to the gauge that fixes those coordinates (an S-transformation:
-    P = I - G (C^T G)^-1 C^T, G the rigid motions at R, C the fixed coordinates)."""
-    m, K = R.shape
+def _rigid_motions(P: np.ndarray) -> np.ndarray:
+    """(len(P) K, K (K + 1) / 2): the first-order rigid motions (translations, rotations about the axes) at
+    the points P (len(P), K), as columns over the flattened coordinates."""
+    m, K = P.shape
     cols = [np.tile(np.eye(K)[a], m) for a in range(K)]
     if K == 3:
         for axis in np.eye(3):
-            cols.append(np.cross(axis[None, :], R).reshape(-1))
+            cols.append(np.cross(axis[None, :], P).reshape(-1))
     else:
-        cols.append(np.column_stack([-R[:, 1], R[:, 0]]).reshape(-1))
-    G = np.column_stack(cols)
+        cols.append(np.column_stack([-P[:, 1], P[:, 0]]).reshape(-1))
+    return np.column_stack(cols)
+
+
+def _gauge_fix(R: np.ndarray, gauge: np.ndarray) -> np.ndarray:
+    """((C^T G)^-1 C^T): the rigid motion (coefficients over `_rigid_motions`) that a shift of the receivers R
+    (in the gauge frame: gauge[0] at 0, gauge[1] on +x, gauge[2] in xy) must lose for the gauge's fixed
+    coordinates to stay fixed (an S-transformation; Baarda 1973)."""
+    m, K = R.shape
     fixed = [gauge[0] * K + a for a in range(K)] + [gauge[1] * K + a for a in range(1, K)]
     if K == 3:
         fixed.append(gauge[2] * K + 2)
     C = np.zeros((m * K, len(fixed)))
     C[fixed, np.arange(len(fixed))] = 1.0
-    P = np.eye(m * K) - G @ np.linalg.solve(C.T @ G, C.T)
+    return np.linalg.solve(C.T @ _rigid_motions(R), C.T)
+
+
+def _s_transform(cov: np.ndarray, R: np.ndarray, gauge: np.ndarray) -> np.ndarray:
+    """The covariance (mK, mK) of receivers R moved from the minimum-norm gauge to the gauge that fixes the
+    coordinates of `_gauge_fix` (P = I - G (C^T G)^-1 C^T, G the rigid motions at R)."""
+    P = np.eye(R.size) - _rigid_motions(R) @ _gauge_fix(R, gauge)
     return P @ cov @ P.T
+
+
+def _plane_wave_reliability(F, fit: PlaneWaveFit, R, S, Q, gauge, determined, opts: CalibrationOptions):
+    """(receiver (m,), transmitter (n,)) external reliability of a plane-wave fit: the largest shift of a
+    node's position, in the reported gauge, that an undetected error of one inlier's minimal detectable bias
+    (sigma delta0 / sqrt(r)) causes. A source whose range is not determined gets inf: a bias moves it along
+    an unbounded range (its direction's shift is bounded, but it is an angle, not a position)."""
+    m, K = R.shape
+    n = len(S)
+    delta0 = float(stats.norm.isf(opts.alpha / 2.0) + stats.norm.ppf(opts.power))
+    r = np.nan_to_num(fit.redundancy, nan=0.0)
+    with np.errstate(divide="ignore"):
+        mdb = np.where(fit.inliers & (r > 1e-12), fit.sigma * delta0 / np.sqrt(np.maximum(r, 1e-300)), np.inf)
+    fix = _gauge_fix(R, gauge)
+    G_r, G_s = _rigid_motions(R), _rigid_motions(S)
+    rng = np.where(determined, 1.0 / np.where(determined, fit.rho, 1.0), 0.0)
+    # source positions s = u / rho: ds = (tangent axes . d angles) / rho - u d rho / rho^2, rotated by Q
+    readout = np.zeros((n, K, K + 1))
+    readout[:, :, :K - 1] = fit.tangents * rng[:, None, None]
+    readout[:, :, K - 1] = -fit.U * (rng**2)[:, None]
+    readout = np.einsum("ab,jbq->jaq", Q, readout)
+    rel_r, rel_t = np.zeros(m), np.zeros(n)
+    for _, dR, dSg in parameter_shifts(F, fit, mdb, readout):
+        k = len(dR)
+        dRg = dR @ Q.T
+        c = dRg.reshape(k, -1) @ fix.T                      # the rigid motion the gauge removes
+        dRg = dRg - (c @ G_r.T).reshape(k, m, K)
+        dSg = dSg - (c @ G_s.T).reshape(k, n, K)
+        rel_r = np.maximum(rel_r, np.sqrt((dRg * dRg).sum(axis=2).max(axis=0)))
+        rel_t = np.maximum(rel_t, np.sqrt((dSg * dSg).sum(axis=2).max(axis=0)))
+    return rel_r, np.where(determined, rel_t, np.inf)
 
 
 def _spread_gauge(R: np.ndarray, use: np.ndarray) -> np.ndarray:
@@ -210,6 +253,7 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
     tcov[~determined] = np.inf
     tstd = np.where(determined, np.sqrt(np.maximum(np.einsum("jaa->j", tcov[:, :K, :K]), 0.0)), np.inf)
     ostd = np.where(determined, np.sqrt(np.maximum(tcov[:, K, K], 0.0)), np.inf)
+    rel_r, rel_t = _plane_wave_reliability(F, fit, R, S, Q, order[:K], determined, opts)
     dir_std = np.degrees(np.sqrt(np.maximum(np.einsum("jaa->j", fit.source_cov[:, :K - 1, :K - 1]), 0.0)))
 
     found: list[tuple[str, str]] = []
@@ -275,6 +319,7 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
         global_test=global_test, redundancy=redundancy, w_test=fit.w, critical_value=float(fit.critical),
         uncontrolled=inl & (np.nan_to_num(redundancy, nan=1.0) < opts.min_redundancy), measured=mask,
         gauge=tuple(int(g) for g in order[:K]), receiver_cov=rcov, transmitter_cov=tcov,
+        receiver_reliability=rel_r, transmitter_reliability=rel_t,
     )
     why = found[0][1] if found else (notes[0] if notes else "plane waves: every receiver and direction determined")
     return replace(res, message=message(status, res, why))

@@ -28,7 +28,7 @@ from .flags import _principal_ratio
 from .frame import RANGE_SHARE, widen_far_ranges
 from .judge import _marginal_rejections, _short_search, _weak_at, message, route_note, worst
 from .result import CalibrationOptions, CalibrationResult
-from .sampling import _needed
+from .ransac import _needed
 
 
 @dataclass(frozen=True, eq=False)

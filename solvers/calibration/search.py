@@ -1,7 +1,7 @@
 """Initialise by the hypothesis search (stage 2, the near-field route) and adjust from its best hypothesis.
 
 The route of data that are not plane waves (`diagnose.Diagnosis.wavefront`): LO-RANSAC over the minimal
-solvers (`sampling`) with local optimisation and extension, the robust adjustment (`robust`), the
+solvers (`ransac` over `sampling`) with local optimisation and extension, the robust adjustment (`robust`), the
 probing of other least-squares basins (`flags`) and the statistics of the final fit (`adjustment`),
 handed to the judge as one `judge_search.SearchFit`. `_calibrate_once` is one such search; `crosscheck`
 compares its answer with other searches of the same data.
@@ -27,7 +27,8 @@ from .frame import node_covariances
 from .judge_search import SearchFit, judge_search
 from .result import CalibrationOptions, CalibrationResult
 from .robust import _adjust, _all_data_fit, _drop_undetermined
-from .sampling import _ransac, available_solvers
+from .ransac import _ransac
+from .sampling import available_solvers
 from .scoring import _Model, _prune, _residual_matrix, _Search
 
 #: Progress of long calls (stage by stage, each snooping round), at INFO; the CLI shows it on stderr.
