@@ -26,13 +26,13 @@ upsampling, so it is written here (scripts/room_simulation.py uses it against th
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .recording import BLOCK_FRAMES, Recording, RecordingError
 
-__all__ = ["GccPeak", "TdoaMatrix", "TdoaOptions", "agreeing_pairs", "ambiguity", "consistent_subset", "detect_events",
+__all__ = ["GccPeak", "TdoaMatrix", "TdoaOptions", "agreeing_pairs", "ambiguity", "consistent_subset", "detect_events", "estimate_sweep",
            "frame_power", "gcc_phat", "matched_filter", "recording_events", "tdoa_matrix"]
 
 def _fast_length(n: int) -> int:
@@ -222,6 +222,16 @@ class TdoaOptions:
         event's 10^4-10^5 lags); on the sweep rooms every channel of every event reached 5.5-21 (the lowest in
         the RT60 0.8 s rooms at 10 dB): 5 is a thin margin on both sides
     signal_rate : the signal's sample rate (None: the recording's); a recording at another rate is an error
+    sweep_gain : an event analysed whole (`ambiguous`) whose loudest channel's spectrogram ridge follows a sweep (a
+        frequency rising or falling linearly or exponentially in time over sweep_span seconds or more and a ratio
+        of 4 or more: estimate_sweep) is measured against that estimated sweep as against a given `signal`
+        (_sweep_arrivals), when the estimate compresses the sweep_channels loudest channels into a pulse whose
+        envelope stands at least sweep_gain x sqrt(ln N) over its rms (N lags; sqrt(ln N) is about the level of
+        noise alone, 3.1-3.4 here): on the sweep rooms of tables/audio3d_kinds.md the sweeps' events reached
+        a peak 4.3-52 times the rms (median 21), the seven three-note phrases that also fitted a line 3.2-5.7 (the
+        staircase test, estimate_sweep, since rejects them before). 0: never
+    sweep_span : seconds the ridge of an estimated sweep must span
+    sweep_channels : the loudest channels whose compressed pulses focus the estimated sweep
     """
 
     speed: float = 343.0
@@ -250,6 +260,9 @@ class TdoaOptions:
     signal_rate: int | None = None
     signal_share: float = 0.3
     signal_psr: float = 5.0
+    sweep_gain: float = 2.0
+    sweep_span: float = 0.3
+    sweep_channels: int = 5
 
     def __post_init__(self) -> None:
         if self.signal is not None:
@@ -282,6 +295,10 @@ class TdoaOptions:
             raise ValueError(f"retry_below must be in [0, 1], got {self.retry_below}")
         if not 0.0 < self.early <= 1.0:
             raise ValueError(f"early must be in (0, 1], got {self.early}")
+        if not (np.isfinite(self.sweep_gain) and self.sweep_gain >= 0 and np.isfinite(self.sweep_span)
+                and self.sweep_span > 0 and self.sweep_channels >= 1):
+            raise ValueError(f"sweep_gain must be >= 0, sweep_span > 0 and sweep_channels >= 1, got {self.sweep_gain}, "
+                             f"{self.sweep_span}, {self.sweep_channels}")
         if not 0.0 < self.signal_share <= 1.0 or not (np.isfinite(self.signal_psr) and self.signal_psr >= 0):
             raise ValueError(f"signal_share must be in (0, 1] and signal_psr >= 0, got {self.signal_share}, "
                              f"{self.signal_psr}")
@@ -350,6 +367,8 @@ class TdoaMatrix:
     channels, events : names of the rows and columns
     source : the recording's file name(s)
     notes : what the reader or the analysis did that a user should know
+    swept : the events (indices) measured against their own estimated sweep (TdoaOptions.sweep_gain): each channel
+        against the sound, not pairs of channels, so the guided pass keeps their columns
     """
 
     F: np.ndarray
@@ -362,6 +381,7 @@ class TdoaMatrix:
     events: tuple[str, ...]
     source: str
     notes: tuple[str, ...] = field(default=())
+    swept: tuple[int, ...] = field(default=())
 
 
 def matched_filter(seg: np.ndarray, signal: np.ndarray, beta: float = 0.0) -> np.ndarray:
@@ -410,6 +430,132 @@ def _signal_arrivals(pulses: np.ndarray, max_lag: int, options: TdoaOptions):
     ok = np.outer(kept, kept)
     np.fill_diagonal(ok, False)
     return r, t - t[r], ok.sum(axis=1), ok
+
+
+def _analytic(x: np.ndarray) -> np.ndarray:
+    """The analytic signal of x along its last axis (x + i Hilbert(x)): its magnitude is x's envelope."""
+    n = x.shape[-1]
+    h = np.zeros(n)
+    h[0] = 1.0
+    h[1 : (n + 1) // 2] = 2.0
+    if n % 2 == 0:
+        h[n // 2] = 1.0
+    return np.fft.ifft(np.fft.fft(x, axis=-1) * h, axis=-1)
+
+
+def _ridge(x: np.ndarray, rate: int):
+    """(times s, frequencies Hz, bin width Hz) of a spectrogram's strongest frequency in every frame of x (16 ms
+    Hann frames, a quarter hop, the peak refined by a parabola through the log powers) whose power is at least
+    5 % of the loudest frame's; None when x is shorter than two frames."""
+    n = 1 << int(np.ceil(np.log2(0.016 * rate)))
+    hop = n // 4
+    if len(x) < n + hop:
+        return None
+    idx = np.arange(n)[None, :] + hop * np.arange((len(x) - n) // hop + 1)[:, None]
+    S = np.abs(np.fft.rfft(x[idx] * np.hanning(n), axis=1)) ** 2
+    k = np.argmax(S[:, 1:-1], axis=1) + 1
+    r = np.arange(len(k))
+    lo, mid, hi = (np.log(S[r, k + d] + 1e-300) for d in (-1, 0, 1))
+    f = (k + _parabola(lo, mid, hi)) * rate / n
+    power = S.sum(axis=1)
+    strong = power >= 0.05 * power.max()
+    return (idx[strong, 0] + n / 2) / rate, f[strong], rate / n
+
+
+def _fit_track(t: np.ndarray, f: np.ndarray, width: float, log: bool):
+    """(intercept, slope, inliers) of f = a + b t (log: ln f = a + b t) fitted to a ridge, five rounds of least
+    squares each keeping the frames within max(3 bins, 8 %) of the last fit; None below 8 frames."""
+    y = np.log(np.maximum(f, 1e-9)) if log else f
+    use = np.ones(len(t), bool)
+    coef = None
+    for _ in range(5):
+        if use.sum() < 8:
+            return None
+        coef = np.linalg.lstsq(np.column_stack([np.ones(use.sum()), t[use]]), y[use], rcond=None)[0]
+        fit = coef[0] + coef[1] * t
+        fit = np.exp(fit) if log else fit
+        use = np.abs(f - fit) <= np.maximum(3 * width, 0.08 * fit)
+    return coef[0], coef[1], use
+
+
+def estimate_sweep(x: np.ndarray, rate: int, focus: np.ndarray, options: TdoaOptions = TdoaOptions()):
+    """(the estimated emitted sweep, its gain) when the loudest channel x of an event follows a sweep, else None.
+
+    The ridge of x's spectrogram (_ridge) is fitted by a linear and by an exponential frequency track (_fit_track);
+    the track of more inliers (at least 60 % of the ridge's frames) spanning options.sweep_span seconds or more and a
+    frequency ratio of 4 or more, each third of whose inliers rises (or falls) at 0.5-2 x its slope (notes on a line
+    are a staircase), is a sweep, synthesised over the inliers' span with a 0.25-power Hann fade. A
+    ridge's slope is biased by the reverberation (by 0.3-3 % measured; a sweep of 0.8 s then smears its compressed
+    pulse over milliseconds), so the slope is focused: the one of a grid (+-5 %, then +-0.6, 0.08, 0.01 %, eleven
+    each, around the best) whose matched filters (phase transform) of the `focus` channels (rows) have the highest
+    envelope peaks over their rms, summed; the track's centre frequency and time stay (an error there only delays
+    every channel alike). The gain: that sum's mean over the channels, divided by sqrt(ln N) of the N lags (about
+    the level of noise alone); below options.sweep_gain the estimate is None (a three-note phrase whose notes lie
+    near a line)."""
+    got = _ridge(x, rate)
+    if got is None:
+        return None
+    t, f, width = got
+    best = None
+    for log in (False, True):
+        fitted = _fit_track(t, f, width, log)
+        if fitted is None:
+            continue
+        a, b, use = fitted
+        if use.sum() < 0.6 * len(t):
+            continue
+        t0, t1 = t[use].min(), t[use].max()
+        f0, f1 = ((np.exp(a + b * t0), np.exp(a + b * t1)) if log else (a + b * t0, a + b * t1))
+        if t1 - t0 < options.sweep_span or min(f0, f1) <= 0 or max(f0, f1) < 4 * min(f0, f1):
+            continue
+        y = np.log(np.maximum(f[use], 1e-9)) if log else f[use]
+        thirds = np.minimum((3 * (t[use] - t0) / (t1 - t0)).astype(int), 2)
+        local = [np.polyfit(t[use][thirds == k], y[thirds == k], 1)[0] if np.sum(thirds == k) >= 3 else 0.0
+                 for k in range(3)]
+        if not all(0.5 <= slope / b <= 2.0 for slope in local):
+            continue  # a staircase (notes on a line) is no sweep: every third of the track rises at its slope
+        if best is None or use.sum() > best[0]:
+            best = (use.sum(), log, a, b, t0, t1)
+    if best is None:
+        return None
+    _, log, a, b, t0, t1 = best
+    u = np.arange(int(t0 * rate), int(t1 * rate)) / rate - 0.5 * (t0 + t1)
+    centre = a + b * 0.5 * (t0 + t1)
+    fade = np.hanning(len(u)) ** 0.25
+
+    def sweep(slope):
+        phase = (np.exp(centre) * np.expm1(slope * u) / slope if log else centre * u + slope * u**2 / 2)
+        return np.sin(2 * np.pi * phase) * fade
+
+    def gain(slope):
+        env = np.abs(_analytic(matched_filter(focus, sweep(slope), beta=1.0)))
+        return float(np.mean(env.max(axis=1) / np.maximum(np.sqrt(np.mean(env**2, axis=1)), 1e-300)))
+
+    for span in (0.05, 0.006, 0.0008, 0.0001):
+        grid = b * (1 + np.linspace(-span, span, 11))
+        b = grid[int(np.argmax([gain(g) for g in grid]))]
+    lags = max(2, matched_filter(focus[:1], sweep(b)).shape[1])
+    score = gain(b) / np.sqrt(np.log(lags))
+    return (sweep(b), score) if score >= options.sweep_gain else None
+
+
+def _sweep_arrivals(seg: np.ndarray, rate: int, max_lag: int, options: TdoaOptions):
+    """_signal_arrivals of an event analysed whole against its estimated sweep (estimate_sweep), or None when the
+    loudest channel follows no sweep. The estimate's phase is not the emitted sweep's: each channel's compressed
+    pulse is a mix of the pulse and its Hilbert transform, two lobes a few samples apart of which either can be
+    the earliest strong one; the pulses are turned by the phase of the highest envelope peak of the channel of the
+    sharpest (the one angle for every channel), which makes them one lobe again (measured on the sweep rooms: 67 %
+    of the entries within 2 samples without the turn, 94 % with it)."""
+    energy = np.sum(seg**2, axis=1)
+    loud = np.argsort(energy)[::-1]
+    got = estimate_sweep(seg[loud[0]], rate, seg[loud[: options.sweep_channels]], options)
+    if got is None:
+        return None
+    z = _analytic(matched_filter(seg, got[0], beta=1.0))
+    env = np.abs(z)
+    r = int(np.argmax(env.max(axis=1) / np.maximum(np.sqrt(np.mean(env**2, axis=1)), 1e-300)))
+    turn = np.exp(-1j * np.angle(z[r, int(np.argmax(env[r]))]))
+    return _signal_arrivals(np.real(turn * z), max_lag, options)
 
 
 def _pair_candidates(seg: np.ndarray, max_lag: int, peaks: int, beta: float = 1.0):
@@ -600,8 +746,15 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
         return _measure(recording, options, lambda j, seg, after, max_lag: _signal_arrivals(seg, max_lag, options),
                         progress)
     kept = [0]
+    swept: list[int] = []
 
     def arrivals(j, seg, after, max_lag):
+        if options.sweep_gain > 0 and not np.any(after):  # analysed whole: a sweep is measured against its estimate
+            got = _sweep_arrivals(seg, recording.rate, max_lag, options)
+            if got is not None:
+                swept.append(j)
+                return got
+
         def analyse(weighted, beta):
             candidates = _pair_candidates(weighted, max_lag, options.peaks, beta)
             if keep is not None and j not in keep and kept[0] + 2 * candidates[2].size <= KEEP_FLOATS:
@@ -610,7 +763,12 @@ def tdoa_matrix(recording: Recording, options: TdoaOptions = TdoaOptions(), prog
             return _event_arrivals(weighted, max_lag, options, beta, candidates)
         return _over_tapers(seg, after, options, analyse)
 
-    return _measure(recording, options, arrivals, progress)
+    tm = _measure(recording, options, arrivals, progress)
+    if swept:
+        tm = replace(tm, swept=tuple(swept), notes=tm.notes + (f"{len(swept)} event(s) measured against their own estimated sweep (a "
+                                           "frequency track fitted to the loudest channel's spectrogram, its slope "
+                                           f"focused): {', '.join(tm.events[j] for j in swept)}",))
+    return tm
 
 
 def _over_tapers(seg: np.ndarray, after: np.ndarray, options: TdoaOptions, analyse):
@@ -690,6 +848,8 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
                 else:
                     keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
                     dropped.setdefault(needed, []).append(j)
+            if keep.any() and not keep[r]:  # a subset without the reference: its best-supported channel refers
+                ref[j] = int(np.argmax(np.where(keep, support, -1)))
             F[keep, j] = options.speed * (onsets[j] + t[keep] / rate)
         if progress is not None and (j + 1) % 10 == 0:
             progress(f"{label}: {j + 1}/{n} events")

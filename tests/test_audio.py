@@ -410,6 +410,90 @@ def test_with_the_signal_each_channel_is_its_own_direct_pulse_even_under_a_loude
     assert "measured against the emitted signal" in run.matrix.notes[-1]
 
 
+def _echoed(rng, sound, delays, onsets, total, echo=0.8):
+    """(channels, frames): `sound` at each onset, channel i hearing it delays[i, j] samples late plus an echo of
+    `echo` x its level 2-6 ms after that and one of 0.6 x 24 ms after, over white noise 1e-3."""
+    m = delays.shape[0]
+    x = 1e-3 * rng.standard_normal((m, int(total * RATE)))
+    for j, onset in enumerate(onsets):
+        pad = np.zeros(len(sound) + 2048)
+        pad[512 : 512 + len(sound)] = sound
+        start = int(onset * RATE) - 512
+        for i in range(m):
+            x[i, start : start + len(pad)] += (delayed(pad, delays[i, j]) + echo * delayed(pad, delays[i, j] + rng.uniform(32, 96))
+                                               + 0.6 * delayed(pad, delays[i, j] + 384))
+    return 0.2 * x
+
+
+@pytest.mark.parametrize("method", ["linear", "logarithmic"])
+def test_a_sweep_analysed_whole_is_measured_against_its_own_estimate(method):
+    """0.8 s sweeps (linear and logarithmic, 100 Hz - 6.4 kHz) under two echoes, the signal not given: the event
+    analysed whole is measured against the sweep estimated from its loudest channel (a note names the events), every
+    time difference within half a sample; with sweep_gain 0 (no estimate) the same events go to the pairs'
+    correlations and the note is absent."""
+    from scipy.signal import chirp
+
+    from solvers.recording import Recording
+
+    rng = np.random.default_rng(21)
+    t = np.arange(int(0.8 * RATE)) / RATE
+    sweep = chirp(t, f0=100.0, t1=t[-1], f1=0.4 * RATE, method=method) * np.hanning(len(t)) ** 0.25
+    m, onsets = 7, [0.3, 1.6]
+    delays = rng.uniform(0.0, 60.0, (m, 2))
+    recording = Recording(_echoed(rng, sweep, delays, onsets, 2.9), RATE, tuple("abcdefg"), "synthetic")
+    options = TdoaOptions(max_distance=2.0, ambiguous=0.01, whole_after=0.0)
+    tm = tdoa_matrix(recording, options)
+    assert any(n.startswith("2 event(s) measured against their own estimated sweep") for n in tm.notes)
+    assert np.all(np.isfinite(tm.F))
+    for j in range(2):
+        r = tm.reference[j]
+        measured = (tm.F[:, j] - tm.F[r, j]) / tm.speed * RATE
+        assert np.max(np.abs(measured - (delays[:, j] - delays[r, j]))) < 0.5
+    plain = tdoa_matrix(recording, TdoaOptions(max_distance=2.0, ambiguous=0.01, whole_after=0.0, sweep_gain=0.0))
+    assert not any("estimated sweep" in n for n in plain.notes)
+
+
+def test_notes_and_noise_are_no_sweep():
+    """estimate_sweep finds no sweep in a three-note phrase (each note a harmonic tone, the notes on a rising line),
+    nor in noise; it finds the linear sweep, its gain far above sweep_gain."""
+    from solvers.audio import estimate_sweep
+    from scipy.signal import chirp
+
+    rng = np.random.default_rng(2)
+    notes = []
+    for f0 in (262.0, 440.0, 784.0):
+        t = np.arange(int(0.27 * RATE)) / RATE
+        notes.append(sum(np.sin(2 * np.pi * h * f0 * t) / h for h in range(1, 9) if h * f0 < 0.45 * RATE)
+                     * np.minimum(t / 0.01, 1.0) * np.exp(-t / 0.15))
+    phrase = np.concatenate([np.zeros(800), *notes, np.zeros(800)]) + 1e-3 * rng.standard_normal(1)
+    assert estimate_sweep(phrase, RATE, phrase[None, :]) is None
+    noise = rng.standard_normal(RATE)
+    assert estimate_sweep(noise, RATE, noise[None, :]) is None
+    t = np.arange(int(0.8 * RATE)) / RATE
+    sweep = np.concatenate([np.zeros(800), chirp(t, f0=100.0, t1=t[-1], f1=6400.0), np.zeros(800)])
+    got = estimate_sweep(sweep, RATE, sweep[None, :])
+    assert got is not None and got[1] > 4 * TdoaOptions().sweep_gain
+
+
+def test_a_subset_without_the_reference_refers_to_one_of_its_channels():
+    """An event kept on a consistent subset that leaves out the channel the analysis referred to: the event's
+    reference is a channel of the subset (its kept entries' differences are measured against it)."""
+    from solvers.audio import _measure
+    from solvers.recording import Recording
+
+    rng = np.random.default_rng(4)
+    m = 8
+    recording = Recording(synthetic_recording(rng, np.zeros((m, 1)), [0.5]), RATE, tuple("abcdefgh"), "synthetic")
+    ok = np.zeros((m, m), bool)
+    ok[1:6, 1:6] = True  # channels 1-5 agree; the reference 0 with none
+    np.fill_diagonal(ok, False)
+    t = np.arange(m, dtype=float)
+    tm = _measure(recording, TdoaOptions(max_distance=2.0), lambda j, seg, after, lag: (0, t, ok.sum(axis=1), ok))
+    assert np.isfinite(tm.F[1:6, 0]).all() and not np.isfinite(tm.F[[0, 6, 7], 0]).any()
+    assert tm.reference[0] in range(1, 6)
+    assert any("consistent subset" in n for n in tm.notes)
+
+
 def test_consistent_subset_peels_the_channels_that_disagree():
     from solvers.audio import consistent_subset
 

@@ -171,3 +171,20 @@ def test_guide_options_are_checked():
         GuideOptions(window_sigmas=-1.0)
     with pytest.raises(ValueError, match="peaks"):
         GuideOptions(peaks=0)
+
+
+def test_the_guided_pass_keeps_the_columns_measured_against_an_estimated_sweep():
+    """An event the first pass measured against its own estimated sweep (TdoaMatrix.swept) keeps its first-pass
+    column in the guided matrix (a note names it); an event of it left missing whole takes the guided column."""
+    from solvers.audio import TdoaMatrix
+    from solvers.audio_guided import _keep_swept
+
+    F1 = np.array([[1.0, np.nan, 3.0], [1.5, np.nan, 3.5], [2.0, np.nan, 4.0]])
+    first = TdoaMatrix(F1, np.full((3, 3), 2.0), np.zeros(3, int), np.zeros(3), 16_000, 343.0, ("a", "b", "c"),
+                       ("e1", "e2", "e3"), "synthetic", swept=(0, 1))
+    guided = replace(first, F=np.nan_to_num(F1, nan=9.0) + 0.01, swept=())
+    out = _keep_swept(first, guided)
+    assert np.array_equal(out.F[:, 0], F1[:, 0])  # measured against the sweep: the first pass's
+    assert np.allclose(out.F[:, 1], 9.01) and np.allclose(out.F[:, 2], F1[:, 2] + 0.01)  # missing / not swept: guided
+    assert out.notes[-1].startswith("1 event(s) keep the first pass's entries, measured against their own estimated")
+    assert _keep_swept(replace(first, swept=()), guided) is guided
