@@ -561,3 +561,24 @@ def test_the_fft_length_is_scipys_next_fast_len():
     rng = np.random.default_rng(0)
     sizes = list(range(1, 3000)) + [int(v) for v in rng.integers(3000, 10**7, 500)]
     assert [_fast_length(n) for n in sizes] == [next_fast_len(n) for n in sizes]
+
+
+def test_onset_windows_start_at_each_syllable():
+    """Three 150 ms noise bursts 100 ms apart, over a tail 20 dB down: one window per burst, each 1 over the lag range
+    before its onset and exp(-t / taper) after it; onset_rise 0 is refused below 0 and turns the stage off."""
+    from solvers.audio import onset_windows
+
+    rng = np.random.default_rng(8)
+    lag, n = 40, int(0.8 * RATE)
+    x = 0.1 * rng.standard_normal((3, n + lag))
+    starts = [0, int(0.25 * RATE), int(0.5 * RATE)]
+    for s in starts:
+        x[:, lag + s : lag + s + int(0.15 * RATE)] += rng.standard_normal((3, int(0.15 * RATE)))
+    w = onset_windows(x, RATE, lag, TdoaOptions())
+    assert w.shape == (3, n + lag)
+    first = np.array([int(np.argmax(row > 0)) for row in w])  # each window's first sample: its onset - lag
+    assert np.allclose(first, starts, atol=0.01 * RATE)
+    for row, f in zip(w, first):
+        assert np.all(row[f : f + lag] == 1.0) and np.all(np.diff(row[f + lag + 2 :]) <= 0)
+    with pytest.raises(ValueError, match="onset_rise"):
+        TdoaOptions(onset_rise=-1.0)
