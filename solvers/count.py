@@ -62,6 +62,12 @@ CELLS = {"10r4s3d": "10r4s-tdoa3d:A,B2,B3,B4,C2-C10", "5r9s3d": "5r9s-tdoa3d-dir
 #: graph and carried every solution.
 COUNT_TRACKER = tracker.TrackerOptions()
 
+#: Every further seed's graph holds the first seed's q0 as its node 1 (in place of a random node), so that the
+#: closed graph carries its set there along its own edges: no separate carrying of the whole set (5r/9s: 248 s of
+#: 3,601, 2026-12-01). The graphs stay independent (their own start pairs, random nodes and edges; one node
+#: shared). A graph that does not close is carried as before (:func:`_carry`).
+ANCHORED = True
+
 #: Routes through a random midpoint tried, in turn, for a carried path that failed on the straight segment and
 #: around its stall point (5r/9s, 2026-11-29: one of 36,947 paths carried from seed 1 to seed 0 failed every
 #: straight retrack and every local detour).
@@ -551,10 +557,17 @@ def _count(target, job, options: CountOptions, say, notes: list[str], runs: list
                 solver_k, q0_k, known[k], graph.GraphOptions(nodes=nodes, seed=seed + 1000 * attempt,
                                                              seconds=options.seconds, tracker=options.tracker),
                 group=group, excluded=excluded_k, checkpoint=_checkpoint(options, system_k, seed, f"graph{attempt}"),
-                progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"), refine=refiners[k])
+                progress=lambda msg, seed=seed: say(f"seed {seed}: {msg}"), refine=refiners[k],
+                anchors=q0[None] if k and ANCHORED and nodes > 2 else None)
             results.append(result)
             carried = ""
-            if k:
+            if k and ANCHORED and nodes > 2 and result.closed:
+                # the first seed's q0 is this graph's node 1: a closed graph's set there is this seed's set carried
+                # to it (every node's set is the image of the base point's along the graph's edges, one-to-one)
+                ends = result.node_roots[1]
+                carried_sets.append((ends, np.ones(len(ends), dtype=bool)))
+                carried, _ = _compare(results[0].roots, *carried_sets[-1], group)
+            elif k:
                 ends, ok = _carry(solver0, q0_k, result.roots, q0, excluded0, track0, group, refiners[0])
                 ok = _reverse(solver0, q0, results[0].roots, q0_k, result.roots, ends, ok, excluded_k, track0, group,
                               refiners[k])

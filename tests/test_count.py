@@ -68,6 +68,25 @@ def test_a_set_with_one_solution_removed_is_found_incomplete(toa3):
     assert cut.status == "failed" and cut.residual > 1e3 * max(full.residual, 1e-15)
 
 
+def test_a_further_seed_s_graph_carries_its_set_to_the_first_seed_s_q0_along_its_own_edges(toa3):
+    """count's further seeds hold the first seed's q0 as node 1 (count.ANCHORED): the closed graph's set there is
+    the set the separate carrying reached, equal to the first seed's; a set one short is still caught."""
+    system, q0, solver, excluded, result = toa3
+    system1, q1, x1, _ = counting._start("3r3stoa", 1)
+    solver1, x1 = monodromy.start_solver(system1, q1, x1, 1)
+    other = graph.graph_monodromy(solver1, q1, x1, graph.GraphOptions(seed=1), excluded=monodromy._excluded(system1, q1),
+                                  anchors=q0[None])
+    assert other.closed and np.array_equal(other.nodes[1], q0) and other.counts == (8, 8, 8, 8)
+    at_q0 = other.node_roots[1]
+    assert counting._compare(result.roots, at_q0, np.ones(8, dtype=bool), None) == ("equal as sets", 0)
+    ends, ok = counting._carry(solver, q1, other.roots, q0, excluded, solver.options)
+    assert ok.all() and counting._compare(at_q0, ends, ok, None) == ("equal as sets", 0)
+    words, outside = counting._compare(result.roots[1:], at_q0, np.ones(8, dtype=bool), None)
+    assert outside == 1 and words.startswith("not equal")
+    with pytest.raises(ValueError, match="anchors"):
+        graph.graph_monodromy(solver1, q1, x1, graph.GraphOptions(nodes=2), anchors=np.vstack([q0, q0]))
+
+
 def test_a_fake_solution_is_never_certified(toa3):
     system, q0, _, _, result = toa3
     rng = np.random.default_rng(5)

@@ -199,6 +199,32 @@ def test_threads_give_the_same_bits(compiled, monkeypatch):
     assert tape_kernel.threads() == 1
 
 
+@pytest.mark.parametrize("compiled", [False, True])
+def test_narrower_batches_give_the_same_bits(compiled, monkeypatch):
+    """A system whose batch of CHUNK paths would take more than BATCH_BYTES is tracked in narrower batches
+    (5r/9s in 3D: 64 paths a batch): 9r/3s's 75 paths of one network in batches of 8 give the bits of one batch."""
+    if compiled and not COMPILED:
+        pytest.skip("no C compiler, or TDOA_WORKBENCH_NATIVE=off")
+    from solvers.synthetic import random_network
+
+    _, solver = _solver()
+    native = tape_native.addresses(solver.tapes, wait=True) if compiled else None
+    q = random_network(9, 3, np.random.default_rng(3)).measurements().reshape(1, -1)
+    q = q / np.sqrt(np.mean(q ** 2))
+    assert tape_kernel.batch_width(solver.tapes) == tape_kernel.CHUNK  # 4.8 KB a path
+    one = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options, native=native)
+    polished = tape_kernel.newton(solver.tapes, q, one[0][np.all(np.isfinite(one[0]), axis=1)], None, 2, native=native)
+    monkeypatch.setattr(tape_kernel, "BATCH_BYTES", 1)
+    assert tape_kernel.batch_width(solver.tapes) == 8
+    assert len(tape_kernel._chunks(len(solver.x0), 8)) >= 9
+    narrow = tape_kernel.track(solver.tapes, solver.q0, q, solver.x0, None, solver.options, native=native)
+    for a, b in zip(one, narrow):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(polished, tape_kernel.newton(solver.tapes, q, one[0][np.all(np.isfinite(one[0]), axis=1)],
+                                                               None, 2, native=native))
+    assert np.sum(one[1][:, 0] == 0) >= 0.8 * len(solver.x0)  # real tracks
+
+
 @pytest.mark.skipif(not COMPILED, reason="no C compiler, or TDOA_WORKBENCH_NATIVE=off")
 def test_systems_of_one_size_share_the_lu_and_tracker_object(tmp_path, monkeypatch):
     """The LU-and-tracker translation unit depends on the number of unknowns alone: a second user's system of 2

@@ -1,7 +1,7 @@
 """Monodromy on a Dask cluster: each round's batch of paths split among the workers.
 
-A round of :func:`solvers.continuation.graph.graph_monodromy` tracks every pending (solution, edge) pair in one
-batch; at 10^4-10^5 solutions in 35-45 unknowns a round takes minutes on one core. :class:`DaskSystem` stands in
+A round of :func:`solvers.continuation.graph.graph_monodromy` tracks every pending (solution, edge) pair in two
+batches (the edges one way, then the other); at 10^4-10^5 solutions in 35-45 unknowns a round takes minutes on one core. :class:`DaskSystem` stands in
 for the graph's system (``track(q0, q1, x0, inst, options)``; ``newton`` and ``options`` stay with the local
 solver): it cuts the batch into chunks of ``chunk`` paths, tracks each on a worker of a ``dask.distributed``
 cluster (``address``: a scheduler, or ``"local"`` for a LocalCluster of ``workers`` processes on this machine,

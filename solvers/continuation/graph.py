@@ -55,6 +55,11 @@ STRAIGHT = (tracker.TIGHT, dataclasses.replace(tracker.TIGHT, max_steps=100_000,
 #: local detours.
 RETRIES = len(STRAIGHT) + len(DETOURS)
 
+#: Each round tracks the pending (solution, edge) pairs of every edge one way (i < j), then the other way only those
+#: still unknown: a track gives its pair's image both ways, and in one batch of both ways a pair pending at both ends
+#: was tracked twice (5r/9s: 260,054 paths for 6 edges x 36,947 solutions = 221,682 images).
+TWO_WAY = True
+
 #: Independent loops the graph keeps when edges with failed tracks leave it (the complete graph on 4 nodes has 3).
 MIN_LOOPS = 2
 
@@ -259,7 +264,8 @@ def _complex(rows) -> np.ndarray:
 def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOptions = GraphOptions(), *,
                     group: np.ndarray | None = None, excluded: Callable | None = None,
                     free: np.ndarray | None = None, checkpoint: str | None = None,
-                    progress: Callable[[str], None] | None = None, refine: Callable | None = None) -> GraphCount:
+                    progress: Callable[[str], None] | None = None, refine: Callable | None = None,
+                    anchors: np.ndarray | None = None) -> GraphCount:
     """Solutions of ``system`` at q0 (P,) from the one solution x0 (N,) (or several, (R, N)) by monodromy on a
     complete graph of ``options.nodes`` parameter nodes (module docstring).
 
@@ -268,8 +274,11 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
     of points on the locus of the non-vanishing conditions (never kept). free: mask of the parameters the
     random nodes move (the trace test's witnesses keep its pencil parameter at 0). checkpoint: a JSON file
     written every minute and at the end, resumed from when it exists for the same q0, options and group.
-    refine: a second chance for endpoints whose Newton step stalls (:func:`_accept`).
-    Each round tracks, in one batch, every (solution, edge) whose image is not known yet.
+    refine: a second chance for endpoints whose Newton step stalls (:func:`_accept`). anchors: parameter points
+    (A, P), A < K, taken as nodes 1..A in place of random ones (count's further seeds take the first seed's q0: a
+    closed graph then holds its set carried there, :attr:`GraphCount.node_roots`).
+    Each round tracks every (solution, edge) whose image is not known yet, in two batches (:data:`TWO_WAY`): the
+    edges i -> j with i < j, then the other way what the first batch left unknown.
     """
     t0 = time.perf_counter()
     q0 = np.asarray(q0, dtype=complex)
@@ -281,6 +290,10 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
     for _ in range(K - 1):
         q = q0 + options.radius * scale * (rng.normal(size=P) + 1j * rng.normal(size=P))
         qs.append(np.where(free, q, q0) if free is not None else q)
+    anchors = np.zeros((0, P), dtype=complex) if anchors is None else np.atleast_2d(np.asarray(anchors, dtype=complex))
+    if len(anchors) >= K or anchors.shape[1] != P:
+        raise ValueError(f"anchors: fewer than {K} parameter points of {P} parameters, not {anchors.shape}")
+    qs[1:1 + len(anchors)] = list(anchors)  # (the random draws of the other nodes as without anchors)
     nodes = [_Node(q, K, k, N) for k, q in enumerate(qs)]
     first = _distinct_new(x0, group)
     nodes[0].add(x0[first == np.arange(len(x0))])
@@ -288,6 +301,8 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
     spent = 0.0
     key = {"q0": _pairs(q0), "nodes": K, "seed": options.seed, "radius": options.radius,
            "accept_tol": options.accept_tol, "group": 0 if group is None else len(group), "N": N}
+    if len(anchors):
+        key["anchors"] = _pairs(anchors)
     if checkpoint and os.path.exists(checkpoint):
         with open(checkpoint, encoding="utf-8") as fh:
             saved = json.load(fh)
@@ -318,15 +333,22 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
         # every (solution, edge) whose image is unknown and whose retracks are not used up
         work = [(i, j, np.flatnonzero((n.image[j] < 0) & (n.tries[j] <= retries)))
                 for i, n in enumerate(nodes) for j in n.image]
-        work = [(i, j, idx) for i, j, idx in work if len(idx)]
-        if not work:
+        if not any(len(idx) for _, _, idx in work):
             break
         rounds += 1
-        for attempt in range(retries + 1):  # 0: plain, then STRAIGHT, then DETOURS
+        tally = []  # per retry level tracked this round: (level, paths, failed, seconds)
+        for phase, attempt in [(p, a) for p in range(2 if TWO_WAY else 1) for a in range(retries + 1)]:
+            if TWO_WAY and attempt == 0:
+                # the edges one way (i < j), then the other way, on what the first way left unknown: a track
+                # i -> j gives the pair's image both ways, so the solutions it reaches at j are not tracked back
+                work = [(i, j, np.flatnonzero((n.image[j] < 0) & (n.tries[j] <= retries)))
+                        for i, n in enumerate(nodes) for j in n.image if (i < j) == (phase == 0)]
+            work = [(i, j, idx) for i, j, idx in work if len(idx)]
             part = [(i, j, idx[nodes[i].tries[j][idx] == attempt]) for i, j, idx in work]
             part = [(i, j, idx) for i, j, idx in part if len(idx)]
             if not part:
                 continue
+            t_level = time.perf_counter()
             qb = np.array([nodes[j].q for _, j, _ in part])
             inst = np.concatenate([np.full(len(idx), e) for e, (_, _, idx) in enumerate(part)])
             xs = np.vstack([nodes[i].roots[idx] for i, _, idx in part])
@@ -338,6 +360,7 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
                                                *DETOURS[attempt - 1 - len(STRAIGHT)])
             paths += tracked
             ends, ok = _accept(system, ends, qb, inst, options.accept_tol, excluded, refine)
+            tally.append((attempt, len(xs), int((~ok).sum()), time.perf_counter() - t_level))
             start = 0
             for e, (i, j, idx) in enumerate(part):
                 sl = slice(start, start + len(idx))
@@ -346,7 +369,8 @@ def graph_monodromy(system, q0: np.ndarray, x0: np.ndarray, options: GraphOption
         if progress:
             progress(f"round {rounds}: {' / '.join(str(len(n.roots)) for n in nodes)} solutions at the "
                      f"{K} nodes, {paths} paths, {sum(int((n.image[j] < 0).sum()) for n in nodes for j in n.image)} "
-                     f"tracks pending, {spent + time.perf_counter() - t0:.0f} s")
+                     f"tracks pending, {spent + time.perf_counter() - t0:.0f} s; tracked (retry level: paths, "
+                     f"failed, s) " + ", ".join(f"{a}: {n}, {f}, {s:.0f}" for a, n, f, s in tally))
         if checkpoint and time.perf_counter() - last_save > 60.0:
             _save(checkpoint, record())
             last_save = time.perf_counter()

@@ -186,11 +186,28 @@ def _check(tapes: "HomotopyTapes", N: int, Q: int) -> None:
 #: batches of about this size: :func:`_chunks`).
 CHUNK = 256
 
+#: Bytes of one batch's work arrays (registers, outputs, the tracker's state) beyond which a system's batches hold
+#: fewer than CHUNK paths (:func:`batch_width`). A batch's factorisations sweep its N + N^2 + N output rows once per
+#: evaluation: 5r/9s in 3D (45 unknowns, 48.7 KB a path) tracked 256 distinct paths in 5.5 ms of CPU a path in
+#: one batch of 256 (12.5 MB), 4.9 in batches of 128, 4.4-4.5 in batches of 48-64 (2.3-3.1 MB), the same bits;
+#: 9r/3s (4.8 KB a path, 1.2 MB for 256) keeps 256.
+BATCH_BYTES = 3 << 20
 
-def _chunks(M: int) -> list[tuple[int, int]]:
-    """Row ranges of M paths in round(M / CHUNK) batches of equal size: one 4r/5s instance (344 paths) is one
+
+def batch_width(tapes: "HomotopyTapes") -> int:
+    """Paths per lock-step batch of ``tapes``' system: CHUNK, or fewer (at least 8) where that many would take
+    more than :data:`BATCH_BYTES` of work arrays (the compiled tracker's: 2 n_reg + 2 n_out + 34 N + 10 doubles
+    a path)."""
+    n_out = tapes.full.n_outputs  # H, J, dH/ds: N + N^2 + N rows
+    N = int(round(np.sqrt(1 + n_out))) - 1
+    per_path = 8 * (2 * tapes.n_registers + 2 * n_out + 34 * N + 10)
+    return int(max(8, min(CHUNK, BATCH_BYTES // per_path)))
+
+
+def _chunks(M: int, width: int = CHUNK) -> list[tuple[int, int]]:
+    """Row ranges of M paths in round(M / width) batches of equal size: one 4r/5s instance (344 paths) is one
     batch (a second of 88 paths ran a lock-step tail of its own: 186 against 137 ms per plain track)."""
-    n = max(1, int(round(M / CHUNK)))
+    n = max(1, int(round(M / width)))
     size = -(-M // n)
     return [(a, min(a + size, M)) for a in range(0, M, size)]
 
@@ -238,9 +255,10 @@ def _pool(n: int) -> ThreadPoolExecutor:
         return _POOL[1]
 
 
-def _each_chunk(M: int, native: np.ndarray, run) -> None:
-    """run(a, b) for the row ranges of :func:`_chunks`, on :func:`threads` threads when there are several."""
-    chunks = _chunks(M)
+def _each_chunk(M: int, native: np.ndarray, run, width: int = CHUNK) -> None:
+    """run(a, b) for the row ranges of :func:`_chunks` (batches of about ``width`` paths), on :func:`threads`
+    threads when there are several."""
+    chunks = _chunks(M, width)
     n = min(threads(), len(chunks))
     if n <= 1:
         for a, b in chunks:
@@ -277,7 +295,7 @@ def track(tapes: "HomotopyTapes", q0: np.ndarray, q1: np.ndarray, x0: np.ndarray
     native = _native(native)
     opts = options.as_array()
     _each_chunk(M, native, lambda a, b: _batch(tapes, native, options.corrector == "chord", x0[a:b], q0, dq, inst[a:b], opts,
-                                               x[a:b], stats[a:b]))
+                                               x[a:b], stats[a:b]), batch_width(tapes))
     x[(stats[:, 0] != 0) & ~((stats[:, 0] == 1) & (stats[:, 3] >= 1.0 - near_end))] = np.nan
     return x, stats
 
@@ -297,5 +315,6 @@ def newton(tapes: "HomotopyTapes", q: np.ndarray, x: np.ndarray, inst: np.ndarra
     opts[7], opts[NEWTON_ONLY] = int(steps), 1.0  # final_newton = steps; Newton steps only
     native = _native(native)
     dq = np.zeros_like(q)
-    _each_chunk(M, native, lambda a, b: _batch(tapes, native, False, x[a:b], q, dq, inst[a:b], opts, out[a:b], stats[a:b]))
+    _each_chunk(M, native, lambda a, b: _batch(tapes, native, False, x[a:b], q, dq, inst[a:b], opts, out[a:b], stats[a:b]),
+                batch_width(tapes))
     return out

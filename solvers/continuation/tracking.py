@@ -406,9 +406,10 @@ class HomotopySolver:
         x, stats = self.track(qa[None], q, np.tile(xa, (B, 1)), inst)
         x = x.reshape(B, K, -1)
         stalled = stats[:, 0].reshape(B, K) == 1
-        self._local_detours(qa, xa, q, x, stalled, stats[:, 3].reshape(B, K)[stalled])
-        redo = stalled & ~np.all(np.isfinite(x), axis=2)
+        if stalled.any():
+            self._local_detours(qa, xa, q, x, stalled, stats[:, 3].reshape(B, K)[stalled])
         lost = ~np.all(np.isfinite(x), axis=2)  # :func:`unresolved` of each instance, kept where nothing is retracked
+        redo = stalled & lost
         for b in range(B):
             dup = _duplicated(x[b])
             lost[b] |= dup
@@ -480,6 +481,8 @@ class HomotopySolver:
             return self._multistart(q)
         B, K = len(q), self.n_paths
         x, complete = self._route(self.q0, self.x0, q)
+        if complete.all():  # (nothing stalled or coincides: what follows would change nothing)
+            return self._polish(x, q)
         bad = [b for b in np.flatnonzero(~complete) if not _degenerate(unresolved(x[b]))]
         # paths that still stall even with tight steps: the segment passes too close to a singular
         # point. Each such path alone goes around it through a fixed complex midpoint (two segments);
