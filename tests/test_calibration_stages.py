@@ -222,3 +222,50 @@ def test_a_model_error_as_large_as_the_receivers_std_is_never_ok():
     assert res.status != "ok"
     assert "direction of arrival" in res.message
     # the simulated array's own 0.3 mm stays a note: its receivers are within 4.4 std and "ok" (the test above)
+
+
+def _plane_network(m, n, sigma, seed, missing=0.0):
+    """A network of the 2D benchmark (scripts/bench_calibrate.network): nodes uniform in [-5, 5]^2."""
+    from solvers.synthetic import Network, corrupt_measurements
+
+    rng = np.random.default_rng(seed)
+    net = Network(rng.uniform(-5, 5, (m, 2)), rng.uniform(-5, 5, (n, 2)), rng.uniform(-2, 2, n))
+    F, _ = corrupt_measurements(net.measurements(sigma, rng), rng, missing, 0.0)
+    return net, F
+
+
+def test_plane_waves_are_a_hypothesis_the_fit_tests():
+    """12r/20s in the plane, sources among the receivers (benchmark network 2 at 0.1 mm): the factorization's third
+    singular value is 0.024 of the first, so the diagnosis proposes plane waves; the fit from their factorization
+    kept 87 of 240 entries and the answer was "inconsistent". The fit refutes the hypothesis: the point-source
+    search runs, its answer is kept, and a warning says which model was tried and why it was left."""
+    net, F = _plane_network(12, 20, 1e-4, 2007)
+    assert diagnose(F, 2).wavefront == "plane"
+    res = calibrate(F, 1e-4, dim=2, seed=2007)
+    assert res.status == "ok", res.message
+    assert res.solver != "factorization"
+    assert standardised_node_errors(res, net).max() < 5.0
+    note = next(w for w in res.warnings if "proposed plane waves" in w)
+    assert "does not explain the data" in note and "point-source" in note
+
+
+def test_a_singular_plane_wave_fit_with_spread_directions_goes_to_the_search():
+    """The same cell, network 54, sigma estimated: the plane-wave adjustment is singular although the directions
+    spread over the plane (not the data's doing, as one elevation cone in space is): "failed" before, the search's
+    answer now."""
+    net, F = _plane_network(12, 20, 1e-4, 54007)
+    res = calibrate(F, None, dim=2, seed=54007)
+    assert res.status == "ok", res.message
+    assert any("singular" in w and "proposed plane waves" in w for w in res.warnings)
+
+
+def test_an_accepted_model_is_confirmed_by_subnetworks_when_the_blocks_run_out():
+    """10r/8s with 30 % missing at 1 mm, sigma estimated (benchmark network 0): one distinct 6r4s block; the search
+    accepted the right calibration after 1 sample and, the blocks run out, called it "unconfirmed"
+    ("uncontrolled"); sub-networks now draw the confirming samples."""
+    net, F = _plane_network(10, 8, 1e-3, 7, missing=0.3)
+    res = calibrate(F, None, dim=2, seed=7)
+    assert res.samples > 1
+    assert not any("distinct blocks" in w for w in res.warnings), res.message
+    assert res.status == "ok", res.message
+    assert standardised_node_errors(res, net).max() < 5.0

@@ -8,7 +8,9 @@ its own statistics cannot see, another fit of the same data can. In the order `r
 - 2D data the model does not explain: fitted in 3D too (`_suggest_3d`, advice only);
 - sigma estimated: the transposed matrix (`_check_orientation`).
 A factorization-started answer (plane waves) needs none of these: its start comes from the data's own
-structure (no sampling), and the diagnosis has compared the two orientations (`_judge_route`).
+structure (no sampling), and the diagnosis has compared the two orientations (`_judge_route`). That start
+is a hypothesis of the diagnosis, which its fit tests (`judge.unexplained`); a fit that does not explain
+the data sends them to the search, and `choose_model` keeps the answer that explains them better.
 
 Where a stage could choose from the data instead (not done in this step, behaviour unchanged): the
 orientation is a property of the data alone (the diagnosis compares the two for plane waves; a near-field
@@ -41,6 +43,28 @@ def _judge_route(F, diagnosis: Diagnosis, result: CalibrationResult, opts: Calib
                 f"{diagnosis.orientation_ratio:.2g}): the data do not decide whether rows are receivers")
         return replace(result, warnings=result.warnings + (note,))
     return result
+
+
+def choose_model(F, sigma, opts: CalibrationOptions, diagnosis: Diagnosis, tried: CalibrationResult, why: str,
+                 searched: CalibrationResult) -> CalibrationResult:
+    """The answer when the plane-wave hypothesis of the diagnosis was refuted by its own fit (`tried`, which
+    does not explain the data: `why`) and the point-source search ran (`searched`, after `recheck`): the
+    one that explains the data better, as `_second_seed` orders two answers (usable first, then the
+    truncated cost at one scale, then more inliers); a warning says which model was tried, why it was
+    left and what the other gave. (The plane-wave adjustment is the exact point-source model through an
+    inverse range: its fit fails from a start in the wrong basin, which is what the search is for.)"""
+    cost_t, cost_s, scale = _truncated_costs(tried, searched, sigma, opts, _floor(F))
+    key_t = (tried.status in UNUSABLE, cost_t, -int(tried.inliers.sum()))
+    key_s = (searched.status in UNUSABLE, cost_s, -int(searched.inliers.sum()))
+    left = (f"the diagnosis proposed plane waves (curvature {diagnosis.curvature:.2g} of the linear term), but the "
+            f"fit from the plane-wave factorization does not explain the data ({why}; {tried.status})")
+    if key_s <= key_t:
+        note = (f"{left}: the point-source hypothesis search was run, and its answer explains the data better "
+                f"(truncated cost {cost_s / scale**2:.4g} against {cost_t / scale**2:.4g} sigma^2)")
+        return replace(searched, warnings=searched.warnings + (note,))
+    note = (f"{left}; the point-source hypothesis search explains them no better ({searched.status}, truncated cost "
+            f"{cost_s / scale**2:.4g} against {cost_t / scale**2:.4g} sigma^2): the plane-wave fit is kept")
+    return replace(tried, warnings=tried.warnings + (note,))
 
 
 def _fits_given_sigma(res: CalibrationResult) -> bool:

@@ -32,6 +32,8 @@ from .state import Diagnosis
 
 #: A node that keeps fewer than this share of its measured entries is judged by what it kept.
 KEPT_SHARE = 0.5
+#: A fit that keeps fewer than this share of all the measured entries does not explain the data: "inconsistent".
+EXPLAINED_SHARE = 2.0 / 3.0
 #: A model error in the residuals (direction_lack_of_fit) whose rms reaches this share of the receivers' median
 #: std makes their std no uncertainty: simulated 48 x 540 with 2 mm of directivity, 0.92 mm rms against a median
 #: std of 0.93 mm, a receiver 5.9 std off under "ok" at share 1; the Pyramic array, 540 sources, 0.78 mm against
@@ -80,6 +82,25 @@ def kept_findings(measured: np.ndarray, inliers: np.ndarray, placed_r, placed_t)
                           "each is placed from the few it kept, which the rest contradict (a wrong column or row, "
                           "a swapped label?); their positions are not checked"))
     return found
+
+
+def unexplained(result: CalibrationResult) -> str | None:
+    """Why a fit does not explain its data, or None when it does: it did not converge, it keeps fewer than
+    EXPLAINED_SHARE of the measured entries, or a node keeps fewer than KEPT_SHARE of its own (the data
+    contradict the fit there). A fit from a start that was a hypothesis (the plane-wave factorization) is
+    its test: such a fit refutes the start, not the data (findings about what the data leave undetermined,
+    the noise level or a model error are not in it)."""
+    if result.status == "failed" or result.measured is None:
+        return None
+    if result.status == "unconverged":
+        return "its adjustment did not converge"
+    measured = int(result.measured.sum())
+    kept = int((result.inliers & result.measured).sum())
+    if kept < EXPLAINED_SHARE * measured:
+        return f"it explains {kept} of the {measured} measurements"
+    found = kept_findings(result.measured, result.inliers, np.isfinite(result.receivers[:, 0]),
+                          np.isfinite(result.transmitters[:, 0]))
+    return found[0][1].split(":")[0] if found else None
 
 
 def judge_kept(result: CalibrationResult) -> CalibrationResult:
@@ -258,7 +279,7 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
 
     found: list[tuple[str, str]] = []
     kept = float(inl.sum()) / max(int(work.sum()), 1)
-    if kept < 2.0 / 3.0:
+    if kept < EXPLAINED_SHARE:
         found.append(("inconsistent", f"the model explains only {100 * kept:.0f} % of the measurements"))
     if not fit.converged:
         found.append(("unconverged", "the plane-wave adjustment did not converge within its iteration budget"))

@@ -26,7 +26,7 @@ import numpy as np
 
 from .flags import _principal_ratio
 from .frame import RANGE_SHARE, widen_far_ranges
-from .judge import _marginal_rejections, _short_search, _weak_at, message, route_note, worst
+from .judge import EXPLAINED_SHARE, _marginal_rejections, _short_search, _weak_at, message, route_note, worst
 from .result import CalibrationOptions, CalibrationResult
 from .ransac import _needed
 
@@ -101,7 +101,7 @@ def judge_search(fit: SearchFit, sigma, seed, opts: CalibrationOptions, t0,
     # because it explains what follows. A refinement from such a hypothesis that does not converge, or
     # collapses onto a plane, is its symptom, not the finding (16r/10s rooms, 10 % gross errors, sigma
     # given: 5 of 8 reported "unconverged", each from a search that drew no block in the basin).
-    lost = kept < 2.0 / 3.0
+    lost = kept < EXPLAINED_SHARE
     if lost:
         found.append(("inconsistent", f"the model explains only {100 * kept:.0f} % of the measurements (transposed "
                       "matrix, wrong units, not TDOA data, or mostly gross errors?)"

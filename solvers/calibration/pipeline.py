@@ -15,9 +15,9 @@ import numpy as np
 
 from . import crosscheck, search
 from .adjust import adjust_plane_waves
-from .diagnose import diagnose
+from .diagnose import WEAK_SPAN_DEGREES, diagnose
 from .initialise import plane_wave_start
-from .judge import judge_kept, plane_wave_result
+from .judge import judge_kept, plane_wave_result, unexplained
 from .result import CalibrationOptions, CalibrationResult
 from .state import CalibrationState
 
@@ -76,27 +76,38 @@ def calibrate(F, sigma: float | None = None, *, dim: int = 2, seed: int | None =
     diagnosis = state.diagnosis
     log.info("diagnosis: %d entries, %d unknowns, %d degrees of freedom; wavefronts %s (curvature %.3g)",
              diagnosis.entries, diagnosis.unknowns, diagnosis.dof, diagnosis.wavefront, diagnosis.curvature)
+    refuted = None
     if diagnosis.wavefront == "plane":
-        result = _plane_waves(state, seed, opts, t0)
-        if result is not None:
+        # the diagnosis proposes plane waves; the fit from their factorization tests that hypothesis
+        result, why = _plane_waves(state, seed, opts, t0)
+        if result is not None and why is None:
             # a start from the data's own structure, no sampling: a second seed gives the same answer, and the
             # factorization has already compared the two orientations (diagnosis.orientation_ratio)
-            result = crosscheck._judge_route(F, diagnosis, result, opts)
             return replace(judge_kept(result), seconds=time.perf_counter() - t0, seed=seed)
+        if result is not None:
+            log.info("the plane-wave fit does not explain the data (%s): the point-source hypothesis search", why)
+            refuted = (result, why)
     result = search._calibrate_once(F, sigma, seed, opts, t0, dim)
     result = crosscheck.recheck(F, sigma, seed, opts, t0, dim, result)
+    if refuted is not None:
+        result = crosscheck.choose_model(F, sigma, opts, diagnosis, refuted[0], refuted[1], result)
     return replace(judge_kept(result), seconds=time.perf_counter() - t0, seed=seed)
 
 
-def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0) -> CalibrationResult | None:
-    """The route the diagnosis chose for plane waves: initialise from the factorization
+def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0
+                 ) -> tuple[CalibrationResult | None, str | None]:
+    """The route the diagnosis proposed for plane waves: initialise from the factorization
     (`initialise.plane_wave_start`, recorded in the state), adjust every source as a direction and an
-    inverse range (`adjust.adjust_plane_waves`), judge (`judge.plane_wave_result`). None when too few
-    entries are usable (the search route then says so)."""
+    inverse range (`adjust.adjust_plane_waves`), judge (`judge.plane_wave_result`, then the orientation,
+    `crosscheck._judge_route`).
+
+    Returns (the answer, None) when its fit explains the data, (the answer, why not) when it does not
+    (`judge.unexplained`: the hypothesis is refuted, the driver runs the point-source search), (None, None)
+    when too few entries are usable (the search route then says so)."""
     F, dim, sigma, diagnosis = state.F, state.dim, state.sigma, state.diagnosis
     work, warnings, failure = search._usable(F, dim)
     if failure is not None:
-        return None
+        return None, None
     m, n = F.shape
     log.info("calibrate %dD, %d x %d, %d measured, sigma %s: plane-wave factorization", dim, m, n,
              int(state.mask.sum()), "estimated" if sigma is None else f"{sigma:g} given")
@@ -109,12 +120,15 @@ def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0) ->
                  int(fit.inliers.sum()), int(work.sum()), fit.rounds, time.perf_counter() - t0)
         res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, notes, seed)
     except np.linalg.LinAlgError:
-        # a source block of the normal matrix is singular: the data leave part of the network free (a few sources
-        # on one elevation cone). No calibration rather than a guessed one; the point-source search is no way
-        # out here (20 sources on one cone: 516 s, "unconverged")
-        span = (f"the sources span {diagnosis.elevation_span:.0f} deg of elevation; "
-                if np.isfinite(diagnosis.elevation_span) else "")
-        return search._failed(F, "the plane-wave adjustment is singular: the data leave part of the network "
-                              f"undetermined ({span}sources at more elevations, or more sources, determine it)",
-                              t0, seed, warnings=tuple(notes), dim=dim)
-    return replace(res, seconds=time.perf_counter() - t0)
+        # a source block of the normal matrix is singular. With the sources on one elevation cone (3D) the data
+        # leave part of the network free: no calibration rather than a guessed one; the point-source search is
+        # no way out there (20 sources on one cone: 516 s, "unconverged"). Otherwise the data do not explain the
+        # singularity, the start does (near-field 12r/20s in the plane taken for plane waves): refuted.
+        weak = dim == 3 and diagnosis.elevation_span < WEAK_SPAN_DEGREES
+        span = f"the sources span {diagnosis.elevation_span:.0f} deg of elevation; " if weak else ""
+        failed = search._failed(F, "the plane-wave adjustment is singular: the data leave part of the network "
+                                f"undetermined ({span}sources at more elevations, or more sources, determine it)",
+                                t0, seed, warnings=tuple(notes), dim=dim)
+        return failed, (None if weak else "its adjustment is singular although the source directions spread")
+    res = crosscheck._judge_route(F, diagnosis, replace(res, seconds=time.perf_counter() - t0), opts)
+    return res, unexplained(res)
