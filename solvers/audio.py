@@ -893,8 +893,7 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
             needed = got[4] if len(got) > 4 else options.min_agreement
             ref[j] = r
             conf[:, j] = support
-            keep = support >= options.min_support
-            keep[r] = support[r] >= 1
+            keep = support >= options.min_support  # the reference too: its entry is measured like every other
             if support.sum() < needed * m * (m - 1):
                 subset = consistent_subset(ok, options.min_support, options.subset_share)
                 if options.min_subset and subset.sum() >= options.min_subset:
@@ -903,7 +902,7 @@ def _measure(recording: Recording, options: TdoaOptions, arrivals, progress=None
                 else:
                     keep[:] = False  # the channels agree on too few pairs: the whole event is unreliable
                     dropped.setdefault(needed, []).append(j)
-            if keep.any() and not keep[r]:  # a subset without the reference: its best-supported channel refers
+            if keep.any() and not keep[r]:  # a subset, or pairs, without the reference: its best-supported channel refers
                 ref[j] = int(np.argmax(np.where(keep, support, -1)))
             F[keep, j] = options.speed * (onsets[j] + t[keep] / rate)
         if progress is not None and (j + 1) % 10 == 0:

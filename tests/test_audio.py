@@ -494,6 +494,29 @@ def test_a_subset_without_the_reference_refers_to_one_of_its_channels():
     assert any("consistent subset" in n for n in tm.notes)
 
 
+
+def test_a_reference_with_fewer_than_min_support_agreeing_pairs_is_left_missing():
+    """The reference's entry is measured like every other: with one agreeing pair (the 48 kHz 0.8 s speech room of
+    tables/audio3d_kinds, whose guided pass kept a reference 10 samples off that way) it is left missing, and the
+    best-supported kept channel refers; the other entries, agreeing with each other, are kept."""
+    from solvers.audio import _measure
+    from solvers.recording import Recording
+
+    rng = np.random.default_rng(4)
+    m = 8
+    recording = Recording(synthetic_recording(rng, np.zeros((m, 1)), [0.5]), RATE, tuple("abcdefgh"), "synthetic")
+    ok = np.zeros((m, m), bool)
+    ok[1:, 1:] = True  # channels 1-7 agree with each other
+    ok[0, 1] = ok[1, 0] = True  # the reference 0 with one channel only
+    np.fill_diagonal(ok, False)
+    t = np.arange(m, dtype=float)
+    options = TdoaOptions(max_distance=2.0)
+    assert options.min_support == 2
+    tm = _measure(recording, options, lambda j, seg, after, lag: (0, t, ok.sum(axis=1), ok))
+    assert not np.isfinite(tm.F[0, 0]) and np.isfinite(tm.F[1:, 0]).all()
+    assert tm.reference[0] == 1  # the most agreeing pairs (7), the first on a tie
+    assert np.allclose(np.diff(tm.F[1:, 0]), options.speed / RATE)  # the kept entries' differences unchanged
+
 def test_consistent_subset_peels_the_channels_that_disagree():
     from solvers.audio import consistent_subset
 
