@@ -54,11 +54,9 @@ def choose_model(F, sigma, opts: CalibrationOptions, diagnosis: Diagnosis, tried
     left and what the other gave. (The plane-wave adjustment is the exact point-source model through an
     inverse range: its fit fails from a start in the wrong basin, which is what the search is for.)"""
     cost_t, cost_s, scale = _truncated_costs(tried, searched, sigma, opts, _floor(F))
-    key_t = (tried.status in UNUSABLE, cost_t, -int(tried.inliers.sum()))
-    key_s = (searched.status in UNUSABLE, cost_s, -int(searched.inliers.sum()))
     left = (f"the diagnosis proposed plane waves (curvature {diagnosis.curvature:.2g} of the linear term), but the "
             f"fit from the plane-wave factorization does not explain the data ({why}; {tried.status})")
-    if key_s <= key_t:
+    if _rank(searched, cost_s) <= _rank(tried, cost_t):
         note = (f"{left}: the point-source hypothesis search was run, and its answer explains the data better "
                 f"(truncated cost {cost_s / scale**2:.4g} against {cost_t / scale**2:.4g} sigma^2)")
         return replace(searched, warnings=searched.warnings + (note,))
@@ -293,6 +291,11 @@ def recheck(F, sigma, seed, opts: CalibrationOptions, t0, dim: int, result: Cali
     return result
 
 
+def _rank(res: CalibrationResult, cost: float) -> tuple:
+    """Order of two answers to the same data: usable first, then the truncated cost, then more inliers."""
+    return res.status in UNUSABLE, cost, -int(res.inliers.sum())
+
+
 def _second_seed(F, sigma, opts: CalibrationOptions, result: CalibrationResult, other: CalibrationResult
                  ) -> CalibrationResult:
     """The answer of the search with the second seed against this one: where they differ, the better
@@ -301,9 +304,7 @@ def _second_seed(F, sigma, opts: CalibrationOptions, result: CalibrationResult, 
     if other is result or other.status == "failed" or not _differs(result, other):
         return result
     cost_r, cost_o, scale = _truncated_costs(result, other, sigma, opts, _floor(F))
-    key_r = (result.status in UNUSABLE, cost_r, -result.inliers.sum())
-    key_o = (other.status in UNUSABLE, cost_o, -other.inliers.sum())
-    first, second = (result, other) if key_r <= key_o else (other, result)
+    first, second = (result, other) if _rank(result, cost_r) <= _rank(other, cost_o) else (other, result)
     gap = abs(cost_r - cost_o) / scale**2 if np.isfinite(cost_r - cost_o) else np.inf
     n_diff = int((first.inliers != second.inliers).sum())
     if gap < opts.ambiguity_chi2:
