@@ -175,8 +175,9 @@ def placement(result, net: Network, det: np.ndarray, truth: np.ndarray) -> dict:
             "max_err_over_std": float(f"{np.max(standardised_node_errors(sub, truth_net), initial=0.0):.3g}")}
 
 
-def run(kind: str, condition: int, events: int, order: int, given: bool = False) -> dict:
-    """One room, one row (the module docstring); `given`: the sweep's signal given to tdoa (--signal)."""
+def room(kind: str, condition: int, events: int, order: int):
+    """(Recording read back from the room's 24-bit WAV file, Network, speed of sound, seed) of one room of the
+    table (seeded by its kind and condition; scripts/audio_music_probe.py measures the same rooms)."""
     import soundfile
 
     rate, rt60, snr = CONDITIONS[condition]
@@ -188,6 +189,14 @@ def run(kind: str, condition: int, events: int, order: int, given: bool = False)
         path = os.path.join(tmp, "room.wav")
         soundfile.write(path, (rec / (1.05 * np.max(np.abs(rec)))).T, rate, subtype="PCM_24")
         recording = read_recording(path)
+    return recording, net, c, seed
+
+
+def run(kind: str, condition: int, events: int, order: int, given: bool = False) -> dict:
+    """One room, one row (the module docstring); `given`: the sweep's signal given to tdoa (--signal)."""
+    rate, rt60, snr = CONDITIONS[condition]
+    recording, net, c, seed = room(kind, condition, events, order)
+    m = net.receivers.shape[0]
     options = TdoaOptions(speed=c, signal=sweep(kind, rate) if given else None)
     run_ = tdoa_and_calibrate(recording, options, dim=3, seed=0)
     row = {"kind": kind + ("+signal" if given else ""), "rate": rate, "rt60_s": rt60, "snr_db": snr, "seed": seed,
@@ -217,6 +226,20 @@ def summary(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def listed(ap: argparse.ArgumentParser, text: str, valid, flag: str) -> list[str]:
+    """The comma-separated names of a flag, each one of `valid` (else the parser's error naming them)."""
+    names = [k for k in text.split(",") if k]
+    if any(k not in valid for k in names):
+        ap.error(f"{flag} takes {', '.join(valid)}")
+    return names
+
+
+def index_range(text: str) -> range:
+    """LOW:HIGH (or LOW alone: that one index) as a range of indices into CONDITIONS."""
+    low, _, high = text.partition(":")
+    return range(int(low), int(high or int(low) + 1))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--kinds", default=",".join(KINDS), help=f"comma-separated, of {', '.join(KINDS)}")
@@ -230,11 +253,8 @@ def main(argv=None) -> int:
                     "whole, in order, at the end")
     ap.add_argument("--signal-only", action="store_true", help="only the sweeps' rows with the signal given")
     args = ap.parse_args(argv)
-    kinds = [k for k in args.kinds.split(",") if k]
-    if any(k not in KINDS for k in kinds):
-        ap.error(f"--kinds takes {', '.join(KINDS)}")
-    low, _, high = args.conditions.partition(":")
-    conditions = range(int(low), int(high or int(low) + 1))
+    kinds = listed(ap, args.kinds, KINDS, "--kinds")
+    conditions = index_range(args.conditions)
     jobs = [] if args.signal_only else [(k, cond, False) for k in kinds for cond in conditions]
     if not args.no_signal:
         jobs += [(k, cond, True) for k in kinds if k.endswith("sweep") for cond in conditions]
