@@ -11,6 +11,9 @@ printed as the strict share per room and pooled (docs/audio.md, "Why the phrases
   srp        (A) steered response in delay space: coordinate ascent of sum_{i<k} GCC_ik(t_i - t_k) over integer
              lags, every pair's whole correlation (not its 8 peaks), started from the consensus; and started from
              the truth (whether the truth is a local maximum of that sum)
+  mccc       (A) the multichannel cross-correlation coefficient (Chen, Benesty & Huang 2003): the determinant of the
+             normalised spatial correlation matrix of the channels (each spectrum prewhitened) minimised by the same
+             coordinate ascent, from the consensus and from the truth
   guide      (B) the guided pass (solvers.audio_guided.guided_tdoa_matrix) at the TRUE positions with a position
              std of 1 cm and 5 cm: the ceiling of any first calibration, however found
   onsets     each channel's first-note onset by a hinge fit (noise, then a line) to its band-passed envelope: the
@@ -52,7 +55,7 @@ from solvers.audio import (TdoaOptions, _consensus, _event_arrivals, _fast_lengt
 from solvers.audio_guided import guided_tdoa_matrix  # noqa: E402
 from audio_kinds import CONDITIONS, index_range, listed, room, scores  # noqa: E402
 
-APPROACHES = ("first", "consensus", "srp", "guide", "onsets", "early", "early-oracle", "hybrid", "wpe")
+APPROACHES = ("first", "consensus", "srp", "mccc", "guide", "onsets", "early", "early-oracle", "hybrid", "wpe")
 BAND = (150.0, 7000.0)
 
 
@@ -99,8 +102,25 @@ def correlations(seg, max_lag, beta=1.0):
     return M
 
 
-def ascend(M, t, r, sweeps=10):
-    """Coordinate ascent of sum_{a<b} M[a, b, t_a - t_b] over integer times (t_r fixed)."""
+def coefficients(seg, max_lag):
+    """(m, m, 2 max_lag + 1) correlation coefficients of every ordered pair of the channels, each spectrum
+    prewhitened (divided by its magnitude): [a, b, max_lag + x] at a's lag x behind b."""
+    m, length = seg.shape
+    n = _fast_length(2 * length)
+    i, k = np.triu_indices(m, 1)
+    X = np.fft.rfft(seg, n, axis=1)
+    X = X / np.maximum(np.abs(X), 1e-12)
+    cc = np.fft.irfft(X[i] * np.conj(X[k]), n, axis=1)[:, np.arange(-max_lag, max_lag + 1) % n]
+    energy = np.sqrt(np.sum(np.abs(X) ** 2, axis=1) / n * 2)
+    M = np.zeros((m, m, 2 * max_lag + 1))
+    M[i, k] = cc / (energy[i] * energy[k])[:, None]
+    M[k, i] = M[i, k][:, ::-1]
+    return M
+
+
+def coordinate_search(M, t, r, objective, sweeps):
+    """Integer times t (t_r fixed) improved channel by channel: each moved to the lag x maximising
+    objective(t, a, row), row (lags, m) = M[a, b, x - t_b] for every x (0 beyond the lag range, and for b = a)."""
     m, lags = M.shape[0], M.shape[2]
     max_lag = lags // 2
     xs = np.arange(-max_lag, max_lag + 1)
@@ -108,15 +128,37 @@ def ascend(M, t, r, sweeps=10):
     for _ in range(sweeps):
         before = t.copy()
         for a in (a for a in range(m) if a != r):
-            s = np.zeros(len(xs))
-            for b in (b for b in range(m) if b != a):
-                d = xs - t[b] + max_lag
-                ok = (d >= 0) & (d < lags)
-                s[ok] += M[a, b, d[ok]]
-            t[a] = xs[int(np.argmax(s))]
+            e = xs[:, None] - t[None, :] + max_lag
+            row = np.where((e >= 0) & (e < lags), M[a, np.arange(m)[None, :], np.clip(e, 0, lags - 1)], 0.0)
+            row[:, a] = 0.0
+            t[a] = xs[int(np.argmax(objective(t, a, row)))]
         if np.array_equal(t, before):
             break
     return t
+
+
+def ascend(M, t, r, sweeps=10):
+    """Coordinate ascent of sum_{a<b} M[a, b, t_a - t_b] (the steered response in delay space)."""
+    return coordinate_search(M, t, r, lambda t, a, row: row.sum(axis=1), sweeps)
+
+
+def ascend_mccc(M, t, r, sweeps=6):
+    """Coordinate descent of log det R(t), R[a, b] = M[a, b, t_a - t_b] (1 on the diagonal; MCCC)."""
+    m, lags = M.shape[0], M.shape[2]
+    max_lag = lags // 2
+
+    def objective(t, a, row):
+        inside = np.abs(t[:, None] - t[None, :]) <= max_lag
+        d = np.clip(t[:, None] - t[None, :] + max_lag, 0, lags - 1)
+        R = np.where(inside, M[np.arange(m)[:, None], np.arange(m)[None, :], d], 0.0)
+        np.fill_diagonal(R, 1.0)
+        Rs = np.repeat(R[None], len(row), axis=0)
+        others = np.arange(m) != a
+        Rs[:, a, others] = Rs[:, others, a] = row[:, others]
+        sign, logdet = np.linalg.slogdet(Rs)
+        return -np.where(sign > 0, logdet, np.inf)
+
+    return coordinate_search(M, t, r, objective, sweeps)
 
 
 def band(seg, rate):
@@ -314,6 +356,11 @@ def measure(approach: str, condition: int) -> dict:
                 M = correlations(ev["seg"], max_lag)
                 add("ascent from the consensus", right(ev, ascend(M, t, r), r))
                 add("ascent from the truth", right(ev, ascend(M, ev["arrival"] - ev["arrival"][r], r), r))
+        elif approach == "mccc":
+            t = _event_arrivals(ev["seg"], max_lag, options)[1]
+            M = coefficients(ev["seg"], max_lag)
+            add("descent from the consensus", right(ev, ascend_mccc(M, t, r), r))
+            add("descent from the truth", right(ev, ascend_mccc(M, ev["arrival"] - ev["arrival"][r], r), r))
         elif approach == "onsets":
             e = hinge_onsets(ev["seg"], rate, max_lag) - ev["arrival"]
             e = np.abs(e - np.nanmedian(e)) / rate
