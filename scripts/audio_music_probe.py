@@ -31,8 +31,9 @@ Per-event approaches are scored as the table's `strict` with every entry of the 
 leaves entries missing); `first` and `guide` as the table (their matrices' rules apply).
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/audio_music_probe.py [--approaches first,consensus,...] [--rooms 0:6]
-Needs the optional extra: pip install -e ".[audio]" (pyroomacoustics). Deterministic (seeded); about 10 minutes
-for every approach on the shared machine.
+Needs the optional extra: pip install -e ".[audio]" (pyroomacoustics). Deterministic (seeded); every approach but
+wpe took about 20 minutes in two processes on the shared 2-core machine at load average 10-13 (wpe on the three
+16 kHz rooms about 8 minutes, the 48 kHz rooms not finished).
 """
 from __future__ import annotations
 
