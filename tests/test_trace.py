@@ -279,3 +279,23 @@ def test_ball_newton_on_the_trace_tape_reaches_a_witness_at_high_precision():
     z, ok = balls.refine(np.vstack([moved, far]), steps=8)
     assert ok[0] and np.abs(z[0] - y).max() <= 1e-14 * (1.0 + np.abs(y).max()), np.abs(z[0] - y).max()
     assert not ok[1] and np.array_equal(z[1], far)
+
+
+def test_graphs_agreeing_on_a_set_with_untrackable_witnesses_do_not_confirm_a_failure(monkeypatch):
+    """A nonzero trace on a witness set that a second graph finds again is "failed" only where the graphs could reach
+    every witness: with points among them that the tracker cannot start from or end on (their Newton step above its
+    corrector tolerance: 3D TOA 4r/6s, two graphs agreed on 1,157 of 1,160 witnesses), it is "inconclusive". The
+    same agreement on well-conditioned witnesses stays "failed"."""
+    W = np.ones((5, 3), dtype=complex)
+
+    def once(stalled):
+        def run(*args, **kwargs):
+            return trace.TraceTest("failed", 1e-6, 4, 5, 3, 100, 1.0, 0, 1e-12, stalled=stalled), W
+        return run
+
+    monkeypatch.setattr(trace, "_trace_once", once(2))
+    test = trace.trace_test(None, ["x", "y"], ["a"], np.zeros(1), np.zeros((4, 2)), (np.zeros(1), np.zeros(2)))
+    assert test.status == "inconclusive" and "too ill-conditioned for the double-precision tracker" in test.why, test
+    monkeypatch.setattr(trace, "_trace_once", once(0))
+    test = trace.trace_test(None, ["x", "y"], ["a"], np.zeros(1), np.zeros((4, 2)), (np.zeros(1), np.zeros(2)))
+    assert test.status == "failed" and test.why == "witness set confirmed by a second graph (5)", test
