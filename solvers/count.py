@@ -730,7 +730,8 @@ def _trace(target, system: ParametricSystem, q0: np.ndarray, roots: np.ndarray, 
     if test.status == "inconclusive" and test.failed_paths and coordinates is not None:
         # paths lost on every route on a pencil of a few coordinates: the fibre's points escape with those coordinates
         # finite (base points of the pencil on the curve; 3D TOA 4r/6s on b: 71 of 1,866 slice paths diverged, 24 of
-        # the 38 roots among them); the pencil on every unknown has none (passed at 9.1e-8, 2026-12-02)
+        # the 38 roots among them); the pencil on every unknown has none (1,160 witnesses, passed at 1.6e-13, rounding level
+        # 1.7e-12, 2026-12-02)
         say(f"trace test: {test.failed_paths} paths lost on the pencil on {pencil}; again on every unknown")
         pencil = f"every unknown (on {pencil}: {test.failed_paths} slice paths lost on every route, base points)"
         test = run(None)

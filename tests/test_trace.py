@@ -231,3 +231,71 @@ def test_a_missing_root_fails_on_a_confirmed_witness_set():
     system, q0, roots, other = _roots("3r3stoa", 8)
     test = trace.trace_test_system(system, q0, roots[1:], other, trace.TraceOptions(seed=1))
     assert test.status == "failed" and test.why.startswith("witness set confirmed by a second graph"), test
+
+
+def test_a_witness_found_twice_counts_once(monkeypatch):
+    """2D TOA 3r/3s: the witness graph returns one witness twice, as two points 4e-6 apart (relative; farther than
+    graph.SAME, as an ill-conditioned witness's double-precision points are: 3D TOA 4r/6s, 1.5e-6). Both step above
+    PRECISE, are refined at 160 bits onto the same point and count once: the test passes on the right witness count.
+    Counted twice, the trace would be off by a whole point."""
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    options = trace.TraceOptions(seed=1)
+    clean = trace.trace_test_system(system, q0, roots, other, options)
+    assert clean.status == "passed", clean
+    real = trace.graph.graph_monodromy
+
+    def twice(*args, **kwargs):
+        result = real(*args, **kwargs)
+        w = result.roots[0]
+        size = 1.0 + np.linalg.norm(w)
+        again = np.vstack([w + 2e-6 * size / np.sqrt(len(w)), w - 2e-6 * size / np.sqrt(len(w)), result.roots[1:]])
+        return dataclasses.replace(result, roots=again)
+
+    monkeypatch.setattr(trace.graph, "graph_monodromy", twice)
+    test = trace.trace_test_system(system, q0, roots, other, options)
+    assert test.status == "passed" and test.witnesses == clean.witnesses and test.residual < trace.PASS_TOL, test
+
+
+def test_ball_newton_on_the_trace_tape_reaches_a_witness_at_high_precision():
+    """certify.TapeBalls runs the trace system's Newton tape in arb: its values agree with the double-precision
+    tape, and a witness moved by 1e-5 (relative) comes back to the witness to double rounding, flagged converged;
+    a point far from the curve is not."""
+    from solvers.continuation import certify, tape_kernel
+
+    system, q0, roots, other = _roots("3r3stoa", 8)
+    names = list(system.unknowns), list(system.parameters)
+    equations = trace.system_equations(system)[0]
+    pencil = trace.Pencil.build(equations, *names, q0, other, trace.TraceOptions(seed=1), None)
+    y = pencil.start[0]
+    balls = certify.TapeBalls(pencil.system.tapes, pencil.Q0)
+    from flint import acb
+    out = balls.run([np.array([acb(v.real, v.imag)], dtype=object) for v in y])
+    ref = tape_kernel.run(pencil.system.tapes.newton,
+                          np.concatenate([y, [0.0], pencil.Q0, np.zeros_like(pencil.Q0)])[:, None])[:, 0]
+    got = np.array([complex(float(v[0].real.mid()), float(v[0].imag.mid())) for v in out])
+    assert np.allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    moved = y * (1.0 + 1e-5)
+    far = y + 0.5 * (1.0 + np.abs(y))
+    z, ok = balls.refine(np.vstack([moved, far]), steps=8)
+    assert ok[0] and np.abs(z[0] - y).max() <= 1e-14 * (1.0 + np.abs(y).max()), np.abs(z[0] - y).max()
+    assert not ok[1] and np.array_equal(z[1], far)
+
+
+def test_graphs_agreeing_on_a_set_with_untrackable_witnesses_do_not_confirm_a_failure(monkeypatch):
+    """A nonzero trace on a witness set that a second graph finds again is "failed" only where the graphs could reach
+    every witness: with points among them that the tracker cannot start from or end on (their Newton step above its
+    corrector tolerance: 3D TOA 4r/6s, two graphs agreed on 1,157 of 1,160 witnesses), it is "inconclusive". The
+    same agreement on well-conditioned witnesses stays "failed"."""
+    W = np.ones((5, 3), dtype=complex)
+
+    def once(stalled):
+        def run(*args, **kwargs):
+            return trace.TraceTest("failed", 1e-6, 4, 5, 3, 100, 1.0, 0, 1e-12, stalled=stalled), W
+        return run
+
+    monkeypatch.setattr(trace, "_trace_once", once(2))
+    test = trace.trace_test(None, ["x", "y"], ["a"], np.zeros(1), np.zeros((4, 2)), (np.zeros(1), np.zeros(2)))
+    assert test.status == "inconclusive" and "too ill-conditioned for the double-precision tracker" in test.why, test
+    monkeypatch.setattr(trace, "_trace_once", once(0))
+    test = trace.trace_test(None, ["x", "y"], ["a"], np.zeros(1), np.zeros((4, 2)), (np.zeros(1), np.zeros(2)))
+    assert test.status == "failed" and test.why == "witness set confirmed by a second graph (5)", test

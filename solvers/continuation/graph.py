@@ -57,11 +57,11 @@ RETRIES = len(STRAIGHT) + len(DETOURS)
 
 #: Each round tracks the pending (solution, edge) pairs of every edge one way (i < j), then the other way only those
 #: still unknown: a track gives its pair's image both ways, and in one batch of both ways a pair pending at both ends
-#: was tracked twice (5r/9s: 260,054 paths for 6 edges x 36,947 solutions = 221,682 images). Off: with it on, the
-#: trace test's witness graph of 3D TOA 4r/6s found 1,159 witnesses (a second graph agreeing) where one batch finds
-#: 1,154, and the verdict on the complete 38 roots went from passed (residual 9.1e-8, rounding level 1.0e-8) to
-#: failed (1.4e-7, level 2.3e-9): a verdict that rests on which witnesses a graph order finds (docs/count.md).
-TWO_WAY = False
+#: was tracked twice (5r/9s seed 0: 221,924 paths on, 259,603 off, for 6 edges x 36,947 solutions = 221,682 images).
+#: It was off for a while: it moved the trace test's verdict on 3D TOA 4r/6s (every unknown), which had passed a set
+#: of 1,154 of the 1,160 witnesses within a rounding level inflated by unrefined ill-conditioned points, and
+#: failed 1,159; the test now refines those points (trace.PRECISE) and passes only the complete set (docs/count.md).
+TWO_WAY = True
 
 #: Independent loops the graph keeps when edges with failed tracks leave it (the complete graph on 4 nodes has 3).
 MIN_LOOPS = 2

@@ -50,7 +50,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import graph
+from . import certify, graph
 from . import monodromy as md
 from . import slp, tape_kernel, tape_native, tracker
 from . import tracking as tk
@@ -98,8 +98,9 @@ REDRAWS = 2
 #: WITNESS_TOL and LOCUS_REL, the continuation fallback. 4 (2026-11-29): witnesses by the graph off the lam = 0
 #: component and settled before the locus test; a group's orbits traced on invariant coordinates. 5 (2026-12-02): a
 #: failed verdict regrown (:data:`REGROW`), inconclusive within a rounding level above FLOOR_MAX / FLOOR_FACTOR,
-#: witnesses started from several roots of the second instance.
-TEST_VERSION = 5
+#: witnesses started from several roots of the second instance. 6 (2026-12-02): points stepping above PRECISE refined at
+#: 160 bits, the witnesses then told apart (one witness found twice is one), the rounding level from the refined points.
+TEST_VERSION = 6
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
 #: one root 2e-4 .. 1e-2 (module docstring; docs/minimal-3d.md, section 4).
@@ -114,6 +115,17 @@ FLOOR_FACTOR = 10.0
 #: ... but never above this: points whose Newton steps are larger are not accurate enough for a verdict of
 #: "passed" (a missing point can weigh 4e-8 .. 4e-7, 10r/4s), and the test fails instead.
 FLOOR_MAX = 1e-7
+
+#: Points (roots, witnesses, slice endpoints) whose next Newton step in double precision is above this (relative) are
+#: refined by Newton's method at :data:`.certify.HIGH_PRECISION` bits on the trace system's tape
+#: (:class:`.certify.TapeBalls`) before they are compared and summed. An ill-conditioned point stalls in double
+#: precision at cond x eps: 3D TOA 4r/6s (every unknown) has witnesses of condition 5e12 whose double-precision
+#: points are off by 1.7e-6 (relative), and 207 of a set of 1,158 step above 1e-11. Unrefined, (a) two approximations
+#: of one witness 1.5e-6 apart passed for two witnesses (:data:`graph.SAME` is 1e-6), and (b) the points' stalled
+#: steps set a rounding level (1e-8) under which sets short of 3 and 6 of the 1,160 witnesses passed (residuals 7.3e-8,
+#: 9.1e-8 .. 9.7e-8); refined, a point is exact to double rounding, the same witness found twice is one point, the
+#: complete set passes at 1.6e-13 and the short ones stand against a level of 1.8e-12.
+PRECISE = 1e-11
 
 
 @dataclass(frozen=True)
@@ -153,6 +165,7 @@ class TraceTest:
     floor: float = float("nan")
     redrawn: int = 0  # slices given another t after paths failed on every route (at most REDRAWS)
     why: str = ""  # what decided an inconclusive or confirmed verdict
+    stalled: int = 0  # witnesses whose double-precision Newton step is above the tracker's corrector tolerance
 
     def record(self) -> dict:
         return dataclasses.asdict(self)
@@ -328,6 +341,11 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
         paths += again.paths
         counts.append(again.witnesses)
         if again.witnesses == test.witnesses and again.status == "failed":  # the same witnesses: confirmed
+            if again.stalled:  # ... by graphs that cannot reach witnesses like some of its own
+                return dataclasses.replace(again, status="inconclusive", paths=paths, why=(
+                    f"witness set confirmed by a second graph ({len(W2)}), but {again.stalled} of its points are too "
+                    f"ill-conditioned for the double-precision tracker (Newton step above {TrackerOptions().tol:.0e}): "
+                    "witnesses like them can be out of every graph's reach"))
             return dataclasses.replace(test, paths=paths, why=f"witness set confirmed by a second graph ({len(W)})")
         test, W = again, W2
     if test.status == "failed":  # the witnesses grew at the last regrowth: not enough of them to decide
@@ -380,6 +398,7 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
     if not system.step(base, Q0).max() <= ROOT_TOL:
         raise tk.HomotopyError(f"the roots are not roots of the system at p (Newton step {system.step(base, Q0).max():.1e})")
     base = system.newton(base, Q0[None], steps=2)
+    base, base_exact = _precise(system, Q0, base)
 
     def off_fibre(y: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """Witness endpoints that are not witnesses, at each point's own node Q (a row per point, or one row for
@@ -416,7 +435,7 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
                                                                                seconds=options.seconds),
                                           group=group_y, excluded=off_fibre, free=free,
                                           checkpoint=checkpoint if not regrow else None,
-                                          progress=progress)
+                                          progress=progress, refine=_tape_refiner(system))
         W = witnesses.roots
         paths = witnesses.paths
         # the graph keeps no point of the lam = 0 component (F(x; p) = 0, the roots' own; the 10r/4s loops, which
@@ -431,6 +450,15 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
         # the rule again on the base node's points as they stand (a checkpoint may hold points kept under older
         # rules: 10r/4s, 3 of 135,921 that 20 more Newton steps moved by 6-93 %)
         W = W[~off_fibre(W, Q0[None])]
+        # refined, one witness found twice (two double-precision points of an ill-conditioned witness farther apart
+        # than graph.SAME) is one point
+        W, W_exact = _precise(system, Q0, W)
+        if len(W) > 1:
+            kept = graph._distinct_new(W, group_y) == np.arange(len(W))
+            if (~kept).any() and progress:
+                progress(f"trace test: {int((~kept).sum())} witness(es) found twice (refined at "
+                         f"{certify.HIGH_PRECISION} bits: the same point) counted once")
+            W, W_exact = W[kept], W_exact[kept]
         # the witnesses' graph need not close: the test itself tells whether roots and witnesses are the whole fibre
         # (6r/3s: 185 of 23,000 witness tracks stall on every retry, edges near the det H = 0 component); a graph cut
         # by the time cap has not looked everywhere, and gives no verdict
@@ -479,14 +507,20 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
     flat[ok] = system.newton(flat[ok], targets, steps=2, inst=inst[ok])
     ends = flat.reshape(2, M, -1)
     n_failed = int(failed.sum())
+    exact = [np.concatenate([base_exact, W_exact])]
+    if not n_failed:
+        for b in range(2):
+            ends[b], done = _precise(system, targets[b], ends[b])
+            exact.append(done)
     sets = [S, ends[0], ends[1]]
     keep = np.append(used, True)  # the pencil's coordinates and lam
     # each orbit counts with its size (all |G| for a free action); the invariant coordinates are one orbit's
     weight = _orbit_sizes(S, group_y)[:, None]
-    # each point's accuracy: its next Newton step (rounding level times its condition); the traces' own error
-    # is at most their sum, which the fit's residual cannot be expected to beat
-    noise = [weight * np.abs(system.image(system.newton(s_, q[None])) - system.image(s_))[:, keep]
-             if not n_failed else np.zeros((0, keep.sum())) for s_, q in zip(sets, [Q0, *targets])]
+    # each point's accuracy: its next Newton step (rounding level times its condition), or double rounding where
+    # it was refined at higher precision; the traces' own error is at most their sum, which the fit's residual
+    # cannot be expected to beat
+    noise = [weight * _accuracy(system, s_, q, e)[:, keep] if not n_failed else np.zeros((0, keep.sum()))
+             for s_, q, e in zip(sets, [Q0, *targets], exact)]
     sets = [weight * system.image(s_)[:, keep] for s_ in sets]
     traces = np.array([s_.sum(axis=0) for s_ in sets])
     size = max(float(np.linalg.norm(s_, axis=1).sum()) for s_ in sets) if not n_failed else 1.0
@@ -505,10 +539,14 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
         status = "failed"
     if progress:
         said = (f"{n_failed} of {2 * M} slice paths failed on every route" if n_failed else
-                f"residual {residual:.1e} (the points' Newton steps sum to {floor:.1e})")
+                f"residual {residual:.1e} (the points' rounding level {floor:.1e})")
         progress(f"trace test: {status}, {said}, {K} roots + {len(W)} witnesses, {paths} paths")
+    # witnesses the double-precision tracker cannot start from or end on (its corrector never reaches its tolerance
+    # there): a graph's tracks miss witnesses like them, so two graphs agreeing on a set holding some does not show it
+    # whole (3D TOA 4r/6s, every unknown: two graphs agreed on 1,157 of 1,160 witnesses)
+    stalled = int((system.step(W, Q0) > system.options.tol).sum()) if len(W) else 0
     return TraceTest(status, residual, K, len(W), witnesses.rounds, paths,
-                     round(time.perf_counter() - t_start, 1), n_failed, floor, redrawn, why), W
+                     round(time.perf_counter() - t_start, 1), n_failed, floor, redrawn, why, stalled), W
 
 
 def _retrack(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.ndarray, ends: np.ndarray,
@@ -522,6 +560,51 @@ def _retrack(system: TraceSystem, Q0: np.ndarray, targets: np.ndarray, S: np.nda
     failed[:] = [_failed(system, targets[b], ends[b], on_locus, group=group) for b in range(2)]
     paths = len(bi) + _detours(system, Q0, targets, S, ends, failed, on_locus, group=group)
     return paths + _continuation(system, Q0, targets, S, ends, failed, on_locus, group=group)
+
+
+def _tape_refiner(system: TraceSystem) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """``refine(points, q_rows)`` for the witness graph (:func:`graph._accept`'s second chance for an endpoint whose
+    Newton step stalls between the acceptance and :data:`graph.BORDER`): Newton's method at
+    :data:`.certify.HIGH_PRECISION` bits on the trace system's tape at each point's node. Without it an ill-conditioned
+    witness is rejected at the base node on every track that reaches it: 3D TOA 4r/6s on every unknown, the graph
+    ended with 1,153 / 1,160 / 1,160 / 1,158 witnesses at its four nodes, 173 tracks into the base node failing
+    every retry."""
+    balls: dict[bytes, certify.TapeBalls] = {}
+
+    def refine(points: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out, ok = points.copy(), np.zeros(len(points), dtype=bool)
+        keys = [np.asarray(qk, dtype=complex).tobytes() for qk in q]
+        for key in dict.fromkeys(keys):
+            rows = np.array([k for k, other in enumerate(keys) if other == key])
+            if key not in balls:
+                balls[key] = certify.TapeBalls(system.tapes, np.asarray(q[rows[0]], dtype=complex))
+            out[rows], ok[rows] = balls[key].refine(points[rows])
+        return out, ok
+
+    return refine
+
+
+def _precise(system: TraceSystem, Q: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points y (K, N + 1) at the trace system's parameters Q with those whose next Newton step is above
+    :data:`PRECISE` refined at :data:`.certify.HIGH_PRECISION` bits (:class:`.certify.TapeBalls`), and the mask of
+    the points refined there (exact to double rounding; a point that does not converge there is left as it was)."""
+    exact = np.zeros(len(y), dtype=bool)
+    rows = np.flatnonzero(np.all(np.isfinite(y), axis=1))
+    rows = rows[~(system.step(y[rows], Q) <= PRECISE)] if len(rows) else rows
+    if not len(rows):
+        return y, exact
+    y = y.copy()
+    y[rows], exact[rows] = certify.TapeBalls(system.tapes, Q).refine(y[rows])
+    return y, exact
+
+
+def _accuracy(system: TraceSystem, y: np.ndarray, Q: np.ndarray, exact: np.ndarray) -> np.ndarray:
+    """Each point's error bound in the pencil's coordinates (K, N + 1): double rounding (2 eps |m(y)|) where the
+    point was refined at higher precision, else its next Newton step in double precision."""
+    image = system.image(y)
+    out = np.abs(system.image(system.newton(y, Q[None])) - image)
+    out[exact] = 2.0 * np.finfo(float).eps * np.abs(image[exact])
+    return out
 
 
 def _orbit_sizes(points: np.ndarray, group: np.ndarray | None) -> np.ndarray:
