@@ -112,10 +112,19 @@ def judge_search(fit: SearchFit, sigma, seed, opts: CalibrationOptions, t0,
     enough = placed_r.sum() > dim and placed_t.sum() > dim  # the shapes below mean something
     flat_all = _principal_ratio(np.vstack([R[placed_r], S[placed_t]])) if dim == 3 and enough else 1.0
     shape, across = ("collinear", "line") if dim == 2 else ("coplanar", "plane")
-    if flat_all < opts.collinear_ratio:
-        found.append(("ambiguous", f"every node lies nearly in one plane (spread ratio {flat_all:.2g}): the data are "
-                      "planar, each node's mirror image across that plane fits as well; calibrate in 2D (dim=2, "
-                      "--dim 2)"))
+    if flat_all < opts.collinear_ratio and st is not None and st.global_passed:
+        # the planar fit explains the data within the given sigma: a fact about the data
+        found.append(("ambiguous", f"every node lies nearly in one plane (spread ratio {flat_all:.2g}) and the fit passes "
+                      "the global test: the data are planar, each node's mirror image across that plane fits as well; "
+                      "calibrate in 2D (dim=2, --dim 2)"))
+    elif flat_all < opts.collinear_ratio:
+        # a fit not shown to explain the data says nothing about them (issue 52): the search can end in a planar
+        # local minimum (a 6 x 10 room recording: rms 38 mm planar, its true 3D positions 0.35 mm)
+        found.append(("ambiguous", f"every node of this fit lies nearly in one plane (spread ratio {flat_all:.2g}): either "
+                      "the network is planar (each node's mirror image across that plane fits as well: calibrate in 2D, "
+                      "dim=2, --dim 2) or the search ended in a planar local minimum (another seed, or sigma given, may "
+                      "find a better 3D fit); " + ("the global test fails at the given sigma" if sigma is not None else
+                                                   "with sigma estimated this fit cannot tell which")))
     else:
         for kind, other, P in (("receivers", "transmitter", R[placed_r]), ("transmitters", "receiver", S[placed_t])):
             ratio = _principal_ratio(P)
