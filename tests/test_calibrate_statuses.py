@@ -9,7 +9,7 @@ import pytest
 
 from solvers.calibration import CalibrationOptions, calibrate
 from solvers.calibration import crosscheck, judge, search
-from solvers.synthetic import corrupt_measurements, random_network
+from solvers.synthetic import Network, corrupt_measurements, random_network
 
 
 def _network(m, n, seed, sigma=1e-2, gross=0.0):
@@ -348,3 +348,32 @@ def test_marginal_rejections_count_only_at_nodes_that_keep_a_weak_entry():
     assert judge._marginal_rejections(~inl, inl, w, redundancy, float("inf"), opts) == []
     with pytest.raises(ValueError):
         CalibrationOptions(weak_redundancy=1.0)
+
+
+def _no_redundancy_network(k: int):
+    # bench_calibrate's 8r/5s, 30 % missing, sigma 1e-4, network k (seed 1000 k + 7): 28 entries for 28 unknowns
+    rng = np.random.default_rng(1000 * k + 7)
+    net = Network(rng.uniform(-5, 5, (8, 2)), rng.uniform(-5, 5, (5, 2)), rng.uniform(-2, 2, 5))
+    F, _ = corrupt_measurements(net.measurements(1e-4, rng), rng, 0.3, 0.0)
+    assert int(np.isfinite(F).sum()) == 28
+    return net, F
+
+
+def test_no_redundancy_is_no_failed_global_test():
+    # network 54: the sigma-given fit is exact (dof 0); its global test was reported failed (bool(None)),
+    # which sent it to the sigma check, whose sigma-estimated fit (a wrong basin, 44 cm off) was then the
+    # answer, "inconsistent: the given sigma is too small"
+    net, F = _no_redundancy_network(54)
+    res = calibrate(F, sigma=1e-4, seed=54007)
+    assert res.status == "uncontrolled", res.message
+    assert res.dof == 0 and res.global_test is None and res.rms < 1e-9
+    assert "too small" not in res.message
+
+
+@pytest.mark.slow  # 146 s at load 12: the sigma-given search that finds nothing, then the sigma check's search
+def test_sigma_check_needs_redundancy_by_count():
+    # network 64: the sigma-given search finds nothing; the sigma-estimated fit reports 28 degrees of
+    # freedom for 28 entries and 28 unknowns, and was taken as the data's sigma ("inconsistent", 1.5 m off)
+    net, F = _no_redundancy_network(64)
+    res = calibrate(F, sigma=1e-4, seed=64007)
+    assert res.status == "failed", res.message

@@ -245,7 +245,8 @@ def judge_search(fit: SearchFit, sigma, seed, opts: CalibrationOptions, t0,
         receiver_std=rstd, transmitter_std=tstd, offset_std=ostd, warnings=tuple(warnings),
         solver="+".join(sorted(search.solvers)), samples=search.samples, hypotheses=search.hypotheses,
         seconds=time.perf_counter() - t0, seed=seed, dof=st.dof if st is not None else 0,
-        global_test=None if st is None or st.global_statistic is None else
+        # no test without redundancy (dof 0: global_passed None), not a failed one (bool(None) was False)
+        global_test=None if st is None or st.global_statistic is None or st.global_passed is None else
         (float(st.global_statistic), float(st.global_critical), bool(st.global_passed)),
         redundancy=redundancy, w_test=w_test, critical_value=float(crit), mdb=mdb,
         receiver_reliability=rrel, transmitter_reliability=trel, uncontrolled=uncontrolled, measured=mask,

@@ -338,7 +338,8 @@ def _print_calibration(result, meas, units: str | None = None) -> None:
               f"hypotheses from {result.solver}: {result.samples} samples, {result.hypotheses} hypotheses, "
               f"{result.seconds:.2f} s")
         gt = result.global_test
-        test = ("global test not run (sigma estimated)" if gt is None else
+        why = "sigma estimated" if result.sigma_estimated else "no degree of freedom"
+        test = (f"global test not run ({why})" if gt is None else
                 f"global test SSR/sigma^2 {gt[0]:.4g} vs {gt[1]:.4g}: {'passed' if gt[2] else 'FAILED'}")
         n_unc = int(result.uncontrolled.sum()) if result.uncontrolled is not None else 0
         print(f"adjustment: {result.dof} degrees of freedom; {test}; outlier test |w| <= {result.critical_value:.3g}; "
