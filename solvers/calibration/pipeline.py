@@ -113,6 +113,18 @@ def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0
              int(state.mask.sum()), "estimated" if sigma is None else f"{sigma:g} given")
     state = replace(state, start=plane_wave_start(F, work, diagnosis))
     notes = warnings + list(diagnosis.notes) + list(state.start.notes)
+    # With the sources on one elevation cone (3D) the data leave part of the network free: a singular or an
+    # unconverged plane-wave fit is then the data's, not the start's, and the point-source search is no way out
+    # (20 sources on one cone: 516 s, "unconverged"): no calibration rather than a guessed one. Otherwise the
+    # data do not explain it, the start does (near-field 12r/20s in the plane taken for plane waves): refuted.
+    weak = dim == 3 and diagnosis.elevation_span < WEAK_SPAN_DEGREES
+
+    def undetermined(what: str) -> CalibrationResult:
+        span = f"the sources span {diagnosis.elevation_span:.0f} deg of elevation; " if weak else ""
+        return search._failed(F, f"the plane-wave adjustment {what}: the data leave part of the network "
+                              f"undetermined ({span}sources at more elevations, or more sources, determine it)",
+                              t0, seed, warnings=tuple(notes), dim=dim)
+
     try:
         fit = adjust_plane_waves(F, work, state.start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
                                  max_iter=opts.max_iterations)
@@ -120,15 +132,11 @@ def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0
                  int(fit.inliers.sum()), int(work.sum()), fit.rounds, time.perf_counter() - t0)
         res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, notes, seed)
     except np.linalg.LinAlgError:
-        # a source block of the normal matrix is singular. With the sources on one elevation cone (3D) the data
-        # leave part of the network free: no calibration rather than a guessed one; the point-source search is
-        # no way out there (20 sources on one cone: 516 s, "unconverged"). Otherwise the data do not explain the
-        # singularity, the start does (near-field 12r/20s in the plane taken for plane waves): refuted.
-        weak = dim == 3 and diagnosis.elevation_span < WEAK_SPAN_DEGREES
-        span = f"the sources span {diagnosis.elevation_span:.0f} deg of elevation; " if weak else ""
-        failed = search._failed(F, "the plane-wave adjustment is singular: the data leave part of the network "
-                                f"undetermined ({span}sources at more elevations, or more sources, determine it)",
-                                t0, seed, warnings=tuple(notes), dim=dim)
-        return failed, (None if weak else "its adjustment is singular although the source directions spread")
+        # a source block of the normal matrix is singular
+        return undetermined("is singular"), (None if weak else "its adjustment is singular although the source "
+                                             "directions spread")
+    if weak and res.status == "unconverged":
+        # nearly singular (which side of exactly singular depends on the machine's rounding)
+        return undetermined("did not converge"), None
     res = crosscheck._judge_route(F, diagnosis, replace(res, seconds=time.perf_counter() - t0), opts)
     return res, unexplained(res)
