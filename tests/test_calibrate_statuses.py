@@ -54,6 +54,26 @@ def test_with_the_orientation_given_a_much_larger_transposed_matrix_is_not_fitte
     assert out.status == res.status and "was not fitted" in out.warnings[-1]
 
 
+def test_a_large_matrix_has_its_orientation_compared_on_a_sub_network(monkeypatch):
+    # 40 x 32 in the plane, sigma estimated: the orientation is decided on a seeded 30 x 30 block, both
+    # orientations fitted there (the transposed search of the whole cost 9/10 of a 100r/60s call); the block's
+    # shapes are what the search sees, and a transposed file is still told
+    _, F, _ = _network(40, 32, seed=7, sigma=1e-3)
+    shapes = []
+    fit = search._calibrate_once
+
+    def spy(G, *args, **kwargs):
+        shapes.append(G.shape)
+        return fit(G, *args, **kwargs)
+
+    monkeypatch.setattr(search, "_calibrate_once", spy)
+    right = calibrate(F, seed=7)
+    assert right.status == "ok" and shapes[-2:] == [(30, 30), (30, 30)]
+    wrong = calibrate(F.T.copy(), seed=7)
+    assert wrong.status == "inconsistent"
+    assert any("fits far better" in w and "30 x 30 sub-network" in w for w in wrong.warnings)
+
+
 def test_the_sample_count_is_rechecked_at_the_adjustments_inlier_share():
     # sigma unknown: the search assumes 10 % gross errors and stops at its budget of 20 samples; with
     # 5 % gross errors, every one rejected, the adjustment's inlier share needs fewer than were drawn
