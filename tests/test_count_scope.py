@@ -194,28 +194,14 @@ def test_cli_start_serves_both_seeds_and_the_trace_test(tmp_path):
 
 def _ed_system(n: int, d: int):
     """The ED degree problem of a general degree-d hypersurface in C^n: x on f = 0 with x - u parallel to grad f
-    (unknowns x, l; parameters u and f's coefficients); ED degree d (1 + (d-1) + ... + (d-1)^(n-1))."""
-    import itertools
+    (unknowns x, l; parameters u and f's coefficients); ED degree d (1 + (d-1) + ... + (d-1)^(n-1)). The builder of
+    examples/ed*.sys (scripts/count_literature.py)."""
+    import importlib.util
 
-    xs = [f"x{i}" for i in range(1, n + 1)]
-    mons = [m for k in range(d + 1) for m in itertools.product(range(d + 1), repeat=n) if sum(m) == k]
-    cs = [f"c{k}" for k in range(len(mons))]
-
-    def mon(m):
-        return "*".join(f"{x}^{e}" if e > 1 else x for x, e in zip(xs, m) if e) or "1"
-
-    eqs = [" + ".join(f"{c}*{mon(m)}" if any(m) else c for c, m in zip(cs, mons))]
-    for i in range(n):
-        terms = []
-        for c, m in zip(cs, mons):
-            if m[i]:
-                dm = list(m)
-                dm[i] -= 1
-                terms.append(f"{m[i]}*{c}*l" + (f"*{mon(dm)}" if any(dm) else ""))
-        eqs.append(f"{xs[i]} - u{i + 1} - (" + " + ".join(terms) + ")")
-    text = (f"unknowns: {', '.join(xs)}, l\nparameters: {', '.join([f'u{i + 1}' for i in range(n)] + cs)}\n"
-            "equations:\n" + "\n".join(eqs) + "\n")
-    return _system(text, f"ed{n}-{d}")
+    spec = importlib.util.spec_from_file_location("count_literature", os.path.join(ROOT, "scripts", "count_literature.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return _system(module.ed_text(n, d), f"ed{n}-{d}")
 
 
 @pytest.mark.slow
