@@ -84,3 +84,13 @@ def test_literature_rows_end_to_end(stem):
     row, _ = LIT.run_row(stem)
     assert row["solutions"] == row["published"] == row["proven"] and row["agrees"] == "yes", row
     assert _as_text(row) == _committed()[f"examples/{stem}.sys"]
+
+
+def test_docs_quote_the_committed_table():
+    """docs/count.md's table of the literature problems is tables/count_literature.md's, row for row."""
+    table = (ROOT / "tables" / "count_literature.md").read_text(encoding="utf-8")
+    rows = [line for line in table.splitlines() if line.startswith("| ")]
+    page = (ROOT / "docs" / "count.md").read_text(encoding="utf-8")
+    section = page[page.index("## Problems from the literature"):]
+    section = section[:section.index("\n## ")]
+    assert [line for line in section.splitlines() if line.startswith("| ")] == rows
