@@ -263,7 +263,7 @@ ALT_REFERENCE = {
 }
 
 COLUMNS = ["problem", "file", "published", "source", "unknowns", "parameters", "start", "solutions", "proven", "found",
-           "graphs", "seed_sets", "trace_test", "trace_residual", "witnesses", "scope", "evidence", "agrees"]
+           "graphs", "seed_sets", "trace_test", "trace_residual", "witnesses", "trace_note", "scope", "evidence", "agrees"]
 
 
 def paths(stem: str) -> tuple[str, str]:
@@ -323,11 +323,11 @@ def run_row(stem: str, threads: int | None = None) -> tuple[dict, dict]:
            "seed_sets": "; ".join(s.carried for s in result.seeds[1:]),
            "trace_test": t.get("status", "not run"),
            "trace_residual": "" if res is None or res != res else f"{res:.0e}",
-           "witnesses": t.get("witnesses", ""), "scope": result.scope, "evidence": result.evidence}
+           "witnesses": t.get("witnesses", ""), "trace_note": t.get("why", ""), "scope": result.scope, "evidence": result.evidence}
     row["agrees"] = "yes" if (result.count == result.proven == published and result.complete
                               and (published > TRACE_MAX or t.get("status") == "passed")) else "no"
     times = {"wall_seconds": round(time.perf_counter() - t0, 1), "cpu_seconds": round(cpu, 1),
-             "trace_residual": res, "notes": list(result.notes)}
+             "trace_residual": res, "trace_rounding_level": t.get("floor"), "notes": list(result.notes)}
     return row, times
 
 
@@ -347,7 +347,8 @@ def write_tables(rows: list[dict], meta: dict) -> None:
               f"| {r['graphs']} | {r['seed_sets']} | {r['trace_test']} | {r['trace_residual']} | {r['witnesses']} "
               f"| {r['scope']} | {r['agrees']} |" for r in rows]
     lines += ["", "Evidence, in `count`'s words:", ""]
-    lines += [f"- `{r['file']}`: {r['evidence']}" for r in rows]
+    lines += [f"- `{r['file']}`: {r['evidence']}" + (f" (trace test: {r['trace_note']})" if r["trace_note"] else "")
+              for r in rows]
     with open(os.path.join(TABLES, "count_literature.md"), "w", encoding="utf-8", newline="\n") as fh:
         fh.write("\n".join(lines) + "\n")
     with open(os.path.join(TABLES, "count_literature.meta.json"), "w", encoding="utf-8", newline="\n") as fh:

@@ -331,15 +331,20 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
                           group, dask)
     paths, counts = test.paths, [test.witnesses]
     for regrow in range(1, REGROW + 1):
-        if test.status != "failed":
+        suspect = _suspect(test)
+        if test.status != "failed" and not suspect:
             break
         if progress:
-            progress(f"trace test: failed with {len(W)} witnesses; the witnesses regrown by another graph ({regrow} of "
-                     f"{REGROW})")
+            progress(f"trace test: {test.status} with {len(W)} witnesses"
+                     + (f" at {test.residual / test.floor:.0f}x the points' rounding level" if suspect else "")
+                     + f"; the witnesses regrown by another graph ({regrow} of {REGROW})")
         again, W2 = _trace_once(equations, unknowns, parameters, p, roots, other, options, excluded, None, progress,
                                 group, dask, regrow=regrow, extra=W)
         paths += again.paths
         counts.append(again.witnesses)
+        if suspect and again.witnesses <= test.witnesses:  # a pass whose witnesses a second graph confirms: it stands
+            return dataclasses.replace(test, paths=paths, why=f"residual {test.residual / test.floor:.0f}x the points' "
+                                       f"rounding level; witness set confirmed by a second graph ({len(W)})")
         if again.witnesses == test.witnesses and again.status == "failed":  # the same witnesses: confirmed
             if again.stalled:  # ... by graphs that cannot reach witnesses like some of its own
                 return dataclasses.replace(again, status="inconclusive", paths=paths, why=(
@@ -358,6 +363,19 @@ def trace_test(equations: Callable, unknowns: list[str], parameters: list[str], 
 
 #: Regrowths of the witness set a failed trace test gets before its verdict (:func:`trace_test`).
 REGROW = 2
+
+#: A passed test whose residual is more than this factor above the points' rounding level has its witnesses regrown
+#: (once, :func:`trace_test`) before the verdict stands: PASS_TOL admits the absence of a witness whose path in t is
+#: nearly affine. examples/fivepoint20.sys, seeds 1 and 6 of 0-7: 425 witnesses of 426 (F4: 426; `count` on the
+#: witness system at that pencil: 426), passed at 4.6e-11 and 9.4e-11 against rounding levels near 2e-13; the missing
+#: witness (norm 287, near q.q = -1) weighs 4.6e-11, while at seed 0 the lightest of the 426 weighs 1.7e-9 and most
+#: 1e-3. The complete sets pass at 1e-15 .. 1e-12, within 10x their level.
+SUSPECT = 100.0
+
+
+def _suspect(test: "TraceTest") -> bool:
+    """Whether a passed test's residual is far enough above its points' rounding level to regrow the witnesses."""
+    return test.status == "passed" and test.floor == test.floor and test.residual > SUSPECT * max(test.floor, 1e-16)
 
 
 def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str], p: np.ndarray, roots: np.ndarray,
@@ -431,7 +449,8 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
             start = md.add_new(start, extra, group_y)
         witnesses = graph.graph_monodromy(mover, Q0, start, graph.GraphOptions(nodes=options.nodes + 2 * regrow,
                                                                                seed=options.seed + 7919 * regrow,
-                                                                               retries=1, accept_tol=WITNESS_TOL,
+                                                                               retries=None if regrow else 1,
+                                                                               accept_tol=WITNESS_TOL,
                                                                                seconds=options.seconds),
                                           group=group_y, excluded=off_fibre, free=free,
                                           checkpoint=checkpoint if not regrow else None,
