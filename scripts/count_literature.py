@@ -246,10 +246,13 @@ PROBLEMS = [
      lambda: ed_text(3, 4), None, 0),
     ("ed4_3", "ED degree, general cubic hypersurface in C^4", ed_degree(4, 3), "Draisma et al. 2016",
      lambda: ed_text(4, 3), None, 0),
+    ("ed4_4", "ED degree, general quartic hypersurface in C^4", ed_degree(4, 4), "Draisma et al. 2016",
+     lambda: ed_text(4, 4), None, 0),
     ("dense3_2", "dense system, 3 quadrics in 3 unknowns", 2 ** 3, "Bezout's theorem", lambda: dense_text(3, 2), None, 0),
     ("dense3_4", "dense system, 3 quartics in 3 unknowns", 4 ** 3, "Bezout's theorem", lambda: dense_text(3, 4), None, 0),
     ("dense4_3", "dense system, 4 cubics in 4 unknowns", 3 ** 4, "Bezout's theorem", lambda: dense_text(4, 3), None, 0),
     ("dense5_3", "dense system, 5 cubics in 5 unknowns", 3 ** 5, "Bezout's theorem", lambda: dense_text(5, 3), None, 0),
+    ("dense8_2", "dense system, 8 quadrics in 8 unknowns", 2 ** 8, "Bezout's theorem", lambda: dense_text(8, 2), None, 0),
 ]
 
 #: Alt's problem is above TRACE_MAX and takes minutes: not rerun here; its committed run (docs/count.md) is kept in the
