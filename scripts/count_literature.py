@@ -383,6 +383,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.only:
         return 0 if all(r["agrees"] == "yes" for r in rows) else 1
     meta = {"script": "scripts/count_literature.py", "threads": args.threads, "load_average": list(os.getloadavg()),
+            "cpu_seconds": "os.times() around each count: this process's threads and the child processes it has waited "
+                           "for (the proofs' pools); the first run of a system also compiles its programs",
             "date": time.strftime("%Y-%m-%d", time.gmtime()), "rows": times, "reference_not_rerun": ALT_REFERENCE}
     write_tables(rows, meta)
     return 0 if all(r["agrees"] == "yes" for r in rows) else 1
