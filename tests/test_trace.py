@@ -304,8 +304,8 @@ def test_graphs_agreeing_on_a_set_with_untrackable_witnesses_do_not_confirm_a_fa
 def test_a_pass_far_above_the_rounding_level_regrows_its_witnesses(monkeypatch):
     """PASS_TOL admits a set short of a witness whose path in t is nearly affine (examples/fivepoint20.sys, seed 1: 425
     of 426 witnesses, residual 4.6e-11 against a rounding level of 1.7e-13). A pass more than SUSPECT times above the
-    level regrows the witnesses once: the regrown set is tested when it is larger; a pass whose set a second graph
-    finds again stands and says so; a pass near the level is not regrown."""
+    level regrows the witnesses, up to REGROW graphs: the regrown set is tested when it is larger; a pass whose set every
+    regrowth finds again stands and says so; a pass near the level is not regrown."""
     def runs(*tests):
         calls = []
 
@@ -323,9 +323,13 @@ def test_a_pass_far_above_the_rounding_level_regrows_its_witnesses(monkeypatch):
     calls = runs(short, whole)
     test = test_once()
     assert calls == [0, 1] and test.witnesses == 6 and test.why == "witnesses regrown: 5 -> 6", test
-    calls = runs(short, short)
+    calls = runs(short, short, whole)  # the first regrowth finds the same set, the second (more nodes) the whole
     test = test_once()
-    assert calls == [0, 1] and test.status == "passed" and test.witnesses == 5, test
-    assert test.why == "residual 250x the points' rounding level; witness set confirmed by a second graph (5)", test
+    assert calls == [0, 1, 2] and test.witnesses == 6 and test.why == "witnesses regrown: 5 -> 5 -> 6", test
+    calls = runs(*[short] * (1 + trace.REGROW))
+    test = test_once()
+    assert calls == list(range(1 + trace.REGROW)) and test.status == "passed" and test.witnesses == 5, test
+    assert test.why == (f"residual 250x the points' rounding level; witness set confirmed by {trace.REGROW} more graphs "
+                        "(5)"), test
     calls = runs(trace.TraceTest("passed", 1e-12, 4, 5, 3, 100, 1.0, 0, 2e-13))
     assert test_once().why == "" and calls == [0]
