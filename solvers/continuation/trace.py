@@ -100,7 +100,7 @@ REDRAWS = 2
 #: failed verdict regrown (:data:`REGROW`), inconclusive within a rounding level above FLOOR_MAX / FLOOR_FACTOR,
 #: witnesses started from several roots of the second instance. 6 (2026-12-02): points stepping above PRECISE refined at
 #: 160 bits, the witnesses then told apart (one witness found twice is one), the rounding level from the refined points.
-#: 7 (2026-12-02): a pass above SUSPECT x the rounding level regrown; regrowths track with every retry.
+#: 7 (2026-12-02): a pass above SUSPECT x the rounding level regrown.
 TEST_VERSION = 7
 
 #: Largest relative residual of the affine fit that passes: complete sets gave 1e-15 .. 2e-12, sets without
@@ -453,8 +453,7 @@ def _trace_once(equations: Callable, unknowns: list[str], parameters: list[str],
             start = md.add_new(start, extra, group_y)
         witnesses = graph.graph_monodromy(mover, Q0, start, graph.GraphOptions(nodes=options.nodes + 2 * regrow,
                                                                                seed=options.seed + 7919 * regrow,
-                                                                               retries=None if regrow else 1,
-                                                                               accept_tol=WITNESS_TOL,
+                                                                               retries=1, accept_tol=WITNESS_TOL,
                                                                                seconds=options.seconds),
                                           group=group_y, excluded=off_fibre, free=free,
                                           checkpoint=checkpoint if not regrow else None,
