@@ -99,3 +99,9 @@ def test_model_error_covariance_matches_refits_with_a_directivity():
         refits += np.outer(d, d)
     assert np.trace(refits) > 1e-16
     assert np.allclose(C, refits, atol=0.03 * np.abs(refits).max())
+
+
+def test_docs_calibrate_quotes_the_committed_tetrahedral_table():
+    rows = [line for line in (ROOT / "tables" / "farfield_tetra.md").read_text().splitlines() if line.startswith("| ")]
+    docs = (ROOT / "docs" / "calibrate.md").read_text()
+    assert all(line in docs for line in rows[2:]), "stale: copy tables/farfield_tetra.md into docs/calibrate.md"
