@@ -23,7 +23,7 @@ import numpy as np
 from scipy import stats
 
 from ..recovery import to_gauge
-from .adjust import PlaneWaveFit, parameter_shifts
+from .adjust import PlaneWaveFit, _reduced, parameter_shifts, predict, tangent_basis
 from .adjustment import gauge_order
 from .diagnose import WEAK_SPAN_DEGREES
 from .result import STATUSES, CalibrationOptions, CalibrationResult
@@ -201,24 +201,35 @@ def _spread_gauge(R: np.ndarray, use: np.ndarray) -> np.ndarray:
     return np.array(chosen + [int(i) for i in order if int(i) not in chosen], dtype=int)
 
 
-def direction_lack_of_fit(fit: PlaneWaveFit, alpha: float) -> tuple[str, float] | None:
-    """(words, rms size) of a model error the residuals show, or None: per receiver, the residuals of its inliers
-    regressed on a constant and the quadratic forms of the direction of arrival (a per-channel delay,
-    directivity, the frame's shadow: what a point microphone does not hold; a part linear in the
-    direction is a shift of the microphone and cannot be seen), pooled in one F test at level alpha."""
+def _direction_features(U: np.ndarray) -> np.ndarray:
+    """(n, p): a constant and the quadratic forms of each unit direction of arrival (the last square dropped:
+    1 minus the others), the model error's shape per receiver in `direction_lack_of_fit`."""
+    K = U.shape[1]
+    return np.column_stack([np.ones(len(U))] + [U[:, a] * U[:, b] for a in range(K) for b in range(a, K)][:-1])
+
+
+def direction_lack_of_fit(fit: PlaneWaveFit, alpha: float) -> tuple[str, float, np.ndarray] | None:
+    """(words, rms size, coefficients' second moment (p, p)) of a model error the residuals show, or None: per
+    receiver, the residuals of its inliers regressed on a constant and the quadratic forms of the direction of
+    arrival (`_direction_features`: a per-channel delay, directivity, the frame's shadow: what a point
+    microphone does not hold; a part linear in the direction is a shift of the microphone and cannot be seen),
+    pooled in one F test at level alpha. The second moment is the mean over the receivers of their
+    coefficients' outer products less the noise's part sigma^2 (X^T X)^-1 (clipped to >= 0): the spread of
+    the model error from receiver to receiver, which `model_error_covariance` propagates to the positions."""
     m, K = fit.R.shape
-    U = fit.U
-    feats = [np.ones(len(U))] + [U[:, a] * U[:, b] for a in range(K) for b in range(a, K)][:-1]
-    X = np.column_stack(feats)                     # (n, p): the last square is 1 minus the others
+    X = _direction_features(fit.U)
     p = X.shape[1]
     E = np.where(fit.inliers, np.nan_to_num(fit.residuals), 0.0)
     explained = 0.0
+    moment, fitted = np.zeros((p, p)), 0
     for i in range(m):
         use = fit.inliers[i]
         if use.sum() <= 2 * p:
             continue
         coef, *_ = np.linalg.lstsq(X[use], E[i, use], rcond=None)
         explained += float(np.sum((X[use] @ coef) ** 2))
+        moment += np.outer(coef, coef) - fit.sigma**2 * np.linalg.pinv(X[use].T @ X[use])
+        fitted += 1
     ssr = float(np.sum(E**2))
     d1, d2 = p * m, fit.dof - p * m
     if d2 <= 0 or ssr <= explained:
@@ -228,10 +239,41 @@ def direction_lack_of_fit(fit: PlaneWaveFit, alpha: float) -> tuple[str, float] 
     if F_stat <= critical:
         return None
     size = math.sqrt(explained / max(int(fit.inliers.sum()), 1))
+    lam, vec = np.linalg.eigh(moment / max(fitted, 1))
+    moment = (vec * np.maximum(lam, 0.0)) @ vec.T
     return (f"the residuals depend on the direction of arrival at the receivers (F = {F_stat:.3g} > {critical:.3g}): "
             f"a model error of rms {size:.2g} that point microphones do not hold (a per-channel delay, directivity, "
-            "the frame's shadow); its part linear in the direction moves each position (an acoustic centre) and is "
-            "not in the reported std, which comes from the noise alone"), size
+            "the frame's shadow); its part linear in the direction moves each position (an acoustic centre): the "
+            "receivers' std holds that shift for a model error spread from microphone to microphone as the "
+            "residuals show it"), size, moment
+
+
+def model_error_covariance(fit: PlaneWaveFit, moment: np.ndarray) -> np.ndarray:
+    """(mK, mK) covariance of the receivers' shifts (in the fit's minimum-norm gauge) that a model error of
+    `_direction_features` with coefficients drawn per receiver with second moment `moment` causes in the
+    least-squares fit on the inliers: D_i = N^+ J^T (receiver i's entries times the features), summed as
+    D_i moment D_i^T (a random-effects model of the directivity). The fit absorbs the error's part that
+    looks like the parameters (a shift of the microphone, a source's offset or direction); the residuals
+    show the rest, from which `moment` is estimated. Schur complement of the source blocks as in
+    `adjust.statistics`."""
+    R, U, rho, o = fit.R, fit.U, fit.rho, fit.o
+    _, dr, ds = predict(R, U, rho, o, tangent_basis(U))
+    m, n, K = dr.shape
+    W = fit.inliers.astype(float)
+    red, T, Y, TY = _reduced(W, dr, ds, 0.0)
+    Pinv = np.linalg.pinv(red, rcond=1e-10, hermitian=True)
+    X = _direction_features(U)                                                  # (n, p)
+    p = X.shape[1]
+    M = (W[..., None] * ds)[..., None] * X[None, :, None, :]                     # (m, n, K + 1, p)
+    rhs = -(TY.reshape(m * K, -1) @ M.transpose(1, 2, 0, 3).reshape(-1, m * p)).reshape(m * K, m, p)
+    own = np.einsum("in,ina,np->iap", W, dr, X)                                 # receiver i's own rows
+    for i in range(m):
+        rhs[i * K:(i + 1) * K, i, :] += own[i]
+    D = (Pinv @ rhs.reshape(m * K, m * p)).reshape(m * K, m, p)
+    lam, vec = np.linalg.eigh(moment)
+    L = vec * np.sqrt(np.maximum(lam, 0.0))                                     # moment = L L^T (semi-definite)
+    G = np.einsum("aip,pq->aiq", D, L).reshape(m * K, m * p)
+    return G @ G.T
 
 
 def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, opts: CalibrationOptions,
@@ -256,9 +298,14 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
     S, Ug = rest[:n], rest[n:2 * n] - rest[2 * n]
     Q = np.linalg.lstsq(fit.U, Ug, rcond=None)[0].T        # the rotation applied (u -> Q u)
     QQ = np.kron(np.eye(m), Q)
-    cov = _s_transform(QQ @ fit.cov_rr @ QQ.T, R, order[:K])
+    # a model error that the residuals show moves the positions by its part the fit absorbed: in the std
+    lack = direction_lack_of_fit(fit, opts.alpha)
+    noise_cov = _s_transform(QQ @ fit.cov_rr @ QQ.T, R, order[:K])
+    cov = noise_cov if lack is None else _s_transform(QQ @ (fit.cov_rr + model_error_covariance(fit, lack[2])) @ QQ.T,
+                                                      R, order[:K])
     rcov = np.stack([cov[i * K:(i + 1) * K, i * K:(i + 1) * K] for i in range(m)])
     rstd = np.sqrt(np.maximum(np.einsum("iaa->i", rcov), 0.0))
+    noise_std = np.sqrt(np.maximum(np.einsum("ii->i", noise_cov).reshape(m, K).sum(axis=1), 0.0))
     # transmitters: (angles, rho, o) -> (s, o - 1 / rho), rotated into the gauge frame
     # (the range's error is skewed: 1 / rho; along the range the std is that of the far side of the 1-sigma
     # interval in rho, 1 / (rho - s) - 1 / rho = s / (rho (rho - s)), as frame.widen_far_ranges does)
@@ -316,11 +363,12 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
     if not np.all(np.isfinite(dir_std)):
         found.append(("uncontrolled", "some source directions are not determined (std inf)"))
     notes = []
-    lack = direction_lack_of_fit(fit, opts.alpha)
-    if lack is not None and lack[1] >= MODEL_ERROR_SHARE * float(np.median(rstd[rstd > 0])):
-        # an unmodelled shift of the size of the receivers' std: that std is not their uncertainty
-        found.append(("uncontrolled", lack[0] + f"; it reaches {MODEL_ERROR_SHARE:g} x the receivers' median std "
-                      f"({float(np.median(rstd[rstd > 0])):.2g}): their positions are not checked to that std"))
+    if lack is not None and lack[1] >= MODEL_ERROR_SHARE * float(np.median(noise_std[noise_std > 0])):
+        # an unmodelled error of the size of the receivers' std from the noise: its propagation above rests on
+        # a model of the model error (quadratic forms of the direction), which is then no longer checked
+        found.append(("uncontrolled", lack[0] + f"; it reaches {MODEL_ERROR_SHARE:g} x the receivers' median std from "
+                      f"the noise ({float(np.median(noise_std[noise_std > 0])):.2g}): their positions are not checked "
+                      "to their std"))
     elif lack is not None:
         notes.append(lack[0])
     if (~determined).any():
