@@ -169,7 +169,7 @@ def test_reported_std_covers_the_true_error():
     assert len(z) >= 25 * 16 and np.mean(z > 3) < 0.02 and np.median(z) < 1.5, np.sort(z)[-5:]
 
 
-@pytest.mark.parametrize("kind", ["transposed", "random", "wrong sigma"])
+@pytest.mark.parametrize("kind", [pytest.param("transposed", marks=pytest.mark.slow), "random", "wrong sigma"])
 def test_bad_data_is_never_ok(kind):
     net, F = _uniform_network(10, 12, 1e-2, seed=1)
     sigma = 1e-2

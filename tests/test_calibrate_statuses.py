@@ -54,6 +54,7 @@ def test_with_the_orientation_given_a_much_larger_transposed_matrix_is_not_fitte
     assert out.status == res.status and "was not fitted" in out.warnings[-1]
 
 
+@pytest.mark.slow
 def test_a_large_matrix_has_its_orientation_compared_on_a_sub_network(monkeypatch):
     # 40 x 32 in the plane, sigma estimated: the orientation is decided on a seeded 30 x 30 block, both
     # orientations fitted there (the transposed search of the whole cost 9/10 of a 100r/60s call); the block's

@@ -158,6 +158,7 @@ def test_single_cone_is_never_ok_and_says_the_height_is_weakly_determined():
     assert "--dim 2" not in text and "dim=2" not in text
 
 
+@pytest.mark.slow
 def test_few_sources_on_one_cone_are_a_status_not_a_crash():
     """20 sources on one elevation cone: the plane-wave fit's normal matrix is singular (numpy raised
     LinAlgError out of calibrate); now no calibration, said with the elevation span, in about a second."""
@@ -214,6 +215,7 @@ def test_entries_far_outside_the_data_do_not_sink_the_factorization():
     assert not res.inliers[[3, 10, 20, 30, 40], [5, 17, 33, 60, 88]].any()
 
 
+@pytest.mark.slow
 def test_a_model_error_as_large_as_the_receivers_std_is_never_ok():
     # 2 mm of direction-dependent delay (directivity), 540 sources: the residuals show it (0.9 mm rms), the
     # receivers' std from the noise is as small (0.9 mm) and a receiver ends 5.9 std off: never "ok"

@@ -282,6 +282,7 @@ def test_the_trace_witness_checkpoint_is_named_by_its_pencil(tmp_path):
     assert names == ["3r3s_toa2d_A_B2_B3_C2_C3-seed0-witnesses-b1-b2.json"], names
 
 
+@pytest.mark.slow
 def test_the_direct_tdoa_pencil_is_on_the_offsets_where_they_determine_each_orbit():
     """2D TDOA 6r/3s, direct parametrization (180 orbits of the 4 reflections): given the offsets the data are
     TOA data, and F4 finds the system with the offsets fixed, down to o1 alone, with 4 solutions (the group's

@@ -144,6 +144,7 @@ def test_a_parameter_free_equation_is_named_and_one_start_pair_serves_every_seed
     assert any("start pair drawn from seed 0's" in n for n in r.notes)
 
 
+@pytest.mark.slow
 def test_cli_exit_status_and_json_carry_the_scope(tmp_path):
     path = tmp_path / "double.sys"
     path.write_text(DOUBLE, encoding="utf-8")

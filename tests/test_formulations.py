@@ -345,7 +345,7 @@ def test_gf_sampler_residues_and_determinism(label):
     assert inst.data_array().shape == (cfg.m, cfg.n)
 
 
-@pytest.mark.parametrize("label", ["50r3s", "20r5s", "17r16s"])
+@pytest.mark.parametrize("label", ["50r3s", "20r5s", pytest.param("17r16s", marks=pytest.mark.slow)])
 def test_gf_sampler_many_receivers(label, monkeypatch):
     """More than 16 receivers: transmitters first, receivers by rejection (seconds, not minutes); the
     distances are residues, r_1 = 0 and the known root satisfies every C equation."""

@@ -181,7 +181,7 @@ def _reference_equations(formulation: Formulation, F, p: int) -> list[dict]:
 
 @pytest.mark.parametrize("label, spec", [("4r5s-toa3d", "all"), ("3r4s-toa2d", "all"),
                                          ("6r5s-tdoa3d", "A,B2-B4,C2,C6,M1234_1234,M2345_1234"),
-                                         ("6r5s-tdoa3d", "B5")])
+                                         pytest.param("6r5s-tdoa3d", "B5", marks=pytest.mark.slow)])
 def test_builder_matches_a_sympy_reference(label, spec):
     formulation = Formulation.from_spec(label, spec)
     instance = sample_gf_instance(formulation.config, P, 5)

