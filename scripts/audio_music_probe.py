@@ -26,14 +26,30 @@ printed as the strict share per room and pooled (docs/audio.md, "Why the phrases
   hybrid     each pair's whole-phrase candidates plus its 2 highest peaks within 1 ms of the onsets' difference
   wpe        (C) weighted prediction error dereverberation (nara-wpe, 10 taps, delay 3, 3 iterations) before the
              consensus (skipped when nara_wpe is not installed; not a dependency of the project)
+  ranks      why: the share of the pairs whose true lag is the highest / among the 8 highest local maxima of the whole
+             phrase's GCC-PHAT, of one note's and of the notes' product, in the room and in the same room rendered
+             with the direct sound only (image order 0): 34.0 / 57.1 % reverberant, 97.3 / 99.4 % direct only (the
+             whole phrase): the reverberant steady state, not the notes' periodicity, outranks the true lag
+  notes      (a) per-note consensus: each note's GCC-PHAT (the event cut at its onsets, solvers.audio.onset_windows'),
+             normalised, combined by their product (geometric mean) or minimum, the 8 highest peaks, the consensus
+  bound      (c) each pair's lags bounded by its TRUE microphone distance / c + 2 samples (the ceiling of a bound from
+             an earlier pass), the 8 highest peaks there, the consensus
+  emphasis   (b) the onsets' direct sound (solvers.audio.onset_emphasis, which the front end now runs), the consensus;
+             and that or the whole phrase by the pairs agreeing (as the first pass chooses)
+
+`--order 0` renders the rooms with the direct sound only (every approach but `ranks`, which renders both).
+Measured (pooled strict, docs/audio.md quotes each room): notes 9.8 % (product) / 9.1 % (minimum), bound 58.7 %,
+emphasis 82.6 % (either line), against the consensus's 58.1 %; consensus at order 0: 89.1 %.
 
 Per-event approaches are scored as the table's `strict` with every entry of the event kept (they have no rule that
 leaves entries missing); `first` and `guide` as the table (their matrices' rules apply).
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/audio_music_probe.py [--approaches first,consensus,...] [--rooms 0:6]
+       [--order 20]
 Needs the optional extra: pip install -e ".[audio]" (pyroomacoustics). Deterministic (seeded); every approach but
 wpe took about 20 minutes in two processes on the shared 2-core machine at load average 10-13 (wpe on the three
-16 kHz rooms about 8 minutes, the 48 kHz rooms not finished).
+16 kHz rooms about 8 minutes, the 48 kHz rooms not finished; ranks, notes + bound, emphasis 2 minutes each, 15-45 s
+of CPU, at load 5-9).
 """
 from __future__ import annotations
 
