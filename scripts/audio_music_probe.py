@@ -26,14 +26,30 @@ printed as the strict share per room and pooled (docs/audio.md, "Why the phrases
   hybrid     each pair's whole-phrase candidates plus its 2 highest peaks within 1 ms of the onsets' difference
   wpe        (C) weighted prediction error dereverberation (nara-wpe, 10 taps, delay 3, 3 iterations) before the
              consensus (skipped when nara_wpe is not installed; not a dependency of the project)
+  ranks      why: the share of the pairs whose true lag is the highest / among the 8 highest local maxima of the whole
+             phrase's GCC-PHAT, of one note's and of the notes' product, in the room and in the same room rendered
+             with the direct sound only (image order 0): 34.0 / 57.1 % reverberant, 97.3 / 99.4 % direct only (the
+             whole phrase): the reverberant steady state, not the notes' periodicity, outranks the true lag
+  notes      (a) per-note consensus: each note's GCC-PHAT (the event cut at its onsets, solvers.audio.onset_windows'),
+             normalised, combined by their product (geometric mean) or minimum, the 8 highest peaks, the consensus
+  bound      (c) each pair's lags bounded by its TRUE microphone distance / c + 2 samples (the ceiling of a bound from
+             an earlier pass), the 8 highest peaks there, the consensus
+  emphasis   (b) the onsets' direct sound (solvers.audio.onset_emphasis, which the front end now runs), the consensus;
+             and that or the whole phrase by the pairs agreeing (as the first pass chooses)
+
+`--order 0` renders the rooms with the direct sound only (every approach but `ranks`, which renders both).
+Measured (pooled strict, docs/audio.md quotes each room): notes 9.8 % (product) / 9.1 % (minimum), bound 58.7 %,
+emphasis 82.6 % (either line), against the consensus's 58.1 %; consensus at order 0: 89.1 %.
 
 Per-event approaches are scored as the table's `strict` with every entry of the event kept (they have no rule that
 leaves entries missing); `first` and `guide` as the table (their matrices' rules apply).
 
 Usage: OPENBLAS_NUM_THREADS=1 python scripts/audio_music_probe.py [--approaches first,consensus,...] [--rooms 0:6]
+       [--order 20]
 Needs the optional extra: pip install -e ".[audio]" (pyroomacoustics). Deterministic (seeded); every approach but
 wpe took about 20 minutes in two processes on the shared 2-core machine at load average 10-13 (wpe on the three
-16 kHz rooms about 8 minutes, the 48 kHz rooms not finished).
+16 kHz rooms about 8 minutes, the 48 kHz rooms not finished; ranks, notes + bound, emphasis 2 minutes each, 15-45 s
+of CPU, at load 5-9).
 """
 from __future__ import annotations
 
@@ -52,11 +68,13 @@ sys.path.insert(0, os.path.join(ROOT, "scripts"))
 import numpy as np  # noqa: E402
 
 from solvers.audio import (TdoaOptions, _consensus, _event_arrivals, _fast_length, _pair_candidates,  # noqa: E402
-                           _parabola, _phat, recording_events, tdoa_matrix)
+                           _parabola, _phat, onset_emphasis, onset_windows, recording_events,
+                           tdoa_matrix)
 from solvers.audio_guided import guided_tdoa_matrix  # noqa: E402
 from audio_kinds import CONDITIONS, index_range, listed, room, scores  # noqa: E402
 
-APPROACHES = ("first", "consensus", "srp", "mccc", "guide", "onsets", "early", "early-oracle", "hybrid", "wpe")
+APPROACHES = ("first", "consensus", "srp", "mccc", "guide", "onsets", "early", "early-oracle", "hybrid", "wpe", "ranks",
+              "notes", "bound", "emphasis")
 BAND = (150.0, 7000.0)
 
 
@@ -305,6 +323,63 @@ def hybrid(ev, rate, max_lag, options, within=0.001, count=2):
                       options.tolerance, options.early)[0]
 
 
+def truth_ranks(G, lags, max_lag):
+    """(pairs,) the rank (0: the highest) of the true lag among each correlation's local maxima (rows of G over
+    -max_lag..max_lag; the highest local maximum within 1.5 samples of the true lag `lags` stands for it), -1 when
+    no local maximum lies that near."""
+    inner = np.zeros_like(G, bool)
+    inner[:, 1:-1] = (G[:, 1:-1] >= G[:, :-2]) & (G[:, 1:-1] > G[:, 2:])
+    out = np.full(len(G), -1)
+    for p in range(len(G)):
+        idx = np.flatnonzero(inner[p])
+        near = idx[np.abs(idx - max_lag - lags[p]) <= 1.5]
+        if len(near):
+            out[p] = int(np.sum(G[p, idx] > G[p, near].max()))
+    return out
+
+
+def note_correlations(seg, rate, max_lag, options):
+    """(i, k, (notes, pairs, 2 max_lag + 1)): each note's GCC-PHAT of every pair, normalised to its highest
+    value: the notes are the stretches between the event's onsets (solvers.audio.onset_windows: the channels'
+    mean power rising onset_rise dB), the first from the segment's start, the last to its end, every channel cut
+    at the same times."""
+    w = onset_windows(seg, rate, max_lag, options)
+    onsets = [int(np.argmax(row > 0)) + max_lag for row in w]
+    bounds = [0] + onsets[1:] + [seg.shape[1]]
+    m, length = seg.shape
+    n = _fast_length(2 * length)
+    i, k = np.triu_indices(m, 1)
+    out = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        X = np.fft.rfft(np.where((np.arange(length) >= lo) & (np.arange(length) < hi), seg, 0.0), n, axis=1)
+        G = _phat(X[i] * np.conj(X[k]), n, -max_lag, max_lag)
+        out.append(G / np.maximum(G.max(axis=1, keepdims=True), 1e-12))
+    return i, k, np.array(out)
+
+
+def per_note(ev, rate, max_lag, options, how):
+    """Approach `notes`: the notes' normalised correlations combined (`how`: "product" of each clipped at 1e-3,
+    its geometric mean as the height; "min"), the 8 highest local maxima of the combination per pair, their
+    consensus (every entry kept). Each note's comb of periodic peaks has its own period; only lags common to every
+    note survive the product or the minimum."""
+    i, k, Gs = note_correlations(ev["seg"], rate, max_lag, options)
+    C = (np.exp(np.mean(np.log(np.maximum(Gs, 1e-3)), axis=0)) if how == "product" else Gs.min(axis=0))
+    lags, heights = peaks_of(C, np.zeros(len(i)), options.peaks)
+    return _consensus(ev["seg"].shape[0], ev["ref"], i, k, lags, heights, options.tolerance, options.early)[0]
+
+
+def bounded(ev, receivers, rate, max_lag, options, c):
+    """Approach `bound`: each pair's whole-phrase GCC-PHAT searched only within +-(its TRUE microphone distance / c
+    + 2 samples) (the ceiling of a bound on |lag| from an earlier pass's microphone spread), its 8 highest local
+    maxima there, their consensus (every entry kept)."""
+    i, k = np.triu_indices(ev["seg"].shape[0], 1)
+    G = correlations(ev["seg"], max_lag)[i, k]
+    bound = np.linalg.norm(receivers[i] - receivers[k], axis=1) / c * rate + 2
+    G = np.where(np.abs(np.arange(-max_lag, max_lag + 1))[None, :] <= bound[:, None], G, G.min() - 1.0)
+    lags, heights = peaks_of(G, np.zeros(len(i)), options.peaks)
+    return _consensus(ev["seg"].shape[0], ev["ref"], i, k, lags, heights, options.tolerance, options.early)[0]
+
+
 def dereverberated(seg, rate):
     from nara_wpe.utils import istft, stft
     from nara_wpe.wpe import wpe
@@ -316,14 +391,18 @@ def dereverberated(seg, rate):
 
 
 @functools.lru_cache(maxsize=None)
-def music_room(condition: int):
-    """audio_kinds.room of the music room of that condition (simulated once per run)."""
-    return room("music", condition, 10, 20)
+def music_room(condition: int, order: int = 20):
+    """audio_kinds.room of the music room of that condition (simulated once per run); order 0: the same room, sounds,
+    noise and SNR with the direct sound only (no reflection)."""
+    return room("music", condition, 10, order)
 
 
-def measure(approach: str, condition: int) -> dict:
-    """{label: (entries right, entries of the true events)} of one approach in one room."""
-    recording, net, c, _ = music_room(condition)
+def measure(approach: str, condition: int, order: int = 20) -> dict:
+    """{label: (entries right, entries of the true events)} of one approach in one room (rendered to that image
+    order; `ranks`: {label: (pairs, pairs of the true events)} at orders 20 and 0 both)."""
+    if approach == "ranks":
+        return ranks(condition)
+    recording, net, c, _ = music_room(condition, order)
     rate = recording.rate
     m, n = net.receivers.shape[0], net.transmitters.shape[0]
     total = n * (m - 1)
@@ -374,6 +453,18 @@ def measure(approach: str, condition: int) -> dict:
                 add(f"windows at the truth +- {1000 * jitter:g} ms", right(ev, early_oracle(ev, rate, jitter), r))
         elif approach == "hybrid":
             add("whole-phrase and near-onset candidates", right(ev, hybrid(ev, rate, max_lag, options), r))
+        elif approach == "notes":
+            for how in ("product", "min"):
+                add(f"per-note consensus, the {how}", right(ev, per_note(ev, rate, max_lag, options, how), r))
+        elif approach == "emphasis":
+            whole = _event_arrivals(ev["seg"], max_lag, options)
+            new = _event_arrivals(onset_emphasis(ev["seg"], rate, options), max_lag, options)
+            add("the onsets' direct sound (onset_emphasis), then the consensus", right(ev, new[1], r))
+            add("that or the whole phrase, whichever agrees on more pairs", right(ev, (new if new[2].sum() > whole[2].sum()
+                                                                                       else whole)[1], r))
+        elif approach == "bound":
+            add("whole phrase within the true microphone distances", right(ev, bounded(ev, net.receivers, rate, max_lag,
+                                                                                       options, c), r))
         elif approach == "wpe":
             z = dereverberated(ev["seg"], rate)
             add("WPE, then the consensus", right(ev, _event_arrivals(z, max_lag, options)[1], r))
@@ -381,11 +472,37 @@ def measure(approach: str, condition: int) -> dict:
     return {label: (value, denominator) for label, value in got.items()}
 
 
+def ranks(condition: int) -> dict:
+    """Approach `ranks`: {label: (pairs, pairs of the true events)} whose true lag is the highest / among the 8
+    highest local maxima (truth_ranks) of the whole phrase's GCC-PHAT, of each note's and of the notes' product
+    (note_correlations), in the room (image order 20) and in the same room with the direct sound only (order 0)."""
+    out = {}
+    for order, room_name in ((20, "reverberant"), (0, "direct sound only")):
+        recording, net, c, _ = music_room(condition, order)
+        events, max_lag, options = events_of(recording, net, c)
+        got: dict[str, list] = {}
+        for ev in events:
+            i, k = np.triu_indices(ev["seg"].shape[0], 1)
+            true = ev["arrival"][i] - ev["arrival"][k]
+            _, _, Gs = note_correlations(ev["seg"], recording.rate, max_lag, options)
+            product = np.exp(np.mean(np.log(np.maximum(Gs, 1e-3)), axis=0))
+            for label, G in (("whole phrase", correlations(ev["seg"], max_lag)[i, k]), ("the notes' product", product),
+                             *(("one note", g) for g in Gs)):
+                got.setdefault(label, []).append(truth_ranks(G, true, max_lag))
+        for label, rk in got.items():
+            rk = np.concatenate(rk)
+            out[f"{room_name}, {label}: the truth highest"] = (int(np.sum(rk == 0)), len(rk))
+            out[f"{room_name}, {label}: among the 8 highest"] = (int(np.sum((rk >= 0) & (rk < 8))), len(rk))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--approaches", default=",".join(a for a in APPROACHES if a != "wpe"),
+    ap.add_argument("--approaches", default=",".join(a for a in APPROACHES if a not in ("wpe", "ranks", "notes", "bound")),
                     help=f"comma-separated, of {', '.join(APPROACHES)}")
     ap.add_argument("--rooms", default="0:6", help="LOW:HIGH indices into audio_kinds.CONDITIONS (default 0:6)")
+    ap.add_argument("--order", type=int, default=20, help="image-source order of the rooms (default 20, the table's; 0: "
+                    "the direct sound only)")
     args = ap.parse_args(argv)
     approaches = listed(ap, args.approaches, APPROACHES, "--approaches")
     rooms = index_range(args.rooms)
@@ -395,7 +512,7 @@ def main(argv=None) -> int:
     for approach in approaches:
         rows: dict[str, list] = {}
         for r in rooms:
-            for label, value in measure(approach, r).items():
+            for label, value in measure(approach, r, args.order).items():
                 rows.setdefault(label, []).append(value)
         for label, values in rows.items():
             pooled = sum(v[0] for v in values) / sum(v[1] for v in values)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .audio import (TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _measure, _over_tapers,
+from .audio import (TdoaMatrix, TdoaOptions, _candidate_tensor, _consensus, _measure, _over_tapers, emphasised,
                     _pair_candidates, agreeing_pairs, tdoa_matrix)
 from .recording import Recording
 
@@ -365,7 +365,7 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
     sstd = None if transmitter_std is None else np.asarray(transmitter_std, dtype=float)
     placed, located, missing, from_entries = [], [], [], []
 
-    def arrivals(j, seg, after, max_lag):
+    def arrivals(j, seg, after, max_lag, whole):
         taper_candidates = None if known is None else known.get(j)  # of options.taper with PHAT
         if S is not None and j >= len(S):
             raise ValueError(f"transmitters has {len(S)} rows, but the recording has more events")
@@ -410,6 +410,8 @@ def guided_tdoa_matrix(recording: Recording, receivers, transmitters=None, optio
             return _guided_arrivals(w, max_lag, options, guide, pred, half, beta, known)
 
         best = _over_tapers(seg, after, options, analyse)
+        best = emphasised(seg, whole, rate, options, best,  # the onsets' direct sound, as the first pass
+                          lambda z: _guided_arrivals(z, max_lag, options, guide, pred, half))
         return (*best, guide.min_agreement)
 
     tm = _measure(recording, options, arrivals, progress, label="tdoa (guided)")

@@ -134,7 +134,8 @@ def test_an_event_that_agrees_poorly_is_analysed_again_with_the_retry_tapers():
     # moved back): the taper's knee then lies within the burst. (Moved back before the burst, an exponential
     # weight only scales each channel's delayed burst, exp(-(t - d) / taper) = exp(d / taper) exp(-t / taper),
     # and even 1 ms finds the delays)
-    late = dict(max_distance=8.0, taper=0.001, retry_weights=(), onset_db=5.0, ambiguous=1.0)
+    # (emphasis 0: the onsets' direct sound, analysed without a taper, finds these delays by itself)
+    late = dict(max_distance=8.0, taper=0.001, retry_weights=(), onset_db=5.0, ambiguous=1.0, emphasis=0.0)
     alone = tdoa_matrix(rec, TdoaOptions(retry_tapers=(), **late))
     assert np.isnan(alone.F).any()
     tm = tdoa_matrix(rec, TdoaOptions(retry_tapers=(0.05,), **late))
@@ -488,7 +489,7 @@ def test_a_subset_without_the_reference_refers_to_one_of_its_channels():
     ok[1:6, 1:6] = True  # channels 1-5 agree; the reference 0 with none
     np.fill_diagonal(ok, False)
     t = np.arange(m, dtype=float)
-    tm = _measure(recording, TdoaOptions(max_distance=2.0), lambda j, seg, after, lag: (0, t, ok.sum(axis=1), ok))
+    tm = _measure(recording, TdoaOptions(max_distance=2.0), lambda j, seg, after, lag, whole: (0, t, ok.sum(axis=1), ok))
     assert np.isfinite(tm.F[1:6, 0]).all() and not np.isfinite(tm.F[[0, 6, 7], 0]).any()
     assert tm.reference[0] in range(1, 6)
     assert any("consistent subset" in n for n in tm.notes)
@@ -512,7 +513,7 @@ def test_a_reference_with_fewer_than_min_support_agreeing_pairs_is_left_missing(
     t = np.arange(m, dtype=float)
     options = TdoaOptions(max_distance=2.0)
     assert options.min_support == 2
-    tm = _measure(recording, options, lambda j, seg, after, lag: (0, t, ok.sum(axis=1), ok))
+    tm = _measure(recording, options, lambda j, seg, after, lag, whole: (0, t, ok.sum(axis=1), ok))
     assert not np.isfinite(tm.F[0, 0]) and np.isfinite(tm.F[1:, 0]).all()
     assert tm.reference[0] == 1  # the most agreeing pairs (7), the first on a tie
     assert np.allclose(np.diff(tm.F[1:, 0]), options.speed / RATE)  # the kept entries' differences unchanged
@@ -605,3 +606,71 @@ def test_onset_windows_start_at_each_syllable():
         assert np.all(row[f : f + lag] == 1.0) and np.all(np.diff(row[f + lag + 2 :]) <= 0)
     with pytest.raises(ValueError, match="onset_rise"):
         TdoaOptions(onset_rise=-1.0)
+
+
+def _phrase_in_a_reverberant_room(seed: int, m: int = 6, tail_db: float = 8.0, rt60: float = 0.5):
+    """(recording (m, 2 s at RATE), delays in samples): three harmonic notes (8 harmonics, 1/h, a 10 ms attack, as
+    scripts/audio_kinds.py's phrases) through room responses of a direct sound at each channel's delay (a windowed
+    sinc) and an exponentially decaying diffuse tail from 2 ms after it, `tail_db` above the direct sound (beyond the
+    critical distance); white noise 30 dB below."""
+    rng = np.random.default_rng(seed)
+    notes = []
+    for f0 in (262.0, 330.0, 392.0):
+        t = np.arange(int(0.25 * RATE)) / RATE
+        tone = sum(np.sin(2 * np.pi * h * f0 * t + rng.uniform(0, 2 * np.pi)) / h for h in range(1, 9))
+        notes.append(tone * np.minimum(t / 0.01, 1.0) * np.exp(-t / 0.15))
+    phrase = np.concatenate(notes)
+    delays = rng.uniform(0.0, 120.0, m)
+    n, start = RATE, int(0.3 * RATE)
+    t = np.arange(n) / RATE
+    out = np.zeros((m, 2 * RATE))
+    k = np.arange(-20, 21)
+    for i, d in enumerate(delays):
+        h = np.zeros(n)
+        h[int(np.floor(d)) + k + 40] += np.sinc(k - (d - np.floor(d))) * np.hanning(43)[1:-1]
+        tail = rng.standard_normal(n) * np.exp(-6.9 * t / rt60) * (t > (d + 40) / RATE + 0.002)
+        h += tail * 10 ** (tail_db / 20) / np.sqrt(np.sum(tail**2))
+        size = len(phrase) + n
+        y = np.fft.irfft(np.fft.rfft(phrase, size) * np.fft.rfft(h, size), size)[: out.shape[1] - start]
+        out[i, start : start + len(y)] = y
+    return out + 0.03 * np.std(out) * rng.standard_normal(out.shape), delays
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_phrase_beyond_the_critical_distance_is_measured_on_its_onsets_direct_sound(seed):
+    """A tone's steady state in a room carries the ratio of two room responses at its harmonics, not the direct
+    sound's delay: with a diffuse tail 8 dB above the direct sound the pairs' correlations agree on lags whole periods
+    off (emphasis 0); weighted by onset_emphasis (only the new power of each frequency: the direct sound of each note's
+    attack) every difference is within half a sample."""
+    from solvers.recording import Recording
+
+    x, delays = _phrase_in_a_reverberant_room(seed)
+    rec = Recording(x, RATE, tuple("abcdef"), "synthetic")
+    errors = {}
+    for emphasis in (0.0, 2.0):
+        tm = tdoa_matrix(rec, TdoaOptions(max_distance=5.0, emphasis=emphasis))
+        assert len(tm.events) == 1
+        r = tm.reference[0]
+        errors[emphasis] = (tm.F[:, 0] - tm.F[r, 0]) / tm.speed * RATE - (delays - delays[r])
+    assert np.nanmax(np.abs(errors[0.0])) > 20  # whole periods off (or missing) without the emphasis
+    assert np.all(np.abs(errors[2.0]) < 0.5)
+    assert any("onsets' direct sound" in note for note in tm.notes)
+
+
+def test_onset_emphasis_keeps_what_is_new_and_drops_a_steady_state():
+    """A tone that has sounded for 0.1 s weighs nothing once its frames hold only it (its power is not new: 1e-8 of
+    it measured); the tone's start and a burst that starts later come through (a rising frame's power is partly new:
+    about a sixth of their amplitude); emphasis < 0 is refused."""
+    from solvers.audio import onset_emphasis
+
+    t = np.arange(int(0.5 * RATE)) / RATE
+    tone = np.sin(2 * np.pi * 440.0 * t)
+    burst = np.where((t >= 0.3) & (t < 0.32), np.random.default_rng(0).standard_normal(len(t)), 0.0)
+    z = onset_emphasis(np.vstack([tone, tone + burst]), RATE)
+    steady = (t > 0.1) & (t < 0.28)
+    assert np.sqrt(np.mean(z[0, steady] ** 2)) < 1e-4 * np.sqrt(np.mean(tone**2))
+    assert np.sqrt(np.mean(z[0, t < 0.01] ** 2)) > 0.1 * np.sqrt(np.mean(tone[t < 0.01] ** 2))  # measured 0.16
+    around = (t >= 0.3) & (t < 0.32)
+    assert np.sqrt(np.mean(z[1, around] ** 2)) > 0.1 * np.sqrt(np.mean(burst[around] ** 2))  # measured 0.13
+    with pytest.raises(ValueError, match="emphasis"):
+        TdoaOptions(emphasis=-1.0)
