@@ -169,7 +169,8 @@ def test_reported_std_covers_the_true_error():
     assert len(z) >= 25 * 16 and np.mean(z > 3) < 0.02 and np.median(z) < 1.5, np.sort(z)[-5:]
 
 
-@pytest.mark.parametrize("kind", [pytest.param("transposed", marks=pytest.mark.slow), "random", "wrong sigma"])
+@pytest.mark.parametrize("kind", [pytest.param("transposed", marks=pytest.mark.slow),
+                                  pytest.param("random", marks=pytest.mark.slow), "wrong sigma"])
 def test_bad_data_is_never_ok(kind):
     net, F = _uniform_network(10, 12, 1e-2, seed=1)
     sigma = 1e-2
@@ -191,6 +192,7 @@ def test_bad_data_is_never_ok(kind):
         assert res.status == "inconsistent"
 
 
+@pytest.mark.slow
 def test_the_answer_does_not_depend_on_the_seed():
     net, F, bad = corrupted(12, 10, seed=4, sigma=1e-3, missing=0.1, outliers=6)
     results = [calibrate(F, seed=seed) for seed in (0, 1, 2)]
