@@ -62,8 +62,7 @@ def main(argv: list[str] | None = None) -> int:
         n, how = certified(key, system)
         rows.append({"system": name, "formulation": result.system, "certified": n, "certificate": how,
                      "solutions": result.count, "proven": result.proven,
-                     "graphs": "; ".join("closed" if s.closed else f"not closed ({s.open_tracks} tracks open)"
-                                         for s in result.seeds),
+                     "graphs": "; ".join(s.graph for s in result.seeds),
                      "seed_sets": "; ".join(s.carried for s in result.seeds[1:]), "evidence": result.evidence})
         print(f"{name}: {result.count} ({result.evidence}); certified {n}; {times[name]} s", flush=True)
     with open(os.path.join(TABLES, "count_known.csv"), "w", newline="", encoding="utf-8") as fh:

@@ -322,7 +322,7 @@ def run_row(stem: str, threads: int | None = None) -> tuple[dict, dict]:
            "unknowns": result.unknowns, "parameters": result.parameters,
            "start": f"examples/{stem}.start.json" if start is not None else "drawn by count",
            "solutions": result.count, "proven": result.proven, "found": result.found,
-           "graphs": "; ".join("closed" if s.closed else f"not closed ({s.open_tracks} tracks open)" for s in result.seeds),
+           "graphs": "; ".join(s.graph for s in result.seeds),
            "seed_sets": "; ".join(s.carried for s in result.seeds[1:]),
            "trace_test": t.get("status", "not run"),
            "trace_residual": "" if res is None or res != res else f"{res:.0e}",

@@ -60,7 +60,7 @@ def row(cell: str, result: counting.CountResult) -> dict:
     residual = t.get("residual")
     return {"cell": cell, "formulation": result.system, "unknowns": result.unknowns, "group_order": result.group_order,
             "seeds": " ".join(str(s.seed) for s in result.seeds), "solutions": result.count, "proven": result.proven,
-            "graphs": "; ".join("closed" if s.closed else f"not closed ({s.open_tracks} tracks open)" for s in result.seeds),
+            "graphs": "; ".join(s.graph for s in result.seeds),
             "seed_sets": "; ".join(s.carried for s in result.seeds[1:]),
             "loop_check": result.loops_checked, "paths": sum(s.paths for s in result.seeds),
             "trace_test": t.get("status", "not run"),

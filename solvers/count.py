@@ -129,6 +129,11 @@ class SeedCount:
     seconds: float
     carried: str = ""  # how this seed's set compares with the first seed's ("equal as sets", ...)
 
+    @property
+    def graph(self) -> str:
+        """The graph's state in words: "closed", or "not closed (N tracks open)"."""
+        return "closed" if self.closed else f"not closed ({self.open_tracks} tracks open)"
+
 
 @dataclass(frozen=True)
 class CountResult:
@@ -181,7 +186,7 @@ class CountResult:
                  f"evidence: {self.evidence}",
                  f"scope: {self.scope}"]
         for s in self.seeds:
-            lines.append(f"seed {s.seed}: {s.solutions} {what}, graph {'closed' if s.closed else f'not closed ({s.open_tracks} tracks open)'}, "
+            lines.append(f"seed {s.seed}: {s.solutions} {what}, graph {s.graph}, "
                          f"{s.paths} paths, {s.rounds} rounds, {s.seconds:.1f} s" + (f"; {s.carried}" if s.carried else ""))
         lines.append(f"loops: {self.loops_checked}")
         if self.trace is not None:
