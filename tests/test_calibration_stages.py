@@ -10,7 +10,7 @@ from solvers.calibration import CalibrationOptions, calibrate
 from solvers.calibration.adjust import PlaneWaveFit, levenberg_marquardt, parameter_shifts, predict, tangent_basis
 from solvers.calibration.diagnose import FAR_FIELD_CURVATURE, diagnose
 from solvers.calibration.factorization import metric_upgrade, robust_low_rank
-from solvers.calibration.judge import judge_kept
+from solvers.calibration.judge import MAD_NORMAL, judge_kept
 from solvers.metrics import align_rigid, receiver_cramer_rao_rms, standardised_node_errors
 from solvers.synthetic import SAMPLE_RATE, SPEED_OF_SOUND, array_network, room_network, tetrahedral_array
 
@@ -177,6 +177,35 @@ def test_a_node_that_keeps_few_of_its_entries_is_judged_by_them():
     inl[:7, 0] = False  # transmitter 1 keeps 3 of its 10
     judged = judge_kept(replace(res, inliers=inl))
     assert judged.status == "uncontrolled" and "s1 keeps 3 of 10" in judged.message
+
+
+def test_a_node_whose_rejections_the_rest_does_not_explain_gets_its_own_noise():
+    """tables/audio3d seed 7: an event's column with 6 of its 16 entries rejected against 1.7 % elsewhere, its kept
+    entries spread 3.3 x the network's sigma, its source 62 mm off: 6.1 x its std from that sigma, under "ok". Such
+    a node's std is widened by the robust scale of its entries' w-tests and said; the same number of rejections
+    scattered over the nodes, as random gross errors fall, changes nothing."""
+    net = room_network(10, 8, np.random.default_rng(6))
+    F = net.measurements(1e-3, np.random.default_rng(7))
+    res = calibrate(F, 1e-3, dim=3, seed=0)
+    assert res.status == "ok", res.message
+    w = np.array(res.w_test, dtype=float)
+    w[:, 2] *= 4.0  # transmitter 3's entries spread 4 x the others'
+    clustered = res.inliers.copy()
+    clustered[[0, 3, 5, 8], 2] = False  # it keeps 6 of its 10: not a majority lost
+    judged = judge_kept(replace(res, inliers=clustered, w_test=w))
+    factor = np.median(np.abs(w[:, 2])) / MAD_NORMAL
+    assert factor > 2.0
+    assert judged.status == "ok" and "s3 (4 of 10 rejected" in judged.warnings[-1]
+    assert judged.transmitter_std[2] == pytest.approx(factor * res.transmitter_std[2])
+    assert judged.offset_std[2] == pytest.approx(factor * res.offset_std[2])
+    assert np.array_equal(np.delete(judged.transmitter_std, 2), np.delete(res.transmitter_std, 2))
+    assert np.array_equal(judged.receiver_std, res.receiver_std)
+    again = judge_kept(judged)  # said and widened once
+    assert np.array_equal(again.transmitter_std, judged.transmitter_std) and again.warnings == judged.warnings
+    scattered = res.inliers.copy()
+    scattered[[0, 3, 5, 8], [1, 2, 4, 6]] = False
+    spread = judge_kept(replace(res, inliers=scattered, w_test=w))
+    assert np.array_equal(spread.transmitter_std, res.transmitter_std) and spread.warnings == res.warnings
 
 
 @pytest.mark.slow

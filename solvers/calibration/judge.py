@@ -3,7 +3,10 @@
 One rule, read off the final fit (never off an intermediate one):
 - a node is judged by what it kept: a receiver or transmitter whose kept measurements are fewer than
   KEPT_SHARE of its measured ones rests on the few it kept, whatever their tests say (a shuffled column
-  fits 6 of its 24 entries as well as the truth fits 24): never "ok", the node named;
+  fits 6 of its 24 entries as well as the truth fits 24): never "ok", the node named; one that keeps most but
+  rejects more than the rest of the network's rejection rate explains (a binomial test at CONTAMINATED_LEVEL
+  over the nodes: its entries go wrong together, not as scattered gross errors) has a noise of its own: its
+  std is widened by the robust scale of its entries' w-tests (`widen_contaminated`), said in a note;
 - receivers: every coordinate determined; a coordinate whose std is WEAK_ANISOTROPY times that of the
   best-determined one, or the height when the sources span less than diagnose.WEAK_SPAN_DEGREES of
   elevation, is weakly determined (plane waves from one elevation: the height rests on the
@@ -32,6 +35,14 @@ from .state import Diagnosis
 
 #: A node that keeps fewer than this share of its measured entries is judged by what it kept.
 KEPT_SHARE = 0.5
+#: A node whose rejections the rest of the network's rejection rate explains with a probability below this (binomial,
+#: divided by the number of placed nodes) has entries that go wrong together: a room recording's event heard through
+#: reflections, 6 of its 16 entries rejected against 1.7 % elsewhere (p 1.6e-7), its kept entries spread 3.3 x the
+#: network's sigma (two errors of 12 and 15 mm kept at redundancy numbers 0.16 and 0.26), its source 62 mm off,
+#: 6.1 x the std from the network's sigma, under "ok" (tables/audio3d seed 7; 1.8 x the widened std).
+CONTAMINATED_LEVEL = 0.001
+#: The robust scale of a normal variable: its median absolute value over this is its standard deviation.
+MAD_NORMAL = 0.6745
 #: A fit that keeps fewer than this share of all the measured entries does not explain the data: "inconsistent".
 EXPLAINED_SHARE = 2.0 / 3.0
 #: A model error in the residuals (direction_lack_of_fit) whose rms reaches this share of the receivers' median
@@ -103,11 +114,74 @@ def unexplained(result: CalibrationResult) -> str | None:
     return found[0][1].split(":")[0] if found else None
 
 
+def contaminated(measured: np.ndarray, inliers: np.ndarray, placed_r, placed_t
+                 ) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per node kind ("r", "s"): (kind, nodes, their rejected and measured counts, the rate of the rest) of the
+    placed nodes that keep at least KEPT_SHARE of their entries and reject more than the rest of the network's
+    rejection rate explains: the binomial probability of as many rejections among its measured entries, at the
+    rate of the other entries (one rejection and one kept entry added to them: a clean rest is no certainty),
+    below CONTAMINATED_LEVEL divided by the number of placed nodes. Gross errors scattered at random pass it."""
+    from scipy import stats
+
+    rejected = measured & ~inliers
+    total_had, total_rej = int(measured.sum()), int(rejected.sum())
+    nodes = int(np.sum(placed_r)) + int(np.sum(placed_t))
+    out = []
+    for kind, axis, placed in (("r", 1, placed_r), ("s", 0, placed_t)):
+        had, rej = measured.sum(axis=axis), rejected.sum(axis=axis)
+        rate = (total_rej - rej + 1.0) / (total_had - had + 2.0)
+        p = stats.binom.sf(rej - 1, had, rate)
+        bad = np.flatnonzero(placed & (rej > 0) & (had - rej >= KEPT_SHARE * had) & (p < CONTAMINATED_LEVEL / max(nodes, 1)))
+        if bad.size:
+            out.append((kind, bad, rej[bad], had[bad], rate[bad]))
+    return out
+
+
+#: The head of widen_contaminated's note (a result that carries it is not widened again).
+WIDENED = "node(s) with a noise of their own"
+
+
+def widen_contaminated(result: CalibrationResult) -> CalibrationResult:
+    """A node whose entries go wrong together (`contaminated`) has a noise of its own, which the network's sigma
+    understates: its std, covariance and reliability are widened by the robust scale of its measured entries'
+    w-tests (median |w| / MAD_NORMAL, kept and rejected: the node's error distribution, half of it allowed to be
+    gross), when above 1; a note names the nodes and the factors."""
+    if result.w_test is None or result.measured is None or any(w.startswith(WIDENED) for w in result.warnings):
+        return result
+    measured, w = result.measured, np.abs(np.asarray(result.w_test, dtype=float))
+    placed_r, placed_t = np.isfinite(result.receivers[:, 0]), np.isfinite(result.transmitters[:, 0])
+    found = contaminated(measured, result.inliers & measured, placed_r, placed_t)
+    if not found:
+        return result
+    fields = {"r": ["receiver_std", "receiver_cov", "receiver_reliability"],
+              "s": ["transmitter_std", "offset_std", "transmitter_cov", "transmitter_reliability"]}
+    changes, said = {}, []
+    for kind, nodes, rej, had, rate in found:
+        arrays = {name: None if getattr(result, name) is None else np.array(getattr(result, name), dtype=float)
+                  for name in fields[kind]}
+        for k, r, h, q in zip(nodes, rej, had, rate):
+            entries = w[:, k] if kind == "s" else w[k]
+            use = (measured[:, k] if kind == "s" else measured[k]) & np.isfinite(entries)
+            factor = max(1.0, float(np.median(entries[use])) / MAD_NORMAL) if use.any() else 1.0
+            for name, arr in arrays.items():
+                if arr is not None:
+                    arr[k] = arr[k] * (factor**2 if name.endswith("cov") else factor)
+            said.append(f"{kind}{k + 1} ({int(r)} of {int(h)} rejected, {100 * q:.2g} % elsewhere; x {factor:.2g})")
+        changes.update({name: arr for name, arr in arrays.items() if arr is not None})
+    note = (f"{WIDENED} ({len(said)}): they reject more of their measurements than the rest of the network's "
+            f"rejection rate explains (binomial, level {CONTAMINATED_LEVEL:g} over the nodes), their entries go wrong "
+            "together (an event heard through reflections, a noisy channel); their std is widened by the "
+            "robust scale of their entries' w-tests: " + ", ".join(said[:8]) + (", ..." if len(said) > 8 else ""))
+    return replace(result, warnings=result.warnings + (note,), **changes)
+
+
 def judge_kept(result: CalibrationResult) -> CalibrationResult:
     """Apply the kept-share rule to a finished result (any route): an "ok" (or milder) status with a node
-    that rests on few of its entries becomes "uncontrolled", the finding first in the warnings."""
+    that rests on few of its entries becomes "uncontrolled", the finding first in the warnings; a node whose
+    entries go wrong together gets its own noise (`widen_contaminated`)."""
     if result.status == "failed" or result.measured is None:
         return result
+    result = widen_contaminated(result)
     found = [f for f in kept_findings(result.measured, result.inliers, np.isfinite(result.receivers[:, 0]),
                                       np.isfinite(result.transmitters[:, 0])) if f[1] not in result.warnings]
     if not found:
