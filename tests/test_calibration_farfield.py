@@ -12,8 +12,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from solvers.calibration.adjust import levenberg_marquardt, predict, tangent_basis
-from solvers.calibration.judge import _direction_features, model_error_covariance
+from solvers.calibration.adjust import direction_features, levenberg_marquardt, predict, tangent_basis
+from solvers.calibration.judge import model_error_covariance
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -63,7 +63,8 @@ def test_the_tetrahedral_table_holds_what_docs_calibrate_claims():
             assert float(r["max_err_over_std"]) < 5.0, r
     full = [r for r in rows if r["case"] == "three cones"]
     assert all(r["status"] == "ok" for r in full)
-    assert statistics.median(float(r["ratio"]) for r in full) <= 1.5
+    assert max(float(r["ratio"]) for r in full) <= 1.5  # issue 52: every seed within 1.5 x the Cramer-Rao bound
+    assert statistics.median(float(r["ratio"]) for r in full) <= 1.0
     with open(ROOT / "tables" / "farfield_tetra.meta.json") as handle:
         cpu = json.load(handle)["cpu_seconds_per_call"]
     assert all(cpu[f"three cones, seed {s}"] < 60.0 for s in range(5))
@@ -84,7 +85,7 @@ def test_model_error_covariance_matches_refits_with_a_directivity():
     use = np.ones((m, n), bool)
     theta, _ = levenberg_marquardt(F, use, (R, U, rho, o), max_iter=50, tol=1e-16)
     fit = SimpleNamespace(R=theta[0], U=theta[1], rho=theta[2], o=theta[3], inliers=use)
-    X = _direction_features(fit.U)
+    X = direction_features(fit.U)
     a = 1e-6 * rng.standard_normal(X.shape[1])
     G = np.column_stack([np.tile(np.eye(3)[k], m) for k in range(3)]
                         + [np.cross(axis[None, :], fit.R).reshape(-1) for axis in np.eye(3)])
@@ -99,6 +100,32 @@ def test_model_error_covariance_matches_refits_with_a_directivity():
         refits += np.outer(d, d)
     assert np.trace(refits) > 1e-16
     assert np.allclose(C, refits, atol=0.03 * np.abs(refits).max())
+
+
+def test_channel_delays_are_fitted_and_recovered():
+    """F_ij = h(r_i; u_j, rho_j) + o_j + d_i: with a delay per receiver in the model least squares recovers the
+    delays (up to their mean, which the arrival times hold) and the positions; without them the positions take
+    the delays (sources at three elevations: the heights)."""
+    rng = np.random.default_rng(3)
+    m, n = 10, 90
+    R = 0.15 * rng.standard_normal((m, 3))
+    elevation = np.radians(np.repeat([-12.0, 2.0, 14.0], n // 3))
+    azimuth = rng.uniform(0.0, 2.0 * np.pi, n)
+    U = np.column_stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+    rho, o = 1.0 / rng.uniform(3.5, 4.2, n), rng.uniform(0.0, 1.0, n)
+    D = 1e-3 * rng.standard_normal(m)
+    F = predict(R, U, rho, o, tangent_basis(U), D)[0] + 1e-5 * rng.standard_normal((m, n))
+    use = np.ones((m, n), bool)
+    with_delays, converged = levenberg_marquardt(F, use, (R, U, rho, o, np.zeros(m)), max_iter=100, tol=1e-15)
+    assert converged
+    fitted = with_delays[4]
+    assert np.allclose(fitted - fitted.mean(), D - D.mean(), atol=5e-5)
+    without, _ = levenberg_marquardt(F, use, (R, U, rho, o), max_iter=100, tol=1e-15)
+
+    def shape_error(P):  # rms position error after removing the mean (the translation the gauge leaves free)
+        return float(np.sqrt(np.mean(np.sum(((P - P.mean(0)) - (R - R.mean(0))) ** 2, axis=1))))
+
+    assert shape_error(with_delays[0]) < 1e-4 < 0.1 * shape_error(without[0])
 
 
 def test_docs_calibrate_quotes_the_committed_tetrahedral_table():

@@ -345,7 +345,8 @@ def anchor_frame(result, anchors: Anchors, fit: AnchorFit = "rigid", alpha: floa
         left = [n for n, ok in zip(anchors.names, usable) if not ok]
         warnings.append(f"anchors not used (not placed, or undetermined): {', '.join(left)}")
     return replace(result, status=status, message=message, receivers=R2, transmitters=S2,
-                   offsets=s * result.offsets, receiver_std=np.where(np.isnan(result.receiver_std), np.nan, rstd),
+                   offsets=s * result.offsets, receiver_delays=None if result.receiver_delays is None else
+                   s * result.receiver_delays, receiver_std=np.where(np.isnan(result.receiver_std), np.nan, rstd),
                    transmitter_std=np.where(np.isnan(result.transmitter_std), np.nan, tstd),
                    offset_std=np.where(np.isnan(result.offset_std), np.nan, ostd),
                    receiver_cov=rcov, transmitter_cov=tcov, warnings=tuple(warnings), gauge=None, frame=frame,

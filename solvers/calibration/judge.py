@@ -26,7 +26,7 @@ import numpy as np
 from scipy import stats
 
 from ..recovery import to_gauge
-from .adjust import PlaneWaveFit, _reduced, parameter_shifts, predict, tangent_basis
+from .adjust import PlaneWaveFit, _reduced, direction_features, parameter_shifts, predict, tangent_basis
 from .adjustment import gauge_order
 from .diagnose import WEAK_SPAN_DEGREES
 from .result import STATUSES, CalibrationOptions, CalibrationResult
@@ -275,23 +275,16 @@ def _spread_gauge(R: np.ndarray, use: np.ndarray) -> np.ndarray:
     return np.array(chosen + [int(i) for i in order if int(i) not in chosen], dtype=int)
 
 
-def _direction_features(U: np.ndarray) -> np.ndarray:
-    """(n, p): a constant and the quadratic forms of each unit direction of arrival (the last square dropped:
-    1 minus the others), the model error's shape per receiver in `direction_lack_of_fit`."""
-    K = U.shape[1]
-    return np.column_stack([np.ones(len(U))] + [U[:, a] * U[:, b] for a in range(K) for b in range(a, K)][:-1])
-
-
 def direction_lack_of_fit(fit: PlaneWaveFit, alpha: float) -> tuple[str, float, np.ndarray] | None:
     """(words, rms size, coefficients' second moment (p, p)) of a model error the residuals show, or None: per
     receiver, the residuals of its inliers regressed on a constant and the quadratic forms of the direction of
-    arrival (`_direction_features`: a per-channel delay, directivity, the frame's shadow: what a point
+    arrival (`direction_features`: a per-channel delay, directivity, the frame's shadow: what a point
     microphone does not hold; a part linear in the direction is a shift of the microphone and cannot be seen),
     pooled in one F test at level alpha. The second moment is the mean over the receivers of their
     coefficients' outer products less the noise's part sigma^2 (X^T X)^-1 (clipped to >= 0): the spread of
     the model error from receiver to receiver, which `model_error_covariance` propagates to the positions."""
     m, K = fit.R.shape
-    X = _direction_features(fit.U)
+    X = direction_features(fit.U)
     p = X.shape[1]
     E = np.where(fit.inliers, np.nan_to_num(fit.residuals), 0.0)
     explained = 0.0
@@ -324,19 +317,19 @@ def direction_lack_of_fit(fit: PlaneWaveFit, alpha: float) -> tuple[str, float, 
 
 def model_error_covariance(fit: PlaneWaveFit, moment: np.ndarray) -> np.ndarray:
     """(mK, mK) covariance of the receivers' shifts (in the fit's minimum-norm gauge) that a model error of
-    `_direction_features` with coefficients drawn per receiver with second moment `moment` causes in the
+    `direction_features` with coefficients drawn per receiver with second moment `moment` causes in the
     least-squares fit on the inliers: D_i = N^+ J^T (receiver i's entries times the features), summed as
     D_i moment D_i^T (a random-effects model of the directivity). The fit absorbs the error's part that
     looks like the parameters (a shift of the microphone, a source's offset or direction); the residuals
     show the rest, from which `moment` is estimated. Schur complement of the source blocks as in
     `adjust.statistics`."""
     R, U, rho, o = fit.R, fit.U, fit.rho, fit.o
-    _, dr, ds = predict(R, U, rho, o, tangent_basis(U))
-    m, n, K = dr.shape
+    _, dr, ds = predict(R, U, rho, o, tangent_basis(U), getattr(fit, "D", None))
+    m, n, K = dr.shape          # K: a receiver's parameters (its position, then any delay: which absorbs the constant)
     W = fit.inliers.astype(float)
     red, T, Y, TY = _reduced(W, dr, ds, 0.0)
     Pinv = np.linalg.pinv(red, rcond=1e-10, hermitian=True)
-    X = _direction_features(U)                                                  # (n, p)
+    X = direction_features(U)                                                  # (n, p)
     p = X.shape[1]
     M = (W[..., None] * ds)[..., None] * X[None, :, None, :]                     # (m, n, K + 1, p)
     rhs = -(TY.reshape(m * K, -1) @ M.transpose(1, 2, 0, 3).reshape(-1, m * p)).reshape(m * K, m, p)
@@ -347,7 +340,8 @@ def model_error_covariance(fit: PlaneWaveFit, moment: np.ndarray) -> np.ndarray:
     lam, vec = np.linalg.eigh(moment)
     L = vec * np.sqrt(np.maximum(lam, 0.0))                                     # moment = L L^T (semi-definite)
     G = np.einsum("aip,pq->aiq", D, L).reshape(m * K, m * p)
-    return G @ G.T
+    pos = (np.arange(m)[:, None] * K + np.arange(R.shape[1])[None, :]).reshape(-1)
+    return G[pos] @ G[pos].T
 
 
 def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, opts: CalibrationOptions,
@@ -363,7 +357,8 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
     lower = 1.0 / (np.maximum(fit.rho, 0.0) + 2.0 * srho)
     ranges = np.where(determined, 1.0 / np.where(determined, fit.rho, 1.0), lower)
     S = fit.U * ranges[:, None]
-    O = fit.o - ranges
+    common = float(np.mean(fit.D)) if fit.D is not None else 0.0   # the delays' mean, held by the offsets
+    O = fit.o + common - ranges
     # report in the gauge of the other route (receiver g1 at 0, g2 on +x, g3 in xy)
     order = _spread_gauge(fit.R, inl)
     moved = to_gauge(fit.R[order], np.vstack([S, fit.U, np.zeros((1, K))]))
@@ -432,8 +427,11 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
         found.append(("uncontrolled", f"{span}the receivers' coordinate along ({', '.join(f'{a:.2f}' for a in axis)}) "
                       f"(their height, across the plane of the source directions) is weakly determined: its std "
                       f"{1e3 * math.sqrt(lam[-1]):.3g}e-3 against {1e3 * math.sqrt(lam[0]):.3g}e-3 across "
-                      f"({math.sqrt(lam[-1] / lam[0]):.0f} x); it rests on the wavefronts' curvature alone, which a model "
-                      "error swamps; sources at more elevations determine it"))
+                      f"({math.sqrt(lam[-1] / lam[0]):.0f} x); " + (
+                          "the receivers' delays, fitted because the residuals depend on the direction of arrival, "
+                          "take what the sources' few elevations tell of it" if fit.D is not None else
+                          "it rests on the wavefronts' curvature alone, which a model error swamps")
+                      + "; sources at more elevations determine it"))
     if not np.all(np.isfinite(dir_std)):
         found.append(("uncontrolled", "some source directions are not determined (std inf)"))
     notes = []
@@ -463,6 +461,7 @@ def plane_wave_result(F, work, diagnosis: Diagnosis, fit: PlaneWaveFit, sigma, o
         uncontrolled=inl & (np.nan_to_num(redundancy, nan=1.0) < opts.min_redundancy), measured=mask,
         gauge=tuple(int(g) for g in order[:K]), receiver_cov=rcov, transmitter_cov=tcov,
         receiver_reliability=rel_r, transmitter_reliability=rel_t,
+        receiver_delays=None if fit.D is None else fit.D - common,
     )
     why = found[0][1] if found else (notes[0] if notes else "plane waves: every receiver and direction determined")
     return replace(res, message=message(status, res, why))

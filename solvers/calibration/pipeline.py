@@ -17,7 +17,7 @@ from . import crosscheck, search
 from .adjust import adjust_plane_waves
 from .diagnose import WEAK_SPAN_DEGREES, diagnose
 from .initialise import plane_wave_start
-from .judge import judge_kept, plane_wave_result, unexplained
+from .judge import direction_lack_of_fit, judge_kept, plane_wave_result, unexplained
 from .result import CalibrationOptions, CalibrationResult
 from .state import CalibrationState
 
@@ -130,6 +130,24 @@ def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0
                                  max_iter=opts.max_iterations)
         log.info("  plane-wave adjustment: %d of %d measurements kept, %d snooping rounds (%.1f s)",
                  int(fit.inliers.sum()), int(work.sum()), fit.rounds, time.perf_counter() - t0)
+        lack = direction_lack_of_fit(fit, opts.alpha)
+        if lack is not None and not weak:
+            # the data choose the model: residuals that depend on the direction of arrival; their part a channel
+            # delay holds is fitted (adjust's docstring: without it the heights move); the rest is judged as before.
+            # (Sources on one elevation leave a delay and the height one unknown: the weak-span finding says so.)
+            delayed = adjust_plane_waves(F, work, state.start, sigma, diagnosis.low_rank.scale, alpha=opts.alpha,
+                                         max_iter=opts.max_iterations, delays=True)
+            log.info("  with the channel delays: %d of %d measurements kept, %d snooping rounds, %s (%.1f s)",
+                     int(delayed.inliers.sum()), int(work.sum()), delayed.rounds,
+                     "converged" if delayed.converged else "not converged", time.perf_counter() - t0)
+            head = lack[0].split(": a model error")[0]
+            if delayed.converged:
+                fit = delayed
+                notes.append(f"{head}: each receiver's delay is fitted with its position (their spread "
+                             f"{float(np.std(fit.D)):.2g}, in the units of the data)")
+            else:
+                notes.append(f"{head}: the fit with a delay per receiver did not converge; the positions are fitted "
+                             "without delays")
         res = plane_wave_result(F, work, diagnosis, fit, sigma, opts, notes, seed)
     except np.linalg.LinAlgError:
         # a source block of the normal matrix is singular
@@ -140,3 +158,4 @@ def _plane_waves(state: CalibrationState, seed, opts: CalibrationOptions, t0
         return undetermined("did not converge"), None
     res = crosscheck._judge_route(F, diagnosis, replace(res, seconds=time.perf_counter() - t0), opts)
     return res, unexplained(res)
+

@@ -203,6 +203,9 @@ class CalibrationResult:
         the anchors' frame (fit, rotation, translation, scale), its test and each anchor's residual
     dim : 2 or 3, the dimension of the positions
     measured : (m, n) bool, the entries of F that hold a measurement
+    receiver_delays : (m,) each receiver's delay (units of F; their mean is in the offsets) when the fit
+        modelled them, F_ij = |r_i - s_j| + o_j + d_i (the plane-wave route fits them when the residuals
+        depend on the direction of arrival: a channel's latency, an acoustic centre), else None
     """
 
     status: Status
@@ -239,6 +242,7 @@ class CalibrationResult:
     receiver_cov: np.ndarray | None = None
     transmitter_cov: np.ndarray | None = None
     frame: dict | None = None
+    receiver_delays: np.ndarray | None = None
 
     @property
     def dim(self) -> int:
@@ -304,5 +308,6 @@ class CalibrationResult:
             "receiver_cov": clean(self.receiver_cov),
             "transmitter_cov": clean(self.transmitter_cov),
             "frame": self.frame,
+            "receiver_delays": clean(self.receiver_delays),
         }
 
