@@ -515,7 +515,8 @@ def write_json(report: dict, path: str) -> None:
 
 def write_nodes_csv(result, path: str, measurements: Measurements | None = None, units: str | None = None) -> None:
     """The nodes as CSV (``--csv``): one row per receiver, then per transmitter, with the columns kind
-    (receiver / transmitter), name, the coordinates x, y (z), offset (transmitters), the standard
+    (receiver / transmitter), name, the coordinates x, y (z), offset (transmitters; a receiver's delay where the
+    fit modelled them, `CalibrationResult.receiver_delays`), the standard
     deviation of each coordinate and of the offset, and std (the root of the sum of the coordinates'
     variances, as printed); an empty cell for what is not placed or not determined. Comment lines first:
     the status line and the frame (the solver's gauge, or the anchors'). OSError propagates."""
@@ -544,7 +545,8 @@ def write_nodes_csv(result, path: str, measurements: Measurements | None = None,
     lines = [f"# {result.message}", f"# coordinates{unit} in {where}",
              ",".join(["kind", "name", *axes, "offset", *(f"std_{a}" for a in axes), "std_offset", "std"])]
     for k, name in enumerate(names_r):
-        lines.append(",".join(["receiver", format_matrix_cell(name), *map(number, result.receivers[k]), "",
+        delay = "" if getattr(result, "receiver_delays", None) is None else number(result.receiver_delays[k])
+        lines.append(",".join(["receiver", format_matrix_cell(name), *map(number, result.receivers[k]), delay,
                                *map(number, axis_std(result.receiver_cov, k)), "", number(result.receiver_std[k])]))
     for k, name in enumerate(names_t):
         lines.append(",".join(["transmitter", format_matrix_cell(name), *map(number, result.transmitters[k]),
