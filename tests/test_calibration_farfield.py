@@ -84,7 +84,7 @@ def test_model_error_covariance_matches_refits_with_a_directivity():
     F = predict(R, U, rho, o, tangent_basis(U))[0]
     use = np.ones((m, n), bool)
     theta, _ = levenberg_marquardt(F, use, (R, U, rho, o), max_iter=50, tol=1e-16)
-    fit = SimpleNamespace(R=theta[0], U=theta[1], rho=theta[2], o=theta[3], inliers=use)
+    fit = SimpleNamespace(R=theta[0], U=theta[1], rho=theta[2], o=theta[3], D=None, inliers=use)
     X = direction_features(fit.U)
     a = 1e-6 * rng.standard_normal(X.shape[1])
     G = np.column_stack([np.tile(np.eye(3)[k], m) for k in range(3)]

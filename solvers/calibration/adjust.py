@@ -83,6 +83,16 @@ def direction_features(U: np.ndarray) -> np.ndarray:
     return np.column_stack([np.ones(len(U))] + [U[:, a] * U[:, b] for a in range(K) for b in range(a, K)][:-1])
 
 
+def _delays(theta):
+    """The receivers' delays of a parameter tuple (R, U, rho, o[, D]), or None when it has none."""
+    return theta[4] if len(theta) > 4 else None
+
+
+def position_index(m: int, per: int, K: int) -> np.ndarray:
+    """The positions' rows among m receivers' parameters of `per` each (position first, then any delay)."""
+    return (np.arange(m)[:, None] * per + np.arange(K)[None, :]).reshape(-1)
+
+
 def tangent_basis(U: np.ndarray) -> np.ndarray:
     """(n, K, K - 1) orthonormal axes perpendicular to each unit row of U."""
     n, K = U.shape
@@ -134,7 +144,7 @@ def _reduced(Wt, dr, ds, damping):
 
 def _step(F, use, W, theta, damping):
     R, U, rho, o = theta[:4]
-    D = theta[4] if len(theta) > 4 else None
+    D = _delays(theta)
     T_ax = tangent_basis(U)
     P, dr, ds = predict(R, U, rho, o, T_ax, D)
     E = np.where(use, F - P, 0.0)
@@ -156,7 +166,7 @@ def _step(F, use, W, theta, damping):
 
 def _cost(F, use, theta, c):
     R, U, rho, o = theta[:4]
-    P, _, _ = predict(R, U, rho, o, tangent_basis(U), theta[4] if len(theta) > 4 else None)
+    P, _, _ = predict(R, U, rho, o, tangent_basis(U), _delays(theta))
     e = np.where(use, F - P, 0.0)
     if c is None:
         return float(np.sum(e**2)), e
@@ -189,7 +199,7 @@ def statistics(F, mask, use, theta, sigma):
     receivers' over all their parameters: positions first, then any delay)."""
     R, U, rho, o = theta[:4]
     T_ax = tangent_basis(U)
-    P, dr, ds = predict(R, U, rho, o, T_ax, theta[4] if len(theta) > 4 else None)
+    P, dr, ds = predict(R, U, rho, o, T_ax, _delays(theta))
     m, n, K = dr.shape
     red, T, Y, TY = _reduced(use.astype(float), dr, ds, 0.0)
     Pinv = np.linalg.pinv(red, rcond=1e-10, hermitian=True)
@@ -260,13 +270,12 @@ def adjust_plane_waves(F, work, start, sigma, scale0, alpha=0.001, max_rounds=30
     E, h, r = st["E"], st["h"], st["r"]
     w = np.where(inl, E / (st["sigma"] * np.sqrt(np.maximum(r, 1e-12))), E / (st["sigma"] * np.sqrt(1.0 + np.maximum(h, 0))))
     m, K = theta[0].shape
-    Kp = st["Pb"].shape[1]
-    pos = (np.arange(m)[:, None] * Kp + np.arange(K)[None, :]).reshape(-1)   # the positions among the parameters
+    pos = position_index(m, st["Pb"].shape[1], K)
     cov_rr = st["sigma"] ** 2 * st["Pinv"][np.ix_(pos, pos)]
     return PlaneWaveFit(*theta[:4], inliers=inl, residuals=E, sigma=st["sigma"], dof=st["dof"], converged=converged,
                         redundancy=r, w=np.where(work, w, np.nan), receiver_cov=st["sigma"] ** 2 * st["Pb"][:, :K, :K],
                         cov_rr=cov_rr, source_cov=st["sigma"] ** 2 * st["Q"], tangents=st["T_ax"], critical=crit,
-                        rounds=rounds, D=theta[4] if len(theta) > 4 else None)
+                        rounds=rounds, D=_delays(theta))
 
 
 def parameter_shifts(F, fit: PlaneWaveFit, bias: np.ndarray, readout: np.ndarray, chunk: int = 1024):

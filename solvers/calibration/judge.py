@@ -26,7 +26,8 @@ import numpy as np
 from scipy import stats
 
 from ..recovery import to_gauge
-from .adjust import PlaneWaveFit, _reduced, direction_features, parameter_shifts, predict, tangent_basis
+from .adjust import (PlaneWaveFit, _reduced, direction_features, parameter_shifts, position_index, predict,
+                     tangent_basis)
 from .adjustment import gauge_order
 from .diagnose import WEAK_SPAN_DEGREES
 from .result import STATUSES, CalibrationOptions, CalibrationResult
@@ -121,8 +122,6 @@ def contaminated(measured: np.ndarray, inliers: np.ndarray, placed_r, placed_t
     rejection rate explains: the binomial probability of as many rejections among its measured entries, at the
     rate of the other entries (one rejection and one kept entry added to them: a clean rest is no certainty),
     below CONTAMINATED_LEVEL divided by the number of placed nodes. Gross errors scattered at random pass it."""
-    from scipy import stats
-
     rejected = measured & ~inliers
     total_had, total_rej = int(measured.sum()), int(rejected.sum())
     nodes = int(np.sum(placed_r)) + int(np.sum(placed_t))
@@ -324,7 +323,7 @@ def model_error_covariance(fit: PlaneWaveFit, moment: np.ndarray) -> np.ndarray:
     show the rest, from which `moment` is estimated. Schur complement of the source blocks as in
     `adjust.statistics`."""
     R, U, rho, o = fit.R, fit.U, fit.rho, fit.o
-    _, dr, ds = predict(R, U, rho, o, tangent_basis(U), getattr(fit, "D", None))
+    _, dr, ds = predict(R, U, rho, o, tangent_basis(U), fit.D)
     m, n, K = dr.shape          # K: a receiver's parameters (its position, then any delay: which absorbs the constant)
     W = fit.inliers.astype(float)
     red, T, Y, TY = _reduced(W, dr, ds, 0.0)
@@ -340,7 +339,7 @@ def model_error_covariance(fit: PlaneWaveFit, moment: np.ndarray) -> np.ndarray:
     lam, vec = np.linalg.eigh(moment)
     L = vec * np.sqrt(np.maximum(lam, 0.0))                                     # moment = L L^T (semi-definite)
     G = np.einsum("aip,pq->aiq", D, L).reshape(m * K, m * p)
-    pos = (np.arange(m)[:, None] * K + np.arange(R.shape[1])[None, :]).reshape(-1)
+    pos = position_index(m, K, R.shape[1])
     return G[pos] @ G[pos].T
 
 
