@@ -78,6 +78,18 @@ def test_native_switch_and_bad_addresses(monkeypatch):
         tape_kernel.track(solver.tapes, solver.q0, solver.q0, solver.x0[:2], None, solver.options, native=np.zeros(3))
 
 
+def factor_solve(A: np.ndarray, b: np.ndarray, N: int, P: int, addresses: np.ndarray) -> tuple:
+    """(factors, solutions, pivots, flags) of the matrices in rows N.. of A's first P columns and right-hand sides b, by
+    the LU and solve at ``addresses`` (zeros: the batched kernels)."""
+    cap = A.shape[1]
+    Ar, Ai = np.ascontiguousarray(A.real), np.ascontiguousarray(A.imag)
+    br, bi = np.ascontiguousarray(b.real), np.ascontiguousarray(b.imag)
+    piv, ok = np.zeros((N, cap), dtype=np.int64), np.zeros(cap, dtype=np.bool_)
+    tape_jit._factor(addresses, Ar, Ai, N, N, piv, ok, P)
+    tape_jit._back(addresses, Ar, Ai, N, N, piv, br, bi, P)
+    return (Ar + 1j * Ai)[:, :P], (br + 1j * bi)[:, :P], piv[:, :P], ok[:P]
+
+
 @pytest.mark.skipif(not COMPILED, reason="no C compiler, or TDOA_WORKBENCH_NATIVE=off")
 def test_compiled_lu_equals_batched():
     """The solver's compiled LU and solves (four columns per pass) give the batched kernels' bits: factors,
@@ -93,16 +105,7 @@ def test_compiled_lu_equals_batched():
     A[N:, 4] = 0.0  # a singular matrix
     A[N + N * N - 1, 7] = np.nan  # a NaN in the last pivot (the interchanges are vector selects: NaN lanes too)
     b = rng.normal(size=(N, cap)) + 1j * rng.normal(size=(N, cap))
-
-    def factor_solve(addresses):
-        Ar, Ai = np.ascontiguousarray(A.real), np.ascontiguousarray(A.imag)
-        br, bi = np.ascontiguousarray(b.real), np.ascontiguousarray(b.imag)
-        piv, ok = np.zeros((N, cap), dtype=np.int64), np.zeros(cap, dtype=np.bool_)
-        tape_jit._factor(addresses, Ar, Ai, N, N, piv, ok, P)
-        tape_jit._back(addresses, Ar, Ai, N, N, piv, br, bi, P)
-        return (Ar + 1j * Ai)[:, :P], (br + 1j * bi)[:, :P], piv[:, :P], ok[:P]
-
-    compiled, batched = factor_solve(lin), factor_solve(np.zeros(2, dtype=np.int64))
+    compiled, batched = factor_solve(A, b, N, P, lin), factor_solve(A, b, N, P, np.zeros(2, dtype=np.int64))
     for got, ref in zip(compiled, batched):
         np.testing.assert_array_equal(got, ref)
     assert not batched[3][4] and not batched[3][7] and batched[3][[0, 1, 2, 3, 5, 6, 8]].all()

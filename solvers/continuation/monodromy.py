@@ -166,7 +166,7 @@ def start_solver(system: ParametricSystem, q0: np.ndarray, x0: np.ndarray,
             "parameters": list(system.parameters), "degree": 0, "coefficient_degree": int(max(system.coefficient_degrees)),
             "monodromy": {"seed": seed}, "tracker": {}, "term_equation": eq.tolist(), "exponents": exps.tolist(),
             "start_parameters": _pairs(q0), "start_roots": _pairs(np.atleast_2d(x0))}
-    solver = HomotopySolver(spec, coefficients, evaluator)
+    solver = HomotopySolver(spec, coefficients, evaluator, elimination="sparse")
     x0 = solver.newton(np.atleast_2d(x0), q0[None], steps=3)
     if solver.residual(x0, q0[None]).max() > 1e-8:
         raise HomotopyError(f"{system.name}: the start point is not a root (residual {solver.residual(x0, q0[None]).max():.1e})")

@@ -656,11 +656,13 @@ class HomotopyTapes:
     """The tapes of one homotopy, on the same inputs (:func:`homotopy_program`); outputs in rows:
     ``full`` H (N), J (N * N, row-major), dH/ds (N), for the predictor and the step that gives the next
     tangent; ``newton`` H and J, for the other Newton steps (dH/ds is a third of ``full``);
-    ``residual`` H."""
+    ``residual`` H; ``lu``: the elimination schedule the compiled LU follows (:func:`.sparse_lu.schedule`, for
+    tapes renamed to a sparse order by :func:`.sparse_lu.permuted`), or None (the dense LU)."""
 
     full: Tape
     newton: Tape
     residual: Tape
+    lu: tuple | None = None
 
     @property
     def n_registers(self) -> int:

@@ -166,10 +166,17 @@ def _batch(tapes: "HomotopyTapes", native: np.ndarray, chord: bool, x0: np.ndarr
         call = _TRACKERS.get(int(native[5]))
         if call is None:
             call = _TRACKERS[int(native[5])] = _TRACK_PROTOTYPE(int(native[5]))
-        x0, x_out, stats = np.ascontiguousarray(x0), np.ascontiguousarray(x_out), np.ascontiguousarray(stats)
-        q0, dq, opts = np.ascontiguousarray(q0), np.ascontiguousarray(dq), np.ascontiguousarray(opts, dtype=np.float64)
+        # the compiled tracker writes C-ordered arrays: an output that is not (an F-ordered x0's empty_like, say) is
+        # written through a copy and copied back, never left as it was
+        out, st = np.ascontiguousarray(x_out), np.ascontiguousarray(stats)
+        x0, q0, dq = np.ascontiguousarray(x0), np.ascontiguousarray(q0), np.ascontiguousarray(dq)
+        opts = np.ascontiguousarray(opts, dtype=np.float64)
         if call(int(chord), tapes.n_registers, tapes.full.n_outputs, len(x0), q0.shape[1], x0.ctypes.data, q0.ctypes.data,
-                dq.ctypes.data, inst.ctypes.data, opts.ctypes.data, len(opts), x_out.ctypes.data, stats.ctypes.data) == 0:
+                dq.ctypes.data, inst.ctypes.data, opts.ctypes.data, len(opts), out.ctypes.data, st.ctypes.data) == 0:
+            if out is not x_out:
+                x_out[...] = out
+            if st is not stats:
+                stats[...] = st
             return
     _track_batch(tapes.full.code, tapes.full.imm, tapes.newton.code, tapes.newton.imm, tapes.residual.code,
                  tapes.residual.imm, native, chord, tapes.n_registers, tapes.full.n_outputs, x0, q0, dq, inst, opts,

@@ -108,14 +108,19 @@ def source(tape, name: str, width: int = WIDTH) -> str:
     return "\n".join(lines)
 
 
-def lu_source(N: int) -> str:
+def lu_source(N: int, steps=None) -> str:
     """C source of ``lu_factor(P, C, Ar, Ai, base, piv, ok)`` and ``lu_solve(P, C, Ar, Ai, base, piv, br, bi)``
     for N x N matrices at rows base + i N + j of Ar, Ai (point p at column p, row stride C), four points
     per pass: :func:`tape_jit._lu` and :func:`tape_jit._solve` with the same operations in the same
     order. The row interchanges, which differ from lane to lane, are vector selects (lanes whose pivot row is i
     exchange rows k and i), and the solve holds its right-hand side in registers: interchanges written lane by
     lane and then read back as vectors stalled on store forwarding (a whole 9r/3s solve took 0.88x the time with selects,
-    the same bits)."""
+    the same bits).
+
+    ``steps``: a :func:`solvers.continuation.sparse_lu.schedule` (the tapes' ``lu``): the same operations on only the
+    positions and columns it says can be non-zero (:func:`sparse_lu_source`)."""
+    if steps is not None:
+        return sparse_lu_source(N, steps)
     return f"""
 #include <math.h>
 typedef double v4d __attribute__((vector_size(32)));
@@ -216,6 +221,112 @@ void lu_solve(long P, long C, const double *restrict Ar, const double *restrict 
     for (int k = 0; k < N; k++) {{ ST(br, k, xr[k]); ST(bi, k, xi[k]); }}
   }}
 }}
+"""
+
+
+def _table(name: str, lists) -> str:
+    """C tables of index lists: ``name_o`` (offsets, len(lists) + 1) and ``name`` (the lists one after another)."""
+    offsets = np.cumsum([0] + [len(x) for x in lists])
+    flat = [v for x in lists for v in x] or [0]
+    return (f"static const int {name}_o[{len(offsets)}] = {{{', '.join(map(str, offsets))}}};\n"
+            f"static const int {name}[{len(flat)}] = {{{', '.join(map(str, flat))}}};\n")
+
+
+def sparse_lu_source(N: int, steps) -> str:
+    """:func:`lu_source`'s ``lu_factor`` and ``lu_solve`` restricted to a schedule: at step k the pivot search,
+    the interchanges and the elimination run over the positions of ``steps[k][0]`` and the columns of
+    ``steps[k][1]`` only, in the dense code's order; the back substitution of row i over the columns of
+    ``steps[i][1]``. What is skipped is an exact zero (:mod:`.sparse_lu`): the same bits as the dense code."""
+    head = lu_source(N).split("void lu_factor", 1)[0]
+    return head + _table("lu_t", [T for T, _ in steps]) + _table("lu_u", [U for _, U in steps]) + r"""
+void lu_factor(long P, long C, double *restrict Ar, double *restrict Ai, long base, long *restrict piv,
+                   unsigned char *restrict ok) {
+  for (long p = 0; p < P; p += 4) {
+    v4l bad = {0, 0, 0, 0};
+    for (int k = 0; k < N; k++) {
+      long kk = base + k * N + k;
+      int t0 = lu_t_o[k], t1 = lu_t_o[k + 1], u0 = lu_u_o[k], u1 = lu_u_o[k + 1];
+      v4d ar = LD(Ar, kk), ai = LD(Ai, kk);
+      v4d best = ar * ar + ai * ai;
+      v4l q = {k, k, k, k};
+      for (int t = t0; t < t1; t++) {
+        long i = lu_t[t], ik = base + i * N + k;
+        v4d xr = LD(Ar, ik), xi = LD(Ai, ik);
+        v4d a = xr * xr + xi * xi;
+        v4l m = a > best;
+        best = SEL(m, a, best);
+        q = (m & (v4l){i, i, i, i}) | (~m & q);
+      }
+      __builtin_memcpy(&piv[k * C + p], &q, 32);
+      for (int t = t0; t < t1; t++) {
+        long i = lu_t[t];
+        v4l m = q == (v4l){i, i, i, i};
+        if (!(m[0] | m[1] | m[2] | m[3])) continue;
+        for (int s = u0 - 1; s < u1; s++) {
+          long j = s < u0 ? k : lu_u[s];
+          long u = base + k * N + j, w = base + i * N + j;
+          v4d ur = LD(Ar, u), wr = LD(Ar, w), ui = LD(Ai, u), wi = LD(Ai, w);
+          ST(Ar, u, SEL(m, wr, ur)); ST(Ar, w, SEL(m, ur, wr));
+          ST(Ai, u, SEL(m, wi, ui)); ST(Ai, w, SEL(m, ui, wi));
+        }
+      }
+      v4l sing = ~(best > 0.0) | ~(best < (v4d){INFINITY, INFINITY, INFINITY, INFINITY});
+      bad |= sing;
+      v4d b = SEL(sing, ((v4d){1e-300, 1e-300, 1e-300, 1e-300}), best);
+      v4d fr = LD(Ar, kk) / b, fi = -LD(Ai, kk) / b;
+      ST(Ar, kk, fr); ST(Ai, kk, fi);
+      for (int t = t0; t < t1; t++) {
+        long i = lu_t[t], ik = base + i * N + k;
+        v4d xr = LD(Ar, ik), xi = LD(Ai, ik);
+        v4d yr = xr * fr - xi * fi, yi = xr * fi + xi * fr;
+        ST(Ar, ik, yr); ST(Ai, ik, yi);
+        for (int s = u0; s < u1; s++) {
+          long j = lu_u[s], ij = base + i * N + j, kj = base + k * N + j;
+          v4d ar = LD(Ar, ij), ai = LD(Ai, ij), br = LD(Ar, kj), bi = LD(Ai, kj);
+          ST(Ar, ij, ar - (yr * br - yi * bi)); ST(Ai, ij, ai - (yr * bi + yi * br));
+        }
+      }
+    }
+    for (int l = 0; l < 4; l++) ok[p + l] = !bad[l];
+  }
+}
+void lu_solve(long P, long C, const double *restrict Ar, const double *restrict Ai, long base,
+                  const long *restrict piv, double *restrict br, double *restrict bi) {
+  for (long p = 0; p < P; p += 4) {
+    v4d xr[N], xi[N];
+    for (int k = 0; k < N; k++) { xr[k] = LD(br, k); xi[k] = LD(bi, k); }
+    for (int k = 0; k < N; k++) {
+      v4l q = LDL(piv, k);
+      for (int t = lu_t_o[k]; t < lu_t_o[k + 1]; t++) {
+        int i = lu_t[t];
+        v4l m = q == (v4l){i, i, i, i};
+        v4d tr = xr[k], ti = xi[k];
+        xr[k] = SEL(m, xr[i], tr); xr[i] = SEL(m, tr, xr[i]);
+        xi[k] = SEL(m, xi[i], ti); xi[i] = SEL(m, ti, xi[i]);
+      }
+      v4d kr = xr[k], ki = xi[k];
+      for (int t = lu_t_o[k]; t < lu_t_o[k + 1]; t++) {
+        int i = lu_t[t];
+        long f = base + i * N + k;
+        v4d a = LD(Ar, f), b = LD(Ai, f);
+        xr[i] = xr[i] - (a * kr - b * ki); xi[i] = xi[i] - (a * ki + b * kr);
+      }
+    }
+    for (int i = N - 1; i >= 0; i--) {
+      v4d yr = xr[i], yi = xi[i];
+      for (int s = lu_u_o[i]; s < lu_u_o[i + 1]; s++) {
+        int j = lu_u[s];
+        long f = base + i * N + j;
+        v4d a = LD(Ar, f), b = LD(Ai, f);
+        yr = yr - (a * xr[j] - b * xi[j]); yi = yi - (a * xi[j] + b * xr[j]);
+      }
+      long f = base + i * N + i;
+      v4d dr = LD(Ar, f), di = LD(Ai, f);
+      xr[i] = yr * dr - yi * di; xi[i] = yr * di + yi * dr;
+    }
+    for (int k = 0; k < N; k++) { ST(br, k, xr[k]); ST(bi, k, xi[k]); }
+  }
+}
 """
 
 
@@ -604,7 +715,7 @@ def _units(tapes, N: int) -> list[str]:
     tape; the Newton and residual tapes; the LU and the tracker (:data:`TAPE_UNITS` of them are tapes)."""
     prototypes = [_TAPE_PROTOTYPE.format(name=f"tape_{kind}") for kind in KINDS]
     return [source(tapes.full, "tape_full"), "\n".join(source(getattr(tapes, kind), f"tape_{kind}") for kind in KINDS[1:]),
-            "\n".join(prototypes + [lu_source(N), tracker_source()])]
+            "\n".join(prototypes + [lu_source(N, getattr(tapes, "lu", None)), tracker_source()])]
 
 
 #: The first units of :func:`_units` are straight-line tapes, compiled with :data:`FAST_COMPILE`; the LU's and

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from .scaling import equation_shift, log2_floor, scaled_float
-from . import tape_kernel, tape_native, tracker
+from . import sparse_lu, tape_kernel, tape_native, tracker
 from .tracker import SystemStructure, TrackerOptions
 
 if TYPE_CHECKING:  # the online solver needs neither sympy nor the exact algebra
@@ -49,6 +49,12 @@ START_TOL = 1e-8
 #: Significant digits of stored start data and roots (refined by Newton's method when loaded).
 START_DIGITS = 11
 
+
+#: How a :class:`HomotopySolver` factors the Jacobian: "dense", in the order of the unknowns and equations (the
+#: committed solvers: their outputs were computed so, and they keep their bits), or "sparse", in the order
+#: :func:`sparse_lu.plan` picks where the Jacobian is sparse enough (the same roots up to rounding: count's and
+#: monodromy's solvers; 3D 5r/9s tracks 6x faster, 7r/5s 3x).
+ELIMINATIONS = ("dense", "sparse")
 
 #: Size of the detour (relative to |q0|) for paths that stall even with tight step control.
 DETOUR = 0.5
@@ -319,9 +325,14 @@ class HomotopySolver:
     retracks and detours (:data:`solvers.generate.STEP_CONTROL`).
     """
 
-    def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto"):
+    def __init__(self, spec: dict, coefficients: Callable, evaluator: str = "auto", elimination: str = "dense"):
+        if elimination not in ELIMINATIONS:
+            raise ValueError(f"unknown elimination {elimination!r}; valid: {', '.join(ELIMINATIONS)}")
         self.coefficients = coefficients
         self.tapes = _tapes(spec, coefficients, evaluator)
+        # "sparse": the tapes renamed to a sparse elimination order where the Jacobian is sparse enough (every track
+        # and Newton step factors it; 3D 5r/9s: 1,779 entry updates for the dense order's 32,430), else None
+        self.sparse = sparse_lu.plan(self.tapes) if self.tapes is not None and elimination == "sparse" else None
         self.terms = (np.array(spec["exponents"], dtype=np.int64), np.array(spec["term_equation"], dtype=np.int64))
         self.structure = SystemStructure.from_exponents(*self.terms)
         self.degree = int(spec["coefficient_degree"])
@@ -355,6 +366,11 @@ class HomotopySolver:
 
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         """Newton steps on the system at parameters q (B, P); x (P', N), path p on instance inst[p]."""
+        if self.sparse is not None:
+            t = self.sparse
+            out = tape_kernel.newton(t.tapes, q, np.atleast_2d(x)[:, t.cols], inst, steps,
+                                     native=tape_native.addresses(t.tapes))
+            return out[:, t.inv]
         if self.tapes is not None:
             return tape_kernel.newton(self.tapes, q, x, inst, steps, native=tape_native.addresses(self.tapes))
         G = self.segment(q, q)
@@ -384,6 +400,11 @@ class HomotopySolver:
         """Track x0 (P, N) along q0 -> q1 (B, P) (path p on segment inst[p]); endpoints and stats
         (``near_end``: :func:`tape_kernel.track`'s, for the tape tracker)."""
         options = options or self.options
+        if self.sparse is not None and options.predictor in tape_kernel.PREDICTORS:
+            t = self.sparse
+            x, stats = tape_kernel.track(t.tapes, q0, q1, np.atleast_2d(x0)[:, t.cols], inst, options, near_end=near_end,
+                                         native=tape_native.addresses(t.tapes))
+            return x[:, t.inv], stats
         if self.tapes is not None and options.predictor in tape_kernel.PREDICTORS:
             return tape_kernel.track(self.tapes, q0, q1, x0, inst, options, near_end=near_end,
                                      native=tape_native.addresses(self.tapes))
