@@ -156,6 +156,22 @@ class Sparse:
     inv: np.ndarray
     work: tuple[int, int]
 
+    def track(self, q0, q1, x0, inst, options, near_end: float = 0.0):
+        """:func:`.tape_kernel.track` of x0 (P, N) in the unknowns' own order, on the renamed tapes."""
+        from . import tape_kernel, tape_native
+
+        x, stats = tape_kernel.track(self.tapes, q0, q1, np.atleast_2d(x0)[:, self.cols], inst, options,
+                                     near_end=near_end, native=tape_native.addresses(self.tapes))
+        return x[:, self.inv], stats
+
+    def newton(self, q, x, inst, steps: int):
+        """:func:`.tape_kernel.newton` of x (P, N) in the unknowns' own order, on the renamed tapes."""
+        from . import tape_kernel, tape_native
+
+        out = tape_kernel.newton(self.tapes, q, np.atleast_2d(x)[:, self.cols], inst, steps,
+                                 native=tape_native.addresses(self.tapes))
+        return out[:, self.inv]
+
 
 def plan(tapes) -> Sparse | None:
     """The ordered tapes of a homotopy whose Jacobian is sparse enough (:data:`WORTH`), else None."""

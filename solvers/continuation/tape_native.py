@@ -8,7 +8,8 @@ the interpreter's operations in the same order and is compiled without contracti
 (``-ffp-contract=off``), so its results are bit-identical to the interpreter's: a solver gives the same
 roots with or without it. The same library holds the LU with partial pivoting of the N x N Jacobians
 and its solves (:func:`lu_source`: the batched kernel's operations, four paths per pass in vector
-registers; 1.3-1.4x the batched kernel for a full batch, 3-5x for a handful of paths), and the batched
+registers; 1.3-1.4x the batched kernel for a full batch, 3-5x for a handful of paths; for tapes renamed to a sparse
+elimination order, :func:`sparse_lu_source`, which skips the exact zeros of :mod:`.sparse_lu`'s schedule), and the batched
 tracker itself (:func:`tracker_source`: :func:`tape_jit._track_batch` line for line, the same bits),
 so that a fresh environment compiles one C file (about a second) where numba took 13-90 s to compile
 the tracker.

@@ -52,7 +52,7 @@ import numpy as np
 
 from . import certify, graph
 from . import monodromy as md
-from . import slp, tape_kernel, tape_native, tracker
+from . import slp, sparse_lu, tape_kernel, tape_native, tracker
 from . import tracking as tk
 from .tracker import TrackerOptions
 
@@ -203,15 +203,21 @@ class TraceSystem:
         params = [f"p:{p}" for p in parameters] + [f"v:{p}" for p in parameters] + [f"a:{u}" for u in unknowns] + ["t"]
         self.tapes = slp.homotopy_tapes(trace_equations(equations, self.N, self.P, tuple(self.square.tolist())),
                                         names, params)
-        self.native = tape_native.addresses(self.tapes)
+        # tracked in a sparse elimination order where the Jacobian is sparse enough (as count's solvers)
+        self.sparse = sparse_lu.plan(self.tapes)
+        self.native = tape_native.addresses(self.tapes if self.sparse is None else self.sparse.tapes)
         self.nvars = self.N + 1
         self.options = TrackerOptions()
 
     def track(self, q0: np.ndarray, q1: np.ndarray, x0: np.ndarray, inst: np.ndarray | None = None,
               options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
+        if self.sparse is not None:
+            return self.sparse.track(q0, q1, x0, inst, options or self.options)
         return tape_kernel.track(self.tapes, q0, q1, x0, inst, options or self.options, native=self.native)
 
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
+        if self.sparse is not None:
+            return self.sparse.newton(q, x, inst, steps)
         return tape_kernel.newton(self.tapes, q, x, inst, steps, native=self.native)
 
     def image(self, y: np.ndarray) -> np.ndarray:

@@ -367,10 +367,7 @@ class HomotopySolver:
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         """Newton steps on the system at parameters q (B, P); x (P', N), path p on instance inst[p]."""
         if self.sparse is not None:
-            t = self.sparse
-            out = tape_kernel.newton(t.tapes, q, np.atleast_2d(x)[:, t.cols], inst, steps,
-                                     native=tape_native.addresses(t.tapes))
-            return out[:, t.inv]
+            return self.sparse.newton(q, x, inst, steps)
         if self.tapes is not None:
             return tape_kernel.newton(self.tapes, q, x, inst, steps, native=tape_native.addresses(self.tapes))
         G = self.segment(q, q)
@@ -401,10 +398,7 @@ class HomotopySolver:
         (``near_end``: :func:`tape_kernel.track`'s, for the tape tracker)."""
         options = options or self.options
         if self.sparse is not None and options.predictor in tape_kernel.PREDICTORS:
-            t = self.sparse
-            x, stats = tape_kernel.track(t.tapes, q0, q1, np.atleast_2d(x0)[:, t.cols], inst, options, near_end=near_end,
-                                         native=tape_native.addresses(t.tapes))
-            return x[:, t.inv], stats
+            return self.sparse.track(q0, q1, x0, inst, options, near_end=near_end)
         if self.tapes is not None and options.predictor in tape_kernel.PREDICTORS:
             return tape_kernel.track(self.tapes, q0, q1, x0, inst, options, near_end=near_end,
                                      native=tape_native.addresses(self.tapes))
