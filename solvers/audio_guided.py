@@ -63,6 +63,10 @@ class GuideOptions:
         fit, from its candidates (locate_source). A calibration's cost grows faster than its events (on the
         10-minute file of scripts/bench_audio_stream.py, 300 events, `tdoa` stopped at 483 s, the first pass
         taking 45 s); a guide needs the receivers, which 40 events of 16 channels place
+    retry_least_supported : when the first calibration cannot guide (`_trust`), it is run once more without the
+        entries that only TdoaOptions.min_support other channels agree with (the least sure the first pass keeps:
+        in the 16 kHz / 0.8 s / 10 dB speech room of tables/audio3d_kinds, 4 of its 8 wrong entries and none of
+        its 63 right ones), and guides when that one can
     """
 
     trusted: tuple[str, ...] = ("ok", "uncontrolled")
@@ -74,6 +78,7 @@ class GuideOptions:
     locate_share: float = 0.4
     seed: int = 0
     calibrate_events: int = 40
+    retry_least_supported: bool = True
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.window_sigmas) and self.window_sigmas >= 0):
@@ -498,8 +503,9 @@ def guide_events(first: TdoaMatrix, limit: int) -> np.ndarray:
 def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, dim: int = 3, seed: int | None = 0,
                 guide: GuideOptions | None = GuideOptions(), progress=None) -> GuidedTdoa:
     """`tdoa` as the verb runs it: the first pass; with a guide, `calibrate(F, dim=dim, seed=seed)` of it
-    (sigma estimated) and, when that calibration is trusted (GuideOptions.trusted, every receiver placed),
-    the guided pass at its positions, each event checked against the first pass's entries that calibration
+    (sigma estimated; when it cannot guide, once more without the least supported entries,
+    GuideOptions.retry_least_supported) and, when that calibration is trusted (GuideOptions.trusted, every
+    receiver placed), the guided pass at its positions, each event checked against the first pass's entries that calibration
     accepted (reconcile); notes say what was done. guide None, or the emitted signal given (options.signal:
     each channel's arrival its own pulse, no pair correlation to narrow): the first pass only."""
     from .calibration import calibrate
@@ -519,6 +525,21 @@ def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, d
                  + (f", {len(chosen)} of its {n} events" if len(chosen) < n else "") + ") to guide a second pass")
     cal = calibrate(first.F[:, chosen], dim=dim, seed=seed)
     why = _trust(cal, guide)
+    retried = ""
+    if why and guide.retry_least_supported:
+        # the entries only min_support channels agree with are the first pass's least sure: the guide is
+        # calibrated once more without them (the final calibration is still of the whole guided matrix)
+        sure = first.F[:, chosen].copy()
+        weak = np.isfinite(sure) & (first.confidence[:, chosen] <= options.min_support)
+        if weak.any():
+            sure[weak] = np.nan
+            again = calibrate(sure, dim=dim, seed=seed)
+            without = f"without the {int(weak.sum())} entries only {options.min_support} other channels agree with"
+            if not _trust(again, guide):
+                retried = f"; {cal.status!r} with every entry, {again.status!r} {without}"
+                cal, why = again, ""
+            else:
+                why += f"; {again.status!r} {without}"
     if why:
         note = f"no guided pass: the first pass's calibration cannot guide it, {why}; the matrix is the first pass's"
         return GuidedTdoa(first, cal, replace(first, notes=first.notes + (note,)), False)
@@ -538,7 +559,7 @@ def tdoa_guided(recording: Recording, options: TdoaOptions = TdoaOptions(), *, d
     own = tuple(f"first pass: {n}" for n in first.notes[len(recording.notes):])  # the recording's notes are in both
     note = (f"first pass: {before}/{first.F.size} entries, calibrated {cal.status!r} (sigma {cal.sigma:.3g} m"
             + (f", {len(chosen)} of its {n} events, those with the most entries" if len(chosen) < n else "")
-            + f"); guided pass: {after}/{matrix.F.size}")
+            + f"{retried}); guided pass: {after}/{matrix.F.size}")
     return GuidedTdoa(first, cal, replace(matrix, notes=matrix.notes + own + (note,)), True)
 
 

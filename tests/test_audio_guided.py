@@ -188,3 +188,30 @@ def test_the_guided_pass_keeps_the_columns_measured_against_an_estimated_sweep()
     assert np.allclose(out.F[:, 1], 9.01) and np.allclose(out.F[:, 2], F1[:, 2] + 0.01)  # missing / not swept: guided
     assert out.notes[-1].startswith("1 event(s) keep the first pass's entries, measured against their own estimated")
     assert _keep_swept(replace(first, swept=()), guided) is guided
+
+
+def test_a_guide_that_fails_is_calibrated_again_without_the_least_supported_entries(monkeypatch):
+    """When the first pass's calibration cannot guide, it runs once more without the entries only min_support other
+    channels agree with (GuideOptions.retry_least_supported); the note says both statuses. Off: one calibration."""
+    import solvers.audio_guided as guided_module
+    import solvers.calibration as calibration
+
+    rec, _, _, _ = room()
+    first = tdoa_matrix(rec, OPTIONS)
+    conf = first.confidence.copy()
+    conf[[1, 4], 0] = OPTIONS.min_support  # two entries with the least support the first pass keeps
+    crafted = replace(first, confidence=conf)
+    monkeypatch.setattr(guided_module, "tdoa_matrix", lambda *a, **k: crafted)
+    given = []
+    real = calibration.calibrate
+    monkeypatch.setattr(calibration, "calibrate", lambda F, *a, **k: given.append(np.array(F)) or real(F, *a, **k))
+    run = tdoa_guided(rec, OPTIONS)
+    assert not run.guided and len(given) == 2 and run.first_calibration.status == "failed"
+    weak = np.isfinite(first.F) & (conf <= OPTIONS.min_support)
+    assert weak.sum() == 2 and np.isnan(given[1][weak]).all()
+    assert np.array_equal(given[1][~weak], first.F[~weak], equal_nan=True)
+    assert "its status is 'failed'" in run.matrix.notes[-1]
+    assert "; 'failed' without the 2 entries only 2 other channels agree with" in run.matrix.notes[-1]
+    given.clear()
+    tdoa_guided(rec, OPTIONS, guide=GuideOptions(retry_least_supported=False))
+    assert len(given) == 1
