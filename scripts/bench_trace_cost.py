@@ -7,7 +7,8 @@ and ``--paths`` tracks of its start point from the base node to as many random n
 graph's own node distribution and tracking options), on one thread. Prints and writes, per cell, the seconds per
 path and the share that failed, and, given the witnesses per orbit measured on a cell whose test ran
 (``--witness-ratio``, e.g. 7r/5s's), the estimated witnesses, paths (6 per witness on the graph's 4 nodes, the
-graph's own 1.1 for retracks, and 2 per point for the test's two slices) and core-hours of the whole test.
+graph's own 1.1 for retracks, and 2 per point for the test's two slices) and core-hours of the whole test; the seconds
+per path in the dense elimination order beside them (the sparse one is what the test runs where its plan exists).
 
 Writes tables/bench_trace_cost.timing.json (untracked: seconds are facts of the run). Compare cells by their ratio
 in one run: the machine's load moves all of them alike.
@@ -57,13 +58,17 @@ def measure(cell: str, paths: int) -> dict:
                       for _ in range(paths)])
     xs = np.repeat(pencil.start, paths, axis=0)
     inst = np.arange(paths)
-    pencil.system.track(Q0[None], nodes[:1], xs[:1], inst[:1])  # the tapes' first call
-    t0 = time.perf_counter()
-    ends, _ = pencil.system.track(Q0[None], nodes, xs, inst)
-    seconds = time.perf_counter() - t0
+    plan, seconds = pencil.system.sparse, {}
+    for order in ("dense", "sparse"):  # the trace system's Jacobian in either elimination order (solvers.continuation.sparse_lu)
+        pencil.system.sparse = plan if order == "sparse" else None
+        pencil.system.track(Q0[None], nodes[:1], xs[:1], inst[:1])  # the tapes' first call
+        t0 = time.perf_counter()
+        ends, _ = pencil.system.track(Q0[None], nodes, xs, inst)
+        seconds[order] = time.perf_counter() - t0
     _, ok = graph._accept(pencil.system, ends, nodes, inst, graph.GraphOptions().accept_tol, None)
-    return {"cell": cell, "unknowns": len(unknowns), "pencil": words, "paths": paths, "seconds_per_path": seconds / paths,
-            "failed": float(1.0 - ok.mean())}
+    return {"cell": cell, "unknowns": len(unknowns), "pencil": words, "paths": paths,
+            "sparse_order": plan is not None, "seconds_per_path": seconds["sparse"] / paths,
+            "seconds_per_path_dense": seconds["dense"] / paths, "failed": float(1.0 - ok.mean())}
 
 
 def main(argv: list[str] | None = None) -> int:

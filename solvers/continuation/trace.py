@@ -205,7 +205,7 @@ class TraceSystem:
                                         names, params)
         # tracked in a sparse elimination order where the Jacobian is sparse enough (as count's solvers)
         self.sparse = sparse_lu.plan(self.tapes)
-        self.native = tape_native.addresses(self.tapes if self.sparse is None else self.sparse.tapes)
+        tape_native.addresses(self.tapes if self.sparse is None else self.sparse.tapes)  # built now, not in a thread
         self.nvars = self.N + 1
         self.options = TrackerOptions()
 
@@ -213,12 +213,13 @@ class TraceSystem:
               options: TrackerOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
         if self.sparse is not None:
             return self.sparse.track(q0, q1, x0, inst, options or self.options)
-        return tape_kernel.track(self.tapes, q0, q1, x0, inst, options or self.options, native=self.native)
+        return tape_kernel.track(self.tapes, q0, q1, x0, inst, options or self.options,
+                                 native=tape_native.addresses(self.tapes))
 
     def newton(self, x: np.ndarray, q: np.ndarray, steps: int = 1, inst: np.ndarray | None = None) -> np.ndarray:
         if self.sparse is not None:
             return self.sparse.newton(q, x, inst, steps)
-        return tape_kernel.newton(self.tapes, q, x, inst, steps, native=self.native)
+        return tape_kernel.newton(self.tapes, q, x, inst, steps, native=tape_native.addresses(self.tapes))
 
     def image(self, y: np.ndarray) -> np.ndarray:
         """The points y (K, N + 1) as (m(x), lam): the coordinates the pencil and the traces use."""
