@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import tape_kernel, tape_native
+from .slp import HomotopyTapes, Tape
 from .tape_jit import CONST, OUT
 
 __all__ = ["Sparse", "WORTH", "dense_cost", "elimination_order", "pattern", "permuted", "plan", "reached", "schedule"]
@@ -36,17 +38,31 @@ __all__ = ["Sparse", "WORTH", "dense_cost", "elimination_order", "pattern", "per
 WORTH = 0.5
 
 
+def _zero_writes(tape) -> np.ndarray:
+    """(instructions,) bool: the OUT instructions that write a register last set by the constant 0."""
+    zero = np.zeros(tape.n_registers, dtype=bool)
+    writes = np.zeros(len(tape.code), dtype=bool)
+    for k, (op, d, a, _, _) in enumerate(tape.code):
+        if op == OUT:
+            writes[k] = zero[a]
+        else:
+            zero[d] = op == CONST and tape.imm[k] == 0.0
+    return writes
+
+
+def _jacobian_writes(tape, N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(instruction indices, rows i, columns j) of the OUT instructions that write the Jacobian entry (i, j)."""
+    d = tape.code[:, 1].astype(np.int64)
+    k = np.nonzero((tape.code[:, 0] == OUT) & (d >= N) & (d < N + N * N))[0]
+    return k, (d[k] - N) // N, (d[k] - N) % N
+
+
 def pattern(tape, N: int) -> np.ndarray:
     """(N, N) bool: the Jacobian entries the tape can write as non-zero (output rows N + i N + j); an entry is zero
     only where its output is a register last set by the constant 0 (exact, no evaluation)."""
-    zero = np.zeros(tape.n_registers, dtype=bool)
     nz = np.ones((N, N), dtype=bool)
-    for k, (op, d, a, _, _) in enumerate(tape.code):
-        if op == OUT:
-            if N <= d < N + N * N:
-                nz[(d - N) // N, (d - N) % N] = not zero[a]
-        else:
-            zero[d] = op == CONST and tape.imm[k] == 0.0
+    k, i, j = _jacobian_writes(tape, N)
+    nz[i, j] = ~_zero_writes(tape)[k]  # (each entry written once: slp.homotopy_tapes)
     return nz
 
 
@@ -106,8 +122,6 @@ def cost(steps) -> int:
 def _renamed(tape, N: int, rows: np.ndarray, cols: np.ndarray):
     """The tape with unknown register cols[k] renamed k, and its output rows (H, J, dH/ds) renamed so that
     equation rows[i] is row i and J's column cols[k] is column k."""
-    from .slp import Tape
-
     reg = np.arange(tape.n_registers)
     reg[cols] = np.arange(N)  # unknown cols[k] now lives in register k (a bijection of registers 0..N-1)
     eq = np.empty(N, dtype=np.int64)
@@ -149,32 +163,24 @@ def _unwritten(tape, N: int, keep: np.ndarray):
     """The tape without its OUT instructions that write the constant zero to a Jacobian entry outside ``keep``: the
     trackers' output arrays start zeroed and no factorisation touches those entries, so the zero is there already
     (5r/9s: 1,764 of the full tape's 2,115 outputs are zeros, two vector stores each at every evaluation)."""
-    from .slp import Tape
-
-    zero = np.zeros(tape.n_registers, dtype=bool)
+    k, i, j = _jacobian_writes(tape, N)
     drop = np.zeros(len(tape.code), dtype=bool)
-    for k, (op, d, a, _, _) in enumerate(tape.code):
-        if op == OUT:
-            drop[k] = zero[a] and N <= d < N + N * N and not keep[(d - N) // N, (d - N) % N]
-        else:
-            zero[d] = op == CONST and tape.imm[k] == 0.0
+    drop[k] = _zero_writes(tape)[k] & ~keep[i, j]
     return Tape(tape.code[~drop], tape.imm[~drop], tape.n_inputs, tape.n_registers, tape.n_outputs, tape.input_names)
 
 
-def permuted(tapes, rows, cols, unwritten: bool = True):
+def permuted(tapes, rows, cols, unwritten: bool = True, steps=None):
     """:class:`~solvers.continuation.slp.HomotopyTapes` renamed to the order (rows, cols), with its LU's
-    :func:`schedule` attached (``lu``), which the compiled LU follows, and without the writes of the zeros no
-    factorisation reaches (:func:`_unwritten`: the tapes are for the trackers, whose output arrays start zeroed;
-    ``unwritten`` False keeps them)."""
-    from .slp import HomotopyTapes
-
+    :func:`schedule` attached (``lu``; ``steps``: that schedule where the caller has it), which the compiled LU
+    follows, and without the writes of the zeros no factorisation reaches (:func:`_unwritten`: the tapes are for the
+    trackers, whose output arrays start zeroed; ``unwritten`` False keeps them)."""
     N = len(cols)
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
     nz = pattern(tapes.full, N)[np.ix_(rows, cols)]
-    steps = schedule(nz)
-    keep = reached(steps, nz)
+    steps = schedule(nz) if steps is None else steps
     full, newton = (_renamed(t, N, rows, cols) for t in (tapes.full, tapes.newton))
     if unwritten:
+        keep = reached(steps, nz)
         full, newton = _unwritten(full, N, keep), _unwritten(newton, N, keep)
     return HomotopyTapes(full, newton, _renamed(tapes.residual, N, rows, cols), lu=steps)
 
@@ -184,23 +190,19 @@ class Sparse:
     """Renamed tapes (:func:`permuted`) and the maps of the unknowns: the tracker's x' = x[:, cols], x = x'[:, inv];
     ``work``: the schedule's entry updates against the dense LU's."""
 
-    tapes: object
+    tapes: HomotopyTapes
     cols: np.ndarray
     inv: np.ndarray
     work: tuple[int, int]
 
     def track(self, q0, q1, x0, inst, options, near_end: float = 0.0):
         """:func:`.tape_kernel.track` of x0 (P, N) in the unknowns' own order, on the renamed tapes."""
-        from . import tape_kernel, tape_native
-
         x, stats = tape_kernel.track(self.tapes, q0, q1, np.atleast_2d(x0)[:, self.cols], inst, options,
                                      near_end=near_end, native=tape_native.addresses(self.tapes))
         return x[:, self.inv], stats
 
     def newton(self, q, x, inst, steps: int):
         """:func:`.tape_kernel.newton` of x (P, N) in the unknowns' own order, on the renamed tapes."""
-        from . import tape_kernel, tape_native
-
         out = tape_kernel.newton(self.tapes, q, np.atleast_2d(x)[:, self.cols], inst, steps,
                                  native=tape_native.addresses(self.tapes))
         return out[:, self.inv]
@@ -214,10 +216,10 @@ def plan(tapes) -> Sparse | None:
         return None
     nz = pattern(tapes.full, N)
     rows, cols = elimination_order(nz)
-    ordered = cost(schedule(nz[np.ix_(rows, cols)]))
-    if ordered > WORTH * dense_cost(N):
+    steps = schedule(nz[np.ix_(rows, cols)])
+    if cost(steps) > WORTH * dense_cost(N):
         return None
     cols = np.asarray(cols, dtype=np.int64)
     inv = np.empty(N, dtype=np.int64)
     inv[cols] = np.arange(N)
-    return Sparse(permuted(tapes, rows, cols), cols, inv, (ordered, dense_cost(N)))
+    return Sparse(permuted(tapes, rows, cols, steps=steps), cols, inv, (cost(steps), dense_cost(N)))

@@ -53,7 +53,7 @@ START_DIGITS = 11
 #: How a :class:`HomotopySolver` factors the Jacobian: "dense", in the order of the unknowns and equations (the
 #: committed solvers: their outputs were computed so, and they keep their bits), or "sparse", in the order
 #: :func:`sparse_lu.plan` picks where the Jacobian is sparse enough (the same roots up to rounding: count's and
-#: monodromy's solvers; 3D 5r/9s tracks 6x faster, 7r/5s 3x).
+#: monodromy's solvers; one thread, 3D 5r/9s tracks 14x faster, 7r/5s 2.7x: scripts/bench_sparse_lu.py).
 ELIMINATIONS = ("dense", "sparse")
 
 #: Size of the detour (relative to |q0|) for paths that stall even with tight step control.
